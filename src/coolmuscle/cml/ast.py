@@ -1,0 +1,356 @@
+"""The CML syntax tree: frozen dataclasses that the parser returns.
+
+One tree serves direct mode, program banks and ladder banks; what a node *does*
+depends on where it runs (cml-users-guide.txt 2.1, 2.2.2, 2.2.3).  For example a
+bare ``P1.1`` is a query in direct mode (6.6 "P1~200"), a move in a program bank
+(2.2.2 "P") and a display in a ladder bank (4.5.1).  The executor decides.
+
+Conventions
+-----------
+* ``index``: the memory/bank/output number written after the letter, ``None``
+  when omitted (``P.1`` is P0, the direct-mode data, 2.1.1).
+* ``motor``: the motor ID written after the dot, ``None`` when omitted.  The
+  executor fills in the default (the bank's motor, or the addressed motor).
+* Letters are stored upper-case; CML is case-insensitive (1.1).
+* Numbers are Python ints (CML is integer-only, 6.7).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Union
+
+# --------------------------------------------------------------------------
+# Operands and expressions (6.7 arithmetic, 6.8 logic, 6.9 comparison)
+# --------------------------------------------------------------------------
+
+RegisterKind = Literal["P", "S", "A", "M", "T", "V", "N", "R", "K", "H"]
+REGISTER_KINDS: tuple[str, ...] = ("P", "S", "A", "M", "T", "V", "N", "R", "K", "H")
+
+
+@dataclass(frozen=True, slots=True)
+class Num:
+    """An integer literal, e.g. ``10000`` or ``-5000``."""
+
+    value: int
+
+
+@dataclass(frozen=True, slots=True)
+class Str:
+    """A double-quoted string: up to 4 characters or a state name (2.2.1 "V")."""
+
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Reg:
+    """A register reference such as ``P2.1``, ``S.1``, ``V3``, ``K23.1``."""
+
+    kind: str
+    index: int | None = None
+    motor: int | None = None
+
+    @property
+    def number(self) -> int:
+        """The memory number with an omitted index read as 0 (direct data)."""
+        return 0 if self.index is None else self.index
+
+
+@dataclass(frozen=True, slots=True)
+class Input:
+    """An input reference ``I#.n``: 1 when the input signal is on, else 0."""
+
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class BinOp:
+    """Arithmetic ``+ - * /`` (integer, division truncates, 6.7)."""
+
+    op: Literal["+", "-", "*", "/"]
+    left: "Expr"
+    right: "Expr"
+
+
+@dataclass(frozen=True, slots=True)
+class Func:
+    """Math function ``U1``..``U6`` (6.7; cm-banks-rt3.txt 1.5)."""
+
+    name: Literal["U1", "U2", "U3", "U4", "U5", "U6"]
+    arg: "Expr"
+
+
+@dataclass(frozen=True, slots=True)
+class Compare:
+    """Comparison ``== != > >= < <=`` (6.9)."""
+
+    op: Literal["==", "!=", ">", ">=", "<", "<="]
+    left: "Expr"
+    right: "Expr"
+
+
+@dataclass(frozen=True, slots=True)
+class Logic:
+    """Logical ``&&`` / ``||`` (6.8)."""
+
+    op: Literal["&&", "||"]
+    left: "Expr"
+    right: "Expr"
+
+
+@dataclass(frozen=True, slots=True)
+class Not:
+    """Negation ``!!(operand)`` (6.8)."""
+
+    operand: "Expr"
+
+
+Expr = Union[Num, Str, Reg, Input, BinOp, Func, Compare, Logic, Not]
+
+# --------------------------------------------------------------------------
+# Statements
+# --------------------------------------------------------------------------
+
+Modifier = Literal["+", "-"] | None
+
+
+@dataclass(frozen=True, slots=True)
+class Assign:
+    """``target = expr``, ``target += expr``, ``target -= expr`` (2.1.1, 6.2, 6.7).
+
+    Also parameter setting ``K23.1=16`` (ch. 3) and ``H0``.
+    """
+
+    target: Reg
+    op: Literal["=", "+=", "-="]
+    value: Expr
+
+
+@dataclass(frozen=True, slots=True)
+class Ref:
+    """A register named alone: ``P1.1``, ``P2.1+``, ``S1.1``, ``T1.1``, ``V2.1``, ``R1.1-``.
+
+    Direct mode: a query.  Program bank: P moves (``+`` relative), S/A/M select
+    the data used by the next motion, T waits, V displays, N/R select the
+    interpolation centre/radius (``-`` picks the minor arc).  Ladder: displays.
+    """
+
+    reg: Reg
+    modifier: Modifier = None
+
+
+@dataclass(frozen=True, slots=True)
+class Move:
+    """``Y#.n`` (move, next line doesn't wait), ``Q#.n`` (push), ``Z#.n`` (push, no wait).
+
+    2.2.2 "Y", "Q", "Z"; ``index`` is a P memory number.
+    """
+
+    kind: Literal["Y", "Q", "Z"]
+    index: int | None = None
+    motor: int | None = None
+    modifier: Modifier = None
+
+
+@dataclass(frozen=True, slots=True)
+class Interp:
+    """``@#.n`` with ``+`` (CW) or ``-`` (CCW): circular/linear interpolation (2.1.2 "@")."""
+
+    index: int | None = None
+    motor: int | None = None
+    direction: Modifier = None
+
+
+ExecOp = Literal[
+    "go",             # ^   execute direct motion (2.1.2)
+    "origin",         # |   origin search
+    "go_origin",      # |1  move to position 0
+    "set_origin",     # |2  current position := 0
+    "enable",         # (
+    "free",           # )
+    "pause",          # ]   pause program bank / stop all motors
+    "pause_motor",    # ]1  pause one motor in a chain
+    "stop_after_line",  # }
+    "estop",          # *
+    "estop_release",  # *1
+    "next_line",      # >
+    "prev_line",      # <
+    "save",           # $
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Exec:
+    """A one-symbol execution command (2.1.2, 6.5)."""
+
+    op: ExecOp
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Output:
+    """``O#.n`` (on) / ``F#.n`` (off) (2.1.2)."""
+
+    on: bool
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class OutputWord:
+    """``O.n=X``: set 16 outputs at once (Modbus FC15 generation, 5.6.7)."""
+
+    value: Expr
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Capture:
+    """``#x.n``: store the current position in P memory x (2.1.2 "#")."""
+
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StartBank:
+    """``[#.n`` program bank, ``[L#.n`` ladder bank, ``[LM#.n`` logic motion bank.
+
+    ``index is None`` means resume the paused bank (``[``, ``[L``).
+    """
+
+    kind: Literal["B", "L", "LM"]
+    index: int | None = None
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StopBank:
+    """``]L.n`` (pause; twice stops) and ``]LM.n`` (ladder / logic motion)."""
+
+    kind: Literal["L", "LM"]
+    motor: int | None = None
+
+
+QueryLetter = Literal["A", "S", "M", "T", "V", "P", "N", "R", "L"]
+
+
+@dataclass(frozen=True, slots=True)
+class Query:
+    """A ``?`` query (6.6).
+
+    * ``?.1``          -> ``letter=None, number=None`` (direct mode data)
+    * ``?96.1``        -> ``number=96``
+    * ``?3.1``         -> ``number=3`` (program bank 3 listing)
+    * ``?A.1``         -> ``letter="A"`` (all A data)
+    * ``?L3.1``        -> ``letter="L", number=3`` (ladder bank 3 listing)
+    * ``?1000.1``      -> ``number=1000``
+    """
+
+    number: int | None = None
+    letter: str | None = None
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Call:
+    """``C#`` call, ``J#`` jump, ``CL#`` ladder call, ``JL#`` ladder jump (2.2.2, 2.2.3)."""
+
+    kind: Literal["C", "J", "CL", "JL"]
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Loop:
+    """``X#.n``: loop the following lines ``count`` times (0 = forever) (2.2.2 "X")."""
+
+    count: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class LoopEnd:
+    """``X.n-``: end of the innermost loop."""
+
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Wait:
+    """``W#.n``: in a branch, wait up to T# while the condition stays true (W0 forever)."""
+
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class BankBegin:
+    """``B#.n`` / ``L#.n``: start of a bank definition (2.2.2 "B", 2.2.3 "L")."""
+
+    ladder: bool
+    index: int
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ClearBanks:
+    """``B100`` / ``L100``: clear all program / ladder banks (cm-banks-rt3.txt 2.3, 3.2)."""
+
+    ladder: bool
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class BankEnd:
+    """``END`` / ``END.n``: end of a bank definition."""
+
+    motor: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Alloc:
+    """``\\P300`` / ``\\N200``: P/N/R data area allocation (2.1.2 "\\")."""
+
+    kind: Literal["P", "N"]
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class Branch:
+    """``condition, then, else`` with ``:`` junctions (2.2.2 "I"/"V", 4.2.2).
+
+    ``then`` and ``orelse`` are tuples of statements joined by ``:``.
+    ``orelse`` is empty when the line gives no else part.
+    """
+
+    condition: Expr
+    then: tuple["Statement", ...]
+    orelse: tuple["Statement", ...] = ()
+
+
+Statement = Union[
+    Assign, Ref, Move, Interp, Exec, Output, OutputWord, Capture, StartBank, StopBank,
+    Query, Call, Loop, LoopEnd, Wait, BankBegin, ClearBanks, BankEnd, Alloc, Branch,
+]
+
+
+@dataclass(frozen=True, slots=True)
+class Line:
+    """One logical line: statements separated by commas (2.2.2 ", (comma)").
+
+    ``joined`` is true when the line ends with ``;``: in a program bank the next
+    line merges with this one; in a ladder bank the results of assignments are
+    not displayed (cm-banks-rt3.txt 1.1 ";").
+    ``source`` keeps the raw text (without comment) for error messages and the
+    40-character check.
+    """
+
+    statements: tuple[Statement, ...]
+    joined: bool = False
+    source: str = ""
+
+    @property
+    def empty(self) -> bool:
+        return not self.statements

@@ -1,0 +1,179 @@
+"""The deterministic simulation kernel: it owns virtual time.
+
+Time is an integer count of nanoseconds (``Kernel.now``), so that ordering and
+arithmetic are exact and every run is the same.  Nothing in the motor model reads
+the wall clock; every delay goes through :meth:`Kernel.schedule`.
+
+The event queue is a heap of ``(time, priority, counter, timer)``: the counter
+makes the order of events at the same instant and priority deterministic (the
+order they were scheduled in).  Motion is closed-form (see
+:mod:`coolmuscle.motor.profile`), so the kernel jumps from event to event and
+never ticks when nothing is scheduled.
+
+Real-time pacing is a thin layer on top (:mod:`coolmuscle.sim.realtime`).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+from dataclasses import dataclass, field
+from typing import Callable
+
+log = logging.getLogger(__name__)
+
+NS_PER_S = 1_000_000_000
+NS_PER_MS = 1_000_000
+NS_PER_US = 1_000
+
+#: Priorities for events that fall on the same instant (lower runs first).
+PRIO_IO = 0        # input edges, bytes arriving on a line
+PRIO_MOTION = 10   # motion milestones (end of move, passing points, alarms)
+PRIO_LOGIC = 20    # program bank steps, ladder scans
+PRIO_REPORT = 30   # output delivery
+
+Callback = Callable[[], None]
+
+
+def seconds(s: float) -> int:
+    """Convert seconds (float) to kernel nanoseconds, rounding to nearest."""
+    return int(round(s * NS_PER_S))
+
+
+def ms(value: float) -> int:
+    """Convert milliseconds to kernel nanoseconds."""
+    return int(round(value * NS_PER_MS))
+
+
+def to_seconds(ns: int) -> float:
+    """Convert kernel nanoseconds to float seconds."""
+    return ns / NS_PER_S
+
+
+@dataclass(eq=False)
+class Timer:
+    """A scheduled callback; :meth:`cancel` keeps it from running."""
+
+    at: int
+    callback: Callback
+    name: str = ""
+    cancelled: bool = field(default=False)
+
+    def cancel(self) -> None:
+        """Cancel the timer; cancelling twice or after it ran is harmless."""
+        self.cancelled = True
+
+    @property
+    def active(self) -> bool:
+        return not self.cancelled
+
+
+class Kernel:
+    """Virtual-time event kernel: ``now``, ``schedule``, ``peek``, ``step``, ``run``."""
+
+    def __init__(self, start: int = 0) -> None:
+        self._now = start
+        self._queue: list[tuple[int, int, int, Timer]] = []
+        self._counter = itertools.count()
+        self._events_run = 0
+
+    # -- time -----------------------------------------------------------
+    @property
+    def now(self) -> int:
+        """Current virtual time in nanoseconds."""
+        return self._now
+
+    @property
+    def now_s(self) -> float:
+        """Current virtual time in seconds."""
+        return self._now / NS_PER_S
+
+    @property
+    def events_run(self) -> int:
+        """How many callbacks have run (for benchmarks)."""
+        return self._events_run
+
+    # -- scheduling -----------------------------------------------------
+    def schedule(self, delay: int, callback: Callback, *, priority: int = PRIO_MOTION,
+                 name: str = "") -> Timer:
+        """Run ``callback`` ``delay`` nanoseconds from now (``delay`` >= 0)."""
+        if delay < 0:
+            raise ValueError(f"negative delay {delay}")
+        return self.schedule_at(self._now + int(delay), callback, priority=priority, name=name)
+
+    def schedule_at(self, at: int, callback: Callback, *, priority: int = PRIO_MOTION,
+                    name: str = "") -> Timer:
+        """Run ``callback`` at absolute time ``at`` (not before now)."""
+        at = max(int(at), self._now)
+        timer = Timer(at, callback, name)
+        heapq.heappush(self._queue, (at, priority, next(self._counter), timer))
+        return timer
+
+    def call_soon(self, callback: Callback, *, priority: int = PRIO_LOGIC, name: str = "") -> Timer:
+        """Run ``callback`` at the current instant, after what is already due now."""
+        return self.schedule_at(self._now, callback, priority=priority, name=name)
+
+    # -- running --------------------------------------------------------
+    def _drop_cancelled(self) -> None:
+        while self._queue and self._queue[0][3].cancelled:
+            heapq.heappop(self._queue)
+
+    def peek(self) -> int | None:
+        """Time of the next pending event, or ``None`` when nothing is scheduled."""
+        self._drop_cancelled()
+        return self._queue[0][0] if self._queue else None
+
+    def step(self) -> bool:
+        """Run the next event; return ``False`` when the queue is empty."""
+        self._drop_cancelled()
+        if not self._queue:
+            return False
+        at, _prio, _count, timer = heapq.heappop(self._queue)
+        self._now = at
+        timer.cancelled = True
+        self._events_run += 1
+        timer.callback()
+        return True
+
+    def run(self, until: int | None = None, *, max_events: int | None = None) -> int:
+        """Run events up to and including time ``until`` and leave ``now == until``.
+
+        With ``until=None`` it runs until the queue is empty (beware endless
+        periodic events; pass ``max_events`` to bound it).  Returns the number of
+        events run.
+        """
+        count = 0
+        while True:
+            nxt = self.peek()
+            if nxt is None or (until is not None and nxt > until):
+                break
+            if max_events is not None and count >= max_events:
+                return count
+            self.step()
+            count += 1
+        if until is not None and until > self._now:
+            self._now = until
+        return count
+
+    def advance(self, delay: int) -> int:
+        """Run everything due within the next ``delay`` nanoseconds."""
+        return self.run(self._now + int(delay))
+
+    def run_until(self, predicate: Callable[[], bool], timeout: int) -> bool:
+        """Run events until ``predicate()`` is true or ``timeout`` ns pass.
+
+        The predicate is checked after every event.  Returns whether it became
+        true; on timeout, ``now`` is the deadline.
+        """
+        deadline = self._now + int(timeout)
+        if predicate():
+            return True
+        while True:
+            nxt = self.peek()
+            if nxt is None or nxt > deadline:
+                self._now = max(self._now, deadline)
+                return predicate()
+            self.step()
+            if predicate():
+                return True
