@@ -1,36 +1,225 @@
-"""The daisy chain of motors; implements the device API (coolmuscle.device.Device).
+"""The daisy chain of motors behind one host line; implements the device API.
 
-PLACEHOLDER: the constructor signature and ``host_line``/``kernel`` attributes are
-final; the behaviour is being written (motor model).  Until then every received line
-is answered by nothing.
+The host line enters at ID1 and every statement goes to the motor its ``.n`` names
+(cml-users-guide.txt 1.1 "up to 15 motors can be controlled on a single network").
+A statement without an ID goes to ID1 in direct mode.  A statement for an ID that is
+not on the chain goes around the chain unanswered (docs/fidelity.md "Daisy chain").
+
+This module is the :class:`coolmuscle.device.Device` every front end uses.
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
+from typing import Callable
 
-from .hostline import HostLine, LineSettings
+from .cml import ast
+from .cml.parser import parse
+from .device import Event, EventListener, MotorSnapshot, TargetStream
+from .errors import CmlSyntaxError, MotorError, NoSuchMotorError, OutOfRangeError
+from .hostline import BAUD_RATES, HostLine, LineSettings
+from .motor.direct import inner_motor, run_statement
+from .motor.firmware import get_firmware
+from .motor.memory import VState
+from .motor.motor import Context, Motor
+from .motor.status import Report
+from .motor.store import Store
 from .sim.kernel import Kernel
+
+log = logging.getLogger(__name__)
+
+#: Origins whose replies are printed on the host line (docs/device-api.md).
+HOST_LINE_ORIGINS = frozenset({"host", "bank", "ladder", "motor"})
+
+
+class _Stream:
+    """Cyclic position mode for one motor (device API ``target_stream``)."""
+
+    def __init__(self, motor: Motor) -> None:
+        self._motor = motor
+        self.closed = False
+
+    def push(self, target: int) -> None:
+        if not self.closed:
+            self._motor.follow(float(target))
+
+    def close(self) -> None:
+        self.closed = True
 
 
 class Chain:
-    """Motors 1..N behind one host line."""
+    """Motors 1..N behind one host line; the device API."""
 
     def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
                  firmware: str = "cm2", state_dir: Path | str | None = None,
                  pacing: bool = False) -> None:
+        if not 1 <= motors <= 15:
+            raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
         self.kernel = kernel or Kernel()
-        self.host_line = HostLine(self.kernel, self._on_host_line, LineSettings,
-                                  pacing=pacing)
+        self.firmware = get_firmware(firmware)
         self.state_dir = Path(state_dir) if state_dir else None
-        self._motor_count = motors
+        self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
+        self._listeners: list[EventListener] = []
+        self.motors: dict[int, Motor] = {}
+        for motor_id in range(1, motors + 1):
+            self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
+        self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
+                                  pacing=pacing)
+        self._restore()
 
+    # -- device API: identity ---------------------------------------------
     @property
     def motor_ids(self) -> tuple[int, ...]:
-        return tuple(range(1, self._motor_count + 1))
+        return tuple(self.motors)
+
+    def motor(self, motor_id: int) -> Motor | None:
+        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
+        return self.motors.get(motor_id)
+
+    def _require(self, motor_id: int) -> Motor:
+        motor = self.motors.get(motor_id)
+        if motor is None:
+            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
+                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
+        return motor
+
+    # -- the host line ----------------------------------------------------
+    def _line_settings(self) -> LineSettings:
+        first = self.motors[1]
+        return LineSettings(echo=not first.k(23) & Report.NO_ECHO,
+                            delimiter=b"\r\n" if first.k(70) == 1 else b"\r",
+                            baud=BAUD_RATES.get(first.k(20), 38400))
 
     def _on_host_line(self, text: str) -> None:
-        del text
+        self._execute_text(text, Context(origin="host"))
+
+    def execute(self, line: str, *, origin: str = "api") -> list[str]:
+        """Run a CML line as ``origin``; return the replies it produced at once."""
+        ctx = Context(origin=origin, replies=[])
+        self._execute_text(line, ctx)
+        return ctx.replies or []
+
+    def _execute_text(self, text: str, ctx: Context) -> None:
+        try:
+            lines = parse(text)
+        except CmlSyntaxError as error:
+            self.motors[1].report_error(ctx, error)
+            return
+        for line in lines:
+            for stmt in line.statements:
+                motor = self.motors.get(inner_motor(stmt) or ctx.default_motor)
+                if motor is not None:
+                    run_statement(motor, stmt, ctx)
+
+    # -- events -------------------------------------------------------------
+    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+             origin: str = "motor") -> None:
+        """Report a line: on the host line (per origin) and to every subscriber."""
+        if origin in HOST_LINE_ORIGINS:
+            self.host_line.send_line(text)
+        event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
+        for listener in list(self._listeners):
+            try:
+                listener(event)
+            except Exception:
+                log.exception("event listener failed")
+
+    def subscribe(self, listener: EventListener) -> Callable[[], None]:
+        self._listeners.append(listener)
+
+        def remove() -> None:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+        return remove
+
+    # -- chain-wide commands and banks (cml-users-guide.txt 2.1.2) ------------
+    def chain_command(self, motor: Motor, stmt: ast.Exec, ctx: Context) -> None:
+        """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``, ``<``."""
+        del ctx
+        if stmt.op == "pause":
+            for each in self.motors.values():
+                each.stop()
+        elif stmt.op == "pause_motor":
+            motor.stop()
+        elif stmt.op == "estop":
+            for each in self.motors.values():
+                each.emergency_stop()
+        elif stmt.op == "estop_release":
+            for each in self.motors.values():
+                each.emergency_release()
+
+    def bank_command(self, motor: Motor, stmt: ast.Statement, ctx: Context) -> None:
+        """Bank definition and execution commands (program/ladder banks)."""
+        del motor, stmt, ctx
+
+    def bank_query(self, motor: Motor, query: ast.Query) -> list[str] | None:
+        """Bank listings ``?#``, ``?L#``, ``?1000``."""
+        del motor, query
+        return None
+
+    # -- saving ---------------------------------------------------------------
+    def save(self, motor: Motor) -> None:
+        """``$``: store parameters, data and banks of ``motor`` (2.1.2)."""
+        if self.store is not None:
+            self.store.save_snapshot(motor.id, motor.to_snapshot())
+
+    def _restore(self) -> None:
+        for motor in self.motors.values():
+            if self.store is not None:
+                saved = self.store.load(motor.id)
+                if saved:
+                    motor.load_snapshot(saved)
+                store = self.store
+                motor.params.on_change(
+                    lambda k, old, new, m=motor.id: store.save_param(m, k, new))
+            motor.power_on()
 
     def close(self) -> None:
-        """Flush and close the store."""
+        """Close the store (unsaved data is lost, as at power off)."""
+        if self.store is not None:
+            self.store.close()
+
+    # -- device API: data -------------------------------------------------------
+    def get_param(self, motor: int, k: int) -> int:
+        return self._require(motor).k(k)
+
+    def set_param(self, motor: int, k: int, value: int) -> None:
+        self._require(motor).params.set(k, value)
+
+    def get_register(self, motor: int, kind: str, index: int) -> int | str:
+        from .motor.queries import format_value
+        value = self._require(motor).memory.get(kind, index)
+        return int(value) if isinstance(value, int) else format_value(value)
+
+    def set_register(self, motor: int, kind: str, index: int, value: int | str) -> None:
+        self._require(motor).write_register(kind, index, value)
+
+    def snapshot(self, motor: int) -> MotorSnapshot:
+        m = self._require(motor)
+        target = m.axis.target()
+        return MotorSnapshot(
+            motor=m.id, time=self.kernel.now, position=m.position(),
+            target=round(target) if abs(target) != float("inf") else 0,
+            position_error=round(m.axis.position_error()), speed=m.speed_units(),
+            speed_pps=m.axis.velocity(), torque=m.torque(), status=m.status,
+            inputs=m.io.input_word(), outputs=m.io.output_word(),
+            temperature=m.temperature, voltage=m.voltage, analog=m.analog,
+            encoder_count=m.encoder_count, enabled=m.axis.enabled)
+
+    def set_input(self, motor: int, number: int, on: bool) -> None:
+        self._require(motor).set_input_level(number, on)
+
+    def set_analog(self, motor: int, counts: int) -> None:
+        if not 0 <= counts <= 1023:
+            raise OutOfRangeError("analog input is 0..1023 (6.6 ?74)")
+        self._require(motor).analog = counts
+
+    def target_stream(self, motor: int) -> TargetStream:
+        return _Stream(self._require(motor))
+
+    def inject_fault(self, motor: int, fault: str, **params: float) -> None:
+        self._require(motor).inject_fault(fault, **params)
+
+
+__all__ = ["Chain", "VState", "MotorError"]

@@ -1,0 +1,40 @@
+# Shared set-up for scripts/demo and scripts/test: a project virtualenv with coolmuscle
+# installed from this checkout.  Idempotent: re-running skips what is already done.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${COOLMUSCLE_VENV:-$ROOT/.venv}"
+PY="${PYTHON:-python3}"
+
+need_python() {
+    "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
+        echo "coolmuscle needs Python 3.11 or newer ($PY is $("$PY" --version 2>&1))" >&2
+        exit 1
+    }
+}
+
+apt_install() {  # apt_install CMD:PACKAGE ...  installs PACKAGE when CMD is missing
+    local missing=()
+    for pair in "$@"; do
+        command -v "${pair%%:*}" >/dev/null 2>&1 || missing+=("${pair#*:}")
+    done
+    [ ${#missing[@]} -eq 0 ] && return 0
+    local sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    echo "installing Debian packages: ${missing[*]}"
+    $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+}
+
+venv_install() {  # venv_install EXTRAS   (e.g. "" or "test")
+    need_python
+    [ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
+    local spec="$ROOT" stamp="$VENV/.coolmuscle-installed-$1"
+    [ -n "$1" ] && spec="$ROOT[$1]"
+    local digest
+    digest="$(cat "$ROOT/pyproject.toml" | sha256sum | cut -c1-16)"
+    if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$digest" ]; then
+        "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
+        "$VENV/bin/python" -m pip install -q -e "$spec"
+        echo "$digest" > "$stamp"
+    fi
+}

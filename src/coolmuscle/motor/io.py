@@ -1,0 +1,99 @@
+"""Digital inputs and outputs of one motor (cml-users-guide.txt ch. 3 K26, K33, K34; 6.6 ?50, ?70).
+
+Inputs: the electrical level of each input is driven from outside (device API,
+machine file); the input *signal* applies the logic of K26 (digit odd = on when the
+port is off).  Outputs: each output's *signal* comes from its K34 function (general
+use = the ``O``/``F`` commands); the *port* applies the logic of K33 (1 = high
+active).  ?70 and ?50 report the input signals and the output ports as hex words.
+
+The input functions (K27–K32) and the output functions other than general use are
+evaluated by the motor, which passes a ``function_signal`` callback.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+#: K34 digit values (ch. 3 K34).
+OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE = 0, 1, 2, 3, 4
+OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH = 6, 7, 8, 9
+
+
+def digit(value: int, position: int) -> int:
+    """Digit ``position`` (1 = rightmost) of a digit-wise parameter such as K27 or K34."""
+    return (abs(value) // 10 ** (position - 1)) % 10
+
+
+class DigitalIO:
+    """Input levels, general output states, and the words reported by ?70 / ?50."""
+
+    def __init__(self, inputs: int, outputs: int, param: Callable[[int], int],
+                 function_signal: Callable[[int, int], bool] = lambda fn, n: False) -> None:
+        self.input_count = inputs
+        self.output_count = outputs
+        self._param = param
+        self._function_signal = function_signal
+        self.levels = [False] * (inputs + 1)        # index 1..inputs (electrical)
+        self.general = [False] * (outputs + 1)      # O/F state, index 1..outputs
+
+    # -- inputs -------------------------------------------------------------
+    def set_level(self, number: int, on: bool) -> bool:
+        """Set the electrical level; returns whether the *signal* changed."""
+        if not 1 <= number <= self.input_count:
+            raise IndexError(f"input {number} (1..{self.input_count})")
+        before = self.input_signal(number)
+        self.levels[number] = bool(on)
+        return before != self.input_signal(number)
+
+    def input_signal(self, number: int) -> bool:
+        """Logical input signal after K26 (ch. 3 K26: 0/2 on when port on, 1/3 inverted)."""
+        if not 1 <= number <= self.input_count:
+            return False
+        inverted = digit(self._param(26), number) % 2 == 1
+        return self.levels[number] != inverted
+
+    def input_word(self) -> int:
+        """?70: bit 0 = input 1."""
+        return sum(1 << (n - 1) for n in range(1, self.input_count + 1)
+                   if self.input_signal(n))
+
+    # -- outputs --------------------------------------------------------------
+    def output_function(self, number: int) -> int:
+        return digit(self._param(34), number)
+
+    def set_general(self, number: int, on: bool) -> bool:
+        """``O#``/``F#``: only an output whose K34 function is general use (3) follows.
+
+        Returns whether the output port changed.
+        """
+        if not 1 <= number <= self.output_count:
+            return False
+        if self.output_function(number) != OUT_GENERAL:
+            return False
+        before = self.output_port(number)
+        self.general[number] = bool(on)
+        return before != self.output_port(number)
+
+    def output_signal(self, number: int) -> bool:
+        fn = self.output_function(number)
+        if fn == OUT_GENERAL:
+            return self.general[number]
+        if fn == OUT_NONE:
+            return False
+        return self._function_signal(fn, number)
+
+    def output_port(self, number: int) -> bool:
+        """The port state: K33 digit 1 = high active, 0 = low active (ch. 3 K33)."""
+        high_active = digit(self._param(33), number) == 1
+        signal = self.output_signal(number)
+        return signal if high_active else not signal
+
+    def output_word(self) -> int:
+        """?50: bit 0 = output 1."""
+        return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
+                   if self.output_port(n))
+
+    def general_word(self) -> int:
+        """Ports of the general-use outputs only (the K23 function 4 report)."""
+        return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
+                   if self.output_function(n) == OUT_GENERAL and self.output_port(n))

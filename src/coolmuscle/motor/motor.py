@@ -1,0 +1,375 @@
+"""One Cool Muscle motor: parameters, data, I/O, axis, status and the actions CML commands call.
+
+The statement executors (:mod:`.direct`, later program and ladder banks) call the
+action methods here; nothing else changes motor state.  Every report goes out through
+the :class:`MotorBus` (the chain), which puts it on the host line and the event
+stream.  Spec: cml-users-guide.txt 2.1.2 (execution commands), ch. 3 (K parameters),
+6.6 (status), K23 (reports).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ..cml import ast
+from ..errors import MotorError, OutOfRangeError
+from ..sim.kernel import Kernel
+from . import units
+from .axis import Axis
+from .evaluate import pack_string
+from .firmware import Firmware
+from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
+                 OUT_ORIGIN_DONE, OUT_PUSH, DigitalIO)
+from .memory import Memory, VNumber, VState, VString
+from .params import ParamTable
+from .planner import Limits, limits_from_data
+from .plant import Plant
+from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
+
+log = logging.getLogger(__name__)
+
+#: Maximum deceleration used by the emergency stop ``*`` (pulses/s²), docs/fidelity.md.
+ESTOP_DECEL = 32767 * 1000.0
+
+
+class MotorBus(Protocol):
+    """What a motor needs from its chain."""
+
+    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+             origin: str = "motor") -> None:
+        """Report a line (host line + event stream)."""
+
+    def motor(self, motor_id: int) -> "Motor | None":
+        """Another motor of the chain (None when absent)."""
+
+
+@dataclass
+class Context:
+    """Who is executing: the origin of the line and where its replies go."""
+
+    origin: str = "host"
+    replies: list[str] | None = None
+    default_motor: int = 1
+    program: bool = False   # inside a program bank
+    ladder: bool = False    # inside a ladder bank
+    quiet: bool = False     # ladder line ending with ';'
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+class Motor:
+    """A virtual COOL MUSCLE: the only place motor behaviour lives."""
+
+    def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
+        self.id = motor_id
+        self.kernel = kernel
+        self.firmware = firmware
+        self.bus = bus
+        self.params = ParamTable(firmware)
+        self.memory = Memory(firmware, max_position=self.max_position)
+        self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
+                            self._output_function_signal)
+        self.plant = Plant()
+        self.axis = Axis(kernel, kp=self.plant.kp,
+                         in_position_window=lambda: self.params.get(55),
+                         on_in_position=self._arrived,
+                         on_passing_point=self._passing_point)
+        self.alarm = 0
+        self.estopped = False
+        self.origin_done = False
+        self.merge_pulse_until = 0
+        self.analog = 0
+        self.encoder_count = 0
+        self.temperature = 40
+        self.voltage = 240
+        self.torque_limit = 100
+        self._last_limits: Limits | None = None
+
+    # -- parameters and units ----------------------------------------------
+    def k(self, number: int) -> int:
+        """Current value of K parameter ``number``."""
+        return self.params.get(number)
+
+    @property
+    def resolution(self) -> units.Resolution:
+        return units.resolution(self.k(37))
+
+    def max_position(self) -> int:
+        """Maximum |P| for the current K37 (ch. 3 K37 table)."""
+        return self.resolution.max_position
+
+    def reports(self, flag: Report) -> bool:
+        """Whether K23 includes ``flag``."""
+        return bool(self.k(23) & flag)
+
+    # -- status ---------------------------------------------------------------
+    @property
+    def status(self) -> int:
+        """Ux (6.6 ?99)."""
+        if self.alarm:
+            return self.alarm
+        if self.estopped:
+            return int(Ux.EMERGENCY_STOP)
+        if not self.axis.enabled:
+            return int(Ux.MOTOR_FREE)
+        return 0 if self.axis.moving else int(Ux.IN_POSITION)
+
+    def position(self) -> int:
+        """Px (?96), whole pulses."""
+        return round(self.axis.position())
+
+    def speed_units(self) -> int:
+        """Sx (?97): actual speed in K37 speed units, truncated toward zero."""
+        return int(self.axis.velocity() / self.resolution.speed_unit_pps)
+
+    def torque(self) -> int:
+        """Ix (?98): % of rated torque."""
+        if not self.axis.enabled:
+            return 0
+        return round(self.plant.torque_percent(self.axis.command_acceleration(),
+                                               self.axis.velocity(),
+                                               self.resolution.pulses_per_rev))
+
+    # -- reports --------------------------------------------------------------
+    def say(self, ctx: Context | None, text: str, kind: str = "reply",
+            value: int | None = None) -> None:
+        """A reply or message: to the context's collector and the bus."""
+        origin = ctx.origin if ctx else "motor"
+        if ctx is not None and ctx.replies is not None:
+            ctx.replies.append(text)
+        self.bus.emit(self.id, kind, text, value=value, origin=origin)
+
+    def report_error(self, ctx: Context | None, error: MotorError) -> None:
+        """``errorNN.n: ...`` when K23 includes 16, otherwise silence (ch. 3 K23)."""
+        if self.reports(Report.MESSAGES):
+            self.say(ctx, error.motor_line(self.id), kind="message")
+
+    def report_status(self) -> None:
+        """``Ux.n=..`` event when K23 includes 1 (in-position and alarms)."""
+        if self.reports(Report.IN_POSITION_AND_ALARM):
+            ux = self.status
+            self.bus.emit(self.id, "status", status_line(self.id, ux), value=ux)
+
+    def report_outputs(self) -> None:
+        """``OUT.n=..`` event when K23 includes 4 (general outputs only)."""
+        if self.reports(Report.OUTPUT_CHANGE):
+            word = self.io.output_word()
+            self.bus.emit(self.id, "output",
+                          f"OUT.{self.id}={io_word_hex(word, self.io.output_count)}",
+                          value=word)
+
+    def report_inputs(self) -> None:
+        """``IN.n=..`` event when K23 includes 2."""
+        if self.reports(Report.INPUT_CHANGE):
+            word = self.io.input_word()
+            self.bus.emit(self.id, "input",
+                          f"IN.{self.id}={io_word_hex(word, self.io.input_count)}",
+                          value=word)
+
+    # -- motion ---------------------------------------------------------------
+    def can_move(self) -> bool:
+        return self.axis.enabled and not self.alarm and not self.estopped
+
+    def limits(self, s_value: int, a_value: int, decel_a: int | None = None) -> Limits:
+        """Motion limits from S/A data and K37, K44, K51, K69 (ch. 3)."""
+        return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
+                                k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
+
+    def move_to(self, waypoints: list[tuple[float, Limits]]) -> None:
+        """Start (or re-plan) a move through user-coordinate waypoints."""
+        if not self.can_move() or not waypoints:
+            return
+        self._last_limits = waypoints[-1][1]
+        self.axis.move(waypoints)
+
+    def run_continuous(self, s_value: int, limits: Limits) -> None:
+        """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
+        if not self.can_move():
+            return
+        self._last_limits = limits
+        self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
+
+    def go(self) -> None:
+        """``^``: execute the direct data P0, S0, A0, M0 (2.1.2)."""
+        s0 = int(self.memory.get("S", 0))
+        a0 = int(self.memory.get("A", 0))
+        p0 = int(self.memory.get("P", 0))
+        self.torque_limit = int(self.memory.get("M", 0))
+        lim = self.limits(s0, a0)
+        if p0 == units.CONTINUOUS:
+            self.run_continuous(s0, lim)
+        else:
+            self.move_to([(float(p0), lim)])
+
+    def go_origin(self) -> None:
+        """``|1``: move to position 0 with K42 speed and K43 acceleration (2.1.2)."""
+        self.move_to([(0.0, self.limits(self.k(42), self.k(43)))])
+
+    def set_origin(self) -> None:
+        """``|2``: the current position becomes 0, no motion (2.1.2)."""
+        self.axis.set_user_position(0.0)
+
+    def stop(self) -> None:
+        """``]``/``}``-style decelerating stop at the motion's deceleration."""
+        lim = self._last_limits or self.limits(self.k(49), self.k(43))
+        self.axis.stop(lim.decel, lim.scurve)
+
+    def emergency_stop(self) -> None:
+        """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
+        self.axis.stop(ESTOP_DECEL)
+        if not self.estopped:
+            self.estopped = True
+            self.report_status()
+
+    def emergency_release(self) -> None:
+        """``*1``: cancel the emergency stop and enable the motor (2.1.2)."""
+        if self.estopped:
+            self.estopped = False
+            self.enable()
+
+    def enable(self) -> None:
+        """``(``: servo on; also clears a latched alarm (CM1 manual 3.2.3 ControlWord 3)."""
+        self.alarm = 0
+        self.axis.hold_here()
+        self.axis.enabled = True
+
+    def free(self) -> None:
+        """``)``: motor free (servo off); the shaft stays where it is."""
+        self.axis.hold_here()
+        self.axis.enabled = False
+
+    def raise_alarm(self, bits: int) -> None:
+        """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
+        bits &= int(ALARM_BITS)
+        if not bits or self.alarm & bits == bits:
+            return
+        self.alarm |= bits
+        self.axis.hold_here()
+        self.axis.enabled = False
+        self.report_status()
+
+    def capture(self, index: int) -> None:
+        """``#x``: P[x] := current position (2.1.2)."""
+        self.memory.set("P", index, self.position())
+
+    def _arrived(self) -> None:
+        self.report_status()
+
+    def _passing_point(self, index: int) -> None:
+        del index
+        self.merge_pulse_until = self.kernel.now + self.k(73) * 1_000_000
+
+    # -- outputs ----------------------------------------------------------------
+    def _output_function_signal(self, function: int, number: int) -> bool:
+        del number
+        if function == OUT_IN_POSITION:
+            return self.status & Ux.IN_POSITION != 0
+        if function == OUT_ALARM:
+            return self.alarm != 0
+        if function == OUT_ORIGIN_DONE:
+            return self.origin_done and self.status == Ux.IN_POSITION
+        if function == OUT_MERGE_PULSE:
+            return self.kernel.now < self.merge_pulse_until
+        if function == OUT_MOTOR_FREE:
+            return not self.axis.enabled
+        if function == OUT_PUSH:
+            return False
+        return False
+
+    def set_output(self, number: int, on: bool) -> None:
+        """``O#``/``F#`` (2.1.2); only general-use outputs (K34 digit 3) follow."""
+        if self.io.set_general(number, on):
+            self.report_outputs()
+
+    def set_input_level(self, number: int, on: bool) -> None:
+        """Drive an input's electrical level (device API, machine file)."""
+        if self.io.set_level(number, on):
+            self.report_inputs()
+
+    # -- V registers and live states --------------------------------------------
+    def state_value(self, name: str) -> int:
+        """A bound V state read live (2.2.1 "V"; cm-banks-rt3.txt 1.3)."""
+        readers = {
+            "Px": self.position, "Sx": self.speed_units, "Ix": self.torque,
+            "Ux": lambda: self.status, "Pe": lambda: round(self.axis.position_error()),
+            "ADIN": lambda: self.analog, "PT": lambda: round(self.axis.target())
+            if abs(self.axis.target()) != float("inf") else units.CONTINUOUS,
+            "ST": lambda: int(self.memory.get("S", 0)), "CT": lambda: self.encoder_count,
+            "Dx": lambda: round(self.axis.target()) if abs(self.axis.target()) != float("inf")
+            else 0,
+            "Fx": lambda: 0, "Cx": lambda: self.encoder_count,
+        }
+        reader = readers.get(name)
+        return int(reader()) if reader else 0
+
+    def v_numeric(self, value: VNumber | VString | VState) -> int:
+        if isinstance(value, VState):
+            return self.state_value(value.name)
+        if isinstance(value, VString):
+            return pack_string(value.text)
+        return int(value.value)
+
+    def register_number(self, reg: ast.Reg) -> int:
+        """Numeric value of a register of this motor."""
+        if reg.kind == "K":
+            return self.k(reg.number)
+        value = self.memory.get(reg.kind, reg.number)
+        if reg.kind == "V":
+            return self.v_numeric(value)
+        return int(value)
+
+    def write_register(self, kind: str, index: int, value: int | str | VState | VString) -> None:
+        """Store data; raises OutOfRangeError / IndexError."""
+        if kind == "K":
+            if not isinstance(value, int):
+                raise OutOfRangeError()
+            self.params.set(index, value)
+            return
+        self.memory.set(kind, index, value)
+
+    def write_state(self, name: str, value: int) -> None:
+        """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).
+
+        ``Dx`` sets the target position the servo follows at once (logic motion
+        banks); ``St`` sets the target speed S0 and re-runs continuous rotation.
+        """
+        if name == "Dx":
+            self.follow(float(value))
+        elif name == "ST":
+            self.memory.set("S", 0, value)
+            if self.axis.moving and self.axis.profile.end_ns is None:
+                self.go()
+
+    def follow(self, target: float) -> None:
+        """Jump the commanded position to ``target``; the servo follows (csp, Dx)."""
+        if self.can_move():
+            self.axis.follow(target)
+
+    def set_output_word(self, word: int) -> None:
+        """``O.n=X``: set every general-use output from the bits of ``word``."""
+        changed = False
+        for number in range(1, self.io.output_count + 1):
+            changed |= self.io.set_general(number, bool(word >> (number - 1) & 1))
+        if changed:
+            self.report_outputs()
+
+    def direct_move(self, stmt: ast.Move) -> None:
+        """``Y#``/``Q#``/``Z#`` given on the host line: move (or push) to P#."""
+        target = float(self.memory.get("P", stmt.index or 0))
+        if stmt.modifier is not None:
+            target = self.position() + (target if stmt.modifier == "+" else -target)
+        lim = self._last_limits or self.limits(int(self.memory.get("S", 0)),
+                                               int(self.memory.get("A", 0)))
+        if stmt.kind == "Y":
+            self.move_to([(target, lim)])
+        else:
+            self.push_to(target, lim)
+
+    def push_to(self, target: float, limits: Limits) -> None:
+        """Push motion toward ``target`` (4.1.4); the push model lives in the plant."""
+        self.move_to([(target, limits)])
+
+    def origin_search(self) -> None:
+        """``|``: origin search per K42, K43, K45, K46 (5.3)."""
+        self.move_to([(0.0, self.limits(self.k(42), self.k(43)))])
