@@ -15,6 +15,7 @@ from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from .evaluate import EvalHost, condition, evaluate
 from .memory import VState
+from .motor import WRITABLE_STATES
 from .queries import query_lines, register_reply
 
 if TYPE_CHECKING:
@@ -48,11 +49,14 @@ class MotorEval(EvalHost):
         return bool(target and target.io.input_signal(number))
 
     def table(self, kind: str, index: int) -> int:
-        return int(self.motor.memory.get(kind, index))
+        value = self.motor.memory.get(kind, index)
+        return value if isinstance(value, int) else self.motor.v_numeric(value)
 
-    @property
-    def u_scaling(self) -> str:
-        return self.motor.firmware.u_scaling
+    def sine(self, x: int) -> int:
+        return self.motor.firmware.sine(x)
+
+    def cosine(self, x: int) -> int:
+        return self.motor.firmware.cosine(x)
 
 
 def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str | None:
@@ -71,7 +75,7 @@ def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str 
         value = base + value if stmt.op == "+=" else base - value
     if reg.kind == "V":
         current = motor.memory.get("V", reg.number)
-        if isinstance(current, VState) and current.writable:
+        if isinstance(current, VState) and current.name in WRITABLE_STATES:
             motor.write_state(current.name, value)
             return value
     motor.write_register(reg.kind, reg.number, value)

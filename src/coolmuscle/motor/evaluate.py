@@ -47,19 +47,16 @@ class EvalHost(Protocol):
     def table(self, kind: str, index: int) -> int:
         """N or R memory value for U4/U5/U6."""
 
-    @property
-    def u_scaling(self) -> str:
-        """"cml" (0.01 degree) or "rt3" (1/10000 turn) for U1/U2."""
+    def sine(self, x: int) -> int:
+        """U1 with the firmware's angle scaling (CML 0.01 degree, RT3 1/10000 turn)."""
+
+    def cosine(self, x: int) -> int:
+        """U2 with the firmware's angle scaling."""
 
 
 def _trunc(x: float) -> int:
-    """Truncate toward zero, forgiving float noise (10000·sin(30°) is 5000, 6.7)."""
-    nudged = x + math.copysign(1e-7, x) if x != 0 else 0.0
-    return int(nudged)
-
-
-def _angle(theta: int, scaling: str) -> float:
-    return 2 * math.pi * theta / (36000 if scaling == "cml" else 10000)
+    """Truncate toward zero."""
+    return int(round(x, 6))
 
 
 def _lookup(host: EvalHost, x: int) -> int:
@@ -98,9 +95,9 @@ def _polynomial(host: EvalHost, kind: str, x: int) -> int:
 def call_function(name: str, x: int, host: EvalHost) -> int:
     """U1..U6 (6.7; cm-banks-rt3.txt 1.5 advanced math functions)."""
     if name == "U1":
-        return _trunc(10000 * math.sin(_angle(x, host.u_scaling)))
+        return host.sine(x)
     if name == "U2":
-        return _trunc(10000 * math.cos(_angle(x, host.u_scaling)))
+        return host.cosine(x)
     if name == "U3":
         return math.isqrt(x) if x > 0 else 0
     if name == "U4":

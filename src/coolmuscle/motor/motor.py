@@ -30,6 +30,9 @@ from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
 
 log = logging.getLogger(__name__)
 
+#: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
+WRITABLE_STATES = frozenset({"Dx", "ST"})
+
 #: Maximum deceleration used by the emergency stop ``*`` (pulses/s²), docs/fidelity.md.
 ESTOP_DECEL = 32767 * 1000.0
 
@@ -67,7 +70,8 @@ class Motor:
         self.firmware = firmware
         self.bus = bus
         self.params = ParamTable(firmware)
-        self.memory = Memory(firmware, max_position=self.max_position)
+        self.memory = Memory(firmware, k37=self.k(37))
+        self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
                             self._output_function_signal)
         self.plant = Plant()
@@ -98,6 +102,11 @@ class Motor:
     def max_position(self) -> int:
         """Maximum |P| for the current K37 (ch. 3 K37 table)."""
         return self.resolution.max_position
+
+    def _param_changed(self, k: int, old: int, new: int) -> None:
+        del old
+        if k == 37:
+            self.memory.k37 = new
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
@@ -373,3 +382,33 @@ class Motor:
     def origin_search(self) -> None:
         """``|``: origin search per K42, K43, K45, K46 (5.3)."""
         self.move_to([(0.0, self.limits(self.k(42), self.k(43)))])
+
+    # -- saving and power ---------------------------------------------------------
+    def to_snapshot(self) -> dict[str, object]:
+        """What ``$`` stores: parameters, data and banks (2.1.2 "$")."""
+        return {"params": self.params.values(), "memory": self.memory.to_dict()}
+
+    def load_snapshot(self, saved: dict[str, object]) -> None:
+        """Restore what was saved (power-up).  Data that no longer fits is skipped."""
+        params = saved.get("params")
+        if isinstance(params, dict):
+            rejected = self.params.restore({int(k): int(v) for k, v in params.items()})
+            if rejected:
+                log.warning("motor %d: saved K%s not accepted", self.id, rejected)
+        memory = saved.get("memory")
+        if isinstance(memory, dict):
+            try:
+                self.memory = Memory.from_dict(self.firmware, memory, k37=self.k(37))
+            except ValueError as exc:
+                log.warning("motor %d: saved data skipped: %s", self.id, exc)
+        self.memory.k37 = self.k(37)
+
+    def power_on(self) -> None:
+        """Power-up: servo on or motor free per K68 (ch. 3 K68)."""
+        if self.k(68) == 0:
+            self.free()
+
+    def inject_fault(self, fault: str, **params: float) -> None:
+        """Fault injection through the device API (docs/machine-file.md)."""
+        del params
+        raise ValueError(f"unknown fault {fault!r}")

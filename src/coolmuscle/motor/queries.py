@@ -53,10 +53,10 @@ def group_lines(items: list[str], per_line: int = PER_LINE) -> list[str]:
 def data_listing(motor: "Motor", kind: str) -> list[str]:
     """?A, ?S, ?M, ?T, ?V, ?P, ?N, ?R: memory numbers 1..N of one kind."""
     items = []
-    for index in motor.memory.indices(kind):
+    for index, value in motor.memory.items(kind):
         if index == 0:
             continue
-        items.append(f"{kind}{index}.{motor.id}={format_value(motor.memory.get(kind, index))}")
+        items.append(f"{kind}{index}.{motor.id}={format_value(value)}")
     return group_lines(items)
 
 
@@ -92,7 +92,7 @@ def query_lines(motor: "Motor", query: ast.Query) -> list[str] | None:
     if query.letter is None and query.number is None:
         return direct_data(motor)
     if query.letter is not None and query.letter != "L":
-        if query.letter in ("N", "R") and not motor.firmware.interpolation:
+        if query.letter in ("N", "R") and not motor.firmware.has_interpolation:
             return None
         return data_listing(motor, query.letter)
     number = query.number
@@ -100,11 +100,11 @@ def query_lines(motor: "Motor", query: ast.Query) -> list[str] | None:
         if 51 <= number <= 50 + motor.io.output_count:
             return [f"OUT{number - 50}.{m}={int(motor.io.output_port(number - 50))}"]
         if number == 90:
-            return motor.params.listing(m)
+            return motor.params.format_param_listing(m)
         if number == 999:
             lines: list[str] = []
             for kind in ALL_DATA_ORDER:
-                if kind in ("N", "R") and not motor.firmware.interpolation:
+                if kind in ("N", "R") and not motor.firmware.has_interpolation:
                     continue
                 lines += data_listing(motor, kind)
             return lines
