@@ -4,12 +4,11 @@ This module owns CML *syntax*: what a line means is the executor's business, wha
 it *says* is decided here.  It is used for the host line, bank uploads,
 ``coolmuscle check`` and the client (docs/architecture.md, rule 3).
 
-Two passes, both hand-written:
-
-* a scanner (:func:`_scan`) turns the text into tokens with one compiled regular
-  expression, decides whether a ``/`` is a division or starts a comment, and
-  enforces the one-Not-per-statement rule (cml-users-guide.txt 6.8);
-* a recursive-descent parser (:class:`_Parser`) builds the tree.
+Two passes, both hand-written: :func:`coolmuscle.cml.scanner.scan` turns the text
+into tokens (and finds the comment), then the recursive-descent :class:`_Parser`
+here builds the tree: segments split by ``;``, statements split by ``,``, branches
+``condition, then, else`` with ``:`` junctions, and expressions with the usual
+precedence (``* /`` over ``+ -`` over comparisons over ``&& ||``).
 
 Anything that does not parse raises :class:`~coolmuscle.errors.CmlSyntaxError`
 with the 0-based column of the offending character; no other exception escapes
@@ -19,7 +18,6 @@ listed in docs/fidelity.md, "CML language".
 
 from __future__ import annotations
 
-import re
 from typing import Final, NoReturn
 
 from coolmuscle.cml.ast import (
@@ -28,161 +26,24 @@ from coolmuscle.cml.ast import (
     Move, Not, Num, Output, OutputWord, Query, Ref, Reg, StartBank, Statement, StopBank,
     Str, Wait,
 )
-from coolmuscle.errors import CmlSyntaxError
+from coolmuscle.cml.scanner import MAX_INDEX, MAX_LOOP, MAX_MOTOR, Tok, fail, scan
 
-__all__ = ["parse", "MAX_NUMBER_DIGITS", "MAX_INDEX", "MAX_MOTOR", "MAX_LOOP"]
-
-#: Longest digit run accepted anywhere (data range is +-1,000,000,000).
-MAX_NUMBER_DIGITS: Final = 10
-#: Largest memory / bank / output / query number (``?1000`` is the largest used).
-MAX_INDEX: Final = 9999
-#: Motor IDs the parser accepts after the dot (the executor checks 1..15).
-MAX_MOTOR: Final = 99
-#: Largest loop count ``X#`` (cml-users-guide.txt 2.2.2 "X": 0 ~ 255).
-MAX_LOOP: Final = 255
-
-# One token per match; leading blanks are skipped.  Outer groups W N M S O name the
-# token kind (``lastgroup`` is the outermost group, which closes last).
-_TOKEN_RE: Final = re.compile(
-    r"""[ \t]*(?:
-      (?P<W>(?P<w>[A-Za-z]+)(?P<wi>[0-9]+)?(?:\.(?P<wm>[0-9]+))?)
-    | (?P<N>(?P<n>[0-9]+)(?:\.(?P<nm>[0-9]+))?)
-    | (?P<M>\.(?P<m>[0-9]+))
-    | (?P<S>"(?P<s>[ !\#-~]*)")
-    | (?P<O>==|!=|>=|<=|&&|\|\||\+=|-=|!!|//|[-+*/=<>!(),:;^|\[\]}$?\#@\\\u00a5\u20a9])
-    )""",
-    re.VERBOSE,
-)
-_BLANKS_RE: Final = re.compile(r"[ \t]*")
-# What can start an operand (the FIRST set of _Parser._primary): a single "/"
-# followed by one of these is a division, otherwise it starts a comment.
-_OPERAND_START_RE: Final = re.compile(
-    r"[ \t]*(?:[0-9\"!]|[-+][0-9]|[PSAMTVNRKHpsamtvnrkh](?![A-Za-z])|[IiUu][0-9])"
-)
+__all__ = ["parse"]
 
 _REGISTERS: Final = frozenset(REGISTER_KINDS)
 _QUERY_LETTERS: Final = frozenset("ASMTVPNRL")
 _SEPARATORS: Final = frozenset({",", ":", ";", "eof"})
 _SEGMENT_END: Final = frozenset({";", "eof"})
-_OPERAND_END: Final = frozenset({"word", "num", "str", ")"})
 _ASSIGN_OPS: Final = frozenset({"=", "+=", "-="})
 _COMPARE_OPS: Final = frozenset({"==", "!=", ">", ">=", "<", "<="})
 _LOGIC_OPS: Final = frozenset({"&&", "||"})
 _ADD_OPS: Final = frozenset({"+", "-"})
 _MUL_OPS: Final = frozenset({"*", "/"})
 _NOT_OPS: Final = frozenset({"!", "!!"})
-_BACKSLASHES: Final = {"\\": "\\", "\u00a5": "\\", "\u20a9": "\\"}  # \, yen, won
 _CONDITIONS: Final = (Compare, Logic, Not, Input)
 _EXPRESSIONS: Final = (Num, Str, Reg, Input, BinOp, Func, Compare, Logic, Not)
 _SIMPLE_EXEC: Final = {"(": "enable", ")": "free", "}": "stop_after_line",
                        ">": "next_line", "<": "prev_line", "$": "save"}
-
-
-class _Tok:
-    """One token.  ``kind`` is "word", "num", "mot", "str", "eof" or the operator text.
-
-    word: ``text`` = letters (upper case), ``val`` = index, ``ipos`` its column;
-    num: ``val`` = value; word/num/mot: ``motor`` and ``mpos`` (column of the dot).
-    """
-
-    __slots__ = ("kind", "start", "end", "text", "val", "motor", "ipos", "mpos")
-
-    def __init__(self, kind: str, start: int, end: int, text: str = "",
-                 val: int | None = None, motor: int | None = None,
-                 ipos: int = 0, mpos: int = 0) -> None:
-        self.kind, self.start, self.end, self.text = kind, start, end, text
-        self.val, self.motor, self.ipos, self.mpos = val, motor, ipos, mpos
-
-
-def _fail(text: str, message: str, position: int) -> NoReturn:
-    raise CmlSyntaxError(message, text=text, position=position)
-
-
-def _number(text: str, digits: str | None, pos: int) -> int | None:
-    """Digits -> int, refusing runs longer than :data:`MAX_NUMBER_DIGITS`."""
-    if digits is None:
-        return None
-    if len(digits) > MAX_NUMBER_DIGITS:
-        _fail(text, f"number longer than {MAX_NUMBER_DIGITS} digits", pos)
-    return int(digits)
-
-
-def _motor(text: str, digits: str | None, dot: int) -> int | None:
-    """The motor ID after a dot: 1..99 (cml-users-guide.txt 2.1 ".n")."""
-    value = _number(text, digits, dot + 1)
-    if value is not None and not 1 <= value <= MAX_MOTOR:
-        _fail(text, f"motor ID must be 1..{MAX_MOTOR}", dot + 1)
-    return value
-
-
-def _bad_character(text: str, pos: int) -> NoReturn:
-    char = text[pos]
-    if char == '"':
-        close = text.find('"', pos + 1)
-        if close < 0:
-            _fail(text, "unterminated string", pos)
-        bad = next((i for i in range(pos + 1, close) if not " " <= text[i] <= "~"), pos)
-        _fail(text, f"invalid character {text[bad]!r} in string", bad)
-    if char == ".":
-        _fail(text, "'.' must be followed by a motor ID", pos)
-    _fail(text, f"invalid character {char!r}", pos)
-
-
-def _scan(text: str) -> tuple[list[_Tok], int]:
-    """Tokens of ``text`` up to its comment, ending with an "eof" token.
-
-    Returns the tokens and the column where the code ends (comment start or
-    length).  ``//`` always starts a comment; a single ``/`` is a division only
-    after an operand and before something that can start one (RT3 1.1 "/").
-    """
-    toks: list[_Tok] = []
-    append = toks.append
-    match = _TOKEN_RE.match
-    pos, size, nots, last = 0, len(text), 0, ""
-    while pos < size:
-        m = match(text, pos)
-        if m is None:
-            pos = _BLANKS_RE.match(text, pos).end()
-            if pos < size:
-                _bad_character(text, pos)
-            break
-        kind = m.lastgroup
-        start, pos = m.start(kind), m.end()
-        if kind == "W":
-            letters_end, dot = m.end("w"), m.start("wm") - 1
-            tok = _Tok("word", start, pos, m.group("w").upper(),
-                       _number(text, m.group("wi"), letters_end),
-                       _motor(text, m.group("wm"), dot), letters_end, dot)
-        elif kind == "N":
-            dot = m.start("nm") - 1
-            tok = _Tok("num", start, pos, "", _number(text, m.group("n"), start),
-                       _motor(text, m.group("nm"), dot), start, dot)
-        elif kind == "M":
-            tok = _Tok("mot", start, pos, "", None, _motor(text, m.group("m"), start),
-                       start, start)
-        elif kind == "S":
-            tok = _Tok("str", start, pos, m.group("s"))
-        else:
-            op = _BACKSLASHES.get(m.group("O"), m.group("O"))
-            if op == "//" or (op == "/" and not (
-                    last in _OPERAND_END and _OPERAND_START_RE.match(text, pos))):
-                return _finish(toks, start)
-            if op in _NOT_OPS:
-                nots += 1
-                if nots > 1:
-                    _fail(text, "only one Not operator is allowed in a statement", start)
-            elif op in (",", ":", ";"):
-                nots = 0
-            tok = _Tok(op, start, pos)
-        append(tok)
-        last = tok.kind
-    return _finish(toks, size)
-
-
-def _finish(toks: list[_Tok], code_end: int) -> tuple[list[_Tok], int]:
-    end = toks[-1].end if toks else 0
-    toks.append(_Tok("eof", end, end))
-    return toks, code_end
 
 
 def parse(text: str) -> list[Line]:
@@ -193,7 +54,7 @@ def parse(text: str) -> list[Line]:
     "; (semi colon)").  ``Line.source`` is the text of that Line without comment,
     ``;`` and surrounding blanks.
     """
-    toks, code_end = _scan(text)
+    toks, code_end = scan(text)
     if len(toks) == 1:
         return []
     return _Parser(text, toks).lines(code_end)
@@ -204,40 +65,40 @@ class _Parser:
 
     __slots__ = ("text", "toks", "i", "tok")
 
-    def __init__(self, text: str, toks: list[_Tok]) -> None:
+    def __init__(self, text: str, toks: list[Tok]) -> None:
         self.text, self.toks, self.i, self.tok = text, toks, 0, toks[0]
 
     # ------------------------------------------------------------ helpers
     def fail(self, message: str, position: int) -> NoReturn:
-        _fail(self.text, message, position)
+        fail(self.text, message, position)
 
-    def unexpected(self, tok: _Tok | None = None) -> NoReturn:
+    def unexpected(self, tok: Tok | None = None) -> NoReturn:
         tok = tok or self.tok
         if tok.kind == "eof":
             self.fail("unexpected end of line", tok.start)
         self.fail(f"unexpected {self.text[tok.start:tok.end]!r}", tok.start)
 
-    def advance(self) -> _Tok:
+    def advance(self) -> Tok:
         tok = self.tok
         self.i += 1
         self.tok = self.toks[self.i]
         return tok
 
-    def expect(self, kind: str) -> _Tok:
+    def expect(self, kind: str) -> Tok:
         if self.tok.kind != kind:
             if self.tok.kind == "eof":
                 self.fail(f"expected {kind!r}", self.tok.start)
             self.unexpected()
         return self.advance()
 
-    def attached(self, prev: _Tok, *kinds: str) -> _Tok | None:
+    def attached(self, prev: Tok, *kinds: str) -> Tok | None:
         """Consume and return the next token if it touches ``prev`` and is of ``kinds``."""
         tok = self.tok
         if tok.start == prev.end and tok.kind in kinds:
             return self.advance()
         return None
 
-    def modifier(self, prev: _Tok) -> str | None:
+    def modifier(self, prev: Tok) -> str | None:
         """A ``+``/``-`` written right after ``prev`` and ending the statement."""
         tok = self.tok
         if (tok.kind in _ADD_OPS and tok.start == prev.end
@@ -245,20 +106,20 @@ class _Parser:
             return self.advance().kind
         return None
 
-    def motor_suffix(self, prev: _Tok) -> int | None:
+    def motor_suffix(self, prev: Tok) -> int | None:
         """An optional ``.n`` written right after a command symbol."""
         tok = self.attached(prev, "mot")
         return None if tok is None else tok.motor
 
-    def no_motor(self, tok: _Tok) -> None:
+    def no_motor(self, tok: Tok) -> None:
         if tok.motor is not None:
             self.fail("no motor ID allowed here", tok.mpos)
 
-    def no_index(self, tok: _Tok) -> None:
+    def no_index(self, tok: Tok) -> None:
         if tok.val is not None:
             self.fail(f"{tok.text} takes no number", tok.ipos)
 
-    def index(self, tok: _Tok, what: str = "number", top: int = MAX_INDEX) -> int:
+    def index(self, tok: Tok, what: str = "number", top: int = MAX_INDEX) -> int:
         """The required number of ``tok`` (a word's index or a num's value)."""
         if tok.val is None:
             self.fail(f"{tok.text or 'command'} needs a {what}", tok.end)
@@ -266,7 +127,7 @@ class _Parser:
             self.fail(f"{what} must be 0..{top}", tok.ipos)
         return tok.val
 
-    def opt_index(self, tok: _Tok) -> int | None:
+    def opt_index(self, tok: Tok) -> int | None:
         return None if tok.val is None else self.index(tok)
 
     # ------------------------------------------------------------- lines
@@ -307,7 +168,7 @@ class _Parser:
                 self.fail("':' joins actions of a branch only", self.tok.start)
             self.unexpected()
 
-    def branch(self, condition: Expr, first: _Tok) -> Branch:
+    def branch(self, condition: Expr, first: Tok) -> Branch:
         """``condition, then, else``; then/else are ``:``-joined (6.3 "I", "V")."""
         if not (isinstance(condition, _CONDITIONS)
                 or (isinstance(condition, Reg) and condition.kind == "V")):
@@ -360,7 +221,7 @@ class _Parser:
             return self.word_statement(tok)
         return self.symbol_statement(tok)
 
-    def register_statement(self, tok: _Tok, head: bool) -> Statement | Expr:
+    def register_statement(self, tok: Tok, head: bool) -> Statement | Expr:
         """``P1.1=...`` Assign, ``P2.1+`` / ``V2.1`` Ref, or (head) a condition."""
         reg = Reg(tok.text, self.opt_index(tok), tok.motor)
         nxt = self.toks[self.i + 1]
@@ -382,7 +243,7 @@ class _Parser:
             return self.expression()
         self.unexpected(nxt)
 
-    def word_statement(self, tok: _Tok) -> Statement:
+    def word_statement(self, tok: Tok) -> Statement:
         """Letter commands: Y Q Z O F C J CL JL X W B L END (2.2.2, 2.2.3)."""
         word = tok.text
         self.advance()
@@ -409,7 +270,7 @@ class _Parser:
             return BankEnd(tok.motor)
         self.fail(f"unknown command {self.text[tok.start:tok.ipos]!r}", tok.start)
 
-    def loop(self, tok: _Tok) -> Loop | LoopEnd:
+    def loop(self, tok: Tok) -> Loop | LoopEnd:
         """``X#.n`` loop count 0..255, ``X.n-`` end of loop (2.2.2 "X")."""
         if tok.val is None:
             if self.modifier(tok) != "-":
@@ -417,7 +278,7 @@ class _Parser:
             return LoopEnd(tok.motor)
         return Loop(self.index(tok, "loop count", MAX_LOOP), tok.motor)
 
-    def symbol_statement(self, tok: _Tok) -> Statement:
+    def symbol_statement(self, tok: Tok) -> Statement:
         """Execution commands and queries (2.1.2, 6.5, 6.6)."""
         kind = tok.kind
         method = _SYMBOL_METHODS.get(kind)
@@ -428,7 +289,7 @@ class _Parser:
             return Exec(_SIMPLE_EXEC[kind], self.motor_suffix(tok))  # type: ignore[arg-type]
         return getattr(self, method)(tok)
 
-    def go(self, tok: _Tok) -> Exec:
+    def go(self, tok: Tok) -> Exec:
         """``^.n``; ``^1`` as written in 2.2.3 is read as ``^.1``."""
         num = self.attached(tok, "num")
         if num is not None:
@@ -438,7 +299,7 @@ class _Parser:
             return Exec("go", num.val)
         return Exec("go", self.motor_suffix(tok))
 
-    def digit_exec(self, tok: _Tok, ops: dict[int, str], plain: str) -> Exec:
+    def digit_exec(self, tok: Tok, ops: dict[int, str], plain: str) -> Exec:
         """``|`` ``|1`` ``|2``, ``*`` ``*1``, ``]`` ``]1`` with optional ``.n``."""
         num = self.attached(tok, "num")
         if num is None:
@@ -447,13 +308,13 @@ class _Parser:
             self.fail(f"{tok.kind}{num.val} is not a command", num.start)
         return Exec(ops[num.val], num.motor)  # type: ignore[arg-type,index]
 
-    def origin(self, tok: _Tok) -> Exec:
+    def origin(self, tok: Tok) -> Exec:
         return self.digit_exec(tok, {1: "go_origin", 2: "set_origin"}, "origin")
 
-    def estop(self, tok: _Tok) -> Exec:
+    def estop(self, tok: Tok) -> Exec:
         return self.digit_exec(tok, {1: "estop_release"}, "estop")
 
-    def pause(self, tok: _Tok) -> Exec | StopBank:
+    def pause(self, tok: Tok) -> Exec | StopBank:
         """``]`` ``]1.n`` pause, ``]L.n`` ``]LM.n`` stop a ladder bank (6.5)."""
         word = self.attached(tok, "word")
         if word is None:
@@ -463,7 +324,7 @@ class _Parser:
         self.no_index(word)
         return StopBank(word.text, word.motor)  # type: ignore[arg-type]
 
-    def start_bank(self, tok: _Tok) -> StartBank:
+    def start_bank(self, tok: Tok) -> StartBank:
         """``[#.n``, ``[`` (resume), ``[L#.n``, ``[LM#.n`` (6.5, RT3 3.2)."""
         nxt = self.attached(tok, "num", "mot", "word")
         if nxt is None:
@@ -473,7 +334,7 @@ class _Parser:
         kind = nxt.text if nxt.kind == "word" else "B"
         return StartBank(kind, self.opt_index(nxt), nxt.motor)  # type: ignore[arg-type]
 
-    def query(self, tok: _Tok) -> Query:
+    def query(self, tok: Tok) -> Query:
         """``?``, ``?.n``, ``?#.n``, ``?A.n`` ... ``?L#.n`` (6.6)."""
         nxt = self.attached(tok, "num", "mot", "word")
         if nxt is None:
@@ -483,21 +344,21 @@ class _Parser:
         letter = nxt.text if nxt.kind == "word" else None
         return Query(self.opt_index(nxt), letter, nxt.motor)
 
-    def capture(self, tok: _Tok) -> Capture:
+    def capture(self, tok: Tok) -> Capture:
         """``#x.n``: capture the position into P memory x (2.1.2 "#")."""
         num = self.attached(tok, "num")
         if num is None:
             self.fail("# needs a P memory number", tok.end)
         return Capture(self.index(num, "P memory number"), num.motor)
 
-    def interp(self, tok: _Tok) -> Interp:
+    def interp(self, tok: Tok) -> Interp:
         """``@#.n+`` / ``@.n-`` / ``@#.n`` (2.1.2 "@")."""
         nxt = self.attached(tok, "num", "mot") or tok
         if nxt is tok:
             return Interp(None, None, self.modifier(tok))  # type: ignore[arg-type]
         return Interp(self.opt_index(nxt), nxt.motor, self.modifier(nxt))  # type: ignore[arg-type]
 
-    def alloc(self, tok: _Tok) -> Alloc:
+    def alloc(self, tok: Tok) -> Alloc:
         r"""``\P300`` / ``\N200`` (2.1.2 "\\"; also written with the yen sign)."""
         word = self.attached(tok, "word")
         if word is None or word.text not in ("P", "N"):
@@ -566,7 +427,7 @@ class _Parser:
             self.fail("expected an operand", tok.start)
         self.unexpected(tok)
 
-    def operand_word(self, tok: _Tok) -> Expr:
+    def operand_word(self, tok: Tok) -> Expr:
         word = tok.text
         self.advance()
         if word in _REGISTERS:
