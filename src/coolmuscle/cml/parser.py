@@ -170,6 +170,8 @@ class _Parser:
 
     def branch(self, condition: Expr, first: Tok) -> Branch:
         """``condition, then, else``; then/else are ``:``-joined (6.3 "I", "V")."""
+        if self.tok.kind not in (",", ";", "eof"):
+            self.end_of_segment()
         if not (isinstance(condition, _CONDITIONS)
                 or (isinstance(condition, Reg) and condition.kind == "V")):
             self.fail("not a condition (use I#, V#, a comparison or && || !!)", first.start)
@@ -241,6 +243,8 @@ class _Parser:
             return Ref(reg, nxt.kind)  # type: ignore[arg-type]
         if head:
             return self.expression()
+        if nxt.kind in _COMPARE_OPS or nxt.kind in _LOGIC_OPS:
+            self.fail("a condition must be the first element of a line", tok.start)
         self.unexpected(nxt)
 
     def word_statement(self, tok: Tok) -> Statement:
