@@ -116,7 +116,6 @@ def attach_not(expr: Expr, inner: Expr) -> Expr:
     return Not(inner)
 
 
-
 expressions = logic(2) | st.builds(attach_not, logic(2), logic(1))
 _compound = st.one_of(
     st.builds(Compare, st.sampled_from(["==", "!=", ">", ">=", "<", "<="]), arith(2), arith(2)),

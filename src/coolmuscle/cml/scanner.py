@@ -33,8 +33,9 @@ MAX_STATEMENT_TOKENS: Final = 128
 #: Deepest ``U#(`` / ``!!(`` nesting; bounds the recursion of the parser.
 MAX_NESTING: Final = 16
 
-# One token per match; leading blanks are skipped.  Outer groups W N M S O name the
-# token kind (``lastgroup`` is the outermost group, which closes last).
+# One token per match; leading blanks are skipped.  Groups, in order: a word with
+# its letters, index and motor; a number with its digits and motor; a ".n" motor
+# suffix and its digits; a string and its body; an operator.
 _TOKEN_RE: Final = re.compile(
     r"""[ \t]*(?:
       (?P<W>(?P<w>[A-Za-z]+)(?P<wi>[0-9]+)?(?:\.(?P<wm>[0-9]+))?)
@@ -126,24 +127,31 @@ def scan(text: str) -> tuple[list[Tok], int]:
             if pos < size:
                 _bad_character(text, pos)
             break
-        kind = m.lastgroup
-        start, pos = m.start(kind), m.end()
-        if kind == "W":
-            letters_end, dot = m.end("w"), m.start("wm") - 1
-            tok = Tok("word", start, pos, m.group("w").upper(),
-                       _number(text, m.group("wi"), letters_end),
-                       _motor(text, m.group("wm"), dot), letters_end, dot)
-        elif kind == "N":
-            dot = m.start("nm") - 1
-            tok = Tok("num", start, pos, "", _number(text, m.group("n"), start),
-                       _motor(text, m.group("nm"), dot), start, dot)
-        elif kind == "M":
-            tok = Tok("mot", start, pos, "", None, _motor(text, m.group("m"), start),
-                       start, start)
-        elif kind == "S":
-            tok = Tok("str", start, pos, m.group("s"))
+        pos = m.end()
+        word, letters, index, wmotor, num, digits, nmotor, mot, mdigits, _, body, op = \
+            m.groups()
+        if letters is not None:
+            start = pos - len(word)
+            ipos = start + len(letters)
+            dot = ipos + len(index) if index else ipos
+            tok = Tok("word", start, pos, letters.upper(),
+                      None if index is None else _number(text, index, ipos),
+                      None if wmotor is None else _motor(text, wmotor, dot), ipos, dot)
+        elif digits is not None:
+            start = pos - len(num)
+            dot = start + len(digits)
+            tok = Tok("num", start, pos, "", _number(text, digits, start),
+                      None if nmotor is None else _motor(text, nmotor, dot), start, dot)
+        elif mdigits is not None:
+            start = pos - len(mot)
+            tok = Tok("mot", start, pos, "", None, _motor(text, mdigits, start),
+                      start, start)
+        elif body is not None:
+            start = pos - len(body) - 2
+            tok = Tok("str", start, pos, body)
         else:
-            op = _BACKSLASHES.get(m.group("O"), m.group("O"))
+            start = pos - len(op)
+            op = _BACKSLASHES.get(op, op)
             if op == "//" or (op == "/" and not (
                     last in _OPERAND_END and _OPERAND_START_RE.match(text, pos))):
                 return _finish(toks, start)
