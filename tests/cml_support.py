@@ -3,7 +3,8 @@
 :func:`corpus` reads tests/data/cml_manual_corpus.txt (every example line of the
 manuals).  The strategies build syntax trees shaped as the parser builds them;
 they are shared by tests/test_cml_formatter.py (round trip),
-tests/test_cml_parser.py (lark differential oracle) and tests/test_cml_fuzz.py.  "Parser-shaped" means: expressions are left-associative
+tests/test_cml_parser.py (lark differential oracle) and tests/test_cml_fuzz.py.
+"Parser-shaped" means: expressions are left-associative
 with ``* /`` under ``+ -`` under one comparison under ``&& ||`` (no grouping
 parentheses exist in CML); at most one ``!!(...)`` per statement and only as the
 last operand (cml-users-guide.txt 6.8); numbers within the scanner's limits.

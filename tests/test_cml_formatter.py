@@ -160,7 +160,8 @@ def test_round_trip_single_statement(stmt: object) -> None:
 @given(expressions)
 def test_round_trip_expression_as_assignment(expr: object) -> None:
     text = "V1.1=" + format_expr(expr)  # type: ignore[arg-type]
-    assert parse(text)[0].statements == (Assign(Reg("V", 1, 1), "=", expr),)  # type: ignore[arg-type]
+    expected = Assign(Reg("V", 1, 1), "=", expr)  # type: ignore[arg-type]
+    assert parse(text)[0].statements == (expected,)
 
 
 def test_format_is_idempotent_on_manual_corpus() -> None:

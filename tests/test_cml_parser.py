@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -19,14 +20,14 @@ from coolmuscle.cml.ast import (
 from coolmuscle.errors import CmlSyntaxError
 
 
-def one(text: str) -> object:
+def one(text: str) -> Any:
     """The only statement of a one-statement line."""
     (line,) = parse(text)
     (stmt,) = line.statements
     return stmt
 
 
-def stmts(text: str) -> tuple[object, ...]:
+def stmts(text: str) -> tuple[Any, ...]:
     (line,) = parse(text)
     return line.statements
 
@@ -82,7 +83,7 @@ def test_2_1_1_direct_data() -> None:
 
 def test_registers_with_index_and_motor() -> None:
     for kind in "PSAMTVNRKH":
-        assert one(f"{kind}7.3=1").target == Reg(kind, 7, 3)  # type: ignore[attr-defined]
+        assert one(f"{kind}7.3=1").target == Reg(kind, 7, 3)
     assert one("K23.1=16") == Assign(Reg("K", 23, 1), "=", Num(16))
     assert one("H0") == Ref(Reg("H", 0))
     assert one("S0=S1") == Assign(Reg("S", 0), "=", Reg("S", 1))
@@ -207,18 +208,18 @@ def test_6_6_queries(text: str, stmt: object) -> None:
 
 def test_6_7_precedence_and_left_association() -> None:
     v1, v2, v3 = Reg("V", 1), Reg("V", 2), Reg("V", 3)
-    assert one("P1=V1+V2*V3").value == BinOp("+", v1, BinOp("*", v2, v3))  # type: ignore[attr-defined]
-    assert one("P1=V1*V2+V3").value == BinOp("+", BinOp("*", v1, v2), v3)  # type: ignore[attr-defined]
-    assert one("P1=V1-V2-V3").value == BinOp("-", BinOp("-", v1, v2), v3)  # type: ignore[attr-defined]
-    assert one("P1=V1/V2/V3").value == BinOp("/", BinOp("/", v1, v2), v3)  # type: ignore[attr-defined]
-    assert one("P1=V1--5").value == BinOp("-", v1, Num(-5))  # type: ignore[attr-defined]
+    assert one("P1=V1+V2*V3").value == BinOp("+", v1, BinOp("*", v2, v3))
+    assert one("P1=V1*V2+V3").value == BinOp("+", BinOp("*", v1, v2), v3)
+    assert one("P1=V1-V2-V3").value == BinOp("-", BinOp("-", v1, v2), v3)
+    assert one("P1=V1/V2/V3").value == BinOp("/", BinOp("/", v1, v2), v3)
+    assert one("P1=V1--5").value == BinOp("-", v1, Num(-5))
     assert error("P1=V1- -V2").position == 8
 
 
 def test_6_7_functions() -> None:
     for n in range(1, 7):
-        assert one(f"P1.1=U{n}(V1.1)").value == Func(f"U{n}", Reg("V", 1, 1))  # type: ignore[attr-defined]
-    assert one("P1.1=P2.1+U3(V1.1)").value == BinOp(  # type: ignore[attr-defined]
+        assert one(f"P1.1=U{n}(V1.1)").value == Func(f"U{n}", Reg("V", 1, 1))
+    assert one("P1.1=P2.1+U3(V1.1)").value == BinOp(
         "+", Reg("P", 2, 1), Func("U3", Reg("V", 1, 1)))
     assert error("P1=U7(V1)").position == 3
     assert error("P1=U1.1(V1)").position == 5
@@ -227,14 +228,14 @@ def test_6_7_functions() -> None:
 def test_6_9_comparisons() -> None:
     for op in ["==", "!=", ">", ">=", "<", "<="]:
         (branch,) = stmts(f"V1.1 {op} V2.1 + V3.1, ?99, ?98")
-        assert branch.condition == Compare(  # type: ignore[attr-defined]
+        assert branch.condition == Compare(
             op, Reg("V", 1, 1), BinOp("+", Reg("V", 2, 1), Reg("V", 3, 1)))
     assert error("V1>V2>V3, ?99").position == 5
 
 
 def test_logic_is_left_to_right() -> None:
     (branch,) = stmts("I1 || I2 && I3, ?99")
-    assert branch.condition == Logic(  # type: ignore[attr-defined]
+    assert branch.condition == Logic(
         "&&", Logic("||", Input(1), Input(2)), Input(3))
 
 
@@ -249,13 +250,13 @@ def test_6_8_not_operator_examples() -> None:
     second = error("I2.1 && !(I3.1) && !(I4.1), O1.1, F1.1")
     assert second.position == 19 and "one Not" in str(second)
     assert one("V1=!!(I3.2)") == one("V1=!(I3.2)")
-    assert stmts("!!(I3.2), O1, F1")[0].condition == Not(Input(3, 2))  # type: ignore[attr-defined]
+    assert stmts("!!(I3.2), O1, F1")[0].condition == Not(Input(3, 2))
 
 
 def test_not_may_repeat_in_separate_statements() -> None:
     assert len(stmts("V1=!!(I1), V2=!(I2)")) == 2
     (branch,) = stmts("!!(I1), V1=!!(I2):V2=!!(I3)")
-    assert len(branch.then) == 2  # type: ignore[attr-defined]
+    assert len(branch.then) == 2
     assert error("V1=!!(!!(I1))").position == 6
 
 
@@ -278,13 +279,13 @@ def test_2_2_2_colon_junctions() -> None:
         Compare(">", Reg("V", 1), Reg("V", 2)),
         (Assign(Reg("S", 0), "=", Reg("S", 1)), Exec("go"), Ref(Reg("T", 1))),
         (Call("CL", 2),))
-    assert one("V1>V2,W0,?96:?90").orelse == (Query(96), Query(90))  # type: ignore[attr-defined]
+    assert one("V1>V2,W0,?96:?90").orelse == (Query(96), Query(90))
 
 
 def test_rt3_any_register_compares() -> None:
     assert one("V1==P1,S0,CL2") == Branch(Compare("==", Reg("V", 1), Reg("P", 1)),
                                           (Ref(Reg("S", 0)),), (Call("CL", 2),))
-    assert one("I1==V1,C2.1,C3.1").condition == Compare("==", Input(1), Reg("V", 1))  # type: ignore[attr-defined]
+    assert one("I1==V1,C2.1,C3.1").condition == Compare("==", Input(1), Reg("V", 1))
 
 
 def test_branch_errors() -> None:
@@ -331,10 +332,10 @@ def test_rt3_1_1_slash_comment_or_division() -> None:
     assert one("P1.1=1000 /end point") == Assign(Reg("P", 1, 1), "=", Num(1000))
     assert one('V3="Dx"      /target position') == Assign(Reg("V", 3), "=", Str("Dx"))
     assert one("V2=1        /incremental counter") == Assign(Reg("V", 2), "=", Num(1))
-    assert one("P1.1=P2.1/V1.1").value == BinOp("/", Reg("P", 2, 1), Reg("V", 1, 1))  # type: ignore[attr-defined]
+    assert one("P1.1=P2.1/V1.1").value == BinOp("/", Reg("P", 2, 1), Reg("V", 1, 1))
     assert one("P1.1=P2.1 / V1.1") == one("P1.1=P2.1/V1.1")
-    assert one("P1=V1/-2").value == BinOp("/", Reg("V", 1), Num(-2))  # type: ignore[attr-defined]
-    assert one("P1=V1/P").value == BinOp("/", Reg("V", 1), Reg("P"))  # type: ignore[attr-defined]
+    assert one("P1=V1/-2").value == BinOp("/", Reg("V", 1), Num(-2))
+    assert one("P1=V1/P").value == BinOp("/", Reg("V", 1), Reg("P"))
     assert one("P2.1+ /P3 comment") == Ref(Reg("P", 2, 1), "+")
     assert error("S1.1, /V1 is").position == 5  # after ',' a '/' starts a comment
     assert one("P1=V1//V2") == Assign(Reg("P", 1), "=", Reg("V", 1))
@@ -343,13 +344,13 @@ def test_rt3_1_1_slash_comment_or_division() -> None:
 # ------------------------------------------------------------ number limits
 
 def test_number_limits() -> None:
-    assert one("P1=9999999999").value == Num(9999999999)  # type: ignore[attr-defined]
-    assert one("P1=-1000000000").value == Num(-1000000000)  # type: ignore[attr-defined]
+    assert one("P1=9999999999").value == Num(9999999999)
+    assert one("P1=-1000000000").value == Num(-1000000000)
     assert error("P1=12345678901").position == 3
     assert error("P1=" + "9" * 10000).position == 3
-    assert one("P9999=1").target == Reg("P", 9999)  # type: ignore[attr-defined]
+    assert one("P9999=1").target == Reg("P", 9999)
     assert error("P10000=1").position == 1
-    assert one("P1.99=1").target == Reg("P", 1, 99)  # type: ignore[attr-defined]
+    assert one("P1.99=1").target == Reg("P", 1, 99)
     assert error("P1.0=1").position == 3
     assert error("P1.100=1").position == 3
     assert error("P1.1=5.1").position == 6
@@ -394,14 +395,14 @@ def test_2_2_2_typo_equals_query_is_rejected() -> None:
 
 # ------------------------------------------------------------ lark oracle
 
-def _load_lark_cml() -> object:
+def _load_lark_cml() -> Any:
     path = Path(__file__).resolve().parents[1] / "bench" / "cml_lark.py"
     spec = importlib.util.spec_from_file_location("cml_lark", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     sys.modules["cml_lark"] = module
     spec.loader.exec_module(module)
-    return module.LarkCml()  # type: ignore[attr-defined]
+    return module.LarkCml()
 
 
 _LARK = _load_lark_cml()
@@ -413,7 +414,7 @@ def test_lark_grammar_agrees_on_generated_lines(line: Line) -> None:
     """Differential oracle: an independent LALR grammar builds the same trees."""
     text = format_line(line)
     ours = parse(text)
-    theirs = _LARK.parse(text)  # type: ignore[attr-defined]
+    theirs = _LARK.parse(text)
     assert [(x.statements, x.joined) for x in theirs] == [(x.statements, x.joined)
                                                           for x in ours]
 
@@ -422,5 +423,5 @@ def test_lark_grammar_agrees_on_manual_corpus() -> None:
     for ex in corpus():
         ours = parse(ex.text) if ex.expect != "fail" else []
         if ours:
-            theirs = _LARK.parse(ex.text)  # type: ignore[attr-defined]
+            theirs = _LARK.parse(ex.text)
             assert [x.statements for x in theirs] == [x.statements for x in ours], ex.text

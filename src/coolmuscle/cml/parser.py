@@ -252,7 +252,8 @@ class _Parser:
         word = tok.text
         self.advance()
         if word in ("Y", "Q", "Z"):
-            return Move(word, self.opt_index(tok), tok.motor, self.modifier(tok))  # type: ignore[arg-type]
+            mod = self.modifier(tok)
+            return Move(word, self.opt_index(tok), tok.motor, mod)  # type: ignore[arg-type]
         if word == "O" and tok.val is None:
             self.expect("=")
             return OutputWord(self.expression(), tok.motor)
