@@ -18,7 +18,7 @@ listed in docs/fidelity.md, "CML language".
 
 from __future__ import annotations
 
-from typing import Final, NoReturn
+from typing import Callable, Final, NoReturn
 
 from coolmuscle.cml.ast import (
     REGISTER_KINDS, Alloc, Assign, BankBegin, BankEnd, BinOp, Branch, Call, Capture,
@@ -122,7 +122,7 @@ class _Parser:
     def index(self, tok: Tok, what: str = "number", top: int = MAX_INDEX) -> int:
         """The required number of ``tok`` (a word's index or a num's value)."""
         if tok.val is None:
-            self.fail(f"{tok.text or 'command'} needs a {what}", tok.end)
+            self.fail(f"missing {what} after {tok.text}", tok.end)
         if tok.val > top:
             self.fail(f"{what} must be 0..{top}", tok.ipos)
         return tok.val
@@ -285,14 +285,15 @@ class _Parser:
 
     def symbol_statement(self, tok: Tok) -> Statement:
         """Execution commands and queries (2.1.2, 6.5, 6.6)."""
-        kind = tok.kind
-        method = _SYMBOL_METHODS.get(kind)
+        method = _SYMBOL_METHODS.get(tok.kind)
         if method is None:
             self.unexpected(tok)
         self.advance()
-        if method == "simple":
-            return Exec(_SIMPLE_EXEC[kind], self.motor_suffix(tok))  # type: ignore[arg-type]
-        return getattr(self, method)(tok)
+        return method(self, tok)
+
+    def simple(self, tok: Tok) -> Exec:
+        """``( ) } > < $`` with an optional ``.n`` (2.1.2)."""
+        return Exec(_SIMPLE_EXEC[tok.kind], self.motor_suffix(tok))  # type: ignore[arg-type]
 
     def go(self, tok: Tok) -> Exec:
         """``^.n``; ``^1`` as written in 2.2.3 is read as ``^.1``."""
@@ -458,9 +459,9 @@ class _Parser:
         return Not(operand)
 
 
-_SYMBOL_METHODS: Final = {
-    "^": "go", "|": "origin", "*": "estop", "]": "pause", "[": "start_bank",
-    "?": "query", "#": "capture", "@": "interp", "\\": "alloc",
-    "(": "simple", ")": "simple", "}": "simple", ">": "simple", "<": "simple",
-    "$": "simple",
+_SYMBOL_METHODS: Final[dict[str, Callable[[_Parser, Tok], Statement]]] = {
+    "^": _Parser.go, "|": _Parser.origin, "*": _Parser.estop, "]": _Parser.pause,
+    "[": _Parser.start_bank, "?": _Parser.query, "#": _Parser.capture,
+    "@": _Parser.interp, "\\": _Parser.alloc, "(": _Parser.simple, ")": _Parser.simple,
+    "}": _Parser.simple, ">": _Parser.simple, "<": _Parser.simple, "$": _Parser.simple,
 }
