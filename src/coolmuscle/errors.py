@@ -61,7 +61,8 @@ class CmlSyntaxError(MotorError, SyntaxError):
     def __init__(self, message: str, *, text: str = "", position: int = 0) -> None:
         self.text_line = text
         self.position = position
-        super().__init__(f"{message} at column {position + 1}: {text!r}")
+        shown = text if len(text) <= 60 else text[:57] + "..."
+        super().__init__(f"{message} at column {position + 1}: {shown!r}")
 
 
 class TooManyStepsError(MotorError):
