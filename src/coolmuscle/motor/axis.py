@@ -48,6 +48,8 @@ class Axis:
         self.target_raw = 0.0
         self.moving = False
         self._timers: list[Timer] = []
+        #: (time_ns, profile, tracking, zero, sign) kept while a trace records.
+        self.history: list[tuple[int, Profile, Tracking, float, int]] | None = None
 
     # -- coordinates ------------------------------------------------------
     def to_raw(self, user: float) -> float:
@@ -128,6 +130,7 @@ class Axis:
         self.tracking = Tracking(self.profile, 0.0, self.kp)
         self.target_raw = here
         self.moving = False
+        self._remember()
 
     def follow(self, user_target: float) -> None:
         """Step the command to a new target; the servo follows with its lag (csp, Dx)."""
@@ -139,6 +142,7 @@ class Axis:
         self.tracking = Tracking(self.profile, e0, self.kp)
         self.target_raw = raw
         self.moving = True
+        self._remember()
         done = now + self.tracking.settle_ns(float(self._window()))
         self._timers.append(self.kernel.schedule_at(done, self._arrived,
                                                     priority=PRIO_MOTION, name="in-position"))
@@ -148,6 +152,19 @@ class Axis:
         self.zero = self.raw_actual() - self.sign * user
         if not self.moving:
             self.hold_here()
+        else:
+            self._remember()
+
+    # -- history (trace) ------------------------------------------------------
+    def record_history(self, on: bool = True) -> None:
+        """Keep every trajectory from now on so a trace can be sampled afterwards."""
+        self.history = [] if on else None
+        self._remember()
+
+    def _remember(self) -> None:
+        if self.history is not None:
+            self.history.append((self.kernel.now, self.profile, self.tracking,
+                                 self.zero, self.sign))
 
     # -- internals ----------------------------------------------------------
     def _cancel(self) -> None:
@@ -162,6 +179,7 @@ class Axis:
         self.profile = profile
         self.tracking = Tracking(profile, e0, self.kp)
         self.moving = True
+        self._remember()
         for t_ns, index in profile.passing_times_ns():
             if t_ns >= now:
                 self._timers.append(self.kernel.schedule_at(

@@ -77,6 +77,7 @@ class Kernel:
         self._queue: list[tuple[int, int, int, Timer]] = []
         self._counter = itertools.count()
         self._events_run = 0
+        self._observers: list[Callback] = []
 
     # -- time -----------------------------------------------------------
     @property
@@ -114,6 +115,15 @@ class Kernel:
         """Run ``callback`` at the current instant, after what is already due now."""
         return self.schedule_at(self._now, callback, priority=priority, name=name)
 
+    def add_observer(self, observer: Callback) -> Callable[[], None]:
+        """Call ``observer()`` after every event (trace recorders); returns a remover."""
+        self._observers.append(observer)
+
+        def remove() -> None:
+            if observer in self._observers:
+                self._observers.remove(observer)
+        return remove
+
     # -- running --------------------------------------------------------
     def _drop_cancelled(self) -> None:
         while self._queue and self._queue[0][3].cancelled:
@@ -134,6 +144,8 @@ class Kernel:
         timer.cancelled = True
         self._events_run += 1
         timer.callback()
+        for observer in self._observers:
+            observer()
         return True
 
     def run(self, until: int | None = None, *, max_events: int | None = None) -> int:
