@@ -82,7 +82,8 @@ class FakeChain:
 def fake_factory(**kwargs: Any) -> Any:
     """A ``Chain``-compatible factory making :class:`FakeChain` with ``kwargs``."""
     def make(kernel: Kernel | None = None, motors: int = 1, **options: Any) -> FakeChain:
-        return FakeChain(kernel, motors, **{**options, **kwargs})
+        options = {"motors": motors, **options, **kwargs}
+        return FakeChain(kernel, **options)
     return make
 
 

@@ -94,7 +94,7 @@ class RealtimeClock:
 
     def virtual_at(self, wall: float) -> int:
         """Kernel time (ns) that corresponds to wall-clock time ``wall``."""
-        return self._v0 + int((wall - self._w0) * self.scale * NS_PER_S)
+        return self._v0 + round((wall - self._w0) * self.scale * NS_PER_S)
 
     def wall_at(self, virtual: int) -> float:
         """Wall-clock time at which kernel time ``virtual`` is reached."""
@@ -227,9 +227,11 @@ class RealtimeDriver:
         self.clock.anchor()
         try:
             while not self._stopped:
+                self._wake.clear()  # before catching up: a wake-up from an event is kept
                 self.clock.catch_up()
+                if self._stopped:
+                    break
                 delay = self.clock.seconds_until_next()
-                self._wake.clear()
                 if delay is not None and delay <= 0:
                     await asyncio.sleep(0)  # let I/O in between overdue events
                     continue

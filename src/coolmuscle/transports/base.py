@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from abc import ABC, abstractmethod
 from typing import Any, Callable
 
@@ -27,6 +28,7 @@ DEFAULT_MAX_BUFFER = 1 << 20
 ByteListener = Callable[[bytes], None]
 
 LINE_ENDS = (0x0D, 0x0A)
+_PIECE = re.compile(rb"[^\r\n]*[\r\n]|[^\r\n]+\Z")
 
 
 class Port:
@@ -42,17 +44,23 @@ class Port:
         self.errors = 0
 
     def feed(self, data: bytes) -> None:
-        """Deliver bytes from a host; model failures are logged, never raised."""
+        """Deliver bytes from a host; model failures are logged, never raised.
+
+        The bytes are delivered line by line, so a line that makes the model fail
+        costs only that line, not the lines after it in the same chunk.
+        """
         if not data:
             return
-        try:
-            if self.driver is not None:
-                self.driver.feed(self.host_line, data)
-            else:
-                self.host_line.feed(data)
-        except Exception:
-            self.errors += 1
-            log.exception("motor model failed on host input %r", data[:64])
+        if self.driver is not None:
+            self.driver.clock.catch_up()
+        for piece in split_after_line_ends(data):
+            try:
+                self.host_line.feed(piece)
+            except Exception:
+                self.errors += 1
+                log.exception("motor model failed on host input %r", piece[:64])
+        if self.driver is not None:
+            self.driver.wake()
 
     def add_listener(self, listener: ByteListener) -> Callable[[], None]:
         """Receive every byte the motor sends; returns an unsubscribe function."""
@@ -69,6 +77,11 @@ class Port:
             log.exception("host line failed to discard a partial line")
             return False
         return True
+
+
+def split_after_line_ends(data: bytes) -> list[bytes]:
+    """Split ``data`` after every CR and LF (the last piece may have no line end)."""
+    return _PIECE.findall(data)
 
 
 def ends_mid_line(data: bytes) -> bool:
