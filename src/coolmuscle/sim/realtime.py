@@ -222,7 +222,6 @@ class RealtimeDriver:
         """Keep the kernel in step with the wall clock until :meth:`stop`."""
         loop = asyncio.get_running_loop()
         self._wake = asyncio.Event()
-        self._stopped = False
         self.running = True
         self.clock.anchor()
         try:
@@ -245,7 +244,7 @@ class RealtimeDriver:
             self.running = False
 
     def stop(self) -> None:
-        """Ask :meth:`run` to return."""
+        """Ask :meth:`run` to return (at once if it has not started yet; final)."""
         self._stopped = True
         self.wake()
 
