@@ -104,7 +104,10 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool) 
     if tcp is None and not (pty or pty_link or stdio):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
-        host, port = parse_address(tcp)
+        try:
+            host, port = parse_address(tcp)
+        except TransportError as exc:
+            raise UsageError(f"--tcp: {exc}") from None
         chosen.append(transports.create("tcp", host=host, port=port))
     if pty or pty_link is not None:
         chosen.append(transports.create("pty", link=pty_link))
