@@ -220,3 +220,22 @@ def test_python_m_coolmuscle_run_with_the_real_chain(tmp_path: Path) -> None:
     assert out.returncode == 0, out.stderr
     assert out.stdout.splitlines()[:2] == ["   0.000000 > ?96.1", "   0.000000 < ?96.1"]
     assert time.monotonic() - start < 30
+
+
+def test_sim_stdio_on_a_terminal_echoes_as_typed_and_stops_on_ctrl_c() -> None:
+    child = pexpect.spawn(sys.executable, ["-m", "coolmuscle", "sim", "--stdio", "--no-state"],
+                          env=ENV, timeout=15)
+    try:
+        child.expect(rb"\(state: none, not saved\)")
+        child.send(b"?96")
+        child.expect(rb"\?96")           # the motor's echo, byte by byte (the tty echoes nothing)
+        child.send(b".1\r")
+        child.expect(rb"\.1\r")
+        child.sendintr()
+        child.expect(b"coolmuscle: stopped")
+        child.expect(pexpect.EOF)
+        child.close()
+        assert child.exitstatus == 0
+    finally:
+        if child.isalive():
+            child.terminate(force=True)

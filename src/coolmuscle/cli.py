@@ -67,14 +67,16 @@ class UsageError(CoolMuscleError, ValueError):
 
 def default_state_dir() -> Path:
     """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``)."""
-    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"), ".local", "share")
+    base = os.environ.get("XDG_DATA_HOME") or os.path.expanduser("~/.local/share")
     return Path(base) / "coolmuscle" / "state"
 
 
 def _show_path(path: Path) -> str:
     home = os.path.expanduser("~")
     text = str(path)
-    return "~" + text[len(home):] if home not in ("", "/") and text.startswith(home + os.sep) else text
+    if home not in ("", "/") and text.startswith(home + os.sep):
+        return "~" + text[len(home):]
+    return text
 
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool) -> Any:
@@ -82,7 +84,8 @@ def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool)
         try:
             state.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise TransportError(f"cannot use state directory {state}: {exc.strerror or exc}") from exc
+            raise TransportError(f"cannot use state directory {state}: "
+                                 f"{exc.strerror or exc}") from exc
     return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace)
 
 
@@ -146,13 +149,16 @@ def sim(
     pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
     pty_link: Optional[Path] = typer.Option(None, "--pty-link", metavar="PATH",
                                             help="Stable symlink to the pty (implies --pty)."),
-    stdio: bool = typer.Option(False, "--stdio", help="Serve stdin/stdout (ends at end of input)."),
-    state: Optional[Path] = typer.Option(None, "--state", metavar="DIR",
-                                         help="State directory [default: ~/.local/share/coolmuscle/state]."),
+    stdio: bool = typer.Option(False, "--stdio",
+                               help="Serve stdin/stdout (ends at end of input)."),
+    state: Optional[Path] = typer.Option(
+        None, "--state", metavar="DIR",
+        help="State directory [default: ~/.local/share/coolmuscle/state]."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
-    pace: bool = typer.Option(False, "--pace", help="Bytes take their wire time at the K20 baud rate."),
+    pace: bool = typer.Option(False, "--pace",
+                              help="Bytes take their wire time at the K20 baud rate."),
     time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
                                      help="Virtual seconds per wall second."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
@@ -179,16 +185,21 @@ def run(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
     until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
                                           help="After the script, run on to this virtual time."),
-    trace: Optional[Path] = typer.Option(None, "--trace", metavar="OUT.csv", help="Write a trace CSV."),
+    trace: Optional[Path] = typer.Option(None, "--trace", metavar="OUT.csv",
+                                         help="Write a trace CSV."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
-    state: Optional[Path] = typer.Option(None, "--state", metavar="DIR",
-                                         help="Start from (and save to) this state [default: fresh]."),
-    check: bool = typer.Option(False, "--check", help="Print only the verdict; fail without expectations."),
-    pace: bool = typer.Option(False, "--pace", help="Bytes take their wire time at the K20 baud rate."),
-    record: Optional[Path] = typer.Option(None, "--record", metavar="OUT.cml",
-                                          help="Write the script with the received bytes as expectations."),
+    state: Optional[Path] = typer.Option(
+        None, "--state", metavar="DIR",
+        help="Start from (and save to) this state [default: fresh]."),
+    check: bool = typer.Option(False, "--check",
+                               help="Print only the verdict; fail without expectations."),
+    pace: bool = typer.Option(False, "--pace",
+                              help="Bytes take their wire time at the K20 baud rate."),
+    record: Optional[Path] = typer.Option(
+        None, "--record", metavar="OUT.cml",
+        help="Write the script with the received bytes as expectations."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
@@ -200,12 +211,14 @@ def run(
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
     try:
         if plot is not None and not callable(getattr(chain, "plot", None)):
-            raise ScriptError(f"cannot plot to {plot}: this chain has no trace recorder (Chain.plot) yet")
+            raise ScriptError(f"cannot plot to {plot}: this chain has no trace recorder "
+                              "(Chain.plot) yet")
 
         def show(entry: TranscriptEntry) -> None:
             sys.stdout.write(entry.format() + "\n")
 
-        result = run_script(script, chain, until=until, trace=trace, on_entry=None if check else show)
+        result = run_script(script, chain, until=until, trace=trace,
+                            on_entry=None if check else show)
         sys.stdout.flush()
         if plot is not None:
             chain.plot(plot)

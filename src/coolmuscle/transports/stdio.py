@@ -6,7 +6,7 @@ another program's pipes.
 
 * When stdin is a terminal it is put in raw mode for the session (restored on close)
   so the motor's own echo is the only echo and bytes reach it as typed; Ctrl-C
-  still stops the simulator.
+  still stops the simulator (output post-processing stays on, for stderr's sake).
 * Output is written by a small writer thread, so a consumer that stops reading never
   blocks the motor; beyond ``max_buffer`` unwritten bytes new output is discarded.
 * End of input sets ``finished``: the simulator stops (``stops_service``).
@@ -83,7 +83,8 @@ class StdioTransport(Transport):
             self._saved_tty = termios.tcgetattr(self.in_fd)
             tty.setraw(self.in_fd, termios.TCSANOW)
             attrs = termios.tcgetattr(self.in_fd)
-            attrs[3] |= termios.ISIG  # keep Ctrl-C / Ctrl-\ as signals
+            attrs[3] |= termios.ISIG   # keep Ctrl-C / Ctrl-\ as signals
+            attrs[1] |= termios.OPOST  # keep log lines on stderr readable
             termios.tcsetattr(self.in_fd, termios.TCSANOW, attrs)
         except termios.error as exc:
             log.warning("stdio: cannot put the terminal in raw mode: %s", exc)
