@@ -181,3 +181,17 @@ def test_driver_with_wire_pacing_keeps_exact_virtual_byte_times() -> None:
     bt = byte_time_ns(38400)
     assert got == [(t0 + 13 * bt, b"?96.1\r\n"), (t0 + 21 * bt, b"Px.1=1\r\n")]
     assert 21 * bt < 6 * NS_PER_MS
+
+
+def test_a_failing_event_is_logged_and_later_events_still_run() -> None:
+    kernel, wall = Kernel(), ManualClock()
+    ran: list[str] = []
+
+    def fail() -> None:
+        raise RuntimeError("model bug")
+    kernel.schedule(ms(1), fail)
+    kernel.schedule(ms(2), lambda: ran.append("after"))
+    clock = RealtimeClock(kernel, clock=wall)
+    wall.t += 0.01
+    clock.catch_up()
+    assert ran == ["after"] and clock.errors == 1 and kernel.now == ms(10)

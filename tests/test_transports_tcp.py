@@ -265,3 +265,12 @@ def test_fuzzed_input_never_stops_the_server(fuzz_server: ServiceThread, data: b
         read_until(checker, rb"Px\.1=\d+\r")
     finally:
         checker.close()
+
+
+def test_a_model_failure_inside_a_paced_kernel_event_does_not_stop_the_server(
+        start_tcp: Starter) -> None:
+    st_ = start_tcp({"pacing": True})
+    sock = connect(st_)
+    sock.sendall(b"boom\r?96.1\r")     # with pacing, lines reach the model in kernel events
+    read_until(sock, rb"Px\.1=1\r\n")
+    assert st_.service is not None and st_.service.driver.clock.errors == 1

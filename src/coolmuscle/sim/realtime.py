@@ -84,6 +84,7 @@ class RealtimeClock:
         self.last_lag = 0.0   # wall seconds the most overdue event of the last catch-up ran late
         self.max_lag = 0.0
         self.late_count = 0   # catch-ups that ran an event later than the threshold
+        self.errors = 0       # kernel events that raised
         self.anchor()
 
     # -- mapping --------------------------------------------------------
@@ -110,10 +111,22 @@ class RealtimeClock:
 
     # -- driving --------------------------------------------------------
     def catch_up(self) -> int:
-        """Run every event due by the wall clock now and leave ``kernel.now`` at "now"."""
+        """Run every event due by the wall clock now and leave ``kernel.now`` at "now".
+
+        An event that raises (a model bug) is logged and counted in ``errors``; the
+        events after it still run, so one failure never stops virtual time.
+        """
         target = self.virtual_now()
         first = self.kernel.peek()
-        count = self.kernel.run(until=target)
+        count = 0
+        while True:
+            try:
+                count += self.kernel.run(until=target)
+                break
+            except Exception:
+                self.errors += 1
+                log.exception("a kernel event failed at %d ns; virtual time goes on",
+                              self.kernel.now)
         if first is not None and first <= target:
             lag = self._clock() - self.wall_at(first)
             self._note_lag(lag)

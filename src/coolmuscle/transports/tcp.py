@@ -158,6 +158,8 @@ class TcpTransport(Transport):
             log.info("tcp: client %s: %s", client.peer, exc)
         except asyncio.CancelledError:
             pass
+        except Exception:  # never let one client's trouble escape as a task error
+            log.exception("tcp: client %s failed", client.peer)
         finally:
             self._forget(client)
 
