@@ -242,3 +242,12 @@ def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path) -> N
     run_script("?96.1\n", chain, trace=tmp_path / "t.csv")
     assert chain.traced == tmp_path / "t.csv" and chain.trace_closed
 
+
+
+def test_a_failing_display_is_not_blamed_on_the_motor() -> None:
+    def broken(entry: TranscriptEntry) -> None:
+        raise BrokenPipeError("reader went away")
+    chain = FakeChain()
+    with pytest.raises(BrokenPipeError):
+        run_script("?96.1\n?96.1\n", chain, on_entry=broken)
+    assert chain.counter == 2

@@ -274,3 +274,16 @@ def test_a_model_failure_inside_a_paced_kernel_event_does_not_stop_the_server(
     sock.sendall(b"boom\r?96.1\r")     # with pacing, lines reach the model in kernel events
     read_until(sock, rb"Px\.1=1\r\n")
     assert st_.service is not None and st_.service.driver.clock.errors == 1
+
+
+def test_a_crlf_split_across_reads_does_not_make_a_blank_line(start_tcp: Starter) -> None:
+    st_ = start_tcp()
+    a, b = connect(st_), connect(st_)
+    time.sleep(0.05)
+    a.sendall(b"?96.1\r")
+    read_until(a, rb"Px\.1=1\r\n")
+    b.sendall(b"K23.1=8\r")            # echo off: b's line goes in between a's CR and LF
+    time.sleep(0.05)
+    a.sendall(b"\n?96.1\r")
+    read_until(a, rb"Px\.1=2\r\n")
+    assert st_.call(lambda: list(st_.chain.lines)) == ["?96.1", "K23.1=8", "?96.1"]

@@ -179,3 +179,9 @@ def test_pacing_takes_wire_time_in_virtual_time(fake: list[dict[str, Any]]) -> N
         assert port.read_until(b"Px.1=1\r\n").endswith(b"Px.1=1\r\n")
         # 6 bytes in, 7 echoed, 8 replied at 38.4 kbps (10 bits a byte)
         assert port.kernel.now == 21 * (10 * NS_PER_S // 38400)
+
+
+def test_a_failing_line_does_not_swallow_the_lines_after_it(fake: list[dict[str, Any]]) -> None:
+    with serial.serial_for_url("coolmuscle://?mode=fast", timeout=0.1) as port:
+        port.write(b"boom\r?96.1\r")
+        assert port.read(100) == b"boom\r\n?96.1\r\nPx.1=1\r\n"

@@ -153,7 +153,7 @@ def sim(
                                help="Serve stdin/stdout (ends at end of input)."),
     state: Optional[Path] = typer.Option(
         None, "--state", metavar="DIR",
-        help="State directory [default: ~/.local/share/coolmuscle/state]."),
+        help="State directory (default: ~/.local/share/coolmuscle/state)."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
@@ -192,7 +192,7 @@ def run(
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
     state: Optional[Path] = typer.Option(
         None, "--state", metavar="DIR",
-        help="Start from (and save to) this state [default: fresh]."),
+        help="Start from (and save to) this state (default: a fresh chain)."),
     check: bool = typer.Option(False, "--check",
                                help="Print only the verdict; fail without expectations."),
     pace: bool = typer.Option(False, "--pace",
@@ -253,6 +253,10 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         err.print("coolmuscle: interrupted", markup=False)
         raise SystemExit(130) from None
+    except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        raise SystemExit(EXIT_FAILED) from None
     except (UsageError, ScriptError) as exc:
         _report(exc, EXIT_USAGE)
     except (CoolMuscleError, OSError) as exc:

@@ -301,11 +301,16 @@ class _Recorder:
         self.lines: list[str] = []   # complete received lines, without terminator
         self._line = bytearray()
         self._held: TranscriptEntry | None = None  # a CR-ended line that may get its LF
+        self.display_error: Exception | None = None
 
     def emit(self, entry: TranscriptEntry) -> None:
         self.entries.append(entry)
         if self.on_entry is not None:
-            self.on_entry(entry)
+            try:
+                self.on_entry(entry)
+            except Exception as exc:  # the display's failure, not the motor's: re-raised later
+                self.display_error = exc
+                self.on_entry = None
 
     def flush_held(self) -> None:
         if self._held is not None:
@@ -392,7 +397,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
     ``source`` is a :class:`Script`, a path or script text (:func:`load_script`).
     ``until``: after the last line, keep running virtual time up to ``until`` seconds
     (absolute).  ``trace``: CSV path for the chain's trace recorder.  ``on_entry`` is
-    called with every transcript entry as it happens (for live display).  The run stops
+    called with every transcript entry as it happens (for live display; if it raises,
+    the run goes on silently and the exception is re-raised at the end).  The run stops
     at the first failure; the result says which.
     """
     script = source if isinstance(source, Script) else load_script(source)
@@ -460,6 +466,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
         close = getattr(tracer, "close", None)
         if callable(close):
             close()
+    if recorder.display_error is not None:
+        raise recorder.display_error
     return RunResult(script=script, transcript=recorder.entries, received=bytes(recorder.stream),
                      failure=failure, expectations=script.expectations, matched=checker.matched,
                      end_time=kernel.now, marks=marks, tail_seconds=tail, exception=exception)

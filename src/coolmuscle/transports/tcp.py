@@ -63,6 +63,7 @@ class _Client:
         self.flush_scheduled = False
         self.dropped = False
         self.mid_line = False
+        self.ended_with_cr = False
         self.last_input = 0.0
 
     def queued(self) -> int:
@@ -86,6 +87,7 @@ class TcpTransport(Transport):
         self._server: asyncio.base_events.Server | None = None
         self._clients: list[_Client] = []
         self._owner: _Client | None = None
+        self._last_feeder: _Client | None = None
         self._released = asyncio.Event()
         self._unsubscribe: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -147,9 +149,14 @@ class TcpTransport(Transport):
                 if client.dropped:
                     break
                 assert self.port is not None
+                if (data[:1] == b"\n" and client.ended_with_cr
+                        and self._last_feeder not in (None, client)):
+                    data = data[1:]   # the rest of this client's CRLF, after someone else's line
+                self._last_feeder = client
                 self.port.feed(data)
                 client.last_input = self._now()
                 client.mid_line = ends_mid_line(data)
+                client.ended_with_cr = data[-1:] == b"\r"
                 if client.mid_line:
                     self._owner = client
                 elif self._owner is client:
@@ -186,6 +193,8 @@ class TcpTransport(Transport):
     def _forget(self, client: _Client) -> None:
         if client in self._clients:
             self._clients.remove(client)
+        if self._last_feeder is client:
+            self._last_feeder = None
         if self._owner is client:
             # The departed client's half line must not prefix the next client's line.
             if self.port is not None and client.mid_line:

@@ -43,6 +43,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 from ..errors import CoolMuscleError
 from ..sim.kernel import NS_PER_S, seconds
 from ..sim.realtime import FastClock, RealtimeClock
+from ..transports.base import split_after_line_ends
 
 log = logging.getLogger("coolmuscle.urlhandler")
 
@@ -268,10 +269,11 @@ class Serial(SerialBase):
         data = to_bytes(data)
         with self._cond:
             self._catch_up()
-            try:
-                self.chain.host_line.feed(data)
-            except Exception:  # front-end entry point: the model's failure is logged only
-                log.exception("virtual chain failed on input %r", data[:64])
+            for piece in split_after_line_ends(data):  # a failing line costs only itself
+                try:
+                    self.chain.host_line.feed(piece)
+                except Exception:  # front-end entry point: the model's failure is logged
+                    log.exception("virtual chain failed on input %r", piece[:64])
             self._cond.notify_all()  # a reader may need to re-plan (pacing scheduled events)
         return len(data)
 
