@@ -261,7 +261,8 @@ class RunResult:
     def summary(self) -> str:
         if self.failure is not None:
             return f"FAIL {self.failure.message}"
-        checked = f"{self.matched} expectation(s) matched" if self.expectations else "no expectations"
+        checked = (f"{self.matched} expectation(s) matched" if self.expectations
+                   else "no expectations")
         return f"ok: {checked}, ended at {to_seconds(self.end_time):.6f} s"
 
     def to_script(self) -> str:

@@ -179,7 +179,8 @@ class FastClock:
         return self.kernel.run_until(predicate, timeout_ns)
 
 
-def make_clock(kernel: Kernel, mode: str = "realtime", *, scale: float = 1.0) -> RealtimeClock | FastClock:
+def make_clock(kernel: Kernel, mode: str = "realtime", *,
+               scale: float = 1.0) -> RealtimeClock | FastClock:
     """``"realtime"`` -> :class:`RealtimeClock`, ``"fast"`` -> :class:`FastClock`."""
     if mode == "realtime":
         return RealtimeClock(kernel, scale=scale)
