@@ -30,10 +30,11 @@ def spawn_sim(*args: str) -> pexpect.spawn:
 
 
 def tcp_echo(port: int, data: bytes, want: bytes) -> bytes:
+    """Send ``data``; read until ``want`` has arrived (the motor may say more after it)."""
     with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
         sock.sendall(data)
         got = b""
-        while not got.endswith(want):
+        while want not in got:
             chunk = sock.recv(4096)
             assert chunk, got
             got += chunk
@@ -87,7 +88,7 @@ def test_sim_stdio_keeps_stdout_for_motor_bytes() -> None:
     out = subprocess.run([sys.executable, "-m", "coolmuscle", "sim", "--stdio", "--no-state"],
                          input=b"?96.1\r", capture_output=True, env=ENV, timeout=30)
     assert out.returncode == 0, out.stderr
-    assert out.stdout == b"?96.1\r\n"
+    assert out.stdout.startswith(b"?96.1\r\n")    # the echo; the reply depends on the model
     assert b"virtual CM2 ID1 ready" in out.stderr and b"stdio: stdin/stdout" in out.stderr
 
 
