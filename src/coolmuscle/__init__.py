@@ -9,3 +9,7 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 __all__ = ["__version__"]
+
+from .urlhandler import register as _register_url_handler  # noqa: E402
+
+_register_url_handler()  # serial.serial_for_url("coolmuscle://...")

@@ -1,0 +1,275 @@
+"""The ``coolmuscle`` command (typer + rich): ``sim`` and ``run``.
+
+Owns command-line parsing, the ready banner, signal handling and the mapping of
+errors to one-line messages and exit codes.  No traceback reaches the user
+(set ``COOLMUSCLE_DEBUG=1`` to see one):
+
+* 0 success; 1 a failed run (expectation mismatch, ``@until`` timeout, model error)
+  or a runtime error (port in use, store); 2 bad usage or a bad script;
+  70 an internal error (a bug: please report it).
+
+``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
+SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
+its expectations (docs/scripts.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import logging
+import os
+import signal
+import sys
+import traceback
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import typer
+from rich.console import Console
+
+from . import __version__
+from .errors import CoolMuscleError, TransportError
+from .script import ScriptError, TranscriptEntry, load_script, run_script
+from .transports.base import Transport
+
+log = logging.getLogger("coolmuscle")
+
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_INTERNAL = 70
+
+app = typer.Typer(name="coolmuscle", add_completion=False, no_args_is_help=True,
+                  pretty_exceptions_enable=False,
+                  help="A virtual Cool Muscle integrated servo motor and host tools.")
+
+err = Console(stderr=True, soft_wrap=True, highlight=False)
+
+
+class Firmware(str, enum.Enum):
+    cm2 = "cm2"
+    rt3 = "rt3"
+    cm1 = "cm1"
+
+
+def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
+    from .chain import Chain
+    return Chain(*args, **kwargs)
+
+
+#: Builds the chain for ``sim`` and ``run`` (same signature as ``Chain``); replaceable in tests.
+chain_factory: Callable[..., Any] = _default_chain_factory
+
+
+class UsageError(CoolMuscleError, ValueError):
+    """Options that do not fit together (exit status 2)."""
+
+
+def default_state_dir() -> Path:
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``)."""
+    base = os.environ.get("XDG_DATA_HOME") or os.path.expanduser("~/.local/share")
+    return Path(base) / "coolmuscle" / "state"
+
+
+def _show_path(path: Path) -> str:
+    home = os.path.expanduser("~")
+    text = str(path)
+    if home not in ("", "/") and text.startswith(home + os.sep):
+        return "~" + text[len(home):]
+    return text
+
+
+def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool) -> Any:
+    if state is not None:
+        try:
+            state.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise TransportError(f"cannot use state directory {state}: "
+                                 f"{exc.strerror or exc}") from exc
+    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace)
+
+
+def _ids(motors: int) -> str:
+    return "ID1" if motors == 1 else f"ID1-ID{motors}"
+
+
+def _setup_logging(verbose: bool) -> None:
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, stream=sys.stderr,
+                        format="coolmuscle: %(message)s")
+
+
+# -- sim -----------------------------------------------------------------
+def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool) -> list[Transport]:
+    from . import transports
+    from .transports.tcp import DEFAULT_PORT, parse_address
+
+    chosen: list[Transport] = []
+    if tcp is None and not (pty or pty_link or stdio):
+        tcp = str(DEFAULT_PORT)
+    if tcp is not None:
+        try:
+            host, port = parse_address(tcp)
+        except TransportError as exc:
+            raise UsageError(f"--tcp: {exc}") from None
+        chosen.append(transports.create("tcp", host=host, port=port))
+    if pty or pty_link is not None:
+        chosen.append(transports.create("pty", link=pty_link))
+    if stdio:
+        chosen.append(transports.create("stdio"))
+    return chosen
+
+
+async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
+                 state: Path | None, scale: float) -> None:
+    from .transports.service import Service
+
+    service = Service(chain, chosen, scale=scale)
+    await service.start()
+    err.print(f"coolmuscle: virtual {firmware.value.upper()} {_ids(motors)} ready", markup=False)
+    where = "   ".join(t.describe() for t in chosen)
+    shown = _show_path(state) if state is not None else "none, not saved"
+    err.print(f"{where}   (state: {shown})", markup=False)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        await service.wait(stop)
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        await service.close()
+
+
+@app.command()
+def sim(
+    tcp: Optional[str] = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
+                                      help="Serve TCP (default when no transport is chosen: "
+                                           "127.0.0.1:5150; port 0 picks a free one)."),
+    pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
+    pty_link: Optional[Path] = typer.Option(None, "--pty-link", metavar="PATH",
+                                            help="Stable symlink to the pty (implies --pty)."),
+    stdio: bool = typer.Option(False, "--stdio",
+                               help="Serve stdin/stdout (ends at end of input)."),
+    state: Optional[Path] = typer.Option(
+        None, "--state", metavar="DIR",
+        help="State directory (default: ~/.local/share/coolmuscle/state)."),
+    no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
+    motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
+    firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
+    pace: bool = typer.Option(False, "--pace",
+                              help="Bytes take their wire time at the K20 baud rate."),
+    time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
+                                     help="Virtual seconds per wall second."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
+) -> None:
+    """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
+    _setup_logging(verbose)
+    if state is not None and no_state:
+        raise UsageError("--state and --no-state exclude each other")
+    if not time_scale > 0:
+        raise UsageError("--time-scale must be > 0")
+    state_dir = None if no_state else (state or default_state_dir()).expanduser()
+    chosen = _transports(tcp, pty, pty_link, stdio)
+    chain = _make_chain(motors, firmware, state_dir, pace)
+    try:
+        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
+    finally:
+        chain.close()
+    err.print("coolmuscle: stopped", markup=False)
+
+
+# -- run -----------------------------------------------------------------
+@app.command()
+def run(
+    file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
+    until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
+                                          help="After the script, run on to this virtual time."),
+    trace: Optional[Path] = typer.Option(None, "--trace", metavar="OUT.csv",
+                                         help="Write a trace CSV."),
+    plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
+    motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
+    firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
+    state: Optional[Path] = typer.Option(
+        None, "--state", metavar="DIR",
+        help="Start from (and save to) this state (default: a fresh chain)."),
+    check: bool = typer.Option(False, "--check",
+                               help="Print only the verdict; fail without expectations."),
+    pace: bool = typer.Option(False, "--pace",
+                              help="Bytes take their wire time at the K20 baud rate."),
+    record: Optional[Path] = typer.Option(
+        None, "--record", metavar="OUT.cml",
+        help="Write the script with the received bytes as expectations."),
+) -> None:
+    """Run a script in fast virtual time, print every line, check expectations."""
+    _setup_logging(False)
+    script = load_script(file)
+    if check and not script.expectations:
+        raise UsageError(f"{file}: --check needs a script with '<<' expectations")
+    if until is not None and until < 0:
+        raise UsageError("--until must be >= 0")
+    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
+    try:
+        if plot is not None and not callable(getattr(chain, "plot", None)):
+            raise ScriptError(f"cannot plot to {plot}: this chain has no trace recorder "
+                              "(Chain.plot) yet")
+
+        def show(entry: TranscriptEntry) -> None:
+            sys.stdout.write(entry.format() + "\n")
+
+        result = run_script(script, chain, until=until, trace=trace,
+                            on_entry=None if check else show)
+        sys.stdout.flush()
+        if plot is not None:
+            chain.plot(plot)
+    finally:
+        chain.close()
+    if record is not None:
+        try:
+            record.write_text(result.to_script(), encoding="utf-8")
+        except OSError as exc:
+            raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
+    if not result.ok:
+        err.print(f"coolmuscle: {result.summary()}", markup=False)
+        raise typer.Exit(EXIT_FAILED)
+    if check:
+        sys.stdout.write(f"coolmuscle: {result.summary()}\n")
+    elif script.expectations:
+        err.print(f"coolmuscle: {result.summary()}", markup=False)
+
+
+@app.command()
+def version() -> None:
+    """Print the version."""
+    sys.stdout.write(f"coolmuscle {__version__}\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    try:
+        app(args=argv, prog_name="coolmuscle")
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        err.print("coolmuscle: interrupted", markup=False)
+        raise SystemExit(130) from None
+    except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        raise SystemExit(EXIT_FAILED) from None
+    except (UsageError, ScriptError) as exc:
+        _report(exc, EXIT_USAGE)
+    except (CoolMuscleError, OSError) as exc:
+        _report(exc, EXIT_FAILED)
+    except Exception as exc:  # a bug: still one line unless asked for more
+        _report(exc, EXIT_INTERNAL, prefix="internal error: ")
+
+
+def _report(exc: BaseException, code: int, prefix: str = "") -> None:
+    if os.environ.get("COOLMUSCLE_DEBUG"):
+        traceback.print_exc()
+    text = str(exc) or type(exc).__name__
+    if prefix:
+        text = f"{prefix}{type(exc).__name__}: {text} (COOLMUSCLE_DEBUG=1 shows a traceback)"
+    err.print(f"coolmuscle: error: {text}", markup=False)
+    raise SystemExit(code) from None
