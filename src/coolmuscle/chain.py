@@ -26,6 +26,7 @@ from .motor.motor import Context, Motor
 from .motor.status import Report
 from .motor.store import Store
 from .sim.kernel import Kernel
+from .sim.trace import TraceRecorder
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +49,18 @@ class _Stream:
         self.closed = True
 
 
+class _TraceFile:
+    """A trace being recorded; :meth:`close` writes it (CSV)."""
+
+    def __init__(self, recorder: TraceRecorder, path: Path, step: float) -> None:
+        self.recorder = recorder
+        self.path = path
+        self.step = step
+
+    def close(self) -> Path:
+        return self.recorder.write_csv(self.path, self.step)
+
+
 class Chain:
     """Motors 1..N behind one host line; the device API."""
 
@@ -61,6 +74,7 @@ class Chain:
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
         self._listeners: list[EventListener] = []
+        self._recorder: TraceRecorder | None = None
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
             self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
@@ -179,6 +193,22 @@ class Chain:
         """Close the store (unsaved data is lost, as at power off)."""
         if self.store is not None:
             self.store.close()
+
+    # -- traces and plots ---------------------------------------------------------
+    def record(self) -> TraceRecorder:
+        """Start (or return) the trace recorder; it records from now on."""
+        if self._recorder is None:
+            self._recorder = TraceRecorder(self)
+        return self._recorder
+
+    def trace(self, path: str | Path, step: float = 0.001) -> "_TraceFile":
+        """Record from now on; ``close()`` on the handle writes the CSV to ``path``."""
+        return _TraceFile(self.record(), Path(path), step)
+
+    def plot(self, path: str | Path, title: str = "") -> Path:
+        """Plot what the recorder holds (position, speed, torque, status and I/O)."""
+        from .plot import plot_trace
+        return plot_trace(self.record(), path, title=title)
 
     # -- device API: data -------------------------------------------------------
     def get_param(self, motor: int, k: int) -> int:

@@ -210,9 +210,8 @@ def run(
         raise UsageError("--until must be >= 0")
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
     try:
-        if plot is not None and not callable(getattr(chain, "plot", None)):
-            raise ScriptError(f"cannot plot to {plot}: this chain has no trace recorder "
-                              "(Chain.plot) yet")
+        if plot is not None:
+            chain.record()
 
         def show(entry: TranscriptEntry) -> None:
             sys.stdout.write(entry.format() + "\n")

@@ -145,6 +145,12 @@ class HostLine:
         if echo:
             self.write(bytes(echo))
 
+    def discard_partial(self) -> None:
+        """Forget a partly received line (its sender went away mid-line)."""
+        self._buf.clear()
+        self._overflow = False
+        self._last_was_cr = False
+
     def _end_line(self) -> None:
         raw = bytes(self._buf)
         self._buf.clear()
@@ -152,4 +158,7 @@ class HostLine:
             self._overflow = False
             log.debug("discarded over-long line (%d+ bytes)", MAX_LINE)
             return
-        self._on_line(raw.decode("latin-1"))
+        try:
+            self._on_line(raw.decode("latin-1"))
+        except Exception:  # the motor model must never take the line down
+            log.exception("line %r failed", raw[:80])

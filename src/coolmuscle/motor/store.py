@@ -17,8 +17,8 @@ The file is SQLite in WAL mode with ``synchronous=FULL`` and every write is one
 on a disk that honours fsync) leaves the previous or the new state, never a
 mixture; a committed ``$`` is durable before ``saved.`` is printed.
 
-Concurrency: one writer process (the simulator) and one thread - the
-connection refuses use from another thread.  Other processes may read.
+Concurrency: one writer process (the simulator); callers serialise access from
+several threads themselves (the coolmuscle:// port holds a lock).  Other processes may read.
 
 Snapshot shape (the motor decides the content; the store only requires JSON
 data with string keys, except ``params`` whose keys may be ints)::
@@ -215,7 +215,8 @@ def _open(path: str) -> sqlite3.Connection:
         except OSError as exc:
             raise StoreError(f"cannot create the state directory for {path}: {exc}") from exc
     try:
-        conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
+        conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
+                               check_same_thread=False)
     except sqlite3.Error as exc:
         raise StoreError(f"cannot open store {path}: {exc}") from exc
     try:

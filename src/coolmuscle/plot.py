@@ -1,0 +1,86 @@
+"""Plots of a trace: stacked position, speed and torque panels plus a status and I/O timeline.
+
+Drawn like the charts of cml-users-guide.txt 4.1 (speed against time, with the
+in-position and output signals under it).  matplotlib runs headless (Agg).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from .sim.kernel import NS_PER_S  # noqa: E402
+
+if TYPE_CHECKING:
+    from .sim.trace import TraceRecorder
+
+
+def _finite(values: list[float]) -> list[float]:
+    return [v if math.isfinite(v) else float("nan") for v in values]
+
+
+def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | None = None,
+               title: str = "") -> Path:
+    """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension)."""
+    end = recorder.chain.kernel.now
+    span = max((end - recorder.start) / NS_PER_S, 1e-3)
+    times = recorder.times(step or span / 2000.0, end)
+    t = [x / NS_PER_S for x in times]
+    motors = recorder.motor_ids
+    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(10, 9),
+                             gridspec_kw={"height_ratios": [3, 2, 2, 1.4]})
+    ax_pos, ax_speed, ax_torque, ax_io = axes
+    for mid in motors:
+        samples = [recorder.sample(mid, x) for x in times]
+        label = f"ID{mid}"
+        ax_pos.plot(t, _finite([s.position for s in samples]), label=f"{label} position")
+        ax_pos.plot(t, _finite([s.target for s in samples]), "--", linewidth=0.8,
+                    label=f"{label} target")
+        ax_speed.plot(t, [s.speed for s in samples], label=label)
+        ax_torque.plot(t, [s.torque for s in samples], label=label)
+        _timeline(ax_io, t, samples, mid, len(motors))
+    ax_pos.set_ylabel("position [pulse]")
+    ax_speed.set_ylabel("speed [pps]")
+    ax_torque.set_ylabel("torque [%]")
+    ax_io.set_xlabel("virtual time [s]")
+    for ax in axes[:3]:
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="upper right", fontsize="small")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _timeline(ax: "plt.Axes", t: list[float], samples: list, motor: int, count: int) -> None:
+    """In-position, motor free, alarm, and each input/output as stacked steps."""
+    rows = [("in-pos", [bool(s.status & 8) for s in samples]),
+            ("free", [bool(s.status & 16) for s in samples]),
+            ("alarm", [bool(s.status & 0b1_1100_0111) for s in samples])]
+    for n in range(6):
+        bits = [bool(s.inputs >> n & 1) for s in samples]
+        if any(bits):
+            rows.append((f"IN{n + 1}", bits))
+    for n in range(4):
+        bits = [bool(s.outputs >> n & 1) for s in samples]
+        if any(bits):
+            rows.append((f"OUT{n + 1}", bits))
+    base = (motor - 1) * (len(rows) + 1)
+    labels = []
+    for i, (name, bits) in enumerate(rows):
+        y = base + i
+        ax.step(t, [y + 0.7 * b for b in bits], where="post", linewidth=1)
+        labels.append((y + 0.35, f"{name}" if count == 1 else f"ID{motor} {name}"))
+    ticks = list(ax.get_yticks()) if motor > 1 else []
+    names = [lbl.get_text() for lbl in ax.get_yticklabels()] if motor > 1 else []
+    ax.set_yticks(ticks + [y for y, _ in labels])
+    ax.set_yticklabels(names + [n for _, n in labels], fontsize="small")
