@@ -3,15 +3,16 @@
 This module owns:
 
 * parsing scripts: plain lines (sent as typed + CR, blank lines too), ``# `` comments,
-  directives ``@wait SECONDS``, ``@until REGEX [TIMEOUT]``, ``@send BYTES`` and
-  expectations ``<< BYTES`` (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
+  directives ``@wait SECONDS``, ``@until REGEX [TIMEOUT]``, ``@send BYTES``,
+  ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES`` (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
 * running a script against a chain in fast (unpaced, deterministic) virtual time,
   producing a timestamped transcript of every line sent and received;
 * checking the received byte stream against the expectations, in order, byte for
   byte, and reporting the first mismatch with context;
 * recording a run back as a golden transcript (:meth:`RunResult.to_script`).
 
-The runner talks to the chain only through ``chain.kernel`` and ``chain.host_line``.
+The runner talks to the chain through ``chain.kernel`` and ``chain.host_line``, and
+through the device API's ``set_input`` / ``set_analog`` for the input directives.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from .sim.kernel import seconds, to_seconds
 #: Default timeout of ``@until`` (virtual seconds).
 DEFAULT_UNTIL_TIMEOUT = 10.0
 
-StepKind = Literal["send", "raw", "wait", "until", "expect", "comment"]
+StepKind = Literal["send", "raw", "wait", "until", "expect", "comment", "input", "analog"]
 Direction = Literal[">", "<"]
 
 _ESCAPES = {"r": 13, "n": 10, "t": 9, "0": 0, "e": 27, "\\": 92}
@@ -114,6 +115,7 @@ class Step:
     data: bytes = b""
     seconds: float = 0.0
     pattern: re.Pattern[str] | None = None
+    args: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,27 @@ def _seconds_arg(text: str, what: str, line_no: int) -> float:
     return value
 
 
+_INPUT = re.compile(r"^(?:(\d+)\.)?(\d+)\s+(on|off|1|0)$", re.IGNORECASE)
+_ANALOG = re.compile(r"^(?:(\d+)\s+)?(\d+)$")
+
+
+def _input_args(arg: str, line_no: int) -> tuple[int, ...]:
+    """``@input [ID.]N on|off``: drive the electrical level of input N of motor ID."""
+    match = _INPUT.match(arg.strip())
+    if not match:
+        raise ScriptError("@input needs [ID.]N on|off, e.g. '@input 1.3 on'", line_no)
+    motor = int(match.group(1) or 1)
+    return motor, int(match.group(2)), int(match.group(3).lower() in ("on", "1"))
+
+
+def _analog_args(arg: str, line_no: int) -> tuple[int, ...]:
+    """``@analog [ID] COUNTS``: set the analog input (0..1023, 6.6 ?74)."""
+    match = _ANALOG.match(arg.strip())
+    if not match:
+        raise ScriptError("@analog needs [ID] COUNTS, e.g. '@analog 1 512'", line_no)
+    return int(match.group(1) or 1), int(match.group(2))
+
+
 def _parse_directive(name: str, arg: str, line_no: int, source: str) -> Step:
     if name == "wait":
         return Step(line_no, "wait", source, seconds=_seconds_arg(arg.strip(), "@wait", line_no))
@@ -165,7 +188,12 @@ def _parse_directive(name: str, arg: str, line_no: int, source: str) -> Step:
         if not data:
             raise ScriptError("@send needs bytes to send", line_no)
         return Step(line_no, "raw", source, data=data)
-    raise ScriptError(f"unknown directive @{name} (known: @wait, @until, @send; CML's "
+    if name == "input":
+        return Step(line_no, "input", source, args=_input_args(arg, line_no))
+    if name == "analog":
+        return Step(line_no, "analog", source, args=_analog_args(arg, line_no))
+    raise ScriptError(f"unknown directive @{name} (known: @wait, @until, @send, @input, "
+                      "@analog; CML's "
                       "interpolation command is @ followed by a digit or a dot)", line_no)
 
 
@@ -431,6 +459,10 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
                     host_line.feed(step.data)
                 elif step.kind == "wait":
                     kernel.advance(seconds(step.seconds))
+                elif step.kind == "input":
+                    chain.set_input(step.args[0], step.args[1], bool(step.args[2]))
+                elif step.kind == "analog":
+                    chain.set_analog(step.args[0], step.args[1])
                 elif step.kind == "until":
                     assert step.pattern is not None
                     pattern = step.pattern
