@@ -87,9 +87,15 @@ def test_port_survives_a_failing_line_and_runs_the_lines_after_it() -> None:
     assert b"".join(out) == b"boom\r\n?96.1\r\nPx.1=1\r\n"
 
 
-def test_port_discard_partial_is_optional() -> None:
+def test_port_discard_partial_forgets_a_half_line() -> None:
     chain = FakeChain()
-    assert Port(chain.host_line).discard_partial() is False
+    port = Port(chain.host_line)
+    out: list[bytes] = []
+    port.add_listener(out.append)
+    port.feed(b"?9")
+    assert port.discard_partial() is True
+    port.feed(b"?96.1\r")
+    assert b"".join(out) == b"?9?96.1\r\nPx.1=1\r\n"
 
 
 # -- service --------------------------------------------------------------

@@ -211,7 +211,10 @@ def run(
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
     try:
         if plot is not None:
-            chain.record()
+            start_recording = getattr(chain, "record", None)
+            if not callable(start_recording):
+                raise ScriptError(f"cannot plot to {plot}: this chain has no trace recorder")
+            start_recording()
 
         def show(entry: TranscriptEntry) -> None:
             sys.stdout.write(entry.format() + "\n")

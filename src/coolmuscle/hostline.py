@@ -123,6 +123,7 @@ class HostLine:
         self.bytes_in += len(data)
         settings = self._settings()
         echo = bytearray()
+        failure: Exception | None = None
         for byte in data:
             if byte == 0x0A and self._last_was_cr:
                 self._last_was_cr = False
@@ -133,7 +134,10 @@ class HostLine:
                     echo += settings.delimiter
                     self.write(bytes(echo))
                     echo.clear()
-                self._end_line()
+                try:
+                    self._end_line()
+                except Exception as exc:  # isolate the line; report after the chunk
+                    failure = failure or exc
                 settings = self._settings()  # the line may have changed K23/K70
                 continue
             if settings.echo:
@@ -144,6 +148,8 @@ class HostLine:
                 self._buf.append(byte)
         if echo:
             self.write(bytes(echo))
+        if failure is not None:
+            raise failure
 
     def discard_partial(self) -> None:
         """Forget a partly received line (its sender went away mid-line)."""
@@ -158,7 +164,4 @@ class HostLine:
             self._overflow = False
             log.debug("discarded over-long line (%d+ bytes)", MAX_LINE)
             return
-        try:
-            self._on_line(raw.decode("latin-1"))
-        except Exception:  # the motor model must never take the line down
-            log.exception("line %r failed", raw[:80])
+        self._on_line(raw.decode("latin-1"))
