@@ -122,9 +122,10 @@ def minimum_time(distance: float, limits: Limits) -> float:
     if length == 0.0:
         return 0.0
     acc, dec, top, c = limits.accel, limits.decel, limits.speed, limits.creep
-    peak = math.sqrt(c * c + 2.0 * acc * dec * length / (acc + dec))
-    if peak <= top:
-        return (peak - c) / acc + (peak - c) / dec
+    lift = 2.0 * acc * dec * length / (acc + dec)
+    rise = lift / (math.sqrt(c * c + lift) + c)  # peak - c without cancellation
+    if c + rise <= top:
+        return rise / acc + rise / dec
     ramps = (top * top - c * c) * (1.0 / (2.0 * acc) + 1.0 / (2.0 * dec))
     return (top - c) / acc + (top - c) / dec + (length - ramps) / top
 
@@ -134,23 +135,34 @@ def _ramp(u0: float, b0: float, u1: float, lim: Limits) -> list[Piece]:
     """Pieces from speed ``u0`` and acceleration ``b0`` to speed ``u1`` at rest accel.
 
     Speed increases use ``accel`` and its jerk, decreases ``decel`` and its jerk.
-    With S-curve a start acceleration is first brought back to zero; when it
-    overshoots ``u1`` either way, the stiffer of the two jerks is used.
+    With S-curve and a start acceleration (re-planning on the fly) the whole ramp
+    uses one jerk (:func:`_jerks`), and a start acceleration beyond the limits is
+    cut to them at once (docs/fidelity.md "Motion").
     """
     if lim.scurve == 0:
         if u1 == u0:
             return []
         amax = lim.accel if u1 > u0 else -lim.decel
         return [((u1 - u0) / amax, amax, 0.0)]
-    ja, jd = lim.jerk_accel, lim.jerk_decel
-    drift = b0 * abs(b0) / 2.0
-    if u1 >= u0 + drift / ja:
+    b0 = min(max(b0, -lim.decel), lim.accel)
+    ja, jd = _jerks(lim, u0, b0)
+    if u1 >= u0 + b0 * abs(b0) / (2.0 * ja):
         return _jerk_ramp(u0, b0, u1, lim.accel, ja, 1.0)
-    if u1 <= u0 + drift / jd:
-        return _jerk_ramp(u0, b0, u1, lim.decel, jd, -1.0)
-    if b0 > 0.0:
-        return _jerk_ramp(u0, b0, u1, lim.accel, max(ja, jd), 1.0)
-    return _jerk_ramp(u0, b0, u1, lim.decel, max(ja, jd), -1.0)
+    return _jerk_ramp(u0, b0, u1, lim.decel, jd, -1.0)
+
+
+def _jerks(lim: Limits, u0: float, b0: float) -> tuple[float, float]:
+    """(accel jerk, decel jerk) of a ramp starting at speed ``u0``, acceleration ``b0``.
+
+    From a decelerating state the jerk is at least b0²/(2 u0), so that unwinding
+    the deceleration does not cross zero speed (the running motion had that much).
+    """
+    if b0 == 0.0:
+        return lim.jerk_accel, lim.jerk_decel
+    stiff = lim.max_jerk
+    if b0 < 0.0 and u0 > 0.0:
+        stiff = max(stiff, b0 * b0 / (2.0 * u0))
+    return stiff, stiff
 
 
 def _jerk_ramp(u0: float, b0: float, u1: float, amax: float, jerk: float,
@@ -241,7 +253,7 @@ def _max_exit(u: float, b: float, dist: float, lim: Limits, cap: float) -> float
         return _ramp_travel(u, b, v, lim)
     if travel(cap) <= dist:
         return cap
-    lo = min(cap, max(0.0, u + b * abs(b) / (2.0 * lim.jerk_accel)))
+    lo = min(cap, max(0.0, u + b * abs(b) / (2.0 * _jerks(lim, u, b)[0])))
     return lo if travel(lo) > dist else _bisect(travel, lo, cap, dist)
 
 
@@ -253,9 +265,11 @@ class _Span:
     indices: list[int]
 
 
-def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float) -> list[float] | None:
+def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float,
+                moving: bool) -> list[float] | None:
     """Speed at the end of each span of a run (no reversal inside; it ends at the
-    creep speed), or ``None`` when the start state cannot make the first span.
+    creep speed), or ``None`` when a moving start cannot make the first span (from
+    rest every run is feasible by construction).
 
     Backward pass: each passing speed <= both spans' S and low enough to slow down
     in time; forward pass: reachable from the previous one.
@@ -269,8 +283,7 @@ def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float) -> lis
     u, b = u0, b0
     for k, span in enumerate(run):
         out[k] = min(out[k], _max_exit(u, b, span.dist, span.limits, out[k]))
-        need = _ramp_travel(u, b, out[k], span.limits)
-        if need > span.dist * (1.0 + 1e-12) + 1e-12:
+        if k == 0 and moving and _ramp_travel(u, b, out[0], span.limits) > span.dist:
             return None
         u, b = out[k], 0.0
     return out
@@ -291,7 +304,8 @@ class _Builder:
         return self.v != 0.0 or self.a != 0.0
 
     def add(self, duration: float, a: float, j: float) -> None:
-        if not duration > 0.0:
+        """Append a segment; one too short to advance the clock is dropped."""
+        if not duration > 0.0 or self.t + duration == self.t:
             return
         self.segments.append(Segment(self.t, duration, self.p, self.v, a, j))
         if math.isinf(duration):
@@ -369,10 +383,8 @@ def _path(b: _Builder, waypoints: Sequence[Waypoint]) -> None:
             u0, b0 = abs(b.v), d * b.a
         else:
             u0, b0 = creep, 0.0
-        speeds = _run_speeds(run, u0, b0, creep)
+        speeds = _run_speeds(run, u0, b0, creep, r == 0 and b.moving)
         if speeds is None:
-            if not b.moving:
-                raise RuntimeError(f"unplannable run from rest: {run!r}")
             _stop(b, waypoints[0].limits)
             return _path(b, waypoints)
         b.set_speed(d * u0)
@@ -432,7 +444,7 @@ def plan_stop(start_state: State, decel: float, origin_ns: int, scurve: int = 0,
     """
     v = abs(start_state[1])
     ref = speed if speed else (v if v > 0.0 else 1.0)
-    lim = Limits(ref, decel, decel, min(creep, ref), scurve)
+    lim = Limits(ref, max(decel, abs(start_state[2])), decel, min(creep, ref), scurve)
     b = _Builder(start_state)
     _stop(b, lim)
     return b.profile(origin_ns, start_state, b.p)

@@ -155,6 +155,11 @@ class Profile:
         seg, tau = found
         return seg.state(tau)
 
+    @property
+    def passing_times(self) -> tuple[tuple[float, int], ...]:
+        """(seconds from the origin, waypoint index) of each merge passing point."""
+        return self._passing
+
     def passing_times_ns(self) -> list[tuple[int, int]]:
         """(kernel time, waypoint index) of each merge passing point (K34=6, K73)."""
         return [(self.origin_ns + round(t * NS_PER_S), i) for t, i in self._passing]
