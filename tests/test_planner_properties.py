@@ -214,7 +214,9 @@ def check_final(profile: Profile, target: float) -> None:
 def integrate(profile: Profile, bounds: list[Limits], h: float = 1e-6,
               cap: int = 100_000) -> None:
     """Trapezoid-integrate the acceleration (documented creep jumps added) and
-    compare with the closed-form position within 1 pulse."""
+    compare with the closed-form position within 1 pulse.  Steps of 1 µs, at most
+    ``cap`` per segment (longer segments use coarser steps; the rule is exact for
+    the linear acceleration of a segment, its error on position is O(h²·Δa))."""
     p, v, _ = profile.start_state
     vscale = max([lim.speed for lim in bounds] + [abs(v)])
     creeps = top_creep(bounds)
@@ -251,7 +253,8 @@ def check_all(profile: Profile, bounds: list[Limits], speed_over: float = 0.0) -
 @given(k=params(), data=st.data())
 def test_ptp_limits_exact_and_minimum_time(k: dict[str, int], data: st.DataObject) -> None:
     lim = data.draw(limits(k))
-    dist = data.draw(distances(lim.speed)) * data.draw(st.sampled_from([1, -1]))
+    far = st.floats(1e6, 2e9)  # up to the K37 position range, long cruises
+    dist = data.draw(st.one_of(distances(lim.speed), far)) * data.draw(st.sampled_from([1, -1]))
     start = float(data.draw(st.integers(-10**6, 10**6)))
     prof = plan_moves((start, 0.0, 0.0), [Waypoint(start + dist, lim)], 7 * NS)
     check_final(prof, start + dist)
@@ -259,7 +262,7 @@ def test_ptp_limits_exact_and_minimum_time(k: dict[str, int], data: st.DataObjec
     if lim.scurve == 0:
         expected = minimum_time((start + dist) - start, lim)
         assert math.isclose(prof.duration, expected, rel_tol=1e-9, abs_tol=1e-12)
-        assert abs(prof.end_ns - 7 * NS - expected * NS) <= 1.0
+        assert abs(prof.end_ns - 7 * NS - expected * NS) <= max(1.0, expected * NS * 1e-15)
     else:
         assert prof.duration >= minimum_time((start + dist) - start, lim) * (1 - 1e-9)
 

@@ -275,8 +275,10 @@ def _segment_crossing(seg: Segment, x: float, tau0: float, tol: float) -> float 
         flo, fhi = seg.position(lo) - x, seg.position(hi) - x
         if abs(flo) <= tol:
             return lo
-        if abs(fhi) <= tol or (flo < 0.0) != (fhi < 0.0):
+        if (flo < 0.0) != (fhi < 0.0) and fhi != 0.0:
             return _solve_monotone(seg, x, lo, hi, flo)
+        if abs(fhi) <= tol:  # touches x at a turning point (or at the end)
+            return hi
     return None
 
 
