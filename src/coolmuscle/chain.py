@@ -107,11 +107,18 @@ class Chain:
 
     def _on_host_line(self, text: str) -> None:
         self._execute_text(text, Context(origin="host"))
+        self._changed()
+
+    def _changed(self) -> None:
+        """State may have changed outside a kernel event: let the recorder look."""
+        if self._recorder is not None:
+            self._recorder.capture()
 
     def execute(self, line: str, *, origin: str = "api") -> list[str]:
         """Run a CML line as ``origin``; return the replies it produced at once."""
         ctx = Context(origin=origin, replies=[])
         self._execute_text(line, ctx)
+        self._changed()
         return ctx.replies or []
 
     def _execute_text(self, text: str, ctx: Context) -> None:
@@ -239,6 +246,7 @@ class Chain:
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         self._require(motor).set_input_level(number, on)
+        self._changed()
 
     def set_analog(self, motor: int, counts: int) -> None:
         if not 0 <= counts <= 1023:

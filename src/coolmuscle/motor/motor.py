@@ -129,8 +129,8 @@ class Motor:
         return round(self.axis.position())
 
     def speed_units(self) -> int:
-        """Sx (?97): actual speed in K37 speed units, truncated toward zero."""
-        return int(self.axis.velocity() / self.resolution.speed_unit_pps)
+        """Sx (?97): actual speed in K37 speed units, to the nearest unit."""
+        return round(self.axis.velocity() / self.resolution.speed_unit_pps)
 
     def torque(self) -> int:
         """Ix (?98): % of rated torque."""

@@ -85,9 +85,10 @@ class TraceRecorder:
         self._logs = {mid: _MotorLog(m) for mid, m in chain.motors.items()}
         for motor in chain.motors.values():
             motor.axis.record_history(True)
-        self._remove = chain.kernel.add_observer(self._observe)
+        self._remove = chain.kernel.add_observer(self.capture)
 
-    def _observe(self) -> None:
+    def capture(self) -> None:
+        """Note the discrete state of every motor now (called after each event)."""
         for log in self._logs.values():
             log.capture()
 
