@@ -248,6 +248,26 @@ class Motor:
         self.axis.hold_here()
         self.axis.enabled = False
 
+    def reset_alarm(self) -> None:
+        """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
+        if self.alarm:
+            self.enable()
+
+    def jog(self, direction: int) -> None:
+        """Manual jog (5.1): K50 pulses CW (+1) or CCW (-1) at the feed speed K49, K43."""
+        if self.axis.moving:
+            return
+        target = self.axis.target() + direction * self.k(50)
+        self.move_to([(target, self.limits(self.k(49), self.k(43)))])
+
+    def feed(self, direction: int) -> None:
+        """Manual feed (5.1): rotate CW (+1) / CCW (-1) at K49 with K43 while the input is on."""
+        self.run_continuous(direction * self.k(49), self.limits(self.k(49), self.k(43)))
+
+    def feed_stop(self) -> None:
+        """End of manual feed: decelerate with K43 (5.1)."""
+        self.axis.stop(self.limits(self.k(49), self.k(43)).decel)
+
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
         bits &= int(ALARM_BITS)
