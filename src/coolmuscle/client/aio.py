@@ -94,6 +94,8 @@ class AsyncDriver:
         self.port = port
         self.session = session
         self.listeners: list[tuple[Listener, Callable[[MotorEvent], bool]]] = []
+        #: ``tap(direction, data)`` sees every byte written (``">"``) and read (``"<"``).
+        self.taps: list[Callable[[str, bytes], None]] = []
         self.lock = asyncio.Lock()
         self._changed = asyncio.Condition()
         self._failure: BaseException | None = None
@@ -113,6 +115,7 @@ class AsyncDriver:
         if isinstance(data, BaseException):
             self._failure = TransportError(f"cannot read from the port: {data}")
         else:
+            self._tap("<", data)
             for event in self.session.protocol.receive(data):
                 self._deliver(event)
         self._loop.create_task(self._notify())
@@ -185,9 +188,17 @@ class AsyncDriver:
             return request
         raise TypeError(f"unknown request {request!r}")
 
+    def _tap(self, direction: str, data: bytes) -> None:
+        for tap in list(self.taps):
+            try:
+                tap(direction, data)
+            except Exception:
+                log.exception("byte tap failed")
+
     def write(self, data: bytes) -> None:
         if not data:
             return
+        self._tap(">", data)
         try:
             self.port.write(data)
         except (serial.SerialException, OSError) as exc:
@@ -453,6 +464,11 @@ class AsyncCoolMuscle(AsyncMotor):
             if entry in self._driver.listeners:
                 self._driver.listeners.remove(entry)
         return remove
+
+    def write_line(self, line: str) -> None:
+        """Send one line as typed, with no exchange: whatever the motor answers arrives
+        as events (kind ``unsolicited`` for replies).  For terminals."""
+        self._driver.write(self._session.protocol.encode([line]))
 
     async def events(self, *, kinds: Iterable[str] | None = None,
                      motor: int | None = None) -> AsyncIterator[MotorEvent]:
