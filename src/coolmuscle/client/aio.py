@@ -184,6 +184,8 @@ class AsyncDriver:
             self.write(protocol.begin(request))
             if not await self._until(lambda: request.complete, request.timeout):
                 protocol.abandon()
+                if request.errors:  # the motor said why it did not answer
+                    raise request.errors[0]
                 raise CoolMuscleTimeout(f"{request.describe()} within {request.timeout:g} s")
             return request
         raise TypeError(f"unknown request {request!r}")

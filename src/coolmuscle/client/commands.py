@@ -85,7 +85,7 @@ def read_register(session: Session, motor: int, kind: str, index: int) -> Op[int
     fw = yield from firmware(session, motor)
     _check_index(fw, kind, index)
     name = register_name(kind, index, motor)
-    line = yield from query(session, motor, name, name.split(".")[0])
+    line = yield from _write_then_read(session, motor, None, name)
     value = (line.value or "").strip()
     if kind == "V" and len(value) >= 2 and value[0] == value[-1] == '"':
         return value[1:-1]
@@ -112,13 +112,18 @@ def write_register(session: Session, motor: int, kind: str, index: int,
         raise OutOfRangeError(f"{name}={text} was not applied: the motor holds {got!r}")
 
 
-def _write_then_read(session: Session, motor: int, assignment: str,
+def _write_then_read(session: Session, motor: int, assignment: str | None,
                      name: str) -> Op[Received]:
-    """An assignment and the query of the same name: the query's reply is the readback."""
+    """An assignment (or nothing), the query of the same name and a ``?96`` fence: the
+    query's reply is the readback.  A memory number the motor does not have answers
+    error00 (K23 16) or nothing; both raise :class:`OutOfRangeError`."""
     short = name.split(".")[0]
-    ex = yield from exchange(session, (assignment, name), named(short, motor), motor,
-                             f"{short}.{motor}= readback")
-    return ex.lines[-1]
+    lines = (assignment, name) if assignment is not None else (name,)
+    answer = yield from fenced(session, motor, lines)
+    for line in answer[:-1]:
+        if line.name == short and line.motor == motor:
+            return line
+    raise OutOfRangeError(f"{name}: no such register on the motor (no reply to {name})")
 
 
 def write_param(session: Session, motor: int, k: int, value: int) -> Op[None]:

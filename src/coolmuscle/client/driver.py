@@ -112,6 +112,8 @@ class SyncDriver:
             remaining = deadline.remaining()
             if remaining <= 0:
                 protocol.abandon()
+                if exchange.errors:  # the motor said why it did not answer
+                    raise exchange.errors[0]
                 raise CoolMuscleTimeout(f"{exchange.describe()} within {exchange.timeout:g} s")
             self.pump(remaining)
         return exchange

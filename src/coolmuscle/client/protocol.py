@@ -21,6 +21,7 @@ same) and the choices made are in docs/fidelity.md, "Host library and tools".
 
 from __future__ import annotations
 
+import re
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable, Final, Literal
@@ -39,6 +40,8 @@ EVENT_MEMORY: Final = 256
 
 EventKind = Literal["status", "input", "output", "message", "error", "unsolicited",
                     "garbled"]
+#: A line that writes K23 may switch the echo off or on (ch. 3 K23 function 8).
+_K23_WRITE: Final = re.compile(r"K23(\.\d+)?\s*[-+]?=", re.IGNORECASE)
 _EVENT_KINDS: Final = {"status": "status", "input": "input", "output": "output",
                        "message": "message", "error": "error", "garbled": "garbled"}
 
@@ -81,6 +84,7 @@ class Exchange:
     garbled: list[str] = field(default_factory=list)
     timeout: float = 1.0
     until_echo: bool = False
+    echo_may_change: bool = False
     echoed: int = 0
     complete: bool = False
     end_seq: int = 0
@@ -135,7 +139,7 @@ class Protocol:
 
     def __init__(self) -> None:
         self._split = LineSplitter()
-        self._sent: deque[str] = deque(maxlen=ECHO_MEMORY)
+        self._sent: deque[tuple[str, Exchange | None]] = deque(maxlen=ECHO_MEMORY)
         self.echo: bool | None = None
         self.exchange: Exchange | None = None
         self.events: deque[MotorEvent] = deque(maxlen=EVENT_MEMORY)
@@ -149,18 +153,20 @@ class Protocol:
         """The line end the motor uses (K70), once seen: ``b"\\r\\n"`` or ``b"\\r"``."""
         return self._split.delimiter
 
-    def encode(self, lines: tuple[str, ...] | list[str]) -> bytes:
+    def encode(self, lines: tuple[str, ...] | list[str],
+               owner: Exchange | None = None) -> bytes:
         """Bytes for ``lines``, each ended with CR (the Enter key, 2.1); remembered for echo."""
         for line in lines:
             if "\r" in line or "\n" in line:
                 raise ValueError(f"a line to send holds a line end: {line!r}")
-            self._sent.append(line)
+            self._sent.append((line, owner))
         return b"".join(line.encode("latin-1") + b"\r" for line in lines)
 
     def begin(self, exchange: Exchange) -> bytes:
         """Start ``exchange`` (the previous one is abandoned); returns the bytes to write."""
         self.exchange = exchange
-        return self.encode(exchange.send)
+        exchange.echo_may_change = any(_K23_WRITE.search(line) for line in exchange.send[:-1])
+        return self.encode(exchange.send, exchange)
 
     def abandon(self) -> None:
         """Forget the pending exchange (its deadline passed); late answers become events.
@@ -192,8 +198,7 @@ class Protocol:
         if not text:
             return None  # a blank line (a lone CR, or an LF after a CR-only end): nothing
         self.seq += 1
-        if text in self._sent:
-            self._echo_of(text)
+        if self._echo_of(text):
             return None
         line = classify(raw)
         if line.kind == "status" and line.motor is not None:
@@ -205,17 +210,21 @@ class Protocol:
             return self._answer(exchange, line)
         return self._event(line)
 
-    def _echo_of(self, text: str) -> None:
-        while self._sent:
-            if self._sent.popleft() == text:
-                break
+    def _echo_of(self, text: str) -> bool:
+        """Whether ``text`` is the echo of a line sent; credits the exchange that sent it."""
+        index = next((i for i, (sent, _o) in enumerate(self._sent) if sent == text), None)
+        if index is None:
+            return False
+        for _ in range(index):
+            self._sent.popleft()  # older lines whose echo never came
+        _text, owner = self._sent.popleft()
         self.echo = True
-        exchange = self.exchange
-        if exchange is not None and not exchange.complete and text in exchange.send:
-            exchange.echoed += 1
-            if exchange.until_echo and exchange.echoed >= len(exchange.send):
-                exchange.complete = True
-                exchange.end_seq = self.seq
+        if owner is not None and owner is self.exchange and not owner.complete:
+            owner.echoed += 1
+            if owner.until_echo and owner.echoed >= len(owner.send):
+                owner.complete = True
+                owner.end_seq = self.seq
+        return True
 
     def _belongs(self, exchange: Exchange, line: Received) -> bool:
         """Lines before the exchange's first echo (echo on) belong to what came before."""
@@ -228,7 +237,9 @@ class Protocol:
         return False
 
     def _answer(self, exchange: Exchange, line: Received) -> MotorEvent | None:
-        if line.kind == "error" and exchange.motor in (None, line.motor):
+        if line.kind == "error":
+            if exchange.motor not in (None, line.motor):
+                return self._event(line)  # another motor's error: not this answer
             exchange.errors.append(line.error())
             exchange.lines.append(line)
             return None
@@ -237,24 +248,25 @@ class Protocol:
                 exchange.garbled.append(line.text)
                 return self._event(line)
             return None
-        if exchange.done(line):
+        strict = self.echo is True and not exchange.echo_may_change
+        all_echoed = exchange.echoed >= len(exchange.send)
+        if (all_echoed or not strict) and exchange.done(line):
             exchange.lines.append(line)
             exchange.complete = True
             exchange.end_seq = self.seq
             self._learn_echo(exchange)
             return None
-        if line.kind in ("status", "input", "output"):
+        if line.kind in ("status", "input", "output") and (all_echoed or not strict):
             return self._event(line)
-        exchange.lines.append(line)
+        exchange.lines.append(line)  # between our echoes: it answers one of our lines
         return None
 
     def _learn_echo(self, exchange: Exchange) -> None:
         """All lines echoed: echo on.  The last one not echoed: echo is off now."""
         if exchange.send and exchange.echoed < len(exchange.send):
-            last = exchange.send[-1]
-            if last in self._sent:
-                self.echo = False
-                self._sent.clear()
+            self.echo = False
+            self._sent = deque(((t, o) for t, o in self._sent if o is not exchange),
+                               maxlen=ECHO_MEMORY)
 
     def _event(self, line: Received) -> MotorEvent:
         kind = _EVENT_KINDS.get(line.kind, "unsolicited")
