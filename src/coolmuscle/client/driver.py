@@ -57,7 +57,9 @@ class _Deadline:
     def remaining(self) -> float:
         left = self._end - self._clock()
         if self._virtual:
-            left = min(left, self._wall_end - time.monotonic()) if left > 0 else left
+            if left < 1e-6:  # the kernel counts whole ns: less cannot be waited for
+                return 0.0
+            left = min(left, self._wall_end - time.monotonic())
         return left
 
 

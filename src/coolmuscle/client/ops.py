@@ -244,10 +244,18 @@ def wait_in_position(session: Session, motor: int, timeout: float) -> Op[Ux]:
                 continue
         else:
             yield Pause(min(remaining, session.poll_interval))
-        ux = yield from status(session, motor)
+        remaining = deadline - (yield Now())
+        if remaining <= 0:
+            continue
+        try:
+            line = yield from query(session, motor, f"?99.{motor}", "Ux",
+                                    timeout=min(session.timeout, remaining))
+        except CoolMuscleTimeout:
+            raise CoolMuscleTimeout(f"motor {motor} not in position within {timeout:g} s "
+                                    f"(no answer to ?99.{motor})") from None
         since = session.protocol.status_seen.get(motor, (since, 0))[0]
-        if settled(motor, int(ux)):
-            return ux
+        if settled(motor, parse_int_reply(line, "Ux", motor)):
+            return Ux(parse_int_reply(line, "Ux", motor))
 
 
 def check_range(ok: bool, message: str) -> None:
