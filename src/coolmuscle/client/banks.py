@@ -95,7 +95,7 @@ def all_banks(session: Session, motor: int, timeout: float | None = None) -> Op[
 
 def compare_bank(block: BankBlock, got: list[str]) -> list[BankDifference]:
     """Differences between a block of the file and the lines the motor printed."""
-    sources = [line for line in block.body if line.lines and line.error is None]
+    sources = [line for line in block.body if line.lines or line.error is not None]
     expected: list[str] = []
     origin: list[int] = []
     for line in sources:

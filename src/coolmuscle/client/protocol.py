@@ -155,11 +155,18 @@ class Protocol:
 
     def encode(self, lines: tuple[str, ...] | list[str],
                owner: Exchange | None = None) -> bytes:
-        """Bytes for ``lines``, each ended with CR (the Enter key, 2.1); remembered for echo."""
+        """Bytes for ``lines``, each ended with CR (the Enter key, 2.1); remembered for echo.
+
+        With echo off only an exchange's lines are remembered (it forgets them when
+        it completes): a line nobody waits for would otherwise stay, and a later reply
+        equal to it (a bank listing line) would pass for its echo.
+        """
+        remember = self.echo is not False or (owner is not None and not owner.complete)
         for line in lines:
             if "\r" in line or "\n" in line:
                 raise ValueError(f"a line to send holds a line end: {line!r}")
-            self._sent.append((line, owner))
+            if remember:
+                self._sent.append((line, owner))
         return b"".join(line.encode("latin-1") + b"\r" for line in lines)
 
     def begin(self, exchange: Exchange) -> bytes:
@@ -262,11 +269,12 @@ class Protocol:
         return None
 
     def _learn_echo(self, exchange: Exchange) -> None:
-        """All lines echoed: echo on.  The last one not echoed: echo is off now."""
+        """All lines echoed: echo on.  The last one not echoed: echo is off now.
+        Either way the exchange's lines are forgotten (their echo is not coming)."""
         if exchange.send and exchange.echoed < len(exchange.send):
             self.echo = False
-            self._sent = deque(((t, o) for t, o in self._sent if o is not exchange),
-                               maxlen=ECHO_MEMORY)
+        self._sent = deque(((t, o) for t, o in self._sent if o is not exchange),
+                           maxlen=ECHO_MEMORY)
 
     def _event(self, line: Received) -> MotorEvent:
         kind = _EVENT_KINDS.get(line.kind, "unsolicited")
