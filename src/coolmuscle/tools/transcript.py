@@ -6,7 +6,9 @@ exactly as received (escaped).  A received line that is not an echo is preceded 
 ``@until ^LINE$ T``: in the replay (``coolmuscle run --check``) virtual time then runs
 until the motor says it, as the motor said it after a while here (T is twice that
 wait plus 2 s).  Each ``@until`` consumes lines in order, so a report that looks like
-an earlier reply (``Ux.1=8``) is matched at its own place.
+an earlier reply (``Ux.1=8``) is matched at its own place.  The pause before each line
+sent (since the last line sent or received) is kept as ``@wait``, so the replay asks
+its questions at the same moments (wall seconds: record a real-time session, scale 1).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ class TranscriptRecorder:
         self._rx = bytearray()
         self._tx = bytearray()
         self._last_sent = time.monotonic()
+        self._last_activity = self._last_sent
         self._file.write("# golden transcript recorded by coolmuscle term"
                          + (f" ({source})" if source else "") + "\n")
         self._file.flush()
@@ -49,6 +52,10 @@ class TranscriptRecorder:
         self._file.flush()
 
     def _line_sent(self, text: str) -> None:
+        now = time.monotonic()
+        pause = now - self._last_activity
+        if pause >= 0.01:
+            self._file.write(f"@wait {pause:.2f}\n")
         stripped = text.lstrip()
         if (stripped.startswith(("#", "<< ")) and not stripped[1:2].isdigit()) \
                 or re.match(r"@[A-Za-z]", stripped):
@@ -57,7 +64,7 @@ class TranscriptRecorder:
             self._file.write(f"{text}\n")
         self._sent.append(text)
         del self._sent[:-32]
-        self._last_sent = time.monotonic()
+        self._last_sent = self._last_activity = now
 
     def _lines_received(self) -> None:
         while True:
@@ -67,6 +74,7 @@ class TranscriptRecorder:
             raw = bytes(self._rx[:match.end()])
             del self._rx[:match.end()]
             text = raw.rstrip(b"\r\n").decode("latin-1")
+            self._last_activity = time.monotonic()
             if text and text not in self._sent:
                 waited = time.monotonic() - self._last_sent
                 self._file.write(f"@until ^{re.escape(text)}$ {2 * waited + 2:.1f}\n")
