@@ -136,3 +136,17 @@ def test_usage_errors_exit_2(tmp_path: Path) -> None:
                          env={"PYTHONPATH": str(ROOT / "src"), "PATH": "/usr/bin:/bin"},
                          timeout=60)
     assert out.returncode == 2 and "cannot read" in out.stderr
+
+
+def test_literals_in_banks_are_errors_on_rt3_and_warnings_on_cm2() -> None:
+    text = "V1.1=1\nB1.1\nV1.1==5, C2.1, T0.1\nEND\nB2.1\nEND\n"
+    for firmware, severity, number in (("rt3", "error", 1), ("cm2", "warning", None)):
+        report = check_program(parse_program(text), firmware=firmware)
+        assert [(d.rule, d.severity, d.motor_error, d.column) for d in report.diagnostics] \
+            == [("literal-in-bank", severity, number, 7)]
+
+
+def test_go_in_a_bank_is_allowed_on_rt3_only() -> None:
+    text = "L1.1\n^.1\nEND\n"
+    assert check_program(parse_program(text), firmware="rt3").diagnostics == []
+    assert [d.rule for d in check_program(parse_program(text)).diagnostics] == ["not-in-bank"]

@@ -99,10 +99,10 @@ def compare_bank(block: BankBlock, got: list[str]) -> list[BankDifference]:
     expected: list[str] = []
     origin: list[int] = []
     for line in sources:
-        canon = canonical_lines([line.send])
+        canon = canonical_lines([line.send], block.motor_id)
         expected += canon
         origin += [line.number] * len(canon)
-    actual = canonical_lines(got)
+    actual = canonical_lines(got, block.motor_id)
     diffs: list[BankDifference] = []
     matcher = difflib.SequenceMatcher(a=expected, b=actual, autojunk=False)
     for op, a0, a1, b0, b1 in matcher.get_opcodes():

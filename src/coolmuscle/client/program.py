@@ -21,6 +21,7 @@ Every line is parsed with the one parser (:func:`coolmuscle.cml.parse`).
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -215,12 +216,45 @@ def load_program(path: str | Path) -> ProgramFile:
     return parse_program(path.read_text(encoding="utf-8"), str(path))
 
 
-def canonical_lines(texts: list[str]) -> list[str]:
+def _fill_expr(expr: ast.Expr, motor: int) -> ast.Expr:
+    if isinstance(expr, (ast.Reg, ast.Input)):
+        return expr if expr.motor is not None else dataclasses.replace(expr, motor=motor)
+    if isinstance(expr, (ast.BinOp, ast.Compare, ast.Logic)):
+        return dataclasses.replace(expr, left=_fill_expr(expr.left, motor),
+                                   right=_fill_expr(expr.right, motor))
+    if isinstance(expr, ast.Func):
+        return dataclasses.replace(expr, arg=_fill_expr(expr.arg, motor))
+    if isinstance(expr, ast.Not):
+        return dataclasses.replace(expr, operand=_fill_expr(expr.operand, motor))
+    return expr
+
+
+def _fill(statement: ast.Statement, motor: int) -> ast.Statement:
+    """``statement`` with the bank's motor ID where it names none (``S1`` in ``B1.2``)."""
+    if isinstance(statement, ast.Assign):
+        return dataclasses.replace(statement, target=_fill_expr(statement.target, motor),
+                                   value=_fill_expr(statement.value, motor))
+    if isinstance(statement, ast.Ref):
+        return dataclasses.replace(statement, reg=_fill_expr(statement.reg, motor))
+    if isinstance(statement, ast.Branch):
+        return ast.Branch(_fill_expr(statement.condition, motor),
+                          tuple(_fill(s, motor) for s in statement.then),
+                          tuple(_fill(s, motor) for s in statement.orelse))
+    if isinstance(statement, ast.OutputWord):
+        statement = dataclasses.replace(statement, value=_fill_expr(statement.value, motor))
+    if isinstance(statement, ast.Alloc) or getattr(statement, "motor", 0) is not None:
+        return statement
+    return dataclasses.replace(statement, motor=motor)  # type: ignore[call-arg]
+
+
+def canonical_lines(texts: list[str], motor: int | None = None) -> list[str]:
     """Canonical logical lines (6.6 readback form) of bank text, for comparison.
 
-    Each text is parsed and every logical line printed by the formatter; bank
-    headers and ``END`` are dropped, so a listing that prints them and one that does
-    not compare equal.  A text that does not parse is kept as written (stripped).
+    Each text is parsed and every logical line printed by the formatter, with
+    ``motor`` written where a statement names no motor ID (a motor stores ``S1`` of
+    ``B1.2`` as ``S1.2``); bank headers and ``END`` are dropped, so a listing that
+    prints them and one that does not compare equal.  A text that does not parse is
+    kept as written (stripped).
     """
     out: list[str] = []
     for text in texts:
@@ -232,5 +266,8 @@ def canonical_lines(texts: list[str]) -> list[str]:
         for line in lines:
             if any(isinstance(s, (ast.BankBegin, ast.BankEnd)) for s in line.statements):
                 continue
+            if motor is not None:
+                line = dataclasses.replace(
+                    line, statements=tuple(_fill(s, motor) for s in line.statements))
             out.append(format_line(line))
     return out

@@ -13,7 +13,11 @@ too-many-steps      error     02     RT3/CM1: more than 200 steps per motor (RT3
 bank-number         error     00     bank number outside 1..30 (2.2.2 "B", 2.2.3 "L")
 bank-end            error     --     a bank definition the file never ends (2.2.2 "END")
 not-in-bank         error     03     a command banks cannot hold (2.2.2 "Execute
-                                     Commands", 6.6, 4.5.1 "X" in a ladder bank)
+                                     Commands", 6.5, 6.6, 4.5.1 "X" in a ladder bank;
+                                     ``^`` is allowed in RT3 banks, RT3 7.1-7.3)
+cannot-follow       error     04     C J CL JL X X- W followed by another command, or
+                                     X / X- not first on the line (2.2.2, error04)
+comment-in-bank     error     01     RT3: a comment inside a bank (RT3 1.1 "/")
 missing-bank        error     05/06  C/J (CL/JL) to a bank the file does not define
 cross-motor-call    error     --     C/J/CL/JL naming another motor's bank (2.2.2 "C")
 recursion           error     --     a bank that calls itself through C/CL (2.2.2 "C")
@@ -23,7 +27,8 @@ range               error     00     memory number, K number or literal value ou
                                      range (6.1, 6.2), motor ID outside 1..15
 register-unset      warning   --     a register a bank reads that nothing sets (RT3 1.2;
                                      index 0, the direct data, and T0 "no action" excepted)
-literal-in-bank     warning   --     a register set to a number inside a bank (RT3 1.2)
+literal-in-bank     warning   --     a number in a bank's assignment or condition (RT3 1.2:
+                                     an error, error01, on RT3 and CM1 firmware)
 bank-not-in-file    warning   --     ``[#``/``[L#`` of a bank this file does not define
 motor-id            warning   --     a motor ID beyond ``--motors``
 ==================  ========  =====  =====================================================
@@ -42,6 +47,7 @@ from dataclasses import dataclass, field
 from typing import Final, Iterator, Literal
 
 from ..cml import ast
+from ..cml.scanner import scan
 from ..errors import CmlSyntaxError, OutOfRangeError
 from ..motor.firmware import Firmware, get_firmware
 from ..motor.memory import Memory
@@ -56,7 +62,8 @@ RULES: Final[dict[str, tuple[Severity, int | None]]] = {
     "syntax": ("error", 1), "statement-length": ("error", None),
     "too-many-commands": ("error", 2), "too-many-steps": ("error", 2),
     "bank-number": ("error", 0), "bank-end": ("error", None),
-    "not-in-bank": ("error", 3), "missing-bank": ("error", 5),
+    "not-in-bank": ("error", 3), "cannot-follow": ("error", 4),
+    "comment-in-bank": ("error", 1), "missing-bank": ("error", 5),
     "cross-motor-call": ("error", None), "recursion": ("error", None),
     "nesting": ("error", None), "loop-balance": ("error", None), "range": ("error", 0),
     "register-unset": ("warning", None), "literal-in-bank": ("warning", None),
@@ -71,6 +78,8 @@ MAX_NESTING: Final = 10
 _NOT_IN_BANK_EXEC: Final = {"pause_motor": "]1", "next_line": ">", "prev_line": "<",
                             "stop_after_line": "}", "save": "$"}
 _DATA_KINDS: Final = ("P", "S", "A", "M", "T", "V", "N", "R", "H")
+#: Statements after which nothing may follow in their list (error04).
+_LINE_ENDERS: Final = (ast.Call, ast.Loop, ast.LoopEnd, ast.Wait)
 
 
 @dataclass(frozen=True)
@@ -120,8 +129,9 @@ class CheckReport:
         return sum(d.severity == "warning" for d in self.diagnostics)
 
     def add(self, line: SourceLine | int, rule: str, message: str, *, column: int = 1,
-            motor_error: int | None = None) -> None:
-        severity, number = RULES[rule]
+            motor_error: int | None = None, severity: Severity | None = None) -> None:
+        default, number = RULES[rule]
+        severity = severity or default
         self.diagnostics.append(Diagnostic(
             line if isinstance(line, int) else line.number, column, severity, rule, message,
             number if motor_error is None else motor_error))
@@ -174,6 +184,23 @@ def _column(raw: str, needle: str) -> int:
     return index + 1 if index >= 0 else 1
 
 
+def _numbers(expr: ast.Expr) -> Iterator[int]:
+    if isinstance(expr, ast.Num):
+        yield expr.value
+    elif isinstance(expr, (ast.BinOp, ast.Compare, ast.Logic)):
+        yield from _numbers(expr.left)
+        yield from _numbers(expr.right)
+    elif isinstance(expr, ast.Func):
+        yield from _numbers(expr.arg)
+    elif isinstance(expr, ast.Not):
+        yield from _numbers(expr.operand)
+
+
+def _statement_text(statement: ast.Statement) -> str:
+    from ..cml.formatter import format_statement
+    return format_statement(statement).split(".")[0].rstrip("-")
+
+
 def _reg_text(kind: str, index: int | None, motor: int | None) -> str:
     return f"{kind}{'' if index is None else index}" + ("" if motor is None else f".{motor}")
 
@@ -218,6 +245,7 @@ class _Checker:
         self.fw = fw
         self.motors = motors
         self.report = CheckReport(program.path, fw.name)
+        self.rt3 = fw.max_bank_steps is not None   # RT3 and CM1 bank rules
         self.memory = Memory(fw)
         self.defined: dict[tuple[bool, int, int], BankBlock] = {}
         for block in program.banks:
@@ -340,13 +368,16 @@ class _Checker:
         flagged: set[RegKey] = set()
         for line in block.body:
             self._length(line)
+            self._comment(line)
+            for logical in line.lines:
+                self._sequence(line, logical.statements, None)
             for statement in line.statements:
                 steps += _steps(statement)
                 commands += _commands(statement)
+                self._literal(line, statement)
                 for each in _flat(statement):
                     depth = self._loops(block, line, each, depth)
                     self._allowed(block, line, each)
-                    self._literal(line, each)
                     self._unset(line, each, motor, set_before | set_in_banks, flagged)
         if depth > 0:
             self.report.add(block.header, "loop-balance", f"{block.label}: {depth} X loop(s) "
@@ -387,12 +418,16 @@ class _Checker:
         return depth
 
     def _allowed(self, block: BankBlock, line: SourceLine, statement: ast.Statement) -> None:
+        """error03: 2.2.2/2.2.3 "]1, [L, ]L, >, <, }, $ commands can not be used", 6.5, 6.6."""
         what: str | None = None
         if isinstance(statement, ast.Exec) and statement.op in _NOT_IN_BANK_EXEC:
             what = _NOT_IN_BANK_EXEC[statement.op]
-        elif isinstance(statement, ast.StartBank) and statement.kind != "B":
+        elif isinstance(statement, ast.Exec) and statement.op == "go" and not self.rt3:
+            what = "^"                      # 6.5 "^": P x, L x (RT3 7.1-7.3 use it)
+        elif isinstance(statement, ast.StartBank) and statement.kind != "B" \
+                and not block.ladder:
             what = "[" + statement.kind
-        elif isinstance(statement, ast.StopBank):
+        elif isinstance(statement, ast.StopBank) and not block.ladder:
             what = "]" + statement.kind
         elif isinstance(statement, ast.Query) and (statement.letter is not None
                                                    or statement.number in (999, 1000)):
@@ -402,18 +437,57 @@ class _Checker:
                 "B100/L100" if isinstance(statement, ast.ClearBanks) else "\\P/\\N"
         elif isinstance(statement, (ast.Loop, ast.LoopEnd)) and block.ladder:
             what = "X (ladder banks are scanned, 4.5.1)"
+        elif isinstance(statement, ast.Move) and block.ladder:
+            what = statement.kind + " (a ladder bank does not move the motor, 6.3)"
         if what is not None:
             self.report.add(line, "not-in-bank", f"{what} is not allowed in {block.label}",
                             column=_column(line.raw, what[:2]))
 
+    def _sequence(self, line: SourceLine, statements: tuple[ast.Statement, ...],
+                  head: str | None) -> None:
+        """error04: C J CL JL X X- W end their list; X and X- start the line (2.2.2)."""
+        for i, statement in enumerate(statements):
+            if isinstance(statement, ast.Branch):
+                self._sequence(line, statement.then, "branch")
+                self._sequence(line, statement.orelse, "branch")
+                continue
+            if isinstance(statement, (ast.Loop, ast.LoopEnd)) and (i > 0 or head):
+                self.report.add(line, "cannot-follow", "X / X- must begin the line",
+                                column=_column(line.raw, "X"))
+            if isinstance(statement, _LINE_ENDERS) and i + 1 < len(statements):
+                text = _statement_text(statement)
+                self.report.add(line, "cannot-follow", f"{text} cannot be followed by "
+                                "another command", column=_column(line.raw, text))
+
+    def _comment(self, line: SourceLine) -> None:
+        """RT3 1.1 "/": "comments cannot be used inside any banks"."""
+        if not self.rt3 or line.error is not None:
+            return
+        _tokens, code_end = scan(line.raw)
+        if line.raw[code_end:].strip():
+            self.report.add(line, "comment-in-bank", "comments are not allowed inside banks "
+                            "on RT3 (RT3 1.1)", column=code_end + 1
+                            + len(line.raw[code_end:]) - len(line.raw[code_end:].lstrip()))
+
     def _literal(self, line: SourceLine, statement: ast.Statement) -> None:
-        if isinstance(statement, ast.Assign) and isinstance(statement.value, ast.Num) \
-                and statement.target.kind != "K":
-            text = _reg_text(statement.target.kind, statement.target.index,
-                             statement.target.motor)
-            self.report.add(line, "literal-in-bank", f"{text} is set to a number inside a "
-                            "bank; set a register before the bank and use it (RT3 1.2)",
-                            column=_column(line.raw, text))
+        """RT3 1.2: "you cannot set it in the bank with an actual number"."""
+        exprs: list[ast.Expr] = []
+        if isinstance(statement, (ast.Assign, ast.OutputWord)):
+            if isinstance(statement, ast.Assign) and statement.target.kind == "K":
+                return
+            exprs.append(statement.value)
+        elif isinstance(statement, ast.Branch):
+            exprs.append(statement.condition)
+            for inner in statement.then + statement.orelse:
+                self._literal(line, inner)
+        number = next((n for e in exprs for n in _numbers(e)), None)
+        if number is None:
+            return
+        severity: Severity = "error" if self.rt3 else "warning"
+        self.report.add(line, "literal-in-bank", f"the number {number} is used inside a "
+                        "bank; set a register before the bank and use it (RT3 1.2)",
+                        column=_column(line.raw, str(number)), severity=severity,
+                        motor_error=1 if self.rt3 else None)
 
     def _unset(self, line: SourceLine, statement: ast.Statement, motor: int,
                known: set[RegKey], flagged: set[RegKey]) -> None:
