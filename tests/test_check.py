@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import pytest
 
 from coolmuscle import cli
@@ -38,8 +40,11 @@ def check_cli(capsys: Any, *args: str) -> tuple[int, str]:
     return int(exit_.value.code or 0), out
 
 
+VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
+
+
 def validate(document: dict[str, Any]) -> None:
-    jsonschema.validate(document, SCHEMA)
+    VALIDATOR.validate(document)
 
 
 def test_every_rule_has_a_bad_program() -> None:
@@ -150,3 +155,21 @@ def test_go_in_a_bank_is_allowed_on_rt3_only() -> None:
     text = "L1.1\n^.1\nEND\n"
     assert check_program(parse_program(text), firmware="rt3").diagnostics == []
     assert [d.rule for d in check_program(parse_program(text)).diagnostics] == ["not-in-bank"]
+
+
+@given(st.lists(st.sampled_from(["B1.1", "L2.1", "END", "", "X3.1", "X.1-", "C2.1", "CL1.1",
+                                 "J1.1", "P1.1=5", "V1==5, C3.1", "S1.1, A1.1, P1.1",
+                                 "hello", "K44.1=0", "[L9.1", "$.1", "/ comment", "@wait 1",
+                                 "# coolmuscle: firmware=rt3", "M0=V2+V5;", "T0"]), max_size=40),
+       st.sampled_from(["cm2", "rt3", "cm1"]))
+@settings(max_examples=100, deadline=None)
+def test_any_file_gives_a_report_that_fits_the_schema(lines: list[str], firmware: str) -> None:
+    report = check_program(parse_program("\n".join(lines)), firmware=firmware)
+    validate(to_json([report]))
+    assert all(1 <= d.line <= max(1, len(lines)) for d in report.diagnostics)
+
+
+@given(st.text(max_size=300))
+@settings(max_examples=200, deadline=None)
+def test_arbitrary_text_never_crashes_the_checker(text: str) -> None:
+    validate(to_json([check_program(parse_program(text))]))

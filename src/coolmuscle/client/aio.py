@@ -467,6 +467,16 @@ class AsyncCoolMuscle(AsyncMotor):
                 self._driver.listeners.remove(entry)
         return remove
 
+    def add_tap(self, tap: Callable[[str, bytes], None]) -> Callable[[], None]:
+        """Call ``tap(">", data)`` for every byte written and ``tap("<", data)`` for every
+        byte read (a session recorder); returns a function that removes it."""
+        self._driver.taps.append(tap)
+
+        def remove() -> None:
+            if tap in self._driver.taps:
+                self._driver.taps.remove(tap)
+        return remove
+
     def write_line(self, line: str) -> None:
         """Send one line as typed, with no exchange: whatever the motor answers arrives
         as events (kind ``unsolicited`` for replies).  For terminals."""

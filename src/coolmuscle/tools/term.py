@@ -25,7 +25,7 @@ import asyncio
 import os
 import shlex
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from prompt_toolkit import PromptSession, print_formatted_text
 from prompt_toolkit.formatted_text import FormattedText
@@ -83,6 +83,7 @@ class Terminal:
         self.url = url
         self.motor = client.id
         self.recorder: TranscriptRecorder | None = None
+        self._untap: Callable[[], None] | None = None
 
     def on_event(self, event: MotorEvent) -> None:
         text, style = describe(event)
@@ -119,14 +120,14 @@ class Terminal:
         return True
 
     def log(self, target: str) -> None:
-        if self.recorder is not None:
-            self.client._driver.taps.remove(self.recorder.tap)
+        if self.recorder is not None and self._untap is not None:
+            self._untap()
             self.recorder.close()
             show(f"log written: {self.recorder.path}", "info")
             self.recorder = None
         if target.lower() != "off":
             self.recorder = TranscriptRecorder(target, self.url)
-            self.client._driver.taps.append(self.recorder.tap)
+            self._untap = self.client.add_tap(self.recorder.tap)
             show(f"logging to {target} (:log off to stop)", "info")
 
     async def send_file(self, path: Path) -> None:
@@ -189,13 +190,15 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
     client = await connect_async(url, baudrate=baudrate, motor=motor, timeout=timeout,
                                  **serial_options)
     try:
-        if log is not None:
-            recorder = TranscriptRecorder(log, url)
-            client._driver.taps.append(recorder.tap)
-        await _session(client, url, store)
+        recorder = TranscriptRecorder(log, url) if log is not None else None
+        if recorder is not None:
+            client.add_tap(recorder.tap)
+        try:
+            await _session(client, url, store)
+        finally:
+            if recorder is not None:
+                recorder.close()
     finally:
-        if log is not None:
-            recorder.close()
         await client.close()
 
 
