@@ -7,8 +7,12 @@ and anchored on the well-known frame ``01 03 00 00 00 01 84 0A``.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
-from typing import Any
+import subprocess
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator
 
 import pytest
 
@@ -73,3 +77,31 @@ class Wire:
     def text(self, line: str) -> str:
         """Send a text line (RS-232 mode); return what came back as text."""
         return self.transact(line.encode() + b"\r").decode("latin-1")
+
+
+@contextlib.contextmanager
+def socat_pty_pair(directory: Path) -> Iterator[tuple[str, str]]:
+    """Two linked pseudo-terminals made by socat (an independent wire); yields their paths."""
+    a, b = directory / "pty-a", directory / "pty-b"
+    proc = subprocess.Popen(["socat", f"PTY,link={a},raw,echo=0", f"PTY,link={b},raw,echo=0"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 5
+        while not (a.exists() and b.exists()):
+            assert proc.poll() is None and time.monotonic() < deadline, "socat made no ptys"
+            time.sleep(0.02)
+        yield str(a), str(b)
+    finally:
+        proc.terminate()
+        proc.wait(5)
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float = 5.0, step: float = 0.02) -> bool:
+    """Poll ``predicate`` (wall clock) until it holds or ``timeout`` passes."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if predicate():
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(step)
