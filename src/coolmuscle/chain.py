@@ -132,7 +132,7 @@ class Chain:
         try:
             lines = parse(text)
         except CmlSyntaxError as error:
-            self.motors[1].report_error(ctx, error)
+            self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
             return
         for line in lines:
             for stmt in line.statements:
