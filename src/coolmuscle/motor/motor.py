@@ -283,7 +283,8 @@ class Motor:
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
-        self.report_status()
+        if not self.estopped and not self.alarm:   # those were reported when they began
+            self.report_status()
 
     def _passing_point(self, index: int) -> None:
         del index
