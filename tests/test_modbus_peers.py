@@ -199,3 +199,21 @@ def test_5_6_6_com1_against_a_pymodbus_server_as_io_slave(tmp_path: Path) -> Non
             st.stop()
             slave.terminate()
             slave.wait(5)
+
+
+def test_pymodbus_client_on_the_coolmuscle_url() -> None:
+    """pymodbus opens ports with ``serial_for_url``, so it can drive an in-process chain."""
+    import coolmuscle  # noqa: F401  (registers the coolmuscle:// handler)
+
+    client = ModbusSerialClient("coolmuscle://?motors=2", baudrate=38400, timeout=2, retries=0)
+    assert client.connect()
+    try:
+        port = client.socket
+        port.write(b"K81.1=1, K84.2=-4\r")                  # COM0 to Modbus by text first
+        assert port.read_until(b"K84.2=-4\r\n").endswith(b"K84.2=-4\r\n")
+        assert not client.write_registers(200, [0, 777], device_id=4).isError()
+        assert client.read_holding_registers(200, count=2, device_id=4).registers == [0, 777]
+        assert client.read_holding_registers(200, count=2, device_id=1).registers == [0, 0]
+        assert port.chain.get_register(2, "P", 0) == 777
+    finally:
+        client.close()

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import pytest
 
+from coolmuscle.chain import Chain
+
 from coolmuscle.modbus.rtu import silent_interval_ns
 from coolmuscle.sim.kernel import ms, seconds
 
@@ -290,3 +292,21 @@ def test_5_6_9_reports_are_not_sent_in_modbus_mode() -> None:
     wire.idle(seconds(1))
     assert wire.chain.snapshot(1).position == 500
     assert wire.out == b"" and any(e.text == "Ux.1=8" for e in wire.events)
+
+
+# -- 5.6.1 wire time ------------------------------------------------------------------------
+def test_5_6_1_paced_round_trip_is_wire_time_plus_the_silent_interval() -> None:
+    """With pacing the request arrives after its wire time (10 bits a byte at K20), the
+    motor answers one 5.6.2 interval later, and the answer takes its own wire time."""
+    chain = Chain(pacing=True)
+    chain.set_param(1, 81, 1)
+    chain.set_param(1, 20, 4)                               # 115.2 kbps
+    got = bytearray()
+    chain.host_line.add_listener(got.extend)
+    request, reply = frame("01 03 00 C8 00 02"), frame("01 03 04 00 00 00 00")
+    start = chain.kernel.now
+    chain.host_line.feed(request)
+    assert chain.kernel.run_until(lambda: len(got) == len(reply), ms(50))
+    byte = 10 * 1_000_000_000 // 115200
+    assert bytes(got) == reply
+    assert chain.kernel.now - start == len(request) * byte + gap_ns(115200) + len(reply) * byte
