@@ -4,8 +4,8 @@
    --modbus-tcp`` and pymodbus' own server (``ModbusTcpServer`` with its simulator
    data model, ``SimDevice``) holding the same ten registers.  The same pymodbus
    client code reads those registers (FC03, K78+200..209 = P0..P4) one request after
-   the other, alternating slices of 100 requests between the two servers.  Printed: requests/s, p50 and p99 latency, and
-   our/pymodbus ratios (goal: at least as fast).
+   the other, alternating slices of 100 requests between the two servers.  Printed:
+   requests/s, p50 and p99 latency, and our/pymodbus ratios (goal: at least as fast).
 2. **Modbus RTU over a pty at 115.2 kbps** (K20=4, written by Modbus first): a bare
    pyserial port sends one FC03 frame and reads the exact 9-byte answer (so no client
    library's polling is measured); the round trip is printed next to the wire time of

@@ -1,4 +1,4 @@
-"""Fuzz: malformed Modbus frames get exactly the right silence or exception, and the slave serves on.
+"""Fuzz: malformed Modbus frames get exactly the right silence or exception; the slave serves on.
 
 Each malformed request is built *by category*, so its expected answer is known from
 the manual (5.6.3, 5.6.7 table, 5.6.8) and docs/fidelity.md "Modbus" without

@@ -9,6 +9,7 @@ for a gap, and sends a CML command at K78+102 that moves the motor.
 from __future__ import annotations
 
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -217,3 +218,30 @@ def test_pymodbus_client_on_the_coolmuscle_url() -> None:
         assert port.chain.get_register(2, "P", 0) == 777
     finally:
         client.close()
+
+
+def test_modbus_tcp_units_follow_k81_and_k84() -> None:
+    """Unit id = Modbus address; 255 and (while K81 = 0) 1 reach ID1; others are silent."""
+    st = ServiceThread(lambda: Chain(motors=2), lambda: [ModbusTcpTransport(port=0)]).start()
+    probe = bytes.fromhex("03 03 6A 00 02")            # K81 (K78+874)
+
+    def ask(sock: socket.socket, unit: int) -> bytes:
+        """The answer to ``unit``, or b"" when a following unit-255 probe answers first."""
+        sock.sendall(bytes.fromhex("00 01 00 00 00 06") + bytes((unit,)) + probe
+                     + bytes.fromhex("00 02 00 00 00 06 FF") + probe)
+        got = b""
+        while len(got) < 13 or got[-13:-11] != b"\x00\x02":
+            got += sock.recv(100)
+        return got[:-13]
+    try:
+        port = st.transports[0].info()["port"]
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+            assert ask(sock, 1) == bytes.fromhex("00 01 00 00 00 07 01 03 04 00 00 00 00")
+            assert ask(sock, 2) == b""
+            st.call(st.chain.execute, "K81.1=5, K84.2=-4")
+            assert ask(sock, 1) == b""
+            assert ask(sock, 5) == bytes.fromhex("00 01 00 00 00 07 05 03 04 00 00 00 05")
+            assert ask(sock, 4) == bytes.fromhex("00 01 00 00 00 07 04 03 04 00 00 00 00")
+            assert ask(sock, 0) == b""                 # broadcast: executed, no answer
+    finally:
+        st.stop()

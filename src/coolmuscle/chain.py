@@ -140,8 +140,8 @@ class Chain:
                 motor = self.motors.get(motor_id)
                 if motor is not None:
                     run_statement(motor, stmt, ctx)
-                elif self.com1.serves(motor_id):
-                    self._com1_statement(stmt, ctx)
+                else:
+                    self.beyond_chain(motor_id, stmt, ctx)
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
@@ -236,6 +236,14 @@ class Chain:
         self.motors[1].params.on_change(
             lambda k, _old, _new: self.modbus_line.k81_written() if k == 81 else None)
         self.com1 = Com1Port(self, self.emit)
+
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
+        """A statement for an ID not on the chain (also from banks): the COM1 Modbus
+        slave takes it when it is "final ID + 1" (5.6.6); else it goes unanswered."""
+        if not self.com1.serves(motor_id):
+            return False
+        self._com1_statement(stmt, ctx)
+        return True
 
     def _com1_statement(self, stmt: ast.Statement, ctx: Context) -> None:
         """A statement for the COM1 Modbus slave, "final ID + 1" (5.6.6, 5.6.7)."""

@@ -125,7 +125,8 @@ class ModbusSlave:
         """The motors a request to ``unit`` reaches (several for a broadcast)."""
         table = self.addressed()
         if tcp:   # the TCP door also works while COM0 is in text mode (K81=0)
-            table.setdefault(1, 1)
+            if 1 not in table.values():
+                table.setdefault(1, 1)
             table[TCP_DIRECT_UNIT] = 1
         if unit == BROADCAST:
             return sorted(set(table.values()))
