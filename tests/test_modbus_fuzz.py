@@ -278,3 +278,25 @@ def test_fuzz_malformed_frames_over_a_real_pty() -> None:
             assert port.in_waiting == 0
     finally:
         st.stop()
+
+
+def test_fuzz_2000_random_cml_commands_are_acknowledged_and_the_slave_serves_on() -> None:
+    """Any bytes at the CML inputs (K78+100 / +102) are a command the motor parses as it
+    parses the host line; the FC16 answer is always the echo of address and count."""
+    wire = Wire(K81_1=1, K23_1=17)
+    wire.chain.set_register(1, "P", 0, P0_VALUE)
+    rng = random.Random(102)
+    alphabet = b"PSAMTVKO?^()|*]}$#=+-,.:;!&<>\"0123456789 \r\x00\n\xff"
+    for i in range(2000):
+        size = rng.randint(0, 40)
+        data = bytes(rng.choice(alphabet) for _ in range(size)) if i % 2 else rng.randbytes(size)
+        start = rng.choice((100, 102))
+        count = rng.randint(0, 0xFFFF)
+        head = bytes((16,)) + _word(start) + _word(count)
+        reply = wire.transact(rtu(UNIT, head + bytes((len(data) & 0xFF,)) + data),
+                              wait_ns=ms(2))
+        assert reply == rtu(UNIT, head), (i, data)
+        if i % 50 == 49:   # the command may have changed P0: check the form of the answer
+            probe = wire.transact(rtu(UNIT, PROBE), wait_ns=ms(2))
+            assert probe[:3] == b"\x01\x03\x04" and probe[-2:] == crc(probe[:-2]), probe
+    assert wire.chain.modbus_line.failures == 0

@@ -89,6 +89,7 @@ class RtuSlaveLine:
         self.escaped = False
         self.frames = 0
         self.bad_frames = 0
+        self.failures = 0
 
     # -- mode -----------------------------------------------------------------
     def station(self) -> int:
@@ -148,7 +149,12 @@ class RtuSlaveLine:
         self._look_for_escape(frame)
 
     def _serve(self, address: int, pdu: bytes) -> None:
-        reply = self.slave.handle(address, pdu)
+        try:
+            reply = self.slave.handle(address, pdu)
+        except Exception:  # a model failure costs this request only (no reply)
+            self.failures += 1
+            log.exception("modbus: the model failed on %s", pdu[:16].hex(" "))
+            return
         if reply is not None:
             self.device.host_line.write(rtu_frame(address, reply))
 
