@@ -82,6 +82,7 @@ class Wire:
 @contextlib.contextmanager
 def socat_pty_pair(directory: Path) -> Iterator[tuple[str, str]]:
     """Two linked pseudo-terminals made by socat (an independent wire); yields their paths."""
+    directory.mkdir(parents=True, exist_ok=True)
     a, b = directory / "pty-a", directory / "pty-b"
     proc = subprocess.Popen(["socat", f"PTY,link={a},raw,echo=0", f"PTY,link={b},raw,echo=0"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Iterator, Protocol
 
 import pytest
+import serial
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
 from coolmuscle.chain import Chain
@@ -245,3 +246,32 @@ def test_modbus_tcp_units_follow_k81_and_k84() -> None:
             assert ask(sock, 0) == b""                 # broadcast: executed, no answer
     finally:
         st.stop()
+
+
+@needs_socat
+def test_5_6_1_serial_devices_follow_k20_k65_and_k82(tmp_path: Path) -> None:
+    """COM0 runs at ID1's K20 and K82, COM1 at the final motor's K65 and K82.  A pty
+    takes the baud rate but refuses parity bits: that must not stop the data."""
+    import termios
+
+    with socat_pty_pair(tmp_path / "0") as (com0, host), \
+            socat_pty_pair(tmp_path / "1") as (com1, _device):
+        st = ServiceThread(lambda: Chain(motors=2),
+                           lambda: [ModbusRtuTransport(com0), Com1Transport(com1)]).start()
+        try:
+            com0_fd = st.transports[0].inner._dev.fd
+            com1_fd = st.transports[1]._dev.fd
+            assert termios.tcgetattr(com0_fd)[4] == termios.B38400
+            st.call(st.chain.execute, "K82.1=1, K65.2=3, K82.2=2, K84.2=1")
+            request = bytes.fromhex("01 03 00 C8 00 02 45 F5")
+            with serial.Serial(host, 38400, timeout=2) as port:
+                port.write(request)                  # the parity change is tried here
+                assert port.read(9) == bytes.fromhex("01 03 04 00 00 00 00 FA 33")
+                st.call(st.chain.execute, "?70.3")   # COM1 sends at K65 = 57.6 kbps
+                assert wait_for(lambda: termios.tcgetattr(com1_fd)[4] == termios.B57600)
+                st.call(st.chain.set_param, 1, 20, 4)
+                port.write(request)                  # the motor switches to 115.2 kbps
+                assert port.read(9) == bytes.fromhex("01 03 04 00 00 00 00 FA 33")
+                assert termios.tcgetattr(com0_fd)[4] == termios.B115200
+        finally:
+            st.stop()

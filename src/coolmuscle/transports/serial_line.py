@@ -67,7 +67,10 @@ class _FdPump:
                 log.warning("%s: read failed: %s", self.label, exc)
             return
         if data:
-            self._on_data(data)
+            try:
+                self._on_data(data)
+            except Exception:  # the pump must go on for the next bytes
+                log.exception("%s: delivering %d bytes failed", self.label, len(data))
 
     def send(self, data: bytes) -> None:
         room = self.max_buffer - len(self._pending)
@@ -132,12 +135,14 @@ class _Device:
         """Re-apply baud rate and parity when the parameters changed."""
         wanted = self._settings()
         if wanted != self._applied:
-            try:
-                self.serial.baudrate, self.serial.parity = wanted
-                self._applied = wanted
-            except (ValueError, OSError) as exc:
-                log.warning("%s: cannot set %s baud, parity %s: %s", self.path, *wanted, exc)
-                self._applied = wanted
+            self._applied = wanted   # tried once per change; a refusal is not retried
+            baud, parity = wanted
+            for name, value in (("baudrate", baud), ("parity", parity)):
+                try:
+                    setattr(self.serial, name, value)
+                except Exception as exc:   # termios.error, SerialException, ValueError
+                    # A pty has no parity bits: Linux refuses PARENB there.
+                    log.warning("%s: cannot set %s %s: %s", self.path, name, value, exc)
 
     def close(self) -> None:
         try:
