@@ -7,7 +7,13 @@ time: bytes go in through the host line, the 5.6.2 silent interval ends each fra
 
 from __future__ import annotations
 
+import ast
+import random
+from pathlib import Path
+
 import pytest
+
+import coolmuscle.modbus
 
 from coolmuscle.chain import Chain
 
@@ -20,11 +26,27 @@ from modbus_support import Wire, crc, frame, gap_ns
 MANUAL = {"K78_1": 100, "K79_1": 200, "K80_1": 300, "K81_1": 1}
 
 
-def test_crc_anchor_and_model_crc_agree() -> None:
+def test_crc_anchor_and_model_crc_agree_with_pymodbus() -> None:
+    from pymodbus.framer.rtu import FramerRTU
+
     from coolmuscle.modbus import crc16
     assert crc(bytes.fromhex("010300000001")) == bytes.fromhex("840A")
-    for body in (b"", b"\x01", bytes(range(200)), b"\xff" * 7):
-        assert crc16(body) == crc(body)
+    rng = random.Random(16)
+    for body in [b"", b"\x01", bytes(range(256)), b"\xff" * 7] + \
+            [rng.randbytes(rng.randint(1, 300)) for _ in range(200)]:
+        assert crc16(body) == crc(body) == FramerRTU.compute_CRC(body).to_bytes(2, "big")
+
+
+def test_the_modbus_model_imports_no_clock_sockets_threads_or_pymodbus() -> None:
+    """docs/architecture.md rule 1: the pure Modbus logic does no I/O and reads no clock."""
+    package = Path(coolmuscle.modbus.__file__).parent
+    for path in package.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for name in names:
+                assert name.split(".")[0] not in {"time", "asyncio", "socket", "threading",
+                                                  "pymodbus", "serial", "select"}, (path, name)
 
 
 # -- 5.6.7 Function Code 03 ---------------------------------------------------------

@@ -2,8 +2,8 @@
 
 This module owns:
 
-* the CRC-16 of 5.6.3 (pymodbus' table-driven implementation) and RTU frames
-  ``address, PDU, CRC low, CRC high``;
+* the CRC-16 of 5.6.3 (polynomial 0xA001 reflected, start 0xFFFF, table-driven) and
+  RTU frames ``address, PDU, CRC low, CRC high``;
 * the silent interval of 5.6.2 that ends a message: 8 byte times of 8 bits
   (64 bit times: the table's 6.66 ms at 9.6 kbps ... 0.27 ms at 230.4 kbps),
   measured in virtual time at the K20 baud rate;
@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import logging
 from typing import TYPE_CHECKING
-
-from pymodbus.framer.rtu import FramerRTU
 
 from ..hostline import BAUD_RATES
 from ..sim.kernel import NS_PER_S, PRIO_IO, Timer
@@ -44,9 +42,30 @@ ESCAPE_BYTE = 0x46
 ESCAPE_COUNT = 9
 
 
+def _crc_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        value = byte
+        for _ in range(8):
+            value = (value >> 1) ^ 0xA001 if value & 1 else value >> 1
+        table.append(value)
+    return tuple(table)
+
+
+_CRC_TABLE = _crc_table()
+
+
 def crc16(data: bytes) -> bytes:
-    """The Modbus CRC-16 of ``data`` as sent on the wire (low byte first)."""
-    return FramerRTU.compute_CRC(data).to_bytes(2, "big")
+    """The Modbus CRC-16 of ``data`` as sent on the wire (low byte first).
+
+    Written here rather than taken from pymodbus, whose import pulls asyncio and
+    sockets into the model (docs/architecture.md rule 1); pymodbus checks it as a peer.
+    """
+    value = 0xFFFF
+    table = _CRC_TABLE
+    for byte in data:
+        value = (value >> 8) ^ table[(value ^ byte) & 0xFF]
+    return bytes((value & 0xFF, value >> 8))
 
 
 def rtu_frame(address: int, pdu: bytes) -> bytes:
