@@ -23,7 +23,7 @@ from .hostline import BAUD_RATES, HostLine, LineSettings
 from .motor.direct import MotorEval, inner_motor, run_statement
 from .motor.evaluate import evaluate
 from .motor.firmware import get_firmware
-from .motor.memory import VState
+from .motor.memory import VNumber, VState
 from .motor.motor import Context, Motor
 from .motor.status import Report
 from .motor.store import Store
@@ -283,6 +283,8 @@ class Chain:
     def get_register(self, motor: int, kind: str, index: int) -> int | str:
         from .motor.queries import format_value
         value = self._require(motor).memory.get(kind, index)
+        if isinstance(value, VNumber):
+            return value.value
         return int(value) if isinstance(value, int) else format_value(value)
 
     def register_value(self, motor: int, kind: str, index: int) -> int:
