@@ -39,9 +39,13 @@ class Pane:
         if shutil.which("tmux") is None:
             raise RuntimeError("tmux is required (scripts/test installs it)")
         self.socket = f"cm-{uuid.uuid4().hex[:8]}"
+        self.status_file = Path(env["HOME"]) / f"exit-{self.socket}"
+        # the shell records the exit status: tmux sometimes marks a pane dead before it
+        # has reaped the process (under load its #{pane_dead_status} stays empty)
         line = "env " + " ".join(f"{k}={shlex.quote(v)}" for k, v in env.items()) + " " + \
-            " ".join(shlex.quote(part) for part in command)
-        self.tmux("new-session", "-d", "-s", "t", "-x", "120", "-y", "50", line)
+            " ".join(shlex.quote(part) for part in command) + \
+            f"; echo $? > {shlex.quote(str(self.status_file))}"
+        self.tmux("new-session", "-d", "-s", "t", "-x", "160", "-y", "200", line)
         self.tmux("set-option", "-t", "t", "remain-on-exit", "on")
 
     def tmux(self, *args: str) -> str:
@@ -62,6 +66,17 @@ class Pane:
                 raise AssertionError(f"{pattern!r} not on the screen:\n{text}")
             time.sleep(0.05)
 
+    def prompt(self, timeout: float = 10) -> None:
+        """Wait until the prompt is the last line (a person types when it is there)."""
+        end = time.monotonic() + timeout
+        while True:
+            lines = [line for line in self.screen().splitlines() if line.strip()]
+            if lines and lines[-1].strip() == "ID1>":
+                return
+            if time.monotonic() > end:
+                raise AssertionError(f"no prompt:\n{self.screen()}")
+            time.sleep(0.05)
+
     def type(self, text: str, enter: bool = True) -> None:
         self.tmux("send-keys", "-t", "t", "-l", text)
         if enter:
@@ -73,10 +88,8 @@ class Pane:
     def exit_status(self, timeout: float = 10) -> int:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            dead, _, status = self.tmux("display", "-p", "-t", "t",
-                                        "#{pane_dead} #{pane_dead_status}").strip().partition(" ")
-            if dead == "1":
-                return int(status)
+            if self.status_file.exists() and self.status_file.read_text().strip():
+                return int(self.status_file.read_text())
             time.sleep(0.05)
         raise AssertionError(f"the terminal did not end:\n{self.screen()}")
 
@@ -107,11 +120,12 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
     pane = Pane([sys.executable, "-m", "coolmuscle", "term", f"socket://127.0.0.1:{port}"],
                 term_env(tmp_path))
     try:
-        pane.wait(r"^ID1>\s*$")
+        pane.prompt()
         pane.type("?96.1")
         screen = pane.wait(r"Px\.1=0", colours=True)
         assert GREEN in line_with(screen, "Px.1=0")                   # a reply: green
         assert "?96.1" not in screen.split("ID1> ?96.1")[1]            # no second echo
+        pane.prompt()
         pane.type("K23.1=19")                                          # reports + messages
         pane.type("P.1=3000")
         pane.type("^.1")
@@ -119,9 +133,11 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
         assert CYAN in line_with(screen, "Ux.1=8")
         served.call(lambda: served.chain.set_input(1, 3, True))        # someone flips input 3
         pane.wait(r"IN\.1=04")                                         # shown as it arrives
+        pane.prompt()
         pane.type("hello")
         screen = pane.wait(r"error01\.1: syntax error!!", colours=True)
         assert RED in line_with(screen, "error01.1")
+        pane.prompt()
         pane.keys("Up")                                                # history
         pane.wait(r"^ID1> hello\s*$")
         pane.keys("C-u")
@@ -129,10 +145,13 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
         screen = pane.wait(r"sent 12 line\(s\) of 2.2-program-bank.cml; banks B1.1 verified",
                            timeout=20, colours=True)
         assert YELLOW in line_with(screen, "banks B1.1 verified")
+        pane.prompt()
         pane.type(":save")
         pane.wait(r"saved\.1")
+        pane.prompt()
         pane.type(":help")
         pane.wait(r"commands: :send FILE.cml")
+        pane.prompt()
         pane.keys("C-d")
         assert pane.exit_status() == 0
     finally:
@@ -147,15 +166,18 @@ def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None
     pane = Pane([sys.executable, "-m", "coolmuscle", "term", "coolmuscle://",
                  "--log", str(log)], term_env(tmp_path))
     try:
-        pane.wait(r"^ID1>\s*$")
+        pane.prompt()
         for line in ("K23.1=17", "S.1=200", "A.1=1000", "P.1=2500", "^.1"):
             pane.type(line)
         pane.wait(r"Ux\.1=8")
         time.sleep(0.4)                                   # a person reads, then asks
+        pane.prompt()
         pane.type("?96.1")
         pane.wait(r"Px\.1=2500")
+        pane.prompt()
         pane.type("K44.1=0")
         pane.wait(r"error00\.1: Out Of Range!!")
+        pane.prompt()
         pane.type(":quit")
         assert pane.exit_status() == 0
     finally:
