@@ -66,5 +66,12 @@ class BankChain(Chain):
             stored.append(self.corrupt.get((label, len(stored)), format_line(line)))
 
     def bank_query(self, motor: Motor, query: ast.Query) -> list[str] | None:
+        if query.number == 1000 and query.letter is None:   # as the bank model prints it
+            out: list[str] = []
+            for (ladder, number, owner), lines in sorted(self.banks.items()):
+                if owner == motor.id:
+                    out += [f"{'L' if ladder else 'B'}{number}.{owner}", *lines,
+                            f"END.{owner}"]
+            return out + [f"Steps.{motor.id}: program 0, ladder 0, total 0/500"]
         key = (query.letter == "L", query.number or 0, motor.id)
         return list(self.banks.get(key, [])) if query.number else None

@@ -63,6 +63,8 @@ def test_upload_sends_and_verifies_every_bank(bank_chain: type[BankChain]) -> No
         assert m.read_bank(1, ladder=True) == ["V1.1>V2.1, S.1=S1.1, S.1=S2.1",
                                                "V2.1>V3.1;", "V2.1=V3.1, T0.1"]
         assert (m.read_register("P", 1), m.read_register("V", 1)) == (10000, "Px")
+        assert m.read_all_banks() == {"B1.1": m.read_bank(1),
+                                      "L1.1": m.read_bank(1, ladder=True)}
 
 
 def test_a_bank_that_loads_differently_is_reported_line_by_line(
@@ -176,3 +178,12 @@ def test_upload_command_as_a_subprocess_over_tcp(tmp_path: Path) -> None:
             assert (m.read_register("P", 1), m.read_param(44)) == (2500, 150)
     finally:
         target.close()
+
+
+def test_a_1000_listing_splits_into_banks() -> None:
+    """The form the bank model prints (RT3 2.3: the listing also counts steps)."""
+    from coolmuscle.client.banks import parse_bank_listing
+    lines = ["B1.1", "A1.1=V1.1", "END.1", "B2.1", "END.1", "L2.1",
+             "V1.1==P1.1, S0.1, CL3.1", "END.1", "Steps.1: program 4, ladder 13, total 17/200"]
+    assert parse_bank_listing(lines) == {"B1.1": ["A1.1=V1.1"], "B2.1": [],
+                                         "L2.1": ["V1.1==P1.1, S0.1, CL3.1"]}

@@ -157,10 +157,19 @@ def test_a_report_between_the_command_and_the_fence_does_not_complete_it() -> No
     proto.echo = True
     ex = Exchange(("*", "?99.1"), lambda l: l.kind == "status" and l.motor == 1, 1)
     proto.begin(ex)
-    proto.receive(b"*\r\nUx.1=512\r\n")
-    assert not ex.complete
+    events = proto.receive(b"*\r\nUx.1=512\r\n")
+    assert not ex.complete and [e.text for e in events] == ["Ux.1=512"]
     proto.receive(b"?99.1\r\nUx.1=512\r\n")
-    assert ex.complete and [l.text for l in ex.lines] == ["Ux.1=512", "Ux.1=512"]
+    assert ex.complete and [l.text for l in ex.lines] == ["Ux.1=512"]
+
+
+def test_a_query_s_reply_between_echoes_is_an_answer_not_a_report() -> None:
+    proto = Protocol()
+    proto.echo = True
+    ex = Exchange(("?50.1", "?96.1"), named("Px", 1), 1)
+    proto.begin(ex)
+    events = proto.receive(b"?50.1\r\nOUT.1=03\r\n?96.1\r\nPx.1=0\r\n")
+    assert events == [] and [l.text for l in ex.lines] == ["OUT.1=03", "Px.1=0"]
 
 
 def test_the_late_echo_of_an_earlier_exchange_is_not_this_one_s() -> None:

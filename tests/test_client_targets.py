@@ -199,6 +199,32 @@ def test_input_reports_reach_subscribers(target: Target, m: CoolMuscle) -> None:
     assert events == [event] and m.inputs == 4
 
 
+def test_output_reports_reach_subscribers(m: CoolMuscle) -> None:
+    m.write_param(34, 3333)
+    m.write_param(23, 5)                     # in-position/alarm and output reports
+    events: list[MotorEvent] = []
+    m.subscribe(events.append, kinds=["output"])
+    m.set_output(2)
+    m.set_output(2, False)
+    m.poll(0.05)
+    assert [(e.text, e.value) for e in events] == [("OUT.1=02", 2), ("OUT.1=00", 0)]
+
+
+def test_cr_line_ends_and_no_echo_are_learned(m: CoolMuscle) -> None:
+    """K70=0 (CR) and K23 with 8 (no echo): nothing to configure on the host (ch. 3)."""
+    m.write_param(70, 0)
+    assert m.position == 0 and m.delimiter == b"\r"
+    m.write_param(23, 9)
+    assert m.echo is False
+    m.move_to(800, speed=200, accel=1000)
+    assert m.wait_in_position(timeout=5) == 8
+    settle(m)
+    assert (m.position, m.read_register("P", 0), m.echo) == (800, 800, False)
+    m.write_param(23, 1)
+    m.write_param(70, 1)
+    assert m.position == 800 and m.echo is True and m.delimiter == b"\r\n"
+
+
 def test_each_motor_of_the_chain_has_its_handle(m: CoolMuscle) -> None:
     m2 = m.motor(2)
     assert m.motor(2) is m2 and m2.id == 2 and m.motor(1) is m

@@ -388,7 +388,7 @@ class AsyncMotor:
         """``?#.n`` / ``?L#.n``."""
         return await self._run(banks.read_bank(self._session, self.id, number, ladder))
 
-    async def read_all_banks(self) -> list[str]:
+    async def read_all_banks(self) -> dict[str, list[str]]:
         """``?1000.n``."""
         return await self._run(banks.all_banks(self._session, self.id))
 

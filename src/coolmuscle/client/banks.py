@@ -17,6 +17,7 @@ what the file says and what the motor holds, parsed and printed by the one forma
 from __future__ import annotations
 
 import difflib
+import re
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -27,7 +28,8 @@ from .ops import Exchange, Op, Pause, Session, exchange, fenced, listing
 from .program import BankBlock, ProgramFile, SourceLine, canonical_lines
 
 __all__ = ["BankDifference", "UploadResult", "UploadError", "upload", "read_bank",
-           "all_banks", "compare_bank", "send_line", "save", "Progress"]
+           "all_banks", "parse_bank_listing", "compare_bank", "send_line", "save",
+           "Progress"]
 
 #: ``progress(lines_sent, lines_total)``.
 Progress = Callable[[int, int], None]
@@ -87,10 +89,34 @@ def read_bank(session: Session, motor: int, number: int, ladder: bool = False,
     return lines
 
 
-def all_banks(session: Session, motor: int, timeout: float | None = None) -> Op[list[str]]:
-    """``?1000.n``: every program and ladder bank (6.6; RT3 2.3 also prints step counts)."""
+def all_banks(session: Session, motor: int,
+              timeout: float | None = None) -> Op[dict[str, list[str]]]:
+    """``?1000.n``: every program and ladder bank, ``{"B1.1": [lines], "L2.1": [...]}``
+    (6.6; RT3 2.3 also prints step counts, which are left out)."""
     lines = yield from listing(session, motor, f"?1000.{motor}", timeout=timeout)
-    return lines
+    return parse_bank_listing(lines)
+
+
+_HEADER = re.compile(r"([BL])(\d+)(?:\.(\d+))?", re.IGNORECASE)
+_END = re.compile(r"END(?:\.\d+)?", re.IGNORECASE)
+
+
+def parse_bank_listing(lines: list[str], motor: int = 1) -> dict[str, list[str]]:
+    """Split a ``?1000`` listing into banks: a ``B#.n``/``L#.n`` line opens one, ``END``
+    closes it; lines outside a bank (a step count summary) are not part of any."""
+    banks: dict[str, list[str]] = {}
+    current: list[str] | None = None
+    for line in lines:
+        text = line.strip()
+        header = _HEADER.fullmatch(text)
+        if header:
+            label = f"{header.group(1).upper()}{header.group(2)}.{header.group(3) or motor}"
+            current = banks.setdefault(label, [])
+        elif _END.fullmatch(text):
+            current = None
+        elif current is not None:
+            current.append(text)
+    return banks
 
 
 def compare_bank(block: BankBlock, got: list[str]) -> list[BankDifference]:

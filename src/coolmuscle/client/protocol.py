@@ -42,6 +42,9 @@ EventKind = Literal["status", "input", "output", "message", "error", "unsolicite
                     "garbled"]
 #: A line that writes K23 may switch the echo off or on (ch. 3 K23 function 8).
 _K23_WRITE: Final = re.compile(r"K23(\.\d+)?\s*[-+]?=", re.IGNORECASE)
+#: Queries whose replies look like K23 reports (6.6 ?50, ?70, ?99).
+_REPORT_QUERY: Final = re.compile(r"\?(50|70|99)(?![0-9])")
+_REPORT_QUERIES: Final = {"50": "output", "70": "input", "99": "status"}
 _EVENT_KINDS: Final = {"status": "status", "input": "input", "output": "output",
                        "message": "message", "error": "error", "garbled": "garbled"}
 
@@ -85,6 +88,7 @@ class Exchange:
     timeout: float = 1.0
     until_echo: bool = False
     echo_may_change: bool = False
+    reply_kinds: frozenset[str] = frozenset()
     echoed: int = 0
     complete: bool = False
     end_seq: int = 0
@@ -99,7 +103,9 @@ class Exchange:
 
 
 class LineSplitter:
-    """Bytes -> lines; CR, LF and CRLF each end one line (K70: 0 CR, 1 CRLF)."""
+    """Bytes -> lines; CR, LF and CRLF each end one line (K70: 0 CR, 1 CRLF).
+
+    ``delimiter`` is the line end seen last (K70 may change while connected)."""
 
     def __init__(self) -> None:
         self._buf = bytearray()
@@ -113,11 +119,11 @@ class LineSplitter:
                 self._after_cr = False
                 self.delimiter = b"\r\n"
                 continue
-            if self._after_cr and self.delimiter is None:
+            if self._after_cr:
                 self.delimiter = b"\r"
             self._after_cr = byte == 0x0D
             if byte in (0x0D, 0x0A):
-                if byte == 0x0A and self.delimiter is None:
+                if byte == 0x0A:
                     self.delimiter = b"\n"
                 lines.append(bytes(self._buf))
                 self._buf.clear()
@@ -173,6 +179,8 @@ class Protocol:
         """Start ``exchange`` (the previous one is abandoned); returns the bytes to write."""
         self.exchange = exchange
         exchange.echo_may_change = any(_K23_WRITE.search(line) for line in exchange.send[:-1])
+        exchange.reply_kinds = frozenset(_REPORT_QUERIES[m.group(1)] for line in exchange.send[:-1]
+                                         for m in _REPORT_QUERY.finditer(line))
         return self.encode(exchange.send, exchange)
 
     def abandon(self) -> None:
@@ -263,8 +271,9 @@ class Protocol:
             exchange.end_seq = self.seq
             self._learn_echo(exchange)
             return None
-        if line.kind in ("status", "input", "output") and (all_echoed or not strict):
-            return self._event(line)
+        if line.kind in ("status", "input", "output") and (
+                all_echoed or not strict or line.kind not in exchange.reply_kinds):
+            return self._event(line)  # a report, unless one of our lines asked for it
         exchange.lines.append(line)  # between our echoes: it answers one of our lines
         return None
 

@@ -265,8 +265,8 @@ class Motor:
         """``?#.n`` / ``?L#.n``: a bank's lines as the motor prints them (6.6)."""
         return self._run(banks.read_bank(self._session, self.id, number, ladder))
 
-    def read_all_banks(self) -> list[str]:
-        """``?1000.n``: every bank (6.6)."""
+    def read_all_banks(self) -> dict[str, list[str]]:
+        """``?1000.n``: every bank, ``{"B1.1": [lines], ...}`` (6.6)."""
         return self._run(banks.all_banks(self._session, self.id))
 
     def start_bank(self, number: int) -> None:
