@@ -27,6 +27,7 @@ from ..cml import ast
 from ..errors import MotorError, NoLadderBankError, OutOfRangeError
 from ..sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
+from .compiled import Compiled, compile_statement
 from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, holds, ladder_units,
                        run_plain, target_motor, timer_ns, wait_branch)
 from .direct import assign_value
@@ -41,7 +42,9 @@ MAX_CALL_DEPTH = 10   # 2.2.3 "CL": "The maximum layer (nesting) should be under
 LOGIC_MOTION_PERIOD_NS = NS_PER_MS   # RT3 3.6 "These banks execute on 1 ms intervals"
 _JUMP = object()
 _GONE = object()
+_PAUSED = object()
 Step = Generator[Request, object, object]
+_Code = tuple[ast.Statement, "Compiled | None", bool]
 
 
 class LadderRunner:
@@ -62,6 +65,8 @@ class LadderRunner:
         self._timer: Timer | None = None
         self._scan_id = 0
         self._running_id = 0
+        self._code_cache: dict[int, list[_Code]] = {}
+        self._code_version = -1
         if not motion:
             motor.params.on_change(self._param_changed)
 
@@ -150,7 +155,11 @@ class LadderRunner:
             return
         self.scan_start = self.clock = self.kernel.now
         self._running_id = self._scan_id
-        self.runner.run(self._scan_gen())
+        start = self._fast_scan(self.bank)
+        if start is None:
+            self._scan_done(None)
+        elif start is not _GONE:
+            self.runner.run(self._scan_gen(*start))  # type: ignore[misc]
 
     def _scan_done(self, result: object) -> None:
         if result is _GONE:
@@ -161,27 +170,97 @@ class LadderRunner:
             self._schedule(self._due())
 
     # -- one scan ---------------------------------------------------------------------
-    def _scan_gen(self) -> LineGen:
+    def _fast_scan(self, number: int) -> tuple[int, object] | object | None:
+        """Run the compiled statements of the scanned bank in a plain loop.
+
+        Returns ``None`` when the scan is complete, else where the interpreter must
+        take over: (index of the statement, what it left to do or ``None``).
+        """
+        code = self._code(number)
+        if code is None:
+            return (0, None)
+        self.clock += STEP_NS   # RT3 3.4: the start of the bank is a step
+        scan_id = self._scan_id
+        for index, (_, fn, _) in enumerate(code):
+            if fn is None:
+                return (index, None)
+            flow = fn()
+            if scan_id != self._scan_id:
+                return _GONE
+            if flow is not None or self.state == PAUSED:
+                return (index, flow if flow is not None else _PAUSED)
+        return None
+
+    def _scan_gen(self, index: int, flow: object) -> LineGen:
         assert self.bank is not None
-        result = yield from self._bank(self.bank, ())
+        result = yield from self._bank(self.bank, (), index, flow)
         return _GONE if self._running_id != self._scan_id else result
 
-    def _bank(self, number: int, callers: tuple[int, ...]) -> Step:
-        bank = self.motor.banks.get(True, number)
-        if bank is None:
+    def _code(self, number: int) -> list[_Code] | None:
+        """The compiled statements of a bank (cached until the banks change)."""
+        if self._code_version != self.motor.banks.version:
+            self._code_cache.clear()
+            self._code_version = self.motor.banks.version
+        code = self._code_cache.get(number)
+        if code is None:
+            bank = self.motor.banks.get(True, number)
+            if bank is None:
+                return None
+            code = self._code_cache[number] = [
+                (stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
+                                         _assigned), unit.quiet)
+                for unit in ladder_units(bank) for stmt in unit.statements]
+        return code
+
+    def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,
+              pending: object = None) -> Step:
+        """Interpret bank ``number``; ``start`` >= 0 continues a scan the fast loop began
+        (``pending``: what its statement left to do)."""
+        code = self._code(number)
+        if code is None:
             self.motor.report_error(self.ctx, NoLadderBankError())
             return None
-        self.clock += STEP_NS   # RT3 3.4: the start of the bank is a step
-        for unit in ladder_units(bank):
-            for stmt in unit.statements:
-                flow = yield from self._statement(stmt, unit.quiet, callers + (number,))
-                if self._running_id != self._scan_id:
-                    return _GONE
-                if flow is _JUMP:
-                    return _JUMP
-                if self.state == PAUSED:
-                    yield HOLD
+        callers += (number,)
+        if start < 0:
+            self.clock += STEP_NS   # RT3 3.4: the start of the bank is a step
+            start = 0
+        elif pending is not None:
+            flow = HOLD if pending is _PAUSED else None
+            if flow is HOLD:
+                yield HOLD
+            else:
+                flow = yield from self._tail(pending, callers)
+            if flow is _JUMP or self._running_id != self._scan_id:
+                return flow if flow is _JUMP else _GONE
+            start += 1
+        for stmt, fn, quiet in code[start:]:
+            if fn is None:
+                flow = yield from self._statement(stmt, quiet, callers)
+            else:
+                flow = fn()
+                if flow is not None:
+                    flow = yield from self._tail(flow, callers)
+            if self._running_id != self._scan_id:
+                return _GONE
+            if flow is _JUMP:
+                return _JUMP
+            if self.state == PAUSED:
+                yield HOLD
         return None
+
+    def _tail(self, flow: object, callers: tuple[int, ...]) -> Step:
+        """What a compiled statement left to do: wait (``T#``) or call (``CL``, ``JL``)."""
+        if isinstance(flow, Sleep):
+            yield from self._sleep(flow.ns)
+            return None
+        if isinstance(flow, ast.Call):
+            return (yield from self._call(flow, callers))
+        return None
+
+    def _sleep(self, ns: int) -> Step:
+        wake = max(self.clock, self.kernel.now) + ns
+        yield Sleep(wake - self.kernel.now)
+        self.clock = wake
 
     def _statement(self, stmt: ast.Statement, quiet: bool, callers: tuple[int, ...]) -> Step:
         if isinstance(stmt, ast.Branch):
@@ -218,9 +297,7 @@ class LadderRunner:
         if reg.kind == "T":
             ns = timer_ns(self.motor, reg)
             if ns:
-                wake = max(self.clock, self.kernel.now) + ns
-                yield Sleep(wake - self.kernel.now)
-                self.clock = wake
+                yield from self._sleep(ns)
             return
         target = target_motor(self.motor, stmt)
         if target is not None:

@@ -112,6 +112,7 @@ class Motor:
         self.limit_sensors = {1: False, -1: False}
         self._go_target: int | None = None     # P0 of a running "^" (S0 stays live)
         self._go_speed: int | None = None
+        self._state_readers: dict[str, Callable[[], int]] | None = None
 
     # -- parameters and units ----------------------------------------------
     def k(self, number: int) -> int:
@@ -365,6 +366,8 @@ class Motor:
     def _passing_point(self, index: int) -> None:
         del index
         self.merge_pulse_until = self.kernel.now + self.k(73) * 1_000_000
+        # an event where the K34=6 pulse ends, so traces and waits see the output fall
+        self.kernel.schedule_at(self.merge_pulse_until, self.bus.poke, name="merge-pulse-end")
 
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
@@ -399,7 +402,14 @@ class Motor:
     # -- V registers and live states --------------------------------------------
     def state_value(self, name: str) -> int:
         """A bound V state read live (2.2.1 "V"; cm-banks-rt3.txt 1.3)."""
-        readers = {
+        readers = self._state_readers
+        if readers is None:
+            readers = self._state_readers = self._make_state_readers()
+        reader = readers.get(name)
+        return int(reader()) if reader else 0
+
+    def _make_state_readers(self) -> dict[str, Callable[[], int]]:
+        return {
             "Px": self.position, "Sx": self.speed_units, "Ix": self.torque,
             "Ux": lambda: self.status, "Pe": lambda: round(self.axis.position_error()),
             "ADIN": lambda: self.analog, "PT": lambda: round(self.axis.target())
@@ -409,8 +419,6 @@ class Motor:
             else 0,
             "Fx": lambda: 0, "Cx": lambda: self.encoder_count,
         }
-        reader = readers.get(name)
-        return int(reader()) if reader else 0
 
     def v_numeric(self, value: VNumber | VString | VState) -> int:
         if isinstance(value, VState):
