@@ -340,7 +340,8 @@ class Motor:
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
-        self.report_status()
+        if not self.estopped and not self.alarm:   # those were reported when they began
+            self.report_status()
         self.motion_settled()
 
     # -- motion completion and limit sensors (issue 4: bank executors wait on these) --
