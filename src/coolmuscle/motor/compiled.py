@@ -67,13 +67,27 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
         return lambda: host.register_value(reg)
     kind, index = reg.kind, reg.number
     if kind == "K":
-        return lambda: motor.params.get(index)
+        def read_k() -> int:
+            try:
+                return motor.params.get(index)
+            except LookupError:
+                return 0   # as MotorEval.register_value: a register that does not exist
+        return read_k
     if kind == "V":
         def read_v() -> int:
-            cell = motor.memory.cells("V")[index]
+            try:
+                cell = motor.memory.cells("V")[index]
+            except IndexError:
+                return 0
             return cell.value if cell.__class__ is VNumber else motor.v_numeric(cell)
         return read_v
-    return lambda: motor.memory.cells(kind)[index]
+
+    def read() -> int:
+        try:
+            return motor.memory.cells(kind)[index]
+        except IndexError:
+            return 0
+    return read
 
 
 def compile_expr(expr: ast.Expr, motor: "Motor") -> Reader:

@@ -28,8 +28,8 @@ from ..errors import MotorError, NoLadderBankError, OutOfRangeError
 from ..sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
 from .compiled import Compiled, compile_statement
-from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, holds, ladder_units,
-                       run_plain, target_motor, timer_ns, wait_branch)
+from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, Watch, holds,
+                       ladder_units, run_plain, target_motor, timer_ns, wait_branch)
 from .direct import assign_value
 from .memory import VState
 from .queries import format_value, register_name, register_reply
@@ -88,7 +88,7 @@ class LadderRunner:
         self.stop()
         self.bank, self.state = number, RUNNING
         self.scan_start = self.clock = self.kernel.now
-        self._schedule(self.kernel.now)
+        self._schedule(None if self.period_ns() is None else self.kernel.now)
 
     def pause(self) -> None:
         """``]L``: pause; a second ``]L`` stops (6.5 "]L")."""
@@ -283,7 +283,11 @@ class LadderRunner:
         truth = holds(self.motor, branch.condition)
         actions = branch.then if truth else branch.orelse
         if truth and branch.then and isinstance(branch.then[0], ast.Wait):
-            timed_out = yield wait_branch(self.motor, branch, branch.then[0])
+            watch = wait_branch(self.motor, branch, branch.then[0])
+            if watch.timeout_ns is not None:   # the timer runs from the scan's step clock
+                ahead = max(self.clock - self.kernel.now, 0)
+                watch = Watch(watch.holds, watch.timeout_ns + ahead)
+            timed_out = yield watch
             self.clock = max(self.clock, self.kernel.now)
             actions = () if timed_out else branch.orelse
         for stmt in actions:
