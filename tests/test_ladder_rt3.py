@@ -82,7 +82,7 @@ def test_rt3_7_3_4_unidirectional_torque_speed_control() -> None:
     # 1 ms scans: stopped as soon as the torque shows, restarted once it is gone: a creep
     assert min(loaded) < 1 and 10 < max(loaded) < 1000
     moved = trace.sample(1, seconds(2)).position - trace.sample(1, seconds(1.1)).position
-    assert 10 < moved < 200
+    assert 1 < moved < 200
     assert r.chain.get_register(1, "M", 0) == 100    # 7.3.4 leaves M0 alone
 
 
