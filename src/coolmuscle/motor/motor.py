@@ -333,6 +333,7 @@ class Motor:
         self.axis.hold_here()
         self.axis.enabled = False
         self.report_status()
+        self.program.alarm()
         self.motion_settled()
 
     def capture(self, index: int) -> None:

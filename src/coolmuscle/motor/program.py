@@ -29,6 +29,7 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns, wait_branch)
 from .planner import Limits
+from .profile import Profile
 from .queries import register_reply
 
 if TYPE_CHECKING:
@@ -64,6 +65,7 @@ class _Motion:
     wait: bool = True
     continuous: tuple[int, Limits] | None = None
     remaining: list[tuple[float, Limits]] | None = None  # what a pause interrupted
+    profile: Profile | None = None                       # the plan that was issued
 
 
 @dataclass
@@ -132,6 +134,12 @@ class ProgramExecutor:
         elif self.state in (RUNNING, STEPPING):
             self._halt()
             self.state = PAUSED
+
+    def alarm(self) -> None:
+        """An alarm freed the motor: the bank pauses where it is (ch. 3 K28 function 1:
+        "Re-start from paused position is possible by 6: Execute Program Bank 1")."""
+        if self.state in (RUNNING, STEPPING):
+            self.pause()
 
     def stop_after_line(self) -> None:
         """``}``: pause after the current line; twice: stop (2.1.2 "}")."""
@@ -487,12 +495,18 @@ def _issue(motion: _Motion, waypoints: list[tuple[float, Limits]]) -> None:
         motion.motor.push_to(aim, limits, via=via)
     else:
         motion.motor.move_to(list(waypoints))
+    motion.profile = motion.motor.axis.profile
+    motion.waypoints = list(waypoints)
 
 
 def _unfinished(motion: _Motion, now: int) -> list[tuple[float, Limits]] | None:
-    """Waypoints a pause left unreached (those not yet passed, 4.1.2)."""
+    """Waypoints a pause (or an alarm) left unreached: those not yet passed (4.1.2)."""
     motor = motion.motor
-    if motion.continuous is not None or not motion.waypoints or motor.motion_done():
+    if motion.continuous is not None or not motion.waypoints:
         return None
-    passed = sum(1 for t, _ in motor.axis.profile.passing_times_ns() if t <= now)
+    final = motion.waypoints[-1][0]
+    if motor.motion_done() and abs(motor.position() - final) <= motor.k(55):
+        return None
+    times = motion.profile.passing_times_ns() if motion.profile is not None else []
+    passed = sum(1 for t, _ in times if t <= now)
     return motion.waypoints[passed:] or None
