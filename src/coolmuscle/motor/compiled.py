@@ -26,7 +26,7 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
-from .memory import VNumber, VState
+from .memory import VState
 from .motor import WRITABLE_STATES
 from .queries import register_reply
 
@@ -56,11 +56,6 @@ def _divide(a: int, b: int) -> int:
     return wrap32(q if (a >= 0) == (b >= 0) else -q)
 
 
-_ARITH: dict[str, Callable[[int, int], int]] = {
-    "+": lambda a, b: wrap32(a + b), "-": lambda a, b: wrap32(a - b),
-    "*": lambda a, b: wrap32(a * b), "/": _divide}
-
-
 def _register(reg: ast.Reg, motor: "Motor") -> Reader:
     if reg.motor not in (None, motor.id):
         host = MotorEval(motor)
@@ -79,7 +74,10 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
                 cell = motor.memory.cells("V")[index]
             except IndexError:
                 return 0
-            return cell.value if cell.__class__ is VNumber else motor.v_numeric(cell)
+            try:
+                return cell.value               # a number (VNumber)
+            except AttributeError:
+                return motor.v_numeric(cell)    # a string or a live state
         return read_v
 
     def read() -> int:
@@ -104,7 +102,7 @@ def compile_expr(expr: ast.Expr, motor: "Motor") -> Reader:
         host, number, which = MotorEval(motor), expr.index, expr.motor
         return lambda: int(host.input_signal(number, which))
     if isinstance(expr, ast.BinOp):
-        return _binary(_ARITH[expr.op], expr, motor)
+        return _arithmetic(expr, motor)
     if isinstance(expr, ast.Compare):
         test = _COMPARE[expr.op]
         return _binary(lambda a, b: int(test(a, b)), expr, motor)
@@ -120,6 +118,24 @@ def compile_expr(expr: ast.Expr, motor: "Motor") -> Reader:
         arg, name, host2 = compile_expr(expr.arg, motor), expr.name, MotorEval(motor)
         return lambda: call_function(name, arg(), host2)
     raise TypeError(f"not an expression: {expr!r}")
+
+
+def _arithmetic(expr: ast.BinOp, motor: "Motor") -> Reader:
+    """``+ - *`` inline (wrapped to 32 bits only when they leave it), ``/`` as 6.7."""
+    left, right = compile_expr(expr.left, motor), compile_expr(expr.right, motor)
+    if expr.op == "/":
+        return lambda: _divide(left(), right())
+    if expr.op == "+":
+        def add() -> int:
+            v = left() + right()
+            return v if -0x8000_0000 <= v <= 0x7FFF_FFFF else wrap32(v)
+        return add
+    if expr.op == "-":
+        def sub() -> int:
+            v = left() - right()
+            return v if -0x8000_0000 <= v <= 0x7FFF_FFFF else wrap32(v)
+        return sub
+    return lambda: wrap32(left() * right())
 
 
 def _binary(op: Callable[[int, int], int], expr: ast.BinOp | ast.Compare,
@@ -138,8 +154,9 @@ def compile_condition(expr: ast.Expr, motor: "Motor") -> Callable[[], bool]:
 
 # ---------------------------------------------------------------- statements
 
-def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool,
+def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool, clock: Clock,
             display: Callable[["Motor", ast.Reg, int], str]) -> Compiled | None:
+    """An assignment as one closure: steps, value, store, display, errors."""
     reg = stmt.target
     if reg.motor not in (None, motor.id) or reg.kind not in _PLAIN_KINDS | {"V", "K"}:
         return None
@@ -151,19 +168,27 @@ def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool,
         sign = 1 if stmt.op == "+=" else -1
         value = lambda: base() + sign * delta()  # noqa: E731
     kind, index = reg.kind, reg.number
+    steps = statement_steps(stmt) * STEP_NS
 
     def run() -> None:
-        result = value()
-        if kind == "V":
-            cell = motor.memory.cells("V")[index]
-            if cell.__class__ is VState and cell.name in WRITABLE_STATES:
-                motor.write_state(cell.name, result)
+        clock.clock += steps
+        try:
+            result = value()
+            if kind == "V":
+                memory = motor.memory
+                cell = memory.cells("V")[index]
+                if cell.__class__ is VState and cell.name in WRITABLE_STATES:
+                    motor.write_state(cell.name, result)
+                else:
+                    memory.set_v_number(index, result)
             else:
                 motor.write_register(kind, index, result)
-        else:
-            motor.write_register(kind, index, result)
-        if not quiet:
-            motor.say(ctx, display(motor, reg, result))
+            if not quiet:
+                motor.say(ctx, display(motor, reg, result))
+        except MotorError as error:
+            motor.report_error(ctx, error)
+        except (LookupError, ValueError, ArithmeticError, TypeError):
+            motor.report_error(ctx, OutOfRangeError())
     return run
 
 
@@ -173,6 +198,8 @@ def compile_statement(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet
     """A closure for a ladder statement, or ``None`` to leave it to the interpreter."""
     if isinstance(stmt, ast.Branch):
         return _branch(stmt, motor, ctx, quiet, clock, display)
+    if isinstance(stmt, ast.Assign):
+        return _assign(stmt, motor, ctx, quiet, clock, display)
     steps = statement_steps(stmt) * STEP_NS
     body = _body(stmt, motor, ctx, quiet, display, last)
     if body is None:
@@ -192,8 +219,6 @@ def compile_statement(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet
 
 def _body(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet: bool,
           display: Callable[["Motor", ast.Reg, int], str], last: bool) -> Compiled | None:
-    if isinstance(stmt, ast.Assign):
-        return _assign(stmt, motor, ctx, quiet, display)
     if isinstance(stmt, ast.Ref):
         return _ref(stmt, motor, ctx, last)
     if isinstance(stmt, ast.Call):

@@ -67,6 +67,7 @@ class LadderRunner:
         self._running_id = 0
         self._code_cache: dict[int, list[_Code]] = {}
         self._code_version = -1
+        self._period = self.period_ns()
         if not motion:
             motor.params.on_change(self._param_changed)
 
@@ -78,6 +79,9 @@ class LadderRunner:
         period = self.motor.k(self.motor.firmware.ladder_period_k)
         return period * NS_PER_MS if period > 0 else None
 
+    def _refresh_period(self) -> None:
+        self._period = self.period_ns()
+
     def start(self, number: int, ctx: "Context | None" = None) -> None:
         """``[L#`` / ``[LM#``: scan bank ``number`` from now (error06 if it does not exist)."""
         if self.motor.banks.get(True, number) is None:
@@ -88,7 +92,8 @@ class LadderRunner:
         self.stop()
         self.bank, self.state = number, RUNNING
         self.scan_start = self.clock = self.kernel.now
-        self._schedule(None if self.period_ns() is None else self.kernel.now)
+        self._refresh_period()
+        self._schedule(None if self._period is None else self.kernel.now)
 
     def pause(self) -> None:
         """``]L``: pause; a second ``]L`` stops (6.5 "]L")."""
@@ -104,6 +109,7 @@ class LadderRunner:
         if self.state != PAUSED:
             return
         self.state = RUNNING
+        self._refresh_period()
         if self.runner.busy:
             self.runner.rearm()
         else:
@@ -131,7 +137,7 @@ class LadderRunner:
 
     def _due(self) -> int | None:
         """When the next scan may start: max(start + cycle, end of this scan)."""
-        period = self.period_ns()
+        period = self._period
         if period is None:
             return None
         return max(self.scan_start + period, self.clock, self.kernel.now)
@@ -145,8 +151,10 @@ class LadderRunner:
 
     def _param_changed(self, k: int, old: int, new: int) -> None:
         del old, new
-        if k == self.motor.firmware.ladder_period_k and self.state == RUNNING \
-                and not self.runner.busy:
+        if k != self.motor.firmware.ladder_period_k:
+            return
+        self._refresh_period()
+        if self.state == RUNNING and not self.runner.busy:
             self._schedule(self._due())
 
     def _scan(self) -> None:

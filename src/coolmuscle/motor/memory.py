@@ -180,6 +180,15 @@ class Memory:
         ladder scanner; read only.  The list is replaced when the allocation changes."""
         return self._data[kind]
 
+    def set_v_number(self, index: int, value: int) -> None:
+        """``V#=value`` with a number, as :meth:`set` checks it (fast path for ladder scans)."""
+        cells = self._data["V"]
+        if not (type(value) is int and -LIMIT_1E9 <= value <= LIMIT_1E9):
+            raise OutOfRangeError(f"V={value!r} is out of range")
+        if not 0 <= index < len(cells):
+            raise NoSuchRegisterError(f"V{index} does not exist (V0..V{len(cells) - 1})")
+        cells[index] = VNumber(value)
+
     def set(self, kind: str, index: int, value: int | str | VValue) -> None:
         """Store ``value``; nothing changes if it is refused.
 
