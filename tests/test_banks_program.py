@@ -173,8 +173,8 @@ def test_t0_does_nothing_and_t_waits_exactly() -> None:
 
 
 def test_4_3_1_line_waits_for_every_motor_it_moved() -> None:
-    r = rig("S1.1=100", "P1.1=1000", "S1.2=10", "P1.2=1000", "B1.1", "S1.1, P1.1, S1.2, P1.2", "V1.1",
-            "END", "[1.1", motors=2)
+    r = rig("S1.1=100", "P1.1=1000", "S1.2=10", "P1.2=1000", "B1.1",
+            "S1.1, P1.1, S1.2, P1.2", "V1.1", "END", "[1.1", motors=2)
     r.until(3)
     (done2,) = r.times("Ux.2=8")
     assert r.times("V1.1=0") == [done2]

@@ -115,7 +115,8 @@ def _fill_expr(expr: ast.Expr, m: int) -> ast.Expr:
 
 def _fill_stmt(stmt: ast.Statement, m: int) -> ast.Statement:
     if isinstance(stmt, ast.Assign):
-        return dataclasses.replace(stmt, target=_fill_expr(stmt.target, m),  # type: ignore[arg-type]
+        target = _fill_expr(stmt.target, m)
+        return dataclasses.replace(stmt, target=target,  # type: ignore[arg-type]
                                    value=_fill_expr(stmt.value, m))
     if isinstance(stmt, ast.Ref):
         return dataclasses.replace(stmt, reg=_fill_expr(stmt.reg, m))  # type: ignore[arg-type]

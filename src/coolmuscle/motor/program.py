@@ -194,11 +194,9 @@ class ProgramExecutor:
 
     def prev_line(self, ctx: "Context | None" = None) -> None:
         """``<``: run the line before the last one run, then pause (``Can't back!``)."""
-        if self.state not in (PAUSED, IDLE):
-            return
         frame = self.stack[-1] if self.stack else None
         target = None if frame is None or frame.last is None else frame.last - 1
-        if (self.state == IDLE or self._current is not None or frame is None
+        if (self.state != PAUSED or self._current is not None or frame is None
                 or target is None or target < 0 or _has_flow(frame.units[target])):
             self.motor.say(ctx, "Can't back!", kind="message")
             return
@@ -420,7 +418,8 @@ class ProgramExecutor:
     def _motion(self, kind: str, index: int, motor_id: int | None, modifier: str | None,
                 run: _Run) -> Step:
         """``P`` ``Y`` ``Q`` ``Z``: start (or extend, merge) the motion of one motor."""
-        target = self.motor if motor_id in (None, self.motor.id) else self.motor.bus.motor(motor_id)
+        target = (self.motor if motor_id in (None, self.motor.id)
+                  else self.motor.bus.motor(motor_id))
         if target is None:
             return
         if target.id in self.unwaited and target.id not in run.motions:
