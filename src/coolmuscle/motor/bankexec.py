@@ -20,7 +20,7 @@ from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .banks import Bank, condition_only
-from .direct import MotorEval, inner_motor, run_statement
+from .direct import MotorEval, inner_motor, route
 
 if TYPE_CHECKING:
     from .motor import Context, Motor
@@ -224,10 +224,9 @@ def target_motor(motor: "Motor", stmt: ast.Statement) -> "Motor | None":
 
 
 def run_plain(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
-    """A statement that means the same in direct mode and in banks (6.5), on its motor."""
-    target = target_motor(motor, stmt)
-    if target is not None:
-        run_statement(target, stmt, ctx)
+    """A statement that means the same in direct mode and in banks (6.5), on its motor
+    (an ID past the chain goes to the chain: the COM1 device, or nobody)."""
+    route(motor, stmt, ctx)
 
 
 def holds(motor: "Motor", condition: ast.Expr) -> bool:
