@@ -110,10 +110,10 @@ def test_x0_loops_forever_and_lines_take_their_steps() -> None:
     """A loop without motion still takes time: 3 steps + 1 step = 1 ms a round (RT3 3.4)."""
     r = rig("V2.1=1", "B1.1", "X0.1", "V1.1=V1.1+V2.1", "X.1-", "END", "[1.1")
     r.until(1)
-    assert r.chain.get_register(1, "V", 1) == "1000"
+    assert r.chain.get_register(1, "V", 1) == 1000
     r.type("]", "]")
     r.until(2)
-    assert r.chain.get_register(1, "V", 1) == "1000"
+    assert r.chain.get_register(1, "V", 1) == 1000
 
 
 def test_2_2_2_call_returns_jump_does_not() -> None:

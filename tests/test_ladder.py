@@ -182,7 +182,7 @@ def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(tmp_path: Path) -> None:
     first.close()
     second = Chain(state_dir=tmp_path)
     second.kernel.run(until=seconds(0.095))
-    assert second.get_register(1, "V", 1) == "10"
+    assert second.get_register(1, "V", 1) == 10
     second.close()
 
 
@@ -262,5 +262,5 @@ def test_the_ladder_runs_beside_a_program_bank(firmware: str) -> None:
                "B1.1", "X0.1", "P1.1", "P2.1", "X.1-", "END", "[L1.1", "[1.1",
                firmware=firmware)
     r.until(2.01)
-    assert r.chain.get_register(1, "V", 1) == "2011"     # 4 steps: every 1 ms, from 0
+    assert r.chain.get_register(1, "V", 1) == 2011     # 4 steps: every 1 ms, from 0
     assert len(r.times("Ux.1=8")) == 10
