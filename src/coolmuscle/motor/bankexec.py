@@ -186,9 +186,11 @@ class Runner:
         fire = self._later(None)
 
         def check() -> None:
-            if all(m.motion_done() for m in request.motors):
-                self._cancel_watch()
-                self.kernel.call_soon(fire, priority=PRIO_LOGIC, name="bank-in-position")
+            for motor in request.motors:
+                if not motor.motion_done():
+                    return
+            self._cancel_watch()
+            self.kernel.call_soon(fire, priority=PRIO_LOGIC, name="bank-in-position")
         self._unwatch = self.motor.bus.watch(check)
         check()
 

@@ -26,7 +26,7 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
-from .memory import VState
+from .memory import VNumber, VState
 from .motor import WRITABLE_STATES
 from .queries import register_reply
 
@@ -74,10 +74,12 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
                 cell = motor.memory.cells("V")[index]
             except IndexError:
                 return 0
-            try:
-                return cell.value               # a number (VNumber)
-            except AttributeError:
-                return motor.v_numeric(cell)    # a string or a live state
+            cls = cell.__class__
+            if cls is VNumber:
+                return cell.value
+            if cls is VState:
+                return motor.state_value(cell.name)
+            return motor.v_numeric(cell)        # a string
         return read_v
 
     def read() -> int:
