@@ -264,3 +264,34 @@ def test_the_ladder_runs_beside_a_program_bank(firmware: str) -> None:
     r.until(2.01)
     assert r.chain.get_register(1, "V", 1) == 2011     # 4 steps: every 1 ms, from 0
     assert len(r.times("Ux.1=8")) == 10
+
+
+def test_2_2_3_s0_is_live_while_a_go_motion_runs() -> None:
+    """The 2.2.3 operation example changes S.1 from a ladder bank during a ^ move."""
+    r = ladder("S.1=10", "A.1=100", "P.1=10000")
+    trace = r.chain.record()
+    r.type("^.1")
+    r.until(1)
+    r.type("S.1=50")
+    r.until(1.5)
+    assert trace.sample(1, seconds(1.5)).speed == pytest.approx(5000, abs=1)
+    r.type("S.1=0")                      # halts short of P0 ...
+    r.until(2)
+    stopped = trace.sample(1, seconds(2)).position
+    assert stopped < 9000 and r.texts() == ["Ux.1=8"]
+    r.type("S.1=20")                     # ... and goes on when S0 is set again
+    r.until(8)
+    assert r.chain.execute("?96.1") == ["Px.1=10000"] and len(r.times("Ux.1=8")) == 2
+    r.type("S.1=30", "S.1=40")           # done: S0 no longer moves the motor
+    r.until(9)
+    assert len(r.times("Ux.1=8")) == 2 and r.motor().motion_done()
+
+
+def test_the_same_go_again_does_not_replan() -> None:
+    r = ladder("S.1=10", "A.1=100", "P.1=1000000000", "^.1")
+    r.until(0.5)
+    profile = r.motor().axis.profile
+    r.type("^.1")
+    assert r.motor().axis.profile is profile
+    r.type("A.1=50", "^.1")
+    assert r.motor().axis.profile is not profile

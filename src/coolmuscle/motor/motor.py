@@ -110,6 +110,7 @@ class Motor:
         self.limit_sensors = {1: False, -1: False}
         self._go_target: int | None = None     # P0 of a running "^" (S0 stays live)
         self._go_speed: int | None = None
+        self._go_data: tuple[int, int, int] | None = None
         self._state_readers: dict[str, Callable[[], int]] | None = None
 
     # -- parameters and units ----------------------------------------------
@@ -232,6 +233,9 @@ class Motor:
         """
         p0 = int(self.memory.get("P", 0))
         self.torque_limit = int(self.memory.get("M", 0))
+        same = (p0, int(self.memory.get("S", 0)), int(self.memory.get("A", 0)))
+        if self._go_target is not None and self.axis.moving and same == self._go_data:
+            return   # that very motion is running already (RT3 7.2 sends ^ every scan)
         self._run_go(p0)
 
     def _run_go(self, p0: int) -> None:
@@ -246,7 +250,7 @@ class Motor:
                 self.run_continuous(s0, lim)
             else:
                 self.move_to([(float(p0), lim)])
-        self._go_target, self._go_speed = p0, s0
+        self._go_target, self._go_speed, self._go_data = p0, s0, (p0, s0, a0)
 
     def direct_speed_changed(self) -> None:
         """S0 was written: a running ``^`` motion takes the new speed (see :meth:`go`)."""
@@ -342,6 +346,8 @@ class Motor:
     def _arrived(self) -> None:
         if not self.estopped and not self.alarm:   # those were reported when they began
             self.report_status()
+        if self._go_speed:            # a "^" reached P0 (not halted by S0 = 0): done
+            self._go_target = None
         self.motion_settled()
 
     # -- motion completion and limit sensors (issue 4: bank executors wait on these) --
