@@ -52,6 +52,21 @@ asyncio.run(serve())
 """ % P0
 
 
+def _wait_port(port: int, timeout: float = 10.0) -> None:
+    """Wait until something accepts TCP connections on ``port`` (servers print "ready"
+    before they bind)."""
+    import socket
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+            return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"nothing listens on 127.0.0.1:{port}") from None
+            time.sleep(0.05)
+
+
 def _free_port() -> int:
     import socket
     with socket.socket() as s:
@@ -116,6 +131,7 @@ def tcp_side_by_side(seconds: float) -> None:
     assert found is not None, banner
     their_port = _free_port()
     theirs, _ = _start(["-c", PYMODBUS_SERVER, str(their_port)], lambda s: "ready" in s)
+    _wait_port(their_port)
     results: dict[str, list[float]] = {"coolmuscle": [], "pymodbus server": []}
     clients: dict[str, Any] = {}
     try:
