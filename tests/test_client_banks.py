@@ -1,9 +1,6 @@
-"""Bank upload with readback verification, and ``coolmuscle upload``.
-
-The chain here stores and lists banks (tests/bank_chain.py) as 6.6 describes, since
-the program/ladder bank model is another branch's work; the uploader only relies on
-the manual's listing format.  Direct lines go to the real motor model.
-"""
+"""Bank upload with readback verification, and ``coolmuscle upload``, on the virtual
+motor's bank model (2.2.2, 2.2.3; RT3 3.3 "query the banks after it has been sent to
+verify that it is loaded correctly")."""
 
 from __future__ import annotations
 
@@ -11,20 +8,19 @@ import asyncio
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
-from bank_chain import BankChain
 from client_targets import Tcp
 from coolmuscle import cli, connect, connect_async
 from coolmuscle.client import UploadError, parse_program
-from coolmuscle.errors import CmlSyntaxError
-from coolmuscle.urlhandler import protocol_coolmuscle
+from coolmuscle.errors import NotAllowedInBankError
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 URL = "coolmuscle://?mode=fast&motors=2"
+RT3 = "coolmuscle://?mode=fast&firmware=rt3"
 
 PROGRAM = """\
 S1.1=100
@@ -46,14 +42,7 @@ END
 """
 
 
-@pytest.fixture
-def bank_chain(monkeypatch: pytest.MonkeyPatch) -> Iterator[type[BankChain]]:
-    monkeypatch.setattr(protocol_coolmuscle, "chain_factory", BankChain)
-    monkeypatch.setattr(BankChain, "corrupt", {})
-    yield BankChain
-
-
-def test_upload_sends_and_verifies_every_bank(bank_chain: type[BankChain]) -> None:
+def test_upload_sends_and_verifies_every_bank() -> None:
     progress: list[tuple[int, int]] = []
     with connect(URL) as m:
         result = m.upload(PROGRAM, progress=lambda done, total: progress.append((done, total)))
@@ -67,30 +56,33 @@ def test_upload_sends_and_verifies_every_bank(bank_chain: type[BankChain]) -> No
                                       "L1.1": m.read_bank(1, ladder=True)}
 
 
-def test_a_bank_that_loads_differently_is_reported_line_by_line(
-        bank_chain: type[BankChain]) -> None:
-    bank_chain.corrupt = {("B1.1", 1): "T2.1", ("L1.1", 2): "V2.1=V3.1"}
-    with connect(URL) as m:
+def test_a_bank_that_loads_differently_is_reported_line_by_line() -> None:
+    """RT3 1.2 "INCORRECT": a number in a bank line; with K23 silent, only the readback
+    tells that the motor did not take it (and what followed it)."""
+    text = "V1.1=100\nB1.1\nA1.1=V1.1\nEND.1\nB2.1\nP1.1\nA1.1=100\nP2.1\nEND.1\n"
+    with connect(RT3) as m:
         with pytest.raises(UploadError) as caught:
-            m.upload(PROGRAM)
+            m.upload(text)
     result = caught.value.result
     assert [d.format() for d in result.differences] == [
-        "B1.1 line 2 (file line 8): expected 'T1.1', motor has 'T2.1'",
-        "L1.1 line 3 (file line 15): expected 'V2.1=V3.1, T0.1', motor has 'V2.1=V3.1'"]
-    assert not result.errors and not result.ok
+        "B2.1 line 2 (file line 7): missing on the motor: 'A1.1=100'",
+        "B2.1 line 3 (file line 8): missing on the motor: 'P2.1'"]
+    assert not result.errors and not result.ok and result.banks == ["B1.1", "B2.1"]
 
 
-def test_errors_reported_while_defining_are_tied_to_their_file_line(
-        bank_chain: type[BankChain]) -> None:
-    text = "K23.1=17\nB2.1\nP1.1\nhello there\nP2.1\nEND\n"
+def test_errors_reported_while_defining_are_tied_to_their_file_line() -> None:
+    text = "K23.1=17\nB2.1\nP1.1\n$.1\nP2.1\nEND\n"
     with connect(URL) as m:
         result = m.upload(text, check=False)
-    assert [(line, type(error)) for line, error in result.errors] == [(4, CmlSyntaxError)]
-    assert result.differences[0].format() == \
-        "B2.1 line 2 (file line 4): missing on the motor: 'hello there'"
+    assert [(line, type(error)) for line, error in result.errors] == \
+        [(4, NotAllowedInBankError)]
+    assert "$ is not allowed in bank" in str(result.errors[0][1])
+    assert [d.format() for d in result.differences] == [
+        "B2.1 line 2 (file line 4): missing on the motor: '$.1'",
+        "B2.1 line 3 (file line 5): missing on the motor: 'P2.1'"]
 
 
-def test_without_echo_lines_are_paced_and_still_verified(bank_chain: type[BankChain]) -> None:
+def test_without_echo_lines_are_paced_and_still_verified() -> None:
     with connect(URL) as m:
         m.write_param(23, 9)                       # K23 8: no echo
         assert m.echo is False
@@ -98,7 +90,7 @@ def test_without_echo_lines_are_paced_and_still_verified(bank_chain: type[BankCh
         assert result.ok and m.echo is False
 
 
-def test_a_bank_ended_by_an_empty_line(bank_chain: type[BankChain]) -> None:
+def test_a_bank_ended_by_an_empty_line() -> None:
     program = parse_program("B3.1\nP1.1\nP2.1\n\nP.1=5\n")
     assert program.banks[0].closed_by == "blank" and len(program.items) == 2
     with connect(URL) as m:
@@ -107,7 +99,7 @@ def test_a_bank_ended_by_an_empty_line(bank_chain: type[BankChain]) -> None:
         assert m.get_direct_data()["P"] == 5
 
 
-def test_send_keeps_a_typed_definition_together(bank_chain: type[BankChain]) -> None:
+def test_send_keeps_a_typed_definition_together() -> None:
     """Lines typed one by one: no fence may end up inside the bank."""
     with connect(URL) as m:
         for line in ("B4.1", "P1.1", "T1.1", "END"):
@@ -115,7 +107,7 @@ def test_send_keeps_a_typed_definition_together(bank_chain: type[BankChain]) -> 
         assert m.read_bank(4) == ["P1.1", "T1.1"]
 
 
-def test_async_upload(bank_chain: type[BankChain]) -> None:
+def test_async_upload() -> None:
     async def session() -> Any:
         async with await connect_async("coolmuscle://?scale=20") as m:
             result = await m.upload(PROGRAM)
@@ -133,24 +125,21 @@ def upload_cli(capsys: Any, *args: str) -> tuple[int, str, str]:
     return int(exit_.value.code or 0), out, err
 
 
-def test_upload_command_verifies_and_saves(bank_chain: type[BankChain], capsys: Any,
-                                           tmp_path: Path) -> None:
+def test_upload_command_verifies_and_saves(capsys: Any) -> None:
     code, out, _ = upload_cli(capsys, str(EXAMPLES / "2.2-program-bank.cml"), "--port", URL,
                               "--save")
     assert code == 0
     assert out.strip().endswith("sent 12 line(s), B1.1 verified; saved on motor 1")
 
 
-def test_upload_command_reports_exactly_what_differs(bank_chain: type[BankChain],
-                                                     capsys: Any) -> None:
-    bank_chain.corrupt = {("B1.1", 0): "S1.1, A1.1"}
-    code, out, _ = upload_cli(capsys, str(EXAMPLES / "2.2-program-bank.cml"), "--port", URL)
+def test_upload_command_reports_exactly_what_differs(capsys: Any, tmp_path: Path) -> None:
+    path = tmp_path / "rt3.cml"
+    path.write_text("# coolmuscle: firmware=rt3\nV1.1=100\nB1.1\nA1.1=100\nEND.1\n")
+    code, out, _ = upload_cli(capsys, str(path), "--port", RT3)
     assert code == 1
     assert out.splitlines() == [
-        f"{EXAMPLES / '2.2-program-bank.cml'}: B1.1 line 1 (file line 9): expected "
-        "'S1.1, A1.1, P1.1', motor has 'S1.1, A1.1'",
-        f"{EXAMPLES / '2.2-program-bank.cml'}: FAILED: 0 error(s), 1 difference(s) after "
-        "sending 12 line(s)"]
+        f"{path}: B1.1 line 1 (file line 4): missing on the motor: 'A1.1=100'",
+        f"{path}: FAILED: 0 error(s), 1 difference(s) after sending 4 line(s)"]
 
 
 def test_upload_command_refuses_a_file_with_syntax_errors(capsys: Any,

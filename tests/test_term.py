@@ -3,8 +3,7 @@
 The terminal runs in a real tmux pane (its own tmux server socket); the test types
 lines, arrow keys and Ctrl-D with ``send-keys`` and reads the rendered screen with
 ``capture-pane`` (``-e`` keeps the colours).  The motor is the simulator behind TCP in
-this process (with the bank stand-in of tests/bank_chain.py, for ``:send``), or the
-in-process ``coolmuscle://`` in the terminal's own process.
+this process, or the in-process ``coolmuscle://`` in the terminal's own process.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ from typing import Iterator
 
 import pytest
 
-from bank_chain import BankChain
+from coolmuscle.chain import Chain
 from coolmuscle.transports.service import ServiceThread
 from coolmuscle.transports.tcp import TcpTransport
 
@@ -105,7 +104,7 @@ def term_env(tmp: Path) -> dict[str, str]:
 
 @pytest.fixture
 def served() -> Iterator[ServiceThread]:
-    service = ServiceThread(lambda: BankChain(), lambda: [TcpTransport(port=0)], scale=4)
+    service = ServiceThread(lambda: Chain(), lambda: [TcpTransport(port=0)], scale=4)
     service.start()
     yield service
     service.stop()
@@ -158,7 +157,8 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
         pane.close()
     history = (tmp_path / "state" / "coolmuscle" / "term_history").read_text()
     assert "+?96.1" in history and "+hello" in history
-    assert served.call(lambda: served.chain.motors[1].position()) == 3000
+    assert served.call(lambda: served.chain.execute("?1.1")) == ["S1.1, A1.1, P1.1", "T1.1",
+                                                                 "P2.1"]
 
 
 def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None:

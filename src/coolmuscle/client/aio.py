@@ -20,7 +20,7 @@ import asyncio
 import logging
 import threading
 from pathlib import Path
-from typing import Any, AsyncIterator, Callable, Iterable
+from typing import Any, Callable, Iterable
 
 import serial
 
@@ -35,7 +35,7 @@ from .sync import open_port, program_of
 
 log = logging.getLogger(__name__)
 
-__all__ = ["connect_async", "AsyncCoolMuscle", "AsyncMotor"]
+__all__ = ["connect_async", "AsyncCoolMuscle", "AsyncMotor", "EventStream"]
 
 
 class _ThreadedReader:
@@ -418,6 +418,36 @@ class AsyncMotor:
         await self._run(banks.save(self._session, self.id, timeout))
 
 
+class EventStream:
+    """An async iterator over events (see :meth:`AsyncCoolMuscle.events`)."""
+
+    def __init__(self, client: AsyncCoolMuscle, kinds: Iterable[str] | None,
+                 motor: int | None) -> None:
+        self._queue: asyncio.Queue[MotorEvent] = asyncio.Queue()
+        self._remove: Callable[[], None] | None = client.subscribe(
+            self._queue.put_nowait, kinds=kinds, motor=motor)
+
+    def __aiter__(self) -> EventStream:
+        return self
+
+    async def __anext__(self) -> MotorEvent:
+        if self._remove is None and self._queue.empty():
+            raise StopAsyncIteration
+        return await self._queue.get()
+
+    async def aclose(self) -> None:
+        """Stop receiving events."""
+        if self._remove is not None:
+            self._remove()
+            self._remove = None
+
+    async def __aenter__(self) -> EventStream:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+
 class AsyncCoolMuscle(AsyncMotor):
     """An asyncio connection to a chain, and the motor it was opened for."""
 
@@ -482,16 +512,15 @@ class AsyncCoolMuscle(AsyncMotor):
         as events (kind ``unsolicited`` for replies).  For terminals."""
         self._driver.write(self._session.protocol.encode([line]))
 
-    async def events(self, *, kinds: Iterable[str] | None = None,
-                     motor: int | None = None) -> AsyncIterator[MotorEvent]:
-        """Iterate over events as they arrive (``async for event in m.events()``)."""
-        queue: asyncio.Queue[MotorEvent] = asyncio.Queue()
-        remove = self.subscribe(queue.put_nowait, kinds=kinds, motor=motor)
-        try:
-            while True:
-                yield await queue.get()
-        finally:
-            remove()
+    def events(self, *, kinds: Iterable[str] | None = None,
+               motor: int | None = None) -> EventStream:
+        """Events as they arrive, from this call on: ``async for event in m.events()``.
+
+        The subscription starts when ``events()`` is called, not at the first
+        iteration, so nothing said in between is missed; ``aclose()`` (or leaving an
+        ``async with``) ends it.
+        """
+        return EventStream(self, kinds, motor)
 
     async def wait_event(self, *, kind: str | None = None, motor: int | None = None,
                          timeout: float = ops.DEFAULT_WAIT) -> MotorEvent:

@@ -15,8 +15,11 @@ bank-end            error     --     a bank definition the file never ends (2.2.
 not-in-bank         error     03     a command banks cannot hold (2.2.2 "Execute
                                      Commands", 6.5, 6.6, 4.5.1 "X" in a ladder bank;
                                      ``^`` is allowed in RT3 banks, RT3 7.1-7.3)
-cannot-follow       error     04     C J CL JL X X- W followed by another command, or
-                                     X / X- not first on the line (2.2.2, error04)
+cannot-follow       error     04     C J CL JL X X- W followed by another command,
+                                     X / X- not first on the line, W in a branch's else
+                                     part, a motion of a motor after its Y/Q/Z on one
+                                     line (2.2.2, 4.3.2, error04)
+wait-outside-branch error     01     W not in the then part of a branch (2.2.2 "W")
 comment-in-bank     error     01     RT3: a comment inside a bank (RT3 1.1 "/")
 missing-bank        error     05/06  C/J (CL/JL) to a bank the file does not define
 cross-motor-call    error     --     C/J/CL/JL naming another motor's bank (2.2.2 "C")
@@ -63,6 +66,7 @@ RULES: Final[dict[str, tuple[Severity, int | None]]] = {
     "too-many-commands": ("error", 2), "too-many-steps": ("error", 2),
     "bank-number": ("error", 0), "bank-end": ("error", None),
     "not-in-bank": ("error", 3), "cannot-follow": ("error", 4),
+    "wait-outside-branch": ("error", 1),
     "comment-in-bank": ("error", 1), "missing-bank": ("error", 5),
     "cross-motor-call": ("error", None), "recursion": ("error", None),
     "nesting": ("error", None), "loop-balance": ("error", None), "range": ("error", 0),
@@ -370,7 +374,7 @@ class _Checker:
             self._length(line)
             self._comment(line)
             for logical in line.lines:
-                self._sequence(line, logical.statements, None)
+                self._sequence(line, logical.statements, None, motor)
             for statement in line.statements:
                 steps += _steps(statement)
                 commands += _commands(statement)
@@ -444,13 +448,20 @@ class _Checker:
                             column=_column(line.raw, what[:2]))
 
     def _sequence(self, line: SourceLine, statements: tuple[ast.Statement, ...],
-                  head: str | None) -> None:
-        """error04: C J CL JL X X- W end their list; X and X- start the line (2.2.2)."""
+                  head: str | None, motor: int = 1) -> None:
+        """error04: C J CL JL X X- W end their list; X and X- start the line (2.2.2);
+        W waits in a branch's then part only; after Y/Q/Z a motor moves no more on the
+        line (4.3.2)."""
+        moved: dict[int, str] = {}
         for i, statement in enumerate(statements):
             if isinstance(statement, ast.Branch):
-                self._sequence(line, statement.then, "branch")
-                self._sequence(line, statement.orelse, "branch")
+                self._sequence(line, statement.then, "then", motor)
+                self._sequence(line, statement.orelse, "else", motor)
                 continue
+            if isinstance(statement, ast.Wait) and head != "then":
+                rule = "cannot-follow" if head == "else" else "wait-outside-branch"
+                self.report.add(line, rule, "W waits in the then part of a branch only",
+                                column=_column(line.raw, "W"))
             if isinstance(statement, (ast.Loop, ast.LoopEnd)) and (i > 0 or head):
                 self.report.add(line, "cannot-follow", "X / X- must begin the line",
                                 column=_column(line.raw, "X"))
@@ -458,6 +469,24 @@ class _Checker:
                 text = _statement_text(statement)
                 self.report.add(line, "cannot-follow", f"{text} cannot be followed by "
                                 "another command", column=_column(line.raw, text))
+            self._motion(line, statement, moved, motor)
+
+    def _motion(self, line: SourceLine, statement: ast.Statement, moved: dict[int, str],
+                default: int) -> None:
+        if isinstance(statement, ast.Ref) and statement.reg.kind == "P":
+            kind, who = "P", statement.reg.motor
+        elif isinstance(statement, (ast.Move, ast.Interp)):
+            kind = statement.kind if isinstance(statement, ast.Move) else "@"
+            who = statement.motor
+        else:
+            return
+        who = who or default
+        if who in moved:
+            self.report.add(line, "cannot-follow", f"{moved[who]} of motor {who} cannot be "
+                            f"followed by another motion of it ({kind}) on one line (4.3.2)",
+                            column=_column(line.raw, kind))
+        elif kind in ("Y", "Q", "Z"):
+            moved[who] = kind
 
     def _comment(self, line: SourceLine) -> None:
         """RT3 1.1 "/": "comments cannot be used inside any banks"."""
@@ -473,7 +502,8 @@ class _Checker:
         """RT3 1.2: "you cannot set it in the bank with an actual number"."""
         exprs: list[ast.Expr] = []
         if isinstance(statement, (ast.Assign, ast.OutputWord)):
-            if isinstance(statement, ast.Assign) and statement.target.kind == "K":
+            if isinstance(statement, ast.Assign) and statement.target.kind == "K" \
+                    and not self.rt3:
                 return
             exprs.append(statement.value)
         elif isinstance(statement, ast.Branch):
