@@ -64,3 +64,16 @@ def test_check_reports_the_error_the_motor_gives(firmware: str, ladder: bool) ->
         if (motor is None and found) or (motor is not None and motor not in found):
             disagree.append((text, motor, sorted(found)))
     assert disagree == []
+
+
+def test_step_and_command_counts_match_the_motor_s() -> None:
+    """Every bank of examples/: the counts ``check`` prints are the bank model's."""
+    from coolmuscle.client.program import load_program
+    from coolmuscle.motor.bankcheck import line_commands, line_steps
+    for path in sorted((ROOT / "examples").glob("*.cml")):
+        program = load_program(path)
+        report = check_program(program)
+        for block, summary in zip(program.banks, report.banks):
+            lines = [fill_motor(l, block.motor_id) for s in block.body for l in s.lines]
+            assert summary.steps == 1 + sum(map(line_steps, lines)), (path.name, block.label)
+            assert summary.commands == sum(map(line_commands, lines)), (path.name, block.label)
