@@ -20,7 +20,7 @@ from ..motor.memory import Memory, NoSuchRegisterError
 from ..motor.queries import format_value
 from ..motor.status import Ux
 from ..motor.units import resolution
-from .ops import Op, Session, exchange, fenced, named, param, query
+from .ops import Op, Session, exchange, fenced, param, query
 from .replies import Received, parse_int_reply, parse_version
 
 __all__ = ["firmware", "read_register", "write_register", "write_param", "motion",

@@ -47,7 +47,7 @@ bank body, a branch counting its condition and each action.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Final, Iterator, Literal
+from typing import Final, Literal
 
 from ..cml import ast
 from ..cml.scanner import scan
@@ -55,6 +55,8 @@ from ..errors import CmlSyntaxError, OutOfRangeError
 from ..motor.firmware import Firmware, get_firmware
 from ..motor.memory import Memory
 from ..client.program import BankBlock, ProgramFile, SourceLine
+from . import check_tree as tree
+from .check_tree import RegKey
 
 __all__ = ["Diagnostic", "BankSummary", "CheckReport", "check_program", "RULES"]
 
@@ -141,106 +143,6 @@ class CheckReport:
             number if motor_error is None else motor_error))
 
 
-# -- walking the tree ------------------------------------------------------------------
-
-def _expr_regs(expr: ast.Expr) -> Iterator[ast.Reg | ast.Input]:
-    if isinstance(expr, (ast.Reg, ast.Input)):
-        yield expr
-    elif isinstance(expr, (ast.BinOp, ast.Compare, ast.Logic)):
-        yield from _expr_regs(expr.left)
-        yield from _expr_regs(expr.right)
-    elif isinstance(expr, ast.Not):
-        yield from _expr_regs(expr.operand)
-    elif isinstance(expr, ast.Func):
-        yield from _expr_regs(expr.arg)
-
-
-def _flat(statement: ast.Statement) -> Iterator[ast.Statement]:
-    """A statement and, for a branch, its actions."""
-    yield statement
-    if isinstance(statement, ast.Branch):
-        yield from statement.then
-        yield from statement.orelse
-
-
-def _steps(statement: ast.Statement) -> int:
-    """RT3 3.4 steps of one statement (module docstring)."""
-    if isinstance(statement, ast.BankEnd):
-        return 0
-    if isinstance(statement, ast.Branch):
-        operands = sum(1 for _ in _expr_regs(statement.condition))
-        return operands + sum(_steps(s) for s in statement.then + statement.orelse)
-    if isinstance(statement, ast.Assign):
-        return 1 + sum(1 for _ in _expr_regs(statement.value))
-    if isinstance(statement, ast.OutputWord):
-        return 1 + sum(1 for _ in _expr_regs(statement.value))
-    return 1
-
-
-def _commands(statement: ast.Statement) -> int:
-    if isinstance(statement, ast.Branch):
-        return 1 + len(statement.then) + len(statement.orelse)
-    return 0 if isinstance(statement, ast.BankEnd) else 1
-
-
-def _column(raw: str, needle: str) -> int:
-    index = raw.upper().find(needle.upper()) if needle else -1
-    return index + 1 if index >= 0 else 1
-
-
-def _numbers(expr: ast.Expr) -> Iterator[int]:
-    if isinstance(expr, ast.Num):
-        yield expr.value
-    elif isinstance(expr, (ast.BinOp, ast.Compare, ast.Logic)):
-        yield from _numbers(expr.left)
-        yield from _numbers(expr.right)
-    elif isinstance(expr, ast.Func):
-        yield from _numbers(expr.arg)
-    elif isinstance(expr, ast.Not):
-        yield from _numbers(expr.operand)
-
-
-def _statement_text(statement: ast.Statement) -> str:
-    from ..cml.formatter import format_statement
-    return format_statement(statement).split(".")[0].rstrip("-")
-
-
-def _reg_text(kind: str, index: int | None, motor: int | None) -> str:
-    return f"{kind}{'' if index is None else index}" + ("" if motor is None else f".{motor}")
-
-
-def _reads(statement: ast.Statement) -> Iterator[ast.Reg]:
-    """Registers a bank statement reads (values, conditions, selections, moves)."""
-    if isinstance(statement, ast.Assign):
-        yield from (r for r in _expr_regs(statement.value) if isinstance(r, ast.Reg))
-    elif isinstance(statement, ast.OutputWord):
-        yield from (r for r in _expr_regs(statement.value) if isinstance(r, ast.Reg))
-    elif isinstance(statement, ast.Branch):
-        yield from (r for r in _expr_regs(statement.condition) if isinstance(r, ast.Reg))
-    elif isinstance(statement, ast.Ref) and statement.reg.kind != "K":
-        yield statement.reg
-    elif isinstance(statement, ast.Move):
-        yield ast.Reg("P", statement.index, statement.motor)
-    elif isinstance(statement, ast.Interp) and statement.index is not None:
-        yield ast.Reg("P", statement.index, statement.motor)
-    elif isinstance(statement, ast.Wait) and statement.index:
-        yield ast.Reg("T", statement.index, statement.motor)
-
-
-def _writes(statement: ast.Statement) -> Iterator[ast.Reg]:
-    if isinstance(statement, ast.Assign):
-        yield statement.target
-    elif isinstance(statement, ast.Capture):
-        yield ast.Reg("P", statement.index, statement.motor)
-
-
-RegKey = tuple[str, int, int]
-
-
-def _key(reg: ast.Reg, default_motor: int) -> RegKey:
-    return reg.kind, reg.number, reg.motor or default_motor
-
-
 class _Checker:
     """One pass over a program file; fills a :class:`CheckReport`."""
 
@@ -260,7 +162,7 @@ class _Checker:
             if line.error is not None:
                 self._syntax(line, line.error)
             for statement in line.statements:
-                for each in _flat(statement):
+                for each in tree.flat(statement):
                     self._ranges(line, each)
         set_before: set[RegKey] = set()
         for item in self.program.items:
@@ -289,11 +191,11 @@ class _Checker:
         if motor is not None:
             if not 1 <= motor <= 15:
                 self.report.add(line, "range", f"motor ID {motor} is not 1..15",
-                                column=_column(line.raw, f".{motor}") + 1)
+                                column=tree.column(line.raw, f".{motor}") + 1)
             elif self.motors is not None and motor > self.motors:
                 self.report.add(line, "motor-id", f"motor ID {motor} is beyond the "
                                 f"{self.motors} motor(s) of the chain",
-                                column=_column(line.raw, f".{motor}") + 1)
+                                column=tree.column(line.raw, f".{motor}") + 1)
         if isinstance(statement, (ast.BankBegin, ast.StartBank, ast.Call)):
             ladder = getattr(statement, "ladder", None)
             if ladder is None:
@@ -305,16 +207,16 @@ class _Checker:
         if number is not None and not 1 <= number <= top:
             kind = "ladder" if ladder else "program"
             self.report.add(line, "bank-number", f"{kind} bank {number} does not exist "
-                            f"(1..{top})", column=_column(line.raw, str(number)))
+                            f"(1..{top})", column=tree.column(line.raw, str(number)))
 
     def _register(self, line: SourceLine, reg: ast.Reg) -> bool:
-        text = _reg_text(reg.kind, reg.index, reg.motor)
+        text = tree.reg_text(reg.kind, reg.index, reg.motor)
         if reg.kind == "K":
             try:
                 self.fw.spec(reg.number)
             except KeyError:
                 self.report.add(line, "range", f"K{reg.number} does not exist (K20..K89)",
-                                column=_column(line.raw, text))
+                                column=tree.column(line.raw, text))
                 return False
             return True
         top = self.fw.registers.limit(reg.kind)
@@ -323,7 +225,7 @@ class _Checker:
         if reg.number > top:
             self.report.add(line, "range", f"{reg.kind}{reg.number} does not exist "
                             f"({reg.kind}0..{reg.kind}{top} on {self.fw.name})",
-                            column=_column(line.raw, text))
+                            column=tree.column(line.raw, text))
             return False
         return True
 
@@ -342,14 +244,14 @@ class _Checker:
             else:
                 self.memory.normalise(target.kind, literal)
         except OutOfRangeError as error:
-            self.report.add(line, "range", f"{_reg_text(target.kind, target.index, target.motor)}"
-                            f"={literal}: {error}", column=_column(line.raw, target.kind))
+            self.report.add(line, "range", f"{tree.reg_text(target.kind, target.index, target.motor)}"
+                            f"={literal}: {error}", column=tree.column(line.raw, target.kind))
 
     def _direct(self, line: SourceLine, set_before: set[RegKey]) -> None:
         for statement in line.statements:
-            for each in _flat(statement):
-                for reg in _writes(each):
-                    set_before.add(_key(reg, 1))
+            for each in tree.flat(statement):
+                for reg in tree.writes(each):
+                    set_before.add(tree.key(reg, 1))
                 if isinstance(each, ast.StartBank) and each.index is not None:
                     ladder = each.kind != "B"
                     motor = each.motor or 1
@@ -357,7 +259,7 @@ class _Checker:
                         kind = "ladder" if ladder else "program"
                         self.report.add(line, "bank-not-in-file", f"{kind} bank {each.index} "
                                         f"of motor {motor} is not defined in this file",
-                                        column=_column(line.raw, "["))
+                                        column=tree.column(line.raw, "["))
                 if isinstance(each, ast.BankEnd):
                     self.report.add(line, "bank-end", "END outside a bank definition")
 
@@ -376,10 +278,10 @@ class _Checker:
             for logical in line.lines:
                 self._sequence(line, logical.statements, None, motor)
             for statement in line.statements:
-                steps += _steps(statement)
-                commands += _commands(statement)
+                steps += tree.steps(statement)
+                commands += tree.commands(statement)
                 self._literal(line, statement)
-                for each in _flat(statement):
+                for each in tree.flat(statement):
                     depth = self._loops(block, line, each, depth)
                     self._allowed(block, line, each)
                     self._unset(line, each, motor, set_before | set_in_banks, flagged)
@@ -395,8 +297,8 @@ class _Checker:
         for block in self.program.banks:
             for line in block.body:
                 for statement in line.statements:
-                    for each in _flat(statement):
-                        found |= {_key(r, block.motor_id) for r in _writes(each)}
+                    for each in tree.flat(statement):
+                        found |= {tree.key(r, block.motor_id) for r in tree.writes(each)}
         return found
 
     def _length(self, line: SourceLine) -> None:
@@ -404,7 +306,7 @@ class _Checker:
             if len(piece.strip()) > MAX_STATEMENT_CHARS:
                 self.report.add(line, "statement-length", f"{len(piece.strip())} characters "
                                 f"between commas (at most {MAX_STATEMENT_CHARS})",
-                                column=_column(line.raw, piece.strip()[:10]))
+                                column=tree.column(line.raw, piece.strip()[:10]))
 
     def _loops(self, block: BankBlock, line: SourceLine, statement: ast.Statement,
                depth: int) -> int:
@@ -412,11 +314,11 @@ class _Checker:
             depth += 1
             if depth > MAX_NESTING:
                 self.report.add(line, "nesting", f"X loops nested {depth} deep "
-                                f"(at most {MAX_NESTING})", column=_column(line.raw, "X"))
+                                f"(at most {MAX_NESTING})", column=tree.column(line.raw, "X"))
         elif isinstance(statement, ast.LoopEnd):
             if depth == 0:
                 self.report.add(line, "loop-balance", "X- without an open X loop",
-                                column=_column(line.raw, "X"))
+                                column=tree.column(line.raw, "X"))
                 return 0
             depth -= 1
         return depth
@@ -445,7 +347,7 @@ class _Checker:
             what = statement.kind + " (a ladder bank does not move the motor, 6.3)"
         if what is not None:
             self.report.add(line, "not-in-bank", f"{what} is not allowed in {block.label}",
-                            column=_column(line.raw, what[:2]))
+                            column=tree.column(line.raw, what[:2]))
 
     def _sequence(self, line: SourceLine, statements: tuple[ast.Statement, ...],
                   head: str | None, motor: int = 1) -> None:
@@ -461,14 +363,14 @@ class _Checker:
             if isinstance(statement, ast.Wait) and head != "then":
                 rule = "cannot-follow" if head == "else" else "wait-outside-branch"
                 self.report.add(line, rule, "W waits in the then part of a branch only",
-                                column=_column(line.raw, "W"))
+                                column=tree.column(line.raw, "W"))
             if isinstance(statement, (ast.Loop, ast.LoopEnd)) and (i > 0 or head):
                 self.report.add(line, "cannot-follow", "X / X- must begin the line",
-                                column=_column(line.raw, "X"))
+                                column=tree.column(line.raw, "X"))
             if isinstance(statement, _LINE_ENDERS) and i + 1 < len(statements):
-                text = _statement_text(statement)
+                text = tree.statement_text(statement)
                 self.report.add(line, "cannot-follow", f"{text} cannot be followed by "
-                                "another command", column=_column(line.raw, text))
+                                "another command", column=tree.column(line.raw, text))
             self._motion(line, statement, moved, motor)
 
     def _motion(self, line: SourceLine, statement: ast.Statement, moved: dict[int, str],
@@ -484,7 +386,7 @@ class _Checker:
         if who in moved:
             self.report.add(line, "cannot-follow", f"{moved[who]} of motor {who} cannot be "
                             f"followed by another motion of it ({kind}) on one line (4.3.2)",
-                            column=_column(line.raw, kind))
+                            column=tree.column(line.raw, kind))
         elif kind in ("Y", "Q", "Z"):
             moved[who] = kind
 
@@ -510,25 +412,25 @@ class _Checker:
             exprs.append(statement.condition)
             for inner in statement.then + statement.orelse:
                 self._literal(line, inner)
-        number = next((n for e in exprs for n in _numbers(e)), None)
+        number = next((n for e in exprs for n in tree.numbers(e)), None)
         if number is None:
             return
         severity: Severity = "error" if self.rt3 else "warning"
         self.report.add(line, "literal-in-bank", f"the number {number} is used inside a "
                         "bank; set a register before the bank and use it (RT3 1.2)",
-                        column=_column(line.raw, str(number)), severity=severity,
+                        column=tree.column(line.raw, str(number)), severity=severity,
                         motor_error=1 if self.rt3 else None)
 
     def _unset(self, line: SourceLine, statement: ast.Statement, motor: int,
                known: set[RegKey], flagged: set[RegKey]) -> None:
-        for reg in _reads(statement):
-            key = _key(reg, motor)
+        for reg in tree.reads(statement):
+            key = tree.key(reg, motor)
             if reg.kind in _DATA_KINDS and reg.number and key not in known \
                     and key not in flagged:
                 flagged.add(key)
-                text = _reg_text(reg.kind, reg.index, reg.motor)
+                text = tree.reg_text(reg.kind, reg.index, reg.motor)
                 self.report.add(line, "register-unset", f"{text} is used in the bank but "
-                                "never set before it (RT3 1.2)", column=_column(line.raw, text))
+                                "never set before it (RT3 1.2)", column=tree.column(line.raw, text))
 
     # -- whole file ----------------------------------------------------------------------
     def _limits(self) -> None:

@@ -33,7 +33,7 @@ MAX_DEPTH = 10
 
 def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
            report: "CheckReport") -> list[Edge]:
-    from .check import _column, _flat
+    from .check_tree import column as _column, flat as _flat
     edges: list[Edge] = []
     for line in block.body:
         for statement in line.statements:
