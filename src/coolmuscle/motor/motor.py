@@ -203,23 +203,39 @@ class Motor:
     def can_move(self) -> bool:
         return self.axis.enabled and not self.alarm and not self.estopped
 
-    def limits(self, s_value: int, a_value: int, decel_a: int | None = None) -> Limits:
-        """Motion limits from S/A data and K37, K44, K51, K69 (ch. 3)."""
+    def limits(self, s_value: int, a_value: int, decel_a: int | None = None) -> Limits | None:
+        """Motion limits from S/A data and K37, K44, K51, K69 (ch. 3).
+
+        ``None`` when the speed, acceleration or deceleration data is 0: such a motion
+        does not move (docs/fidelity.md "Motion").
+        """
+        if s_value == 0 or a_value == 0 or decel_a == 0:
+            return None
         return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
                                 k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
 
-    def move_to(self, waypoints: list[tuple[float, Limits]]) -> None:
-        """Start (or re-plan) a move through user-coordinate waypoints."""
+    def move_to(self, waypoints: Sequence[tuple[float, Limits | None]]) -> None:
+        """Start (or re-plan) a move through user-coordinate waypoints.
+
+        A waypoint without limits (zero speed) means no motion at all.
+        """
         self._go_target = None
-        if not self.can_move() or not waypoints:
+        if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
             return
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints)
 
-    def run_continuous(self, s_value: int, limits: Limits) -> None:
-        """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
+    def run_continuous(self, s_value: int, limits: Limits | None) -> None:
+        """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S.
+
+        Zero speed (no limits) stops a rotation in progress.
+        """
         self._go_target = None
         if not self.can_move():
+            return
+        if limits is None:
+            if self.axis.moving:
+                self.stop()
             return
         self._last_limits = limits
         self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
@@ -492,8 +508,8 @@ class Motor:
         else:
             self.push_to(target, lim)
 
-    def push_to(self, target: float, limits: Limits,
-                via: Sequence[tuple[float, Limits]] = ()) -> None:
+    def push_to(self, target: float, limits: Limits | None,
+                via: Sequence[tuple[float, Limits | None]] = ()) -> None:
         """Push motion toward ``target`` (4.1.4); the push model lives in the plant.
 
         ``via``: merge waypoints before the push (4.1.4 "S3.1, A1.1, P1.1, S1.1, Q2.1").
