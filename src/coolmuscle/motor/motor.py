@@ -315,7 +315,6 @@ class Motor:
 
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
-        del number
         if function == OUT_IN_POSITION:
             return self.status & Ux.IN_POSITION != 0
         if function == OUT_ALARM:
