@@ -129,6 +129,7 @@ def test_5_2_solved_states_agree_with_a_sampled_schmitt_trigger(
         state = _relay(_actual(chain, t), state, width, h)
         if t % 1_000_000 == 0:
             assert track.state_at(t) == state, t / NS_PER_S
+    state = _relay(_actual(chain, chain.kernel.now), state, width, h)
     assert track.state() == state
 
 

@@ -112,7 +112,9 @@ class AnalogControl:
         self._waiting = False
         self._timer: Timer | None = None
         self._sleeping = True
+        self._in_tick = False
         analog_input.listeners.append(self.wake)
+        motor.timeline.listeners.append(self._trajectory_changed)
         motor.params.on_change(self._param_changed)
 
     # -- activation and the loop ---------------------------------------------------
@@ -122,13 +124,15 @@ class AnalogControl:
             self.motor.axis.stop(self._limits().decel)
         self.mode = effective_mode(self.motor)
         self.filtered = float(self.input.counts())
-        self.armed = False
+        self.armed = self._zero_speed_input()
         self.feedback = None
         self._own = self._data = self._speed = self._torque = None
         self._rebase()
         self._cancel()
-        if self.mode != NONE:
-            self._next(self.kernel.now)
+        if self.mode == POSITION:
+            self._next(self.kernel.now)   # starts where it is: nothing to do until it changes
+        elif self.mode != NONE:
+            self.wake()                   # apply the input once, steady or not
 
     def _param_changed(self, k: int, old: int, new: int) -> None:
         del old, new
@@ -139,14 +143,25 @@ class AnalogControl:
         elif k in (39, 40, 37):
             self.wake()
 
+    def _dormant(self) -> bool:
+        """No control type, or torque feedback with no positioning running (5.5)."""
+        return self.mode == NONE or (self.mode == TORQUE_FEEDBACK and self.feedback is None)
+
     def wake(self) -> None:
         """The input or a setting changed: sample from the next millisecond on."""
-        if self.mode == NONE or (self._timer is not None and not self._sleeping):
+        if self._dormant() or (self._timer is not None and not self._sleeping):
             return
         self._cancel()
         self._schedule(self.kernel.now + TICK_NS, sleeping=False)
 
+    def _trajectory_changed(self, *_: object) -> None:
+        """Another motion started (or ended a wait): speed and torque control look again."""
+        if not self._in_tick and self.mode in (*SPEED_MODES, TORQUE) and not self._owns():
+            self.wake()
+
     def _schedule(self, at: int, *, sleeping: bool) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
         self._sleeping = sleeping
         self._timer = self.kernel.schedule_at(at, self._tick, priority=PRIO_MOTION,
                                               name="analog")
@@ -163,14 +178,27 @@ class AnalogControl:
         if not self._owns():
             self._rebase()
         self._filter(now)
+        self._in_tick = True
         try:
             self._apply()
         except MotorError:
             pass                        # a value the motor refuses is not applied
+        finally:
+            self._in_tick = False
         self._next(now)
 
     def _next(self, now: int) -> None:
         """Tick again in 1 ms while busy; else sleep until the source changes."""
+        if self._dormant():
+            self._cancel()
+            return
+        if self._waiting and self._settled(now):
+            end = self.motor.axis.profile.end_ns    # wait for the other motion to end
+            if end is None:
+                self._cancel()                      # endless: its next change wakes us
+            else:
+                self._schedule(max(end, now + TICK_NS), sleeping=False)
+            return
         if self._busy(now):
             self._schedule(now + TICK_NS, sleeping=False)
             return
@@ -266,7 +294,7 @@ class AnalogControl:
         both = self.mode == SPEED_BOTH
         self._waiting = False
         if not self.armed:
-            self.armed = (MID_LO <= y <= MID_HI) if both else y <= LO
+            self.armed = self._zero_speed_input()
             if not self.armed:
                 return
         fraction = bipolar(y) if both else unipolar(y) * (-1 if self.mode == SPEED_CCW else 1)
@@ -287,6 +315,11 @@ class AnalogControl:
             return
         m.axis.run(speed * m.axis.sign, self._limits(abs(speed)))
         self._own = m.axis.profile
+
+    def _zero_speed_input(self) -> bool:
+        """The input asks for 0 min⁻¹: below 0.2 V (types 2, 3), 2.4-2.6 V (type 4)."""
+        y = self.filtered
+        return MID_LO <= y <= MID_HI if self.mode == SPEED_BOTH else y <= LO
 
     # -- K38=5..8 direct-mode data --------------------------------------------------------
     def _write_data(self, kind: str, value: int) -> None:
@@ -383,6 +416,7 @@ class AnalogControl:
             return True
         self.feedback = _Feedback(target, limits.speed, 1 if target > here else -1, limits)
         self._own = None
+        self.filtered = float(self.input.counts())
         self._cancel()
         self._tick()
         return True
@@ -405,11 +439,11 @@ class AnalogControl:
             self.feedback = None
             return
         error = m.v_numeric(m.memory.get("V", 15)) - self.sensor_value()
-        ki = m.k(75) / 1000.0
-        fb.integral += error
-        if ki:
-            fb.integral = max(-100.0 / ki, min(100.0 / ki, fb.integral))
-        u = m.k(74) / 100.0 * error + ki * fb.integral
+        kp, ki = m.k(74) / 100.0, m.k(75) / 1000.0
+        u = kp * error + ki * (fb.integral + error)
+        if abs(u) < 100.0 or (u > 0) != (error > 0):
+            fb.integral += error        # no integration while saturated (anti-windup)
+        u = kp * error + ki * fb.integral
         speed = fb.direction * fb.speed * max(-1.0, min(1.0, u / 100.0))
         here = m.axis.command_position()
         remaining = (fb.target - here) * fb.direction

@@ -17,7 +17,7 @@ from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from . import units
-from .analog import AnalogInput
+from .analog import AnalogInput, AnalogSource
 from .analog_control import AnalogControl
 from .analog_output import output_volts, volts_to_register
 from .axis import Axis
@@ -463,6 +463,11 @@ class Motor:
     @analog.setter
     def analog(self, counts: int) -> None:
         self.analog_input.set_counts(counts)
+
+    def set_analog_source(self, source: AnalogSource) -> None:
+        """Drive the analog input from ``source`` from now on (machine file, tests)."""
+        source.bind(self)
+        self.analog_input.set_source(source)
 
     @property
     def encoder_count(self) -> int:
