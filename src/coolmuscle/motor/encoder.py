@@ -133,6 +133,7 @@ class ExternalEncoder:
         self.clock: _Clock | None = None
         self._index_state: int | None = None
         self._index_timer: Timer | None = None
+        self._config: tuple[object, ...] | None = None
         motor.params.on_change(self._param_changed)
         timeline.listeners.append(self._trajectory_changed)
         self.reconfigure()
@@ -169,7 +170,14 @@ class ExternalEncoder:
         return Schmitt(1.0, play, 0.5 + play)
 
     def reconfigure(self) -> None:
-        """K71/K72/K37 or the gearing changed: keep the count, restart counting."""
+        """K71/K72/K37 or the gearing changed: keep the count, restart counting.
+
+        Writing a parameter with the value it has changes nothing (the quantizer keeps
+        its hysteresis)."""
+        config = (self.encoder_type(), self.resolution(), self.motor.k(37), self.gearing)
+        if config == self._config:
+            return
+        self._config = config
         self.offset = self.count()
         self.cancel_index()
         if self.track is not None:
