@@ -177,6 +177,7 @@ class Track:
         self.done = timeline.now()
         self.schmitt.init(self.value(timeline.piece, self.done))
         self.checkpoints: list[tuple[int, int, Piece]] = []
+        self._times: list[int] = []
         self._checkpoint(timeline.piece)
         timeline.tracks.append(self)
 
@@ -199,10 +200,13 @@ class Track:
 
     def _checkpoint(self, piece: Piece) -> None:
         entry = (self.done, self.schmitt.state, piece)
-        if self.timeline.recording:
-            self.checkpoints.append(entry)
-        else:
-            self.checkpoints = [entry]
+        if not self.timeline.recording:
+            self.checkpoints, self._times = [], []
+        elif self._times and self._times[-1] == self.done:
+            self.checkpoints.pop()
+            self._times.pop()
+        self.checkpoints.append(entry)
+        self._times.append(self.done)
 
     def _advance(self, schmitt: Schmitt, piece: Piece, t0: int, t1: int) -> None:
         for _, tb in piece.runs(t0, t1):
@@ -240,14 +244,14 @@ class Track:
     def _base(self, t: int) -> tuple[int, int, Piece] | None:
         if not self.checkpoints:
             return None
-        i = bisect_right([c[0] for c in self.checkpoints], t) - 1
+        i = bisect_right(self._times, t) - 1
         return self.checkpoints[max(i, 0)]
 
     def edges(self, t0: int, t1: int, limit: int = MAX_EDGES) -> list[tuple[int, int]]:
         """(time, new state) of every state change in (t0, t1], solved on each run."""
         out: list[tuple[int, int]] = []
-        starts = [c[0] for c in self.checkpoints]
-        for i, (start, state, piece) in enumerate(self.checkpoints):
+        starts = self._times
+        for i, (start, _, piece) in enumerate(self.checkpoints):
             end = starts[i + 1] if i + 1 < len(starts) else t1
             lo, hi = max(start, t0), min(end, t1)
             if hi <= lo:

@@ -20,6 +20,7 @@ are added to the sample times, so a trace shows every edge exactly.  Export:
 from __future__ import annotations
 
 import csv
+import importlib.util
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
@@ -43,6 +44,25 @@ FIELDS = ("target", "command", "position", "speed", "torque", "status", "inputs"
 
 #: Most position-derived edges added to the sample times of one export.
 MAX_EDGE_SAMPLES = 200_000
+
+#: Columns holding whole numbers (Parquet int64); the others are float64.
+INTEGER_FIELDS = frozenset({"status", "inputs", "outputs", "analog_in", "encoder"})
+
+
+class TraceFormatError(ValueError):
+    """A trace path the recorder cannot write (Parquet without pyarrow)."""
+
+
+def parquet_available() -> bool:
+    """Whether pyarrow is installed (Parquet traces are optional)."""
+    return importlib.util.find_spec("pyarrow") is not None
+
+
+def check_trace_path(path: str | Path) -> None:
+    """Refuse, before anything runs, a trace the recorder could not write."""
+    if Path(path).suffix.lower() == ".parquet" and not parquet_available():
+        raise TraceFormatError(f"cannot write {path}: Parquet traces need pyarrow "
+                               "(pip install pyarrow); a .csv path needs nothing")
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,14 +205,40 @@ class TraceRecorder:
     def header(self) -> list[str]:
         return ["time_s"] + [f"m{mid}.{f}" for mid in self._logs for f in FIELDS]
 
+    def write(self, path: str | Path, step: float = 0.001) -> Path:
+        """Write the trace: Parquet for a ``.parquet`` path (pyarrow), else CSV."""
+        if Path(path).suffix.lower() == ".parquet":
+            return self.write_parquet(path, step)
+        return self.write_csv(path, step)
+
+    def write_parquet(self, path: str | Path, step: float = 0.001) -> Path:
+        """Write the trace as Parquet (needs pyarrow: :class:`TraceFormatError`)."""
+        check_trace_path(path)
+        import pyarrow as pa  # noqa: PLC0415  (optional dependency)
+        import pyarrow.parquet as pq  # noqa: PLC0415
+        header = self.header()
+        columns: list[list[float]] = [[] for _ in header]
+        for row in self.rows(step):
+            for column, value in zip(columns, row):
+                column.append(value)
+        arrays = {}
+        for name, values in zip(header, columns):
+            if name.rsplit(".", 1)[-1] in INTEGER_FIELDS:
+                arrays[name] = pa.array([int(v) for v in values], type=pa.int64())
+            else:
+                arrays[name] = pa.array(values, type=pa.float64())
+        path = Path(path)
+        pq.write_table(pa.table(arrays), str(path))
+        return path
+
     def write_csv(self, path: str | Path, step: float = 0.001) -> Path:
-        """Write the trace as CSV (``step`` seconds between grid samples)."""
+        """Write the trace as CSV (``step`` seconds between grid samples; times to the ns)."""
         path = Path(path)
         with path.open("w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(self.header())
             for row in self.rows(step):
-                writer.writerow([_fmt(v) for v in row])
+                writer.writerow([f"{row[0]:.9f}"] + [_fmt(v) for v in row[1:]])
         return path
 
 
