@@ -85,7 +85,7 @@ class ManualMotion:
         m = self.motor
         if self.feeding():
             lim = m.limits(m.k(49), m.k(43))
-            m.axis.stop(lim.decel, lim.scurve)
+            m.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
         self.feed_profile = None
         self.feed_direction = 0
         self.blocked = False

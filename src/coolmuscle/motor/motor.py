@@ -29,7 +29,7 @@ from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
 from .manual import ManualMotion
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
-from .planner import Limits, limits_from_data
+from .planner import ESTOP_DECEL, Limits, limits_from_data
 from .plant import Plant
 from .pulses import RotationPulses
 from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
@@ -40,8 +40,6 @@ log = logging.getLogger(__name__)
 #: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
 WRITABLE_STATES = frozenset({"Dx", "ST"})
 
-#: Maximum deceleration used by the emergency stop ``*`` (pulses/s²), docs/fidelity.md.
-ESTOP_DECEL = 32767 * 1000.0
 
 
 class MotorBus(Protocol):
@@ -239,7 +237,7 @@ class Motor:
     def stop(self) -> None:
         """``]``/``}``-style decelerating stop at the motion's deceleration."""
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
-        self.axis.stop(lim.decel, lim.scurve)
+        self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
@@ -297,7 +295,8 @@ class Motor:
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
-        self.report_status()
+        if not self.estopped and not self.alarm:   # those were reported when they began
+            self.report_status()
 
     def _passing_point(self, index: int) -> None:
         """K34=6: the output is on for K73 ms from each passing point; a point within
