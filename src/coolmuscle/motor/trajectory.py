@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
-from ..sim.kernel import NS_PER_MS
+from ..sim.kernel import NS_PER_MS, NS_PER_S
 from .profile import Profile
 from .servo import Tracking
 
@@ -42,10 +42,13 @@ class Piece:
 
     def position(self, t: int) -> float:
         """Actual position in user pulses at kernel time ``t``."""
-        return self.sign * (self.profile.position_at(t) - self.tracking.error_at(t) - self.zero)
+        return self.sign * (self.raw_position(t) - self.zero)
 
     def raw_position(self, t: int) -> float:
         """Actual position in raw encoder pulses (the shaft, whatever ``|2`` did)."""
+        shaft = getattr(self.tracking, "position_at", None)
+        if callable(shaft):
+            return float(shaft(t))
         return self.profile.position_at(t) - self.tracking.error_at(t)
 
     def user_of(self, raw: float) -> float:
@@ -57,10 +60,17 @@ class Piece:
         return self.sign * self.tracking.actual_velocity_at(t)
 
     def turns(self, t0: int, t1: int) -> list[int]:
-        """Instants in (t0, t1) where the actual motion may reverse."""
+        """Instants in (t0, t1) where the actual motion may reverse.
+
+        Asks the servo model: ``velocity_zeros`` (first-order tracking,
+        :mod:`.servo`), or the sign changes of each piece's speed of a piecewise
+        shaft motion (``pieces``, ``to_ns``; the load model); else a 1 ms scan.
+        """
         zeros = getattr(self.tracking, "velocity_zeros", None)
         if callable(zeros):
             return list(zeros(t0, t1))
+        if hasattr(self.tracking, "pieces") and hasattr(self.tracking, "to_ns"):
+            return _piecewise_turns(self.tracking, t0, t1)
         return _sampled_turns(self, t0, t1)
 
     def runs(self, t0: int, t1: int) -> Iterator[tuple[int, int]]:
@@ -82,6 +92,21 @@ class Piece:
 def piece_of(axis: "Axis") -> Piece:
     """The trajectory the axis follows now."""
     return Piece(axis.kernel.now, axis.profile, axis.tracking, axis.zero, axis.sign)
+
+
+def _piecewise_turns(motion: Any, t0: int, t1: int) -> list[int]:
+    """Piece boundaries and speed sign changes of a piecewise closed-form motion."""
+    from . import expoly  # noqa: PLC0415  (the load model's closed forms)
+    rel0 = (t0 - motion.origin_ns) / NS_PER_S
+    rel1 = (t1 - motion.origin_ns) / NS_PER_S
+    out: list[int] = []
+    for p in motion.pieces:
+        a, b = max(rel0, p.start), min(rel1, p.end)
+        if a >= b:
+            continue
+        cuts = [0.0, *expoly.roots(p.vel(), p.k, a - p.start, b - p.start)]
+        out.extend(t for t in (motion.to_ns(p, tau) for tau in cuts) if t0 < t < t1)
+    return sorted(set(out))
 
 
 def _sampled_turns(piece: Piece, t0: int, t1: int) -> list[int]:
