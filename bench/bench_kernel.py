@@ -26,13 +26,14 @@ import sys
 import time
 from dataclasses import dataclass
 
+from typing import Any
+
 from coolmuscle.chain import Chain
 from coolmuscle.device import Event
 from coolmuscle.motor.analog_output import output_volts
-from coolmuscle.motor.plant import Plant
+from coolmuscle.motor.axis import Axis
 from coolmuscle.motor.planner import Waypoint, limits_from_data, plan_moves
-from coolmuscle.motor.profile import hold
-from coolmuscle.motor.servo import DEFAULT_KP, Tracking
+from coolmuscle.motor.profile import Profile, hold
 from coolmuscle.motor.status import status_line
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S
 
@@ -78,6 +79,47 @@ class ClosedForm:
 
 
 # -- naive: a fixed 1 ms tick loop over the same moves -----------------------------------------
+def solve(axis: Axis, profile: Profile, now: int, previous: Any) -> Any:
+    """The servo model's shaft solution for ``profile`` from ``now``, built as the axis
+    builds it (first-order tracking, or the load model's piecewise motion)."""
+    try:
+        from coolmuscle.motor.servo import Tracking
+    except ImportError:                               # the load model (dynamics.Motion)
+        from coolmuscle.motor.dynamics import Motion
+        p, v = (previous.position_at(now), previous.velocity_at(now)) if previous else (0, 0)
+        return Motion(profile, now, p, v, axis._current_drive())
+    return Tracking(profile, previous.error_at(now) if previous else 0.0, axis.kp)
+
+
+try:                                       # first-order tracking, or the load model
+    import coolmuscle.motor.servo  # noqa: F401
+    LOAD_MODEL = False
+except ImportError:
+    LOAD_MODEL = True
+
+
+def shaft(solution: Any, profile: Profile, t: int) -> tuple[float, float, float]:
+    """(command, actual position, actual speed), raw pulses: first-order tracking."""
+    command = profile.position_at(t)
+    error = solution.error_at(t)
+    return command, command - error, solution.kp * error
+
+
+def shaft_load(solution: Any, profile: Profile, t: int) -> tuple[float, float, float]:
+    """The same from the load model's motion."""
+    return solution.command_at(t), solution.position_at(t), solution.velocity_at(t)
+
+
+def torque(motor: Any, solution: Any, profile: Profile, t: int, speed: float) -> float:
+    """Ix as the trace computes it: the plant from the command."""
+    return motor.plant.torque_percent(profile.acceleration_at(t), speed, 1000)
+
+
+def torque_load(motor: Any, solution: Any, profile: Profile, t: int, speed: float) -> float:
+    """Ix from the load model's motion."""
+    return solution.torque_percent_at(t)
+
+
 @dataclass
 class Tick:
     """What the naive loop evaluates each millisecond."""
@@ -92,15 +134,20 @@ class Tick:
 
 
 class Naive:
-    """Fixed-step simulation: every millisecond evaluate the motor and run the host."""
+    """Fixed-step simulation: every millisecond evaluate the motor and run the host.
+
+    A motor object of its own (never run by a kernel) only lends the model's
+    parameters: its plant, servo gain and drive."""
 
     def __init__(self, record: bool) -> None:
-        self.plant = Plant()
+        self.motor = Chain().motors[1]
         self.window = 5.0                 # K55
         self.ppr = 1000                   # K37=3
         self.limits = limits_from_data(S_VALUE, A_VALUE, k37=3, k44=100, k51=0, k69=0)
         self.profile = hold(0.0, 0)
-        self.tracking = Tracking(self.profile, 0.0, DEFAULT_KP)
+        self.tracking = solve(self.motor.axis, self.profile, 0, None)
+        self.shaft = shaft_load if LOAD_MODEL else shaft
+        self.torque = torque_load if LOAD_MODEL else torque
         self.target = 0.0
         self.moving = False
         self.moves = 0
@@ -112,34 +159,29 @@ class Naive:
     def _go(self) -> None:
         target = float(TARGETS[self.moves % 2])
         start = self.profile.state_at(self.now)
-        e0 = self.tracking.error_at(self.now)
         self.profile = plan_moves(start, [Waypoint(target, self.limits)], self.now)
-        self.tracking = Tracking(self.profile, e0, DEFAULT_KP)
+        self.tracking = solve(self.motor.axis, self.profile, self.now, self.tracking)
         self.target = target
         self.moving = True
         self.moves += 1
 
     def tick(self) -> None:
         t = self.now
-        command = self.profile.position_at(t)
-        error = self.tracking.error_at(t)
+        command, position, speed = self.shaft(self.tracking, self.profile, t)
         ended = self.profile.end_ns is not None and t >= self.profile.end_ns
-        if self.moving and ended and abs(error) <= self.window:
+        if self.moving and ended and abs(command - position) <= self.window:
             self.moving = False
             self.reports.append((t, status_line(1, 8)))   # K23=1 report
             self._go()                                     # the host, this millisecond
-            command = self.profile.position_at(t)
-            error = self.tracking.error_at(t)
-        speed = self.tracking.kp * error
-        accel = self.profile.acceleration_at(t)
-        torque = self.plant.torque_percent(accel, speed, self.ppr)
+            command, position, speed = self.shaft(self.tracking, self.profile, t)
+        ix = self.torque(self.motor, self.tracking, self.profile, t, speed)
         status = 0 if self.moving else 8
         outputs = 0                                        # K34=0000: no output functions
-        analog = output_volts(0, target=self.target, position=command - error, error=error,
-                              speed_pps=speed, torque=torque, pulses_per_rev=self.ppr)
+        analog = output_volts(0, target=self.target, position=position,
+                              error=command - position, speed_pps=speed, torque=ix,
+                              pulses_per_rev=self.ppr)
         if self.samples is not None:
-            self.samples.append(Tick(command, command - error, speed, torque, status, outputs,
-                                     analog))
+            self.samples.append(Tick(command, position, speed, ix, status, outputs, analog))
         self.now += NS_PER_MS
 
     def run(self, seconds: float) -> None:

@@ -15,7 +15,7 @@ import pytest
 from coolmuscle.chain import Chain
 from coolmuscle.motor.analog import (Constant, Ramp, Sine, Table, TorqueSensor, adc,
                                      source_from_config)
-from coolmuscle.motor.analog_control import SAMPLE_NS, TICK_NS
+from coolmuscle.motor.analog_control import SAMPLE_NS, TICK_NS, friction_nm
 from coolmuscle.motor.analog_output import output_volts, volts_to_register
 from coolmuscle.sim.kernel import seconds
 
@@ -136,11 +136,11 @@ def test_the_loop_wakes_for_a_ramp_and_ticks_only_while_it_changes() -> None:
     chain.set_param(1, 39, 1024)
     motor.set_analog_source(Ramp(0.2, 4.8, seconds(5), seconds(1)))
     chain.kernel.run(until=seconds(4.9))
-    assert chain.kernel.events_run < 5             # asleep until the ramp starts
+    assert motor.analog_control.ticks == 1         # 0 V -> 0.2 V at once, then asleep
     chain.kernel.run(until=seconds(5.5))
-    mid = chain.kernel.events_run
-    assert 450 <= mid <= 560                       # one tick a millisecond, plus motion
+    assert motor.analog_control.ticks == 1 + 500   # one a millisecond from 5.001 s
     chain.kernel.run(until=seconds(10))
+    assert motor.analog_control.ticks == 1 + 1000  # 5.001 .. 6.000 s, then asleep
     assert chain.kernel.peek() is None
     assert chain.execute("?96.1") == ["Px.1=1000"]
 
@@ -261,7 +261,7 @@ def test_ch3_k38_9_torque_control_accelerates_the_load_up_to_k40() -> None:
     chain.kernel.run(until=seconds(1))
     assert chain.execute("?97.1") == ["Sx.1=100"]  # capped at K40
     torque = int(chain.execute("?98.1")[0].split("=")[1])
-    friction = motor.plant.torque_percent(0.0, 10000.0, 1000)
+    friction = 100 * friction_nm(motor.plant, 10000.0, 1000) / motor.plant.rated_torque
     assert torque == round(friction) < 50
     assert chain.kernel.peek() is None             # steady at K40: the loop sleeps
 

@@ -184,8 +184,8 @@ def test_ch3_k71_change_keeps_the_count_and_frees_inputs_1_and_2() -> None:
 def test_cm1_k63_counts_with_k88_resolution() -> None:
     chain = _chain(Gearing(), firmware="cm1")
     chain.execute("(.1")
-    _run(chain, "K88.1=2000", "K63.1=2", "S.1=10", "P.1=500", "^.1", until=3)
-    assert chain.execute("?76.1") == ["Ecnt.1=1000"]   # 2000 ppr encoder, 1000 ppr motor
+    _run(chain, "K88.1=1500", "K63.1=2", "S.1=10", "P.1=501", "^.1", until=3)
+    assert chain.execute("?76.1") == ["Ecnt.1=751"]    # 1500 ppr encoder, 1000 ppr motor
 
 
 def test_machine_file_encoder_tables() -> None:

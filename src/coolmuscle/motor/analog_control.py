@@ -71,6 +71,16 @@ def effective_mode(motor: "Motor") -> int:
     return motor.k(38)
 
 
+def friction_nm(plant: object, speed_pps: float, ppr: int) -> float:
+    """Friction torque (N·m) opposing ``speed_pps``: Coulomb, plus viscous and a
+    constant load torque where the load model has them."""
+    if speed_pps == 0.0:
+        return 0.0
+    omega = speed_pps * 2 * math.pi / ppr
+    coulomb = math.copysign(getattr(plant, "coulomb_friction", 0.0), speed_pps)
+    return coulomb + getattr(plant, "viscous_friction", 0.0) * omega
+
+
 def k40_pps(motor: "Motor") -> float:
     """K40 (min⁻¹) in pulses/s of the current resolution."""
     return units.rpm_to_pps(motor.k(40), motor.k(37))
@@ -113,6 +123,7 @@ class AnalogControl:
         self._timer: Timer | None = None
         self._sleeping = True
         self._in_tick = False
+        self.ticks = 0                    # loop samples so far (tests, benchmarks)
         analog_input.listeners.append(self.wake)
         motor.timeline.listeners.append(self._trajectory_changed)
         motor.params.on_change(self._param_changed)
@@ -174,6 +185,7 @@ class AnalogControl:
 
     def _tick(self) -> None:
         self._timer = None
+        self.ticks += 1
         now = self.kernel.now
         if not self._owns():
             self._rebase()
@@ -360,8 +372,9 @@ class AnalogControl:
         m = self.motor
         plant = m.plant
         ppr = m.resolution.pulses_per_rev
-        tau = percent / 100.0 * plant.rated_torque - self.input.source_load_torque()
-        friction = plant.torque_nm(0.0, v0, ppr)
+        load = self.input.source_load_torque() - m.axis.sign * getattr(plant, "load_torque", 0.0)
+        tau = percent / 100.0 * plant.rated_torque - load
+        friction = friction_nm(plant, v0, ppr)
         if v0 == 0.0 and abs(tau) <= plant.coulomb_friction:
             return 0.0, percent
         if v0 == 0.0:
@@ -373,7 +386,7 @@ class AnalogControl:
         cap = k40_pps(m)
         if abs(v1) >= cap:
             v1 = math.copysign(cap, v1)
-            need = plant.torque_nm(0.0, v1, ppr) + self.input.source_load_torque()
+            need = friction_nm(plant, v1, ppr) + load
             return v1, 100.0 * need / plant.rated_torque
         return v1, percent
 

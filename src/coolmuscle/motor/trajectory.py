@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 from ..sim.kernel import NS_PER_MS, NS_PER_S
 from .profile import Profile
-from .servo import Tracking
 
 if TYPE_CHECKING:
     from .axis import Axis
@@ -36,7 +35,7 @@ class Piece:
 
     start: int
     profile: Profile
-    tracking: Tracking
+    tracking: Any           # the servo model's solution (servo.Tracking or a motion)
     zero: float
     sign: int
 
