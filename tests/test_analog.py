@@ -369,3 +369,22 @@ def test_constant_source_and_set_analog_agree() -> None:
     assert chain.snapshot(1).analog == 512
     chain.set_analog(1, 1023)
     assert chain.snapshot(1).analog == 1023 and chain.execute("?74.1") == ["ADI0.1=1023"]
+
+
+def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> None:
+    """The machine file loader sets ``analog_config`` / ``encoder_config`` on the motor
+    (docs/machine-file.md); that drives the input and connects the encoder at once."""
+    from coolmuscle.motor.encoder import gearing_from_config
+    chain = _chain()
+    motor = chain.motors[1]
+    motor.analog_config = source_from_config({"kind": "constant", "value": 512,
+                                              "unit": "counts"})
+    motor.encoder_config = gearing_from_config({"ppr": 500})
+    assert chain.execute("?74.1") == ["ADI0.1=512"]
+    chain.set_param(1, 71, 5)
+    chain.set_param(1, 38, 0)
+    chain.execute("S.1=10, P.1=2000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(3))
+    assert chain.execute("?76.1") == ["Ecnt.1=1000"]
+    assert motor.encoder_config.ppr == 500 and motor.analog_config.volts(0) == 2.5

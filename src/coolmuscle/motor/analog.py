@@ -191,9 +191,10 @@ class Table(AnalogSource):
 class TorqueSensor(AnalogSource):
     """A torque sensor on a spring load (5.5): the motor pushes the load at ``contact``.
 
-    Torque (N·m) = ``stiffness`` x how far the actual position is past ``contact``
-    in the ``direction`` of the push (0 before contact); volts = ``offset`` +
-    ``volts_per_nm`` x torque.  5.5's sensor: 2.5 V offset, 1 V per 0.2 N·m.
+    Torque (N·m) = ``stiffness`` x how far the actual shaft (raw pulses: a machine
+    position, unmoved by ``|2``) is past ``contact`` in the ``direction`` of the push
+    (0 before contact); volts = ``offset`` + ``volts_per_nm`` x torque.  5.5's sensor:
+    2.5 V offset, 1 V per 0.2 N·m.
     """
 
     def __init__(self, *, offset: float = 2.5, volts_per_nm: float = 5.0,
@@ -206,13 +207,14 @@ class TorqueSensor(AnalogSource):
         self._position: Callable[[], float] = lambda: 0.0
 
     def bind(self, motor: "Motor") -> None:
-        self._position = lambda: motor.axis.position()
+        self._position = lambda: motor.axis.raw_actual()
 
     def torque(self) -> float:
         past = (self._position() - self.contact) * self.direction
         return self.stiffness * max(0.0, past)
 
     def load_torque(self) -> float:
+        """In the raw (CW) direction; the torque control turns it to user terms."""
         return self.direction * self.torque()
 
     def volts(self, t: int) -> float:

@@ -372,7 +372,10 @@ class AnalogControl:
         m = self.motor
         plant = m.plant
         ppr = m.resolution.pulses_per_rev
-        load = self.input.source_load_torque() - m.axis.sign * getattr(plant, "load_torque", 0.0)
+        # resisting torque in the user direction: a sensed spring load (raw, against its
+        # push) less a constant load torque of the load model (raw, "+ pushes CW")
+        load = m.axis.sign * (self.input.source_load_torque()
+                              - getattr(plant, "load_torque", 0.0))
         tau = percent / 100.0 * plant.rated_torque - load
         friction = friction_nm(plant, v0, ppr)
         if v0 == 0.0 and abs(tau) <= plant.coulomb_friction:

@@ -21,7 +21,7 @@ from .analog import AnalogInput, AnalogSource
 from .analog_control import AnalogControl
 from .analog_output import output_volts, volts_to_register
 from .axis import Axis
-from .encoder import ExternalEncoder
+from .encoder import ExternalEncoder, Gearing
 from .evaluate import pack_string
 from .firmware import Firmware
 from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
@@ -467,6 +467,25 @@ class Motor:
         """Drive the analog input from ``source`` from now on (machine file, tests)."""
         source.bind(self)
         self.analog_input.set_source(source)
+
+    @property
+    def analog_config(self) -> AnalogSource:
+        """The analog input's source; setting it (machine file ``[axis.analog]``) drives
+        the input from now on (docs/machine-file.md)."""
+        return self.analog_input.source
+
+    @analog_config.setter
+    def analog_config(self, source: AnalogSource) -> None:
+        self.set_analog_source(source)
+
+    @property
+    def encoder_config(self) -> Gearing:
+        """The external encoder's gearing (machine file ``[axis.encoder]``)."""
+        return self.encoder.gearing
+
+    @encoder_config.setter
+    def encoder_config(self, gearing: Gearing) -> None:
+        self.encoder.set_gearing(gearing)
 
     @property
     def encoder_count(self) -> int:
