@@ -388,3 +388,18 @@ def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> 
     chain.kernel.run(until=seconds(3))
     assert chain.execute("?76.1") == ["Ecnt.1=1000"]
     assert motor.encoder_config.ppr == 500 and motor.analog_config.volts(0) == 2.5
+
+
+def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
+    """K78+54 "Analog Output" (5.6.7 FC03 table) reads the K35 output: 683 for the
+    current position 512 (3.335 V), as the device snapshot publishes it."""
+    from coolmuscle.modbus.registers import MotorMap, long_of
+    chain = _chain()
+    chain.set_param(1, 35, 2)
+    chain.execute("S.1=10, A.1=100, P.1=512")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert chain.snapshot(1).extra["analog_output"] == 683
+    words = MotorMap(chain, 1, chain.get_param(1, 78), little=False).read_holding(
+        chain.get_param(1, 78) + 54, 2)
+    assert long_of(words[0], words[1], False) == 683

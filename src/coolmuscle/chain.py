@@ -307,7 +307,8 @@ class Chain:
             speed_pps=m.axis.velocity(), torque=m.torque(), status=m.status,
             inputs=m.io.input_word(), outputs=m.io.output_word(),
             temperature=m.temperature, voltage=m.voltage, analog=m.analog,
-            encoder_count=m.encoder_count, enabled=m.axis.enabled)
+            encoder_count=m.encoder_count, enabled=m.axis.enabled,
+            extra={"analog_output": m.analog_output()})   # K35 (Modbus K78+54)
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         self._require(motor).set_input_level(number, on)

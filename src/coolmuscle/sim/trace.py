@@ -130,6 +130,10 @@ class TraceRecorder:
         for motor in chain.motors.values():
             motor.axis.record_history(True)
             _record_signals(motor)
+            # a motion started from outside a kernel event (Python API) changes Ux too
+            listeners = getattr(motor.axis, "trajectory_listeners", None)
+            if listeners is not None:
+                listeners.append(self.capture)
         self._remove = chain.kernel.add_observer(self.capture)
 
     def capture(self) -> None:
@@ -140,6 +144,10 @@ class TraceRecorder:
     def stop(self) -> None:
         """Stop recording discrete changes (the history is kept for export)."""
         self._remove()
+        for log in self._logs.values():
+            listeners = getattr(log.motor.axis, "trajectory_listeners", [])
+            if self.capture in listeners:
+                listeners.remove(self.capture)
 
     @property
     def motor_ids(self) -> tuple[int, ...]:
