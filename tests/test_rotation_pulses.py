@@ -223,3 +223,22 @@ def test_ch3_k73_merge_pulse_is_on_for_k73_ms_from_each_passing_point() -> None:
         assert rec.sample(1, t + 30_000_000 - 1).outputs & 1 == 1
         assert rec.sample(1, t + 30_000_000).outputs & 1 == 0
     assert math.isclose(motor.position(), 9000, abs_tol=0.5)
+
+
+def test_cm1_k34_7_quadrature_with_the_k54_offset() -> None:
+    """CM1 (Appendix A): K34 7 = quadrature phase output every K24 pulses, shifted by
+    K54 "Quadrature output offset"."""
+    chain = Chain(firmware="cm1")
+    chain.execute("(.1")
+    chain.set_param(1, 24, 1000)
+    chain.set_param(1, 34, 77)
+    chain.set_param(1, 54, 300)
+    chain.execute("S.1=10, A.1=100, P.1=250")
+    chain.execute("^.1")
+    pulses = chain.motors[1].pulses
+    chain.kernel.run(until=seconds(1))
+    assert (pulses.signal(1), pulses.signal(2)) == (False, False)   # 250 - 300: last quarter
+    chain.execute("P.1=400")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert (pulses.signal(1), pulses.signal(2)) == (True, False)    # 100: first quarter

@@ -45,7 +45,7 @@ class RotationPulses:
         self.motor = motor
         self.timeline = timeline
         self.track: Track | None = None
-        self._config: tuple[int, int, int] | None = None
+        self._config: tuple[int, int, int, int] | None = None
         motor.params.on_change(self._param_changed)
         self.refresh()
 
@@ -65,9 +65,13 @@ class RotationPulses:
         """±1/5000 revolution in pulses (5.2: ±10 pulses at 50000 ppr)."""
         return self.motor.resolution.pulses_per_rev * HYSTERESIS_PER_REV
 
+    def offset(self) -> int:
+        """CM1 K54 "Quadrature output offset" (pulses): the pattern starts there."""
+        return self.motor.k(54) if self.motor.firmware.name == "cm1" else 0
+
     def refresh(self) -> None:
         """Start, restart or stop following the position after K24/K34/K37 changes."""
-        config = (self.motor.k(24), self.motor.k(34), self.motor.k(37))
+        config = (self.motor.k(24), self.motor.k(34), self.motor.k(37), self.offset())
         active = bool(self.outputs())
         if active and config == self._config and self.track is not None:
             return
@@ -77,11 +81,12 @@ class RotationPulses:
         self._config = config if active else None
         if active:
             h = self.hysteresis()
-            self.track = Track(self.timeline, Schmitt(self.motor.k(24) / 4.0, h, h))
+            self.track = Track(self.timeline, Schmitt(self.motor.k(24) / 4.0, h, h),
+                               offset=-float(self.offset()))
 
     def _param_changed(self, k: int, old: int, new: int) -> None:
         del old, new
-        if k in (24, 34, 37):
+        if k in (24, 34, 37, 54):
             self.refresh()
 
     # -- signals ----------------------------------------------------------------
