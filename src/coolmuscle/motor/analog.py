@@ -69,8 +69,8 @@ class AnalogSource:
     def bind(self, motor: "Motor") -> None:
         """Attach to the motor whose input it drives (sensors read the motor)."""
 
-    def load_torque(self) -> float:
-        """Torque (N·m, user direction) the measured load puts on the shaft."""
+    def load_torque(self, t: int | None = None) -> float:
+        """Torque (N·m, raw direction, resisting) the measured load puts on the shaft."""
         return 0.0
 
 
@@ -204,22 +204,26 @@ class TorqueSensor(AnalogSource):
         self.stiffness = stiffness
         self.contact = contact
         self.direction = 1 if direction >= 0 else -1
-        self._position: Callable[[], float] = lambda: 0.0
+        self._position: Callable[[int | None], float] = lambda t: 0.0
 
     def bind(self, motor: "Motor") -> None:
-        self._position = lambda: motor.axis.raw_actual()
+        def raw(t: int | None) -> float:
+            if t is None or t >= motor.kernel.now:
+                return motor.axis.raw_actual()
+            return motor.timeline.piece_at(t).raw_position(t)
+        self._position = raw
 
-    def torque(self) -> float:
-        past = (self._position() - self.contact) * self.direction
+    def torque(self, t: int | None = None) -> float:
+        """The sensed torque (N·m, >= 0) with the shaft where it is (was) at ``t``."""
+        past = (self._position(t) - self.contact) * self.direction
         return self.stiffness * max(0.0, past)
 
-    def load_torque(self) -> float:
+    def load_torque(self, t: int | None = None) -> float:
         """In the raw (CW) direction; the torque control turns it to user terms."""
-        return self.direction * self.torque()
+        return self.direction * self.torque(t)
 
     def volts(self, t: int) -> float:
-        del t
-        return self.offset + self.volts_per_nm * self.torque()
+        return self.offset + self.volts_per_nm * self.torque(t)
 
     def changing(self, t: int) -> bool:
         return True
@@ -271,9 +275,9 @@ class AnalogInput:
         """The converter's reading (?74 ``ADI0``)."""
         return adc(self.volts(t))
 
-    def source_load_torque(self) -> float:
-        """Load torque of a sensor source now (N·m), 0 for plain signals."""
-        return self.source.load_torque()
+    def source_load_torque(self, t: int | None = None) -> float:
+        """Load torque of a sensor source (N·m, raw direction), 0 for plain signals."""
+        return self.source_at(self._now() if t is None else t).load_torque(t)
 
 
 # -- machine file -----------------------------------------------------------------

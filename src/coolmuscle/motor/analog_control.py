@@ -16,6 +16,7 @@ docs/fidelity.md "Analog".
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -29,6 +30,8 @@ from .profile import Profile, Segment
 
 if TYPE_CHECKING:
     from .motor import Motor
+
+log = logging.getLogger(__name__)
 
 SAMPLE_NS = 200_000          # filter sample period: 5000 samples/s (K39 unit)
 TICK_NS = 1_000_000          # command update period
@@ -195,6 +198,8 @@ class AnalogControl:
             self._apply()
         except MotorError:
             pass                        # a value the motor refuses is not applied
+        except ValueError as exc:       # no plan for these settings: skip this sample
+            log.warning("motor %d: analog control: %s", self.motor.id, exc)
         finally:
             self._in_tick = False
         self._next(now)
@@ -482,6 +487,14 @@ class AnalogControl:
         self._own = ax.profile
 
     # -- Ix while the control sets the torque ---------------------------------------------------
+    def load_percent(self, t: int | None = None) -> float:
+        """The torque (% of rated, user direction) a sensed load takes from the motor
+        holding against it (a torque-sensor source; 0 otherwise)."""
+        load = self.input.source_load_torque(t)
+        if not load:
+            return 0.0
+        return 100.0 * self.motor.axis.sign * load / self.motor.plant.rated_torque
+
     def torque_percent(self) -> float | None:
         """The torque the control commands (type 9), or ``None`` (the servo's own)."""
         if self.mode == TORQUE and self._owns() and self._torque is not None:

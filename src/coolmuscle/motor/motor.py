@@ -174,9 +174,10 @@ class Motor:
         commanded = self.analog_control.torque_percent()
         if commanded is not None:
             return round(commanded)
-        return round(self.plant.torque_percent(self.axis.command_acceleration(),
-                                               self.axis.velocity(),
-                                               self.resolution.pulses_per_rev))
+        load = self.analog_control.load_percent()       # a torque-sensor load (5.5)
+        return round(load + self.plant.torque_percent(self.axis.command_acceleration(),
+                                                      self.axis.velocity(),
+                                                      self.resolution.pulses_per_rev))
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",

@@ -365,3 +365,12 @@ class Timeline:
     def position(self) -> float:
         return self.piece.position(self.now())
 
+    def piece_at(self, t: int) -> Piece:
+        """The trajectory followed at ``t`` (earlier ones from the axis history while a
+        trace records; else the current one)."""
+        history = self.axis.history
+        if t >= self.piece.start or not history:
+            return self.piece
+        i = max(bisect_right([h[0] for h in history], t) - 1, 0)
+        return Piece(*history[i])
+

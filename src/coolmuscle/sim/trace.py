@@ -183,7 +183,7 @@ class TraceRecorder:
         torque = 0.0
         ppr = motor.resolution.pulses_per_rev
         if not status & _NO_TORQUE:
-            torque = motor.plant.torque_percent(accel, speed, ppr)
+            torque = motor.plant.torque_percent(accel, speed, ppr) + _load(motor, t)
         command = sign * (command_raw - zero)
         position = sign * (command_raw - error - zero)
         analog_out = output_volts(motor.k(35), target=target if math.isfinite(target)
@@ -271,6 +271,12 @@ def _pulse_ports(motor: "Motor", t: int, outputs: int) -> int:
         bit = 1 << (number - 1)
         outputs = (outputs | bit) if port else (outputs & ~bit)
     return outputs
+
+
+def _load(motor: "Motor", t: int) -> float:
+    """Torque (%) a sensed load (analog torque-sensor source, 5.5) takes at ``t``."""
+    control = getattr(motor, "analog_control", None)
+    return control.load_percent(t) if control is not None else 0.0
 
 
 def _signal(motor: "Motor", name: str, t: int) -> int:
