@@ -224,3 +224,21 @@ def test_5_4_1_index_stop_is_solved_at_the_count_edge(target: int, speed: int, a
     assert motor.encoder.count(stop - 1) == target - step
     final = motor.encoder.count()
     assert (final - target) * step >= 0
+
+
+def test_signal_modules_import_no_clock_sockets_or_threads() -> None:
+    """docs/architecture.md rule 1 for the signal models (pulses, analog, encoder, jog)."""
+    import ast
+    from pathlib import Path
+
+    import coolmuscle.motor
+    package = Path(coolmuscle.motor.__file__).parent
+    for name in ("trajectory", "pulses", "manual", "analog", "analog_control",
+                 "analog_output", "encoder"):
+        tree = ast.parse((package / f"{name}.py").read_text())
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            for imported in names:
+                assert imported.split(".")[0] not in {"time", "asyncio", "socket",
+                                                      "threading"}, (name, imported)
