@@ -231,8 +231,9 @@ def run(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
     until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
                                           help="After the script, run on to this virtual time."),
-    trace: Optional[Path] = typer.Option(None, "--trace", metavar="OUT.csv",
-                                         help="Write a trace CSV."),
+    trace: Optional[Path] = typer.Option(
+        None, "--trace", metavar="OUT.csv",
+        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow)."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
@@ -254,6 +255,12 @@ def run(
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
+    if trace is not None:
+        from .sim.trace import TraceFormatError, check_trace_path
+        try:
+            check_trace_path(trace)
+        except TraceFormatError as exc:
+            raise UsageError(str(exc)) from None
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
     try:
         if plot is not None:
