@@ -25,7 +25,8 @@ from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import Limits, limits_from_data
-from .plant import Plant
+from .dynamics import Drive
+from .plant import DEFAULT_KP, STEPPER_KP, Plant
 from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
 
 log = logging.getLogger(__name__)
@@ -74,8 +75,9 @@ class Motor:
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
                             self._output_function_signal)
-        self.plant = Plant()
-        self.axis = Axis(kernel, kp=self.plant.kp,
+        self.torque_limit = 100
+        self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
+        self.axis = Axis(kernel, drive=self.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
                          on_passing_point=self._passing_point)
@@ -87,7 +89,6 @@ class Motor:
         self.encoder_count = 0
         self.temperature = 40
         self.voltage = 240
-        self.torque_limit = 100
         self._last_limits: Limits | None = None
 
     # -- parameters and units ----------------------------------------------
@@ -136,9 +137,13 @@ class Motor:
         """Ix (?98): % of rated torque."""
         if not self.axis.enabled:
             return 0
-        return round(self.plant.torque_percent(self.axis.command_acceleration(),
-                                               self.axis.velocity(),
-                                               self.resolution.pulses_per_rev))
+        return round(self.axis.torque_percent())
+
+    def drive(self) -> Drive:
+        """Dynamics parameters now: plant, torque limit M (2.1.1), machine, faults."""
+        return self.plant.drive(self.resolution.pulses_per_rev,
+                                limit_percent_of_rated=self.torque_limit * self.plant.peak_torque
+                                / 100.0, enabled=True)
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",

@@ -19,15 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable
 
-from ..motor.status import ALARM_BITS, Ux
 from .kernel import NS_PER_S
 
 if TYPE_CHECKING:
     from ..chain import Chain
     from ..motor.motor import Motor
-
-#: Ux bits during which the motor makes no torque: motor free and the alarms.
-_NO_TORQUE = int(Ux.MOTOR_FREE | ALARM_BITS)
 
 FIELDS = ("target", "command", "position", "speed", "torque", "status", "inputs", "outputs")
 
@@ -115,18 +111,15 @@ class TraceRecorder:
         history = motor.axis.history or []
         starts = [h[0] for h in history]
         i = max(bisect_right(starts, t) - 1, 0)
-        _, profile, tracking, zero, sign = history[i]
-        command_raw = profile.position_at(t)
-        error = tracking.error_at(t)
+        _, profile, motion, zero, sign = history[i]
+        command_raw = motion.command_at(t)
+        actual_raw = motion.position_at(t)
         final = profile.final_position
         target = sign * (final - zero) if math.isfinite(final) else math.copysign(math.inf, final)
-        speed = sign * tracking.kp * error
-        accel = sign * profile.acceleration_at(t)
+        speed = sign * motion.velocity_at(t)
         status, inputs, outputs = log.state_at(t)
-        torque = 0.0
-        if not status & _NO_TORQUE:
-            torque = motor.plant.torque_percent(accel, speed, motor.resolution.pulses_per_rev)
-        return Sample(t, target, sign * (command_raw - zero), sign * (command_raw - error - zero),
+        torque = sign * motion.torque_percent_at(t)
+        return Sample(t, target, sign * (command_raw - zero), sign * (actual_raw - zero),
                       speed, torque, status, inputs, outputs)
 
     def times(self, step: float, end: int | None = None) -> list[int]:
