@@ -66,6 +66,8 @@ class Axis:
         self.moving = False
         self.generation = 0
         self.watchers: list[Watcher] = []
+        #: Called with (the motion ending, now) before each re-solve (thermal model).
+        self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
         self._watch_timers: dict[int, Timer] = {}
         #: (time_ns, profile, motion, zero, sign) kept while a trace records.
@@ -265,6 +267,8 @@ class Axis:
         """Re-solve the shaft motion from the actual state now and re-arm everything."""
         now = self.kernel.now
         p, v = self.raw_actual(), self.raw_velocity()
+        for hook in self.before_resolve:
+            hook(self.motion, now)
         self._cancel()
         self.generation += 1
         self.motion = Motion(self.profile, now, p, v, self._current_drive())

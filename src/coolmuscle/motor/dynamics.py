@@ -135,6 +135,7 @@ class Motion:
         self.kp = drive.kp
         self.pieces: list[Piece] = []
         self._starts: list[float] = []
+        self._reach: dict[tuple[int, str], float] = {}
         self._cmd = command_pieces(profile, self.origin_ns)
         self._build(float(position), float(velocity))
 
@@ -191,15 +192,33 @@ class Motion:
     def to_ns(self, piece: Piece, tau: float) -> int:
         return self.origin_ns + round((piece.start + tau) * NS_PER_S)
 
+    def reach(self, piece: Piece, what: str) -> float:
+        """A bound of |err|, |vel| or |torque| (``what``) over a piece (cached)."""
+        key = (id(piece), what)
+        found = self._reach.get(key)
+        if found is None:
+            f = piece.err() if what == "err" else piece.vel() if what == "vel" else piece.torque
+            found = self._reach[key] = xp.abs_bound(f, piece.duration)
+        return found
+
+    def span(self, piece: Piece) -> tuple[float, float]:
+        """Bounds (lowest, highest) of the actual position over a piece."""
+        spread = xp.spread(piece.pos, piece.duration)
+        return piece.pos[0] - spread, piece.pos[0] + spread
+
     def first(self, after_ns: int, *alternatives: Conditions,
-              horizon_ns: int | None = None) -> int | None:
+              horizon_ns: int | None = None,
+              skip: Callable[[Piece], bool] | None = None) -> int | None:
         """First kernel time >= ``after_ns`` where, for one alternative, every condition
-        it gives for the piece is > 0 (``None`` from a piece: not there)."""
+        it gives for the piece is > 0 (``None`` from a piece: not there).  Pieces for
+        which ``skip`` is true are known not to qualify."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
             if horizon_ns is not None and self.to_ns(piece, 0.0) > horizon_ns:
                 return None
+            if skip is not None and skip(piece):
+                continue
             a = max(0.0, rel - piece.start)
             best: float | None = None
             for alt in alternatives:

@@ -83,6 +83,18 @@ def scale(f: F, s: float) -> F:
     return tuple(c * s for c in f)
 
 
+def spread(f: F, b: float) -> float:
+    """A bound of ``|f(τ) - c0|`` on [0, b] (∞ when b is and ``f`` has a τ term)."""
+    out = abs(f[-1])
+    for i in range(1, len(f) - 1):
+        c = f[i]
+        if c:
+            if math.isinf(b):
+                return INF
+            out += abs(c) * b ** i
+    return out
+
+
 def abs_bound(f: F, b: float) -> float:
     """A bound of ``|f|`` on [0, b] (∞ when b is and ``f`` has a τ term)."""
     out = abs(f[0]) + abs(f[-1])

@@ -27,7 +27,8 @@ from .params import ParamTable
 from .planner import Limits, limits_from_data
 from .dynamics import Drive
 from .plant import DEFAULT_KP, STEPPER_KP, Plant
-from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
+from .status import Report, Ux, io_word_hex, status_line
+from .supervision import Supervision
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +63,7 @@ class Context:
     extra: dict[str, object] = field(default_factory=dict)
 
 
-class Motor:
+class Motor(Supervision):
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
     def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
@@ -77,17 +78,18 @@ class Motor:
                             self._output_function_signal)
         self.torque_limit = 100
         self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
+        self.alarm = 0
+        self._init_supervision()
         self.axis = Axis(kernel, drive=self.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
                          on_passing_point=self._passing_point)
-        self.alarm = 0
+        self._attach_supervision()
         self.estopped = False
         self.origin_done = False
         self.merge_pulse_until = 0
         self.analog = 0
         self.encoder_count = 0
-        self.temperature = 40
         self.voltage = 240
         self._last_limits: Limits | None = None
 
@@ -108,6 +110,7 @@ class Motor:
         del old
         if k == 37:
             self.memory.k37 = new
+        self._supervision_param(k)
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
@@ -123,6 +126,9 @@ class Motor:
             return int(Ux.EMERGENCY_STOP)
         if not self.axis.enabled:
             return int(Ux.MOTOR_FREE)
+        special = self._supervision_status()
+        if special is not None:
+            return special
         return 0 if self.axis.moving else int(Ux.IN_POSITION)
 
     def position(self) -> int:
@@ -194,6 +200,10 @@ class Motor:
         """Start (or re-plan) a move through user-coordinate waypoints."""
         if not self.can_move() or not waypoints:
             return
+        waypoints = [(self.travel.clamp(t), lim) for t, lim in waypoints]
+        if self._allowed_target(waypoints[-1][0]) is None:
+            return
+        self.abandon_motion()
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints)
 
@@ -201,7 +211,10 @@ class Motor:
         """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
         if not self.can_move():
             return
+        self.abandon_motion()
         self._last_limits = limits
+        if self._continuous_blocked(s_value, limits):
+            return
         self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
 
     def go(self) -> None:
@@ -227,10 +240,12 @@ class Motor:
     def stop(self) -> None:
         """``]``/``}``-style decelerating stop at the motion's deceleration."""
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
+        self.abandon_motion()
         self.axis.stop(lim.decel, lim.scurve)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
+        self.abandon_motion()
         self.axis.stop(ESTOP_DECEL)
         if not self.estopped:
             self.estopped = True
@@ -245,13 +260,17 @@ class Motor:
     def enable(self) -> None:
         """``(``: servo on; also clears a latched alarm (CM1 manual 3.2.3 ControlWord 3)."""
         self.alarm = 0
+        self.abandon_motion()
         self.axis.hold_here()
         self.axis.enabled = True
 
     def free(self) -> None:
-        """``)``: motor free (servo off); the shaft stays where it is."""
-        self.axis.hold_here()
+        """``)``: motor free (servo off); the shaft coasts to rest where it is."""
+        self.abandon_motion()
+        was_moving = not self.motion_done()
         self.axis.enabled = False
+        if was_moving:
+            self.notify_motion_done("free")
 
     def reset_alarm(self) -> None:
         """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
@@ -275,20 +294,14 @@ class Motor:
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
-        bits &= int(ALARM_BITS)
-        if not bits or self.alarm & bits == bits:
-            return
-        self.alarm |= bits
-        self.axis.hold_here()
-        self.axis.enabled = False
-        self.report_status()
+        self._alarm_latched(bits)
 
     def capture(self, index: int) -> None:
         """``#x``: P[x] := current position (2.1.2)."""
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
-        self.report_status()
+        self._arrival()
 
     def _passing_point(self, index: int) -> None:
         del index
@@ -308,7 +321,7 @@ class Motor:
         if function == OUT_MOTOR_FREE:
             return not self.axis.enabled
         if function == OUT_PUSH:
-            return False
+            return self.push.active
         return False
 
     def set_output(self, number: int, on: bool) -> None:
@@ -318,8 +331,9 @@ class Motor:
 
     def set_input_level(self, number: int, on: bool) -> None:
         """Drive an input's electrical level (device API, machine file)."""
-        if self.io.set_level(number, on):
+        if self.io.set_level(number, self._input_driven(number, on)):
             self.report_inputs()
+            self._input_changed(number)
 
     # -- V registers and live states --------------------------------------------
     def state_value(self, name: str) -> int:
@@ -378,7 +392,7 @@ class Motor:
     def follow(self, target: float) -> None:
         """Jump the commanded position to ``target``; the servo follows (csp, Dx)."""
         if self.can_move():
-            self.axis.follow(target)
+            self.axis.follow(self.travel.clamp(target))
 
     def set_output_word(self, word: int) -> None:
         """``O.n=X``: set every general-use output from the bits of ``word``."""
@@ -399,14 +413,6 @@ class Motor:
             self.move_to([(target, lim)])
         else:
             self.push_to(target, lim)
-
-    def push_to(self, target: float, limits: Limits) -> None:
-        """Push motion toward ``target`` (4.1.4); the push model lives in the plant."""
-        self.move_to([(target, limits)])
-
-    def origin_search(self) -> None:
-        """``|``: origin search per K42, K43, K45, K46 (5.3)."""
-        self.move_to([(0.0, self.limits(self.k(42), self.k(43)))])
 
     # -- saving and power ---------------------------------------------------------
     def to_snapshot(self) -> dict[str, object]:
@@ -432,8 +438,4 @@ class Motor:
         """Power-up: servo on or motor free per K68 (ch. 3 K68)."""
         if self.k(68) == 0:
             self.free()
-
-    def inject_fault(self, fault: str, **params: float) -> None:
-        """Fault injection through the device API (docs/machine-file.md)."""
-        del params
-        raise ValueError(f"unknown fault {fault!r}")
+        self._power_on_search()
