@@ -211,7 +211,8 @@ class Motion:
               skip: Callable[[Piece], bool] | None = None) -> int | None:
         """First kernel time >= ``after_ns`` where, for one alternative, every condition
         it gives for the piece is > 0 (``None`` from a piece: not there).  Pieces for
-        which ``skip`` is true are known not to qualify."""
+        which ``skip`` is true are known not to qualify.  The instant is rounded up to
+        the next nanosecond, so the condition already holds then."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -229,7 +230,8 @@ class Motion:
                 if tau is not None and (best is None or tau < best):
                     best = tau
             if best is not None:
-                return max(after_ns, self.to_ns(piece, best))
+                at = self.origin_ns + math.ceil((piece.start + best) * NS_PER_S)
+                return max(after_ns, at)
         return None
 
     # -- building ---------------------------------------------------------------

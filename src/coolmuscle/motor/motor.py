@@ -25,7 +25,6 @@ from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import Limits, limits_from_data
-from .dynamics import Drive
 from .plant import DEFAULT_KP, STEPPER_KP, Plant
 from .status import Report, Ux, io_word_hex, status_line
 from .supervision import Supervision
@@ -79,6 +78,7 @@ class Motor(Supervision):
         self.torque_limit = 100
         self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
         self.alarm = 0
+        self.voltage = 240
         self._init_supervision()
         self.axis = Axis(kernel, drive=self.drive,
                          in_position_window=lambda: self.params.get(55),
@@ -90,7 +90,6 @@ class Motor(Supervision):
         self.merge_pulse_until = 0
         self.analog = 0
         self.encoder_count = 0
-        self.voltage = 240
         self._last_limits: Limits | None = None
 
     # -- parameters and units ----------------------------------------------
@@ -144,12 +143,6 @@ class Motor(Supervision):
         if not self.axis.enabled:
             return 0
         return round(self.axis.torque_percent())
-
-    def drive(self) -> Drive:
-        """Dynamics parameters now: plant, torque limit M (2.1.1), machine, faults."""
-        return self.plant.drive(self.resolution.pulses_per_rev,
-                                limit_percent_of_rated=self.torque_limit * self.plant.peak_torque
-                                / 100.0, enabled=True)
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",

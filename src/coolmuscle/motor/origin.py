@@ -42,6 +42,9 @@ PHASE_CYCLES = 50
 
 _LENGTH_UNIT = {0: 100, 1: 10, 2: 1}
 
+#: An edge counts as crossed this far past it (pulses): no chatter from float noise.
+EDGE_MARGIN = 1e-6
+
 
 def source_of(k46: int) -> str:
     """K46 -> the origin signal source (CM1 16..19 behave as 0..3)."""
@@ -200,6 +203,7 @@ class OriginSearch:
             return self._stopper_time(axis, after_ns)
         if self.phase in ("seek", "leave", "reverse") and self.source in (ZPHASE, SENSOR_Z):
             up, down = self._z_edges
+            up, down = up + EDGE_MARGIN, down - EDGE_MARGIN
             return axis.motion.first(after_ns, lambda p: [xp.plus(p.pos, -up)],
                                      lambda p: [xp.plus(xp.scale(p.pos, -1.0), down)])
         return None
@@ -232,7 +236,7 @@ class OriginSearch:
     def encoder_phase(self, raw: float) -> int:
         """Encoder phase 0..999 of a raw position (5.3.1)."""
         cycle = self._cycle()
-        frac = ((raw - self.motor.z_position()) % cycle) / cycle
+        frac = (round(raw - self.motor.z_position(), 6) % cycle) / cycle
         return min(999, int(frac * 1000))
 
     def _phase_zero(self, raw: float) -> float:
@@ -275,8 +279,8 @@ class OriginSearch:
         self.phase = None
         axis = m.axis
         axis.sign = -1 if self._k45(1) >= 2 else 1
-        axis.hold_here()
         axis.zero = axis.target_raw
+        axis.refresh()
         m.origin_done = True
         if m.reports(Report.IN_POSITION_AND_ALARM):
             m.bus.emit(m.id, "origin", f"Origin.{m.id}={self.reported_phase}",

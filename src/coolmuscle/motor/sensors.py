@@ -16,6 +16,9 @@ from typing import TYPE_CHECKING
 
 from . import expoly as xp
 
+#: An edge counts as crossed this far past it (pulses): no chatter from float noise.
+EDGE_MARGIN = 1e-6
+
 if TYPE_CHECKING:
     from .axis import Axis
     from .motor import Motor
@@ -62,17 +65,17 @@ class PositionSensor:
         if self.inside:
             alts = []
             if math.isfinite(hi):
-                alts.append(lambda p: [xp.plus(p.pos, -hi)])
+                alts.append(lambda p: [xp.plus(p.pos, -hi - EDGE_MARGIN)])
             if math.isfinite(lo):
-                alts.append(lambda p: [xp.plus(xp.scale(p.pos, -1.0), lo)])
+                alts.append(lambda p: [xp.plus(xp.scale(p.pos, -1.0), lo - EDGE_MARGIN)])
             return motion.first(after_ns, *alts, skip=far) if alts else None
 
         def enter(p):  # type: ignore[no-untyped-def]
             conds = []
             if math.isfinite(lo):
-                conds.append(xp.plus(p.pos, -lo))
+                conds.append(xp.plus(p.pos, -lo - EDGE_MARGIN))
             if math.isfinite(hi):
-                conds.append(xp.plus(xp.scale(p.pos, -1.0), hi))
+                conds.append(xp.plus(xp.scale(p.pos, -1.0), hi - EDGE_MARGIN))
             return conds
         return motion.first(after_ns, enter, skip=far)
 
