@@ -30,6 +30,7 @@ from rich.console import Console
 
 from . import __version__
 from .errors import CoolMuscleError, TransportError
+from .machine import MachineFileError
 from .script import ScriptError, TranscriptEntry, load_script, run_script
 from .transports.base import Transport
 
@@ -79,14 +80,23 @@ def _show_path(path: Path) -> str:
     return text
 
 
-def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool) -> Any:
+def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
+                machine: Path | None = None) -> Any:
     if state is not None:
         try:
             state.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise TransportError(f"cannot use state directory {state}: "
                                  f"{exc.strerror or exc}") from exc
-    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace)
+    extra: dict[str, Any] = {}
+    if machine is not None:
+        from .machine import load_machine
+        extra["machine"] = load_machine(machine)
+    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace,
+                         **extra)
+
+
+_MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
 
 
 def _ids(motors: int) -> str:
@@ -162,6 +172,8 @@ def sim(
     time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
                                      help="Virtual seconds per wall second."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
+    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+                                           help=_MACHINE_HELP),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -171,7 +183,7 @@ def sim(
         raise UsageError("--time-scale must be > 0")
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     chosen = _transports(tcp, pty, pty_link, stdio)
-    chain = _make_chain(motors, firmware, state_dir, pace)
+    chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
     finally:
@@ -200,6 +212,8 @@ def run(
     record: Optional[Path] = typer.Option(
         None, "--record", metavar="OUT.cml",
         help="Write the script with the received bytes as expectations."),
+    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+                                           help=_MACHINE_HELP),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
@@ -208,7 +222,8 @@ def run(
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
-    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
+    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
+                        machine)
     try:
         if plot is not None:
             start_recording = getattr(chain, "record", None)
@@ -259,7 +274,7 @@ def main(argv: list[str] | None = None) -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         raise SystemExit(EXIT_FAILED) from None
-    except (UsageError, ScriptError) as exc:
+    except (UsageError, ScriptError, MachineFileError) as exc:
         _report(exc, EXIT_USAGE)
     except (CoolMuscleError, OSError) as exc:
         _report(exc, EXIT_FAILED)

@@ -66,8 +66,9 @@ class Faults:
     def names(self) -> tuple[str, ...]:
         return tuple(self._handlers)
 
-    def inject(self, fault: str, **params: object) -> None:
-        """Inject ``fault`` now; ``ValueError`` for an unknown fault or parameter."""
+    def check(self, fault: str, params: dict[str, object]) -> Callable[[dict[str, object]],
+                                                                       None]:
+        """The handler of ``fault``; ``ValueError`` for an unknown fault or parameter."""
         entry = self._handlers.get(str(fault).strip().lower())
         if entry is None:
             raise ValueError(f"unknown fault {fault!r} (known: {', '.join(self.names)})")
@@ -75,7 +76,11 @@ class Faults:
         unknown = set(params) - allowed
         if unknown:
             raise ValueError(f"fault {fault!r} takes no parameter {sorted(unknown)[0]!r}")
-        handler(params)
+        return handler
+
+    def inject(self, fault: str, **params: object) -> None:
+        """Inject ``fault`` now; ``ValueError`` for an unknown fault or parameter."""
+        self.check(fault, params)(params)
 
     # -- handlers ---------------------------------------------------------------
     def _alarm(self, bit: Ux) -> None:

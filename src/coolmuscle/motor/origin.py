@@ -236,7 +236,7 @@ class OriginSearch:
     def encoder_phase(self, raw: float) -> int:
         """Encoder phase 0..999 of a raw position (5.3.1)."""
         cycle = self._cycle()
-        frac = (round(raw - self.motor.z_position(), 6) % cycle) / cycle
+        frac = (round(raw - self.motor.z_position(), 3) % cycle) / cycle
         return min(999, int(frac * 1000))
 
     def _phase_zero(self, raw: float) -> float:
