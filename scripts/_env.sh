@@ -33,8 +33,13 @@ venv_install() {  # venv_install EXTRAS   (e.g. "" or "test")
     local digest
     digest="$(cat "$ROOT/pyproject.toml" | sha256sum | cut -c1-16)"
     if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$digest" ]; then
-        "$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-        "$VENV/bin/python" -m pip install -q -e "$spec"
+        echo "installing coolmuscle${1:+ [$1]} into $VENV (log: $VENV/pip.log)"
+        if ! { "$VENV/bin/python" -m pip install --upgrade pip \
+               && "$VENV/bin/python" -m pip install -e "$spec"; } >"$VENV/pip.log" 2>&1; then
+            tail -n 30 "$VENV/pip.log" >&2
+            echo "pip install failed; the whole log is $VENV/pip.log" >&2
+            exit 1
+        fi
         echo "$digest" > "$stamp"
     fi
 }

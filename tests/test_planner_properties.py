@@ -99,12 +99,19 @@ def p_candidates(seg: Segment, lo: float, hi: float) -> list[float]:
     return [seg.position(t) for t in taus if lo <= t <= hi]
 
 
+def span_limits(profile: Profile, seg: Segment, bounds: list[Limits]) -> list[Limits]:
+    """Limits of the waypoint a segment moves toward (passing points fall on segment
+    boundaries).  A segment shorter than the clock's resolution at its instant sits
+    on a boundary: either side's limits may apply."""
+    times = [t for t, _ in profile.passing_times]
+    sides = {bisect_left(times, seg.end)}
+    if seg.end == seg.start:
+        sides.add(bisect_right(times, seg.end))
+    return [bounds[profile.passing_times[k][1] if k < len(times) else -1] for k in sides]
+
+
 def limits_of(profile: Profile, seg: Segment, bounds: list[Limits]) -> Limits:
-    """Limits of the waypoint a segment moves toward (passing points fall on
-    segment boundaries)."""
-    passing = profile.passing_times
-    k = bisect_left([t for t, _ in passing], seg.end)
-    return bounds[passing[k][1] if k < len(passing) else -1]
+    return span_limits(profile, seg, bounds)[0]
 
 
 def active_limits(profile: Profile, t_ns: int, bounds: list[Limits]) -> Limits:
@@ -128,15 +135,26 @@ def check_limits(profile: Profile, bounds: list[Limits], speed_over: float = 0.0
     ``speed_over``/``jerk_over``: what a re-planned motion may inherit from the
     running one (its speed plus the drift of its acceleration; its jerk)."""
     for seg in profile.segments:
-        lim = limits_of(profile, seg, bounds)
-        top = max(lim.speed, speed_over)
-        finite = seg.duration if not math.isinf(seg.duration) else 1.0
-        assert max(abs(v) for v in v_extremes(seg, 0.0, finite)) <= top * (1 + REL) + 1e-9
-        d = direction(seg)
-        for a in (seg.a, seg.acceleration(finite)):
-            cap = lim.accel if a * d > 0.0 else lim.decel if a * d < 0.0 else 0.0
-            assert abs(a) <= max(cap, 0.0) * (1 + REL) + 1e-9, (seg, lim)
-        assert abs(seg.j) <= max(lim.max_jerk, jerk_over) * (1 + REL), (seg, lim)
+        problems = [segment_problem(seg, lim, speed_over, jerk_over)
+                    for lim in span_limits(profile, seg, bounds)]
+        assert None in problems, (seg, problems)
+
+
+def segment_problem(seg: Segment, lim: Limits, speed_over: float,
+                    jerk_over: float) -> str | None:
+    """What of S, A, D, jerk one segment exceeds under ``lim`` (None: nothing)."""
+    top = max(lim.speed, speed_over)
+    finite = seg.duration if not math.isinf(seg.duration) else 1.0
+    if max(abs(v) for v in v_extremes(seg, 0.0, finite)) > top * (1 + REL) + 1e-9:
+        return "speed"
+    d = direction(seg)
+    for a in (seg.a, seg.acceleration(finite)):
+        cap = lim.accel if a * d > 0.0 else lim.decel if a * d < 0.0 else 0.0
+        if abs(a) > max(cap, 0.0) * (1 + REL) + 1e-9:
+            return "acceleration"
+    if abs(seg.j) > max(lim.max_jerk, jerk_over) * (1 + REL):
+        return "jerk"
+    return None
 
 
 def top_creep(bounds: list[Limits]) -> float:
@@ -221,25 +239,26 @@ def integrate(profile: Profile, bounds: list[Limits], h: float = 1e-6,
     vscale = max([lim.speed for lim in bounds] + [abs(v)])
     creeps = top_creep(bounds)
     for seg in profile.segments:
-        if abs(seg.v - v) > REL * vscale + 1e-6:
-            assert is_creep_jump(v, seg.v, creeps, vscale)
-            v = seg.v
+        if abs(seg.v - float(v)) > REL * vscale + 1e-6:
+            assert is_creep_jump(float(v), seg.v, creeps, vscale)
+            v = np.longdouble(seg.v)
         length = seg.duration if math.isfinite(seg.duration) else 2.0
         n = int(min(cap, max(2, math.ceil(length / h))))
-        tau = np.linspace(0.0, length, n + 1)
-        dt = length / n
+        tau = np.linspace(0.0, length, n + 1, dtype=np.longdouble)
+        dt = tau[1] - tau[0]
         acc = seg.a + seg.j * tau
-        vel = v + np.concatenate(([0.0], np.cumsum((acc[1:] + acc[:-1]) * dt / 2.0)))
-        pos = p + np.concatenate(([0.0], np.cumsum((vel[1:] + vel[:-1]) * dt / 2.0)))
+        zero = np.zeros(1, dtype=np.longdouble)  # long double: the reference must not
+        vel = v + np.concatenate((zero, np.cumsum((acc[1:] + acc[:-1]) * dt / 2)))  # drift
+        pos = p + np.concatenate((zero, np.cumsum((vel[1:] + vel[:-1]) * dt / 2)))
         for i in (n // 3, 2 * n // 3, n):
             t_ns = profile.origin_ns + round((seg.start + tau[i]) * NS)
             if profile.end_ns is not None and t_ns >= profile.end_ns:
                 t_ns = profile.end_ns - 1
-            assert abs(profile.position_at(t_ns) - pos[i]) <= 1.0, (seg, pos[i])
-        p, v = float(pos[-1]), float(vel[-1])
+            assert abs(profile.position_at(t_ns) - float(pos[i])) <= 1.0, (seg, pos[i])
+        p, v = pos[-1], vel[-1]
         if math.isinf(seg.duration):
             return
-    assert abs(p - profile.final_position) <= 1.0
+    assert abs(float(p) - profile.final_position) <= 1.0
 
 
 def check_all(profile: Profile, bounds: list[Limits], speed_over: float = 0.0) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import sqlite3
 from pathlib import Path
 
@@ -204,16 +206,41 @@ def test_unreadable_snapshot_row_is_store_error(store: Store, path: Path) -> Non
         store.load(1)
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores directory permissions")
-def test_unwritable_directory(tmp_path: Path) -> None:
-    locked = tmp_path / "locked"
-    locked.mkdir()
-    locked.chmod(0o500)
+def _opens_as_store_error(path: Path) -> bool:
     try:
-        with pytest.raises(StoreError):
-            Store(locked / "sub" / "store.sqlite3")
+        Store(path)
+    except StoreError:
+        return True
+    return False
+
+
+def test_unwritable_directory() -> None:
+    """A directory the user may not write to is a StoreError (as root: a child that
+    drops to the 'nobody' user, since root ignores directory permissions)."""
+    base = Path(tempfile.mkdtemp())
+    base.chmod(0o755)
+    locked = base / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    target = locked / "sub" / "store.sqlite3"
+    try:
+        if os.geteuid() != 0:
+            assert _opens_as_store_error(target)
+            return
+        pid = os.fork()
+        if pid == 0:                      # child: become nobody, try, report by exit code
+            code = 2
+            try:
+                os.setgid(65534)
+                os.setuid(65534)
+                code = 0 if _opens_as_store_error(target) else 1
+            finally:
+                os._exit(code)
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0
     finally:
-        locked.chmod(0o700)
+        locked.chmod(0o755)
+        shutil.rmtree(base)
 
 
 def test_state_dir_that_is_a_file(tmp_path: Path) -> None:

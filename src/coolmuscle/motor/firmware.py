@@ -168,7 +168,7 @@ def _cm2_params(inputs: int, outputs: int) -> dict[int, ParamSpec]:
         per_channel(34, "Output Functions", outputs, 0, 9, 0),
         ranged(35, "Analog Output Functions", 0, 9, 0),
         ranged(36, "Command Pulse Format", 0, 3, 0),
-        chosen(37, "Resolution/Speed Unit", frozenset(RESOLUTIONS), 3),
+        chosen(37, "Resolution/Speed Unit", frozenset(k for k in RESOLUTIONS if k <= 90), 3),
         ranged(38, "Analog Control Type", 0, 10, 1),
         ranged(39, "Low Pass Filter Cut-off Frequency", 0, 1024, 128, "5rad/s"),
         ranged(40, "Maximum Speed", 1, 4000, 3000, "min-1",
@@ -243,7 +243,7 @@ def _rt3_params() -> dict[int, ParamSpec]:
 
 _CM1_K37 = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 40, 42, 43, 44, 45, 46, 47, 48, 49,
                       50, 20, 21, 22, 23, 24, 25, 26, 27, 28, 30, 60, 62, 63, 64, 65,
-                      66, 67, 68, 69, 70}) & frozenset(RESOLUTIONS)
+                      66, 67, 68, 69, 70, 100}) & frozenset(RESOLUTIONS)
 
 
 def _cm1_params() -> dict[int, ParamSpec]:

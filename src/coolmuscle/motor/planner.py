@@ -160,8 +160,8 @@ def _jerks(lim: Limits, u0: float, b0: float) -> tuple[float, float]:
     if b0 == 0.0:
         return lim.jerk_accel, lim.jerk_decel
     stiff = lim.max_jerk
-    if b0 < 0.0 and u0 > 0.0:
-        stiff = max(stiff, b0 * b0 / (2.0 * u0))
+    if b0 < 0.0 and u0 > 0.0 and b0 * b0 / (2.0 * u0) > stiff * (1.0 + 1e-6):
+        stiff = b0 * b0 / (2.0 * u0)  # (within 1e-6 of the jerk: rounding of the state)
     return stiff, stiff
 
 
@@ -304,8 +304,9 @@ class _Builder:
         return self.v != 0.0 or self.a != 0.0
 
     def add(self, duration: float, a: float, j: float) -> None:
-        """Append a segment; one too short to advance the clock is dropped."""
-        if not duration > 0.0 or self.t + duration == self.t:
+        """Append a segment (one shorter than the clock's resolution is kept: its
+        change of speed is invisible to evaluation but keeps the chain exact)."""
+        if not duration > 0.0:
             return
         self.segments.append(Segment(self.t, duration, self.p, self.v, a, j))
         if math.isinf(duration):

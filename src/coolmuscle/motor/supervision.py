@@ -213,7 +213,8 @@ class Supervision:
         elif self.push.active:
             self.push.arrived()
         else:
-            self.report_status()
+            if not self.estopped and not self.alarm:   # those were reported when they began
+                self.report_status()
             self.notify_motion_done("in-position")
 
     def _alarm_latched(self: "Motor", bits: int) -> bool:

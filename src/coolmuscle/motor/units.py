@@ -55,6 +55,9 @@ def _decode(k37: int) -> Resolution | None:
 RESOLUTIONS: dict[int, Resolution] = {
     k: r for k in range(0, 91) if (r := _decode(k)) is not None
 }
+#: CM1 only (cm1-ethernetip-interface-manual.txt Appendix A K37 "100: 50000"); the CM2
+#: table stops at 90, so its K37 range refuses it.
+RESOLUTIONS[100] = Resolution(100, 50000, 1, 999_999_999, True)
 
 
 def resolution(k37: int) -> Resolution:

@@ -1,0 +1,268 @@
+"""Circular and linear interpolation of two adjacent motors (cml-users-guide.txt 4.4, 2.1.2 "@").
+
+Geometry: the start point is the current position of the X motor (the lower ID) and
+the Y motor; the end point is their P data.  With ``R`` the path is an arc of that
+radius (equal radii: a circle; different radii: an oval whose semi-axes are the two
+radii), the major arc for a positive radius and the minor arc for a negative radius
+or the ``-`` modifier (4.4.1); with ``N`` the arc is centred on the N data (4.4.2);
+``R`` = 0 draws a straight line (4.4.3).  ``+`` turns CW, ``-`` CCW.
+
+Timing: the arc length ``s(t)`` is planned as a one-dimensional move with the
+planner (S is the speed along the path, A its acceleration; merge motion through
+consecutive paths keeps moving at the junction), then each axis's position
+``x(s(t))`` becomes a chain of cubic Hermite pieces in time, so every axis still
+follows a closed-form piecewise-polynomial Profile.  Lines are exact; arc pieces are
+short enough that the curve is followed within a small fraction of a pulse.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from dataclasses import dataclass
+from typing import Sequence
+
+from .planner import Limits, Waypoint, plan_moves
+from .profile import Profile, Segment
+
+Point = tuple[float, float]
+
+#: Largest distance (pulses) between a cubic piece and the true path at its check points.
+MAX_ERROR = 0.05
+_GAUSS = ((-0.906179845938664, 0.236926885056189), (-0.538469310105683, 0.478628670499366),
+          (0.0, 0.568888888888889), (0.538469310105683, 0.478628670499366),
+          (0.906179845938664, 0.236926885056189))
+
+
+class PathError(ValueError):
+    """An interpolation that cannot be drawn (documented in docs/fidelity.md)."""
+
+
+class Line:
+    """A straight segment from ``start`` to ``end`` (4.4.3)."""
+
+    def __init__(self, start: Point, end: Point) -> None:
+        self.start, self.end = start, end
+        self.length = math.dist(start, end)
+
+    def point(self, s: float) -> Point:
+        if self.length == 0:
+            return self.end
+        f = min(max(s / self.length, 0.0), 1.0)
+        return (self.start[0] + f * (self.end[0] - self.start[0]),
+                self.start[1] + f * (self.end[1] - self.start[1]))
+
+    def tangent(self, s: float) -> Point:
+        if self.length == 0:
+            return (0.0, 0.0)
+        return ((self.end[0] - self.start[0]) / self.length,
+                (self.end[1] - self.start[1]) / self.length)
+
+
+class Arc:
+    """An arc of an axis-aligned ellipse (a circle when ``rx == ry``).
+
+    ``theta0`` is the start angle, ``sweep`` the signed angle travelled (negative =
+    CW).  Points: ``center + (rx cos θ, ry sin θ)``.  Arc length is tabulated with
+    Gauss–Legendre quadrature and inverted by Newton's method.
+    """
+
+    def __init__(self, center: Point, rx: float, ry: float, theta0: float, sweep: float,
+                 end: Point | None = None) -> None:
+        self.center, self.rx, self.ry = center, abs(rx), abs(ry)
+        self.theta0, self.sweep = theta0, sweep
+        self.exact_end = end
+        n = max(8, int(abs(sweep) / (math.pi / 32)) + 1)
+        self._thetas = [theta0 + sweep * i / n for i in range(n + 1)]
+        self._lengths = [0.0]
+        for a, b in zip(self._thetas, self._thetas[1:]):
+            self._lengths.append(self._lengths[-1] + self._length(a, b))
+        self.length = self._lengths[-1]
+
+    def _speed(self, theta: float) -> float:
+        return math.hypot(self.rx * math.sin(theta), self.ry * math.cos(theta))
+
+    def _length(self, a: float, b: float) -> float:
+        half, mid = (b - a) / 2, (a + b) / 2
+        return abs(half) * sum(w * self._speed(mid + half * x) for x, w in _GAUSS)
+
+    def theta(self, s: float) -> float:
+        """Angle at arc length ``s`` from the start."""
+        s = min(max(s, 0.0), self.length)
+        i = min(max(bisect_right(self._lengths, s) - 1, 0), len(self._thetas) - 2)
+        a = self._thetas[i]
+        base = self._lengths[i]
+        direction = 1.0 if self.sweep >= 0 else -1.0
+        theta = a
+        for _ in range(30):
+            err = base + self._length(a, theta) - s
+            speed = self._speed(theta) or 1e-12
+            step = err / speed
+            theta -= direction * step
+            if abs(step) < 1e-13:
+                break
+        return theta
+
+    def point(self, s: float) -> Point:
+        if self.exact_end is not None and s >= self.length:
+            return self.exact_end
+        t = self.theta(s)
+        return (self.center[0] + self.rx * math.cos(t), self.center[1] + self.ry * math.sin(t))
+
+    def tangent(self, s: float) -> Point:
+        t = self.theta(s)
+        dx, dy = -self.rx * math.sin(t), self.ry * math.cos(t)
+        norm = math.hypot(dx, dy) or 1.0
+        sign = 1.0 if self.sweep >= 0 else -1.0
+        return (sign * dx / norm, sign * dy / norm)
+
+
+Path = Line | Arc
+
+
+def _angle(center: Point, p: Point, rx: float, ry: float) -> float:
+    return math.atan2((p[1] - center[1]) / ry, (p[0] - center[0]) / rx)
+
+
+def _sweep(theta0: float, theta1: float, cw: bool, full_if_equal: bool) -> float:
+    d = (theta1 - theta0) % (2 * math.pi)
+    if cw:
+        d = d - 2 * math.pi if d > 0 else d
+    if abs(d) < 1e-12 and full_if_equal:
+        d = -2 * math.pi if cw else 2 * math.pi
+    return d
+
+
+def arc_from_radius(start: Point, end: Point, rx: float, ry: float, *, minor: bool,
+                    cw: bool) -> Path:
+    """4.4.1: start, end and radius; the major arc unless ``minor``; R=0 is a line."""
+    if rx == 0 or ry == 0:
+        return Line(start, end)
+    rx, ry = abs(rx), abs(ry)
+    # scale Y so the oval becomes a circle of radius rx, solve, scale back
+    k = rx / ry
+    a = (start[0], start[1] * k)
+    b = (end[0], end[1] * k)
+    chord = math.dist(a, b)
+    if chord == 0:
+        raise PathError("an arc by radius needs different start and end points")
+    r = max(rx, chord / 2)
+    mid = ((a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+    h = math.sqrt(max(r * r - (chord / 2) ** 2, 0.0))
+    ux, uy = (b[0] - a[0]) / chord, (b[1] - a[1]) / chord
+    candidates = []
+    for side in (1.0, -1.0):
+        c = (mid[0] - side * uy * h, mid[1] + side * ux * h)
+        t0 = math.atan2(a[1] - c[1], a[0] - c[0])
+        t1 = math.atan2(b[1] - c[1], b[0] - c[0])
+        candidates.append((c, t0, _sweep(t0, t1, cw, False)))
+    # the minor arc sweeps at most half a turn; a half circle (chord = 2R) is both
+    c, t0, sweep = min(candidates, key=lambda cand: abs(cand[2]) if minor else -abs(cand[2]))
+    return Arc((c[0], c[1] / k), r, r / k, t0, sweep, end)
+
+
+def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Arc:
+    """4.4.2: start, end and centre (radius from the start; start == end: a full circle)."""
+    r = math.dist(start, center)
+    if r == 0:
+        raise PathError("the centre is the start point")
+    t0 = math.atan2(start[1] - center[1], start[0] - center[0])
+    t1 = math.atan2(end[1] - center[1], end[0] - center[0])
+    sweep = _sweep(t0, t1, cw, math.dist(start, end) < 0.5)
+    return Arc(center, r, r, t0, sweep, end)
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One interpolated path with the limits (speed along the path) it runs at."""
+
+    path: Path
+    limits: Limits
+
+
+def _hermite(t0: float, h: float, p0: float, v0: float, p1: float, v1: float) -> Segment:
+    a = (6 * (p1 - p0) - h * (4 * v0 + 2 * v1)) / (h * h)
+    j = (12 * (p0 - p1) + 6 * h * (v0 + v1)) / (h * h * h)
+    return Segment(t0, h, p0, v0, a, j)
+
+
+def _knots(s_profile: Profile, starts: list[float]) -> list[float]:
+    """Where pieces must break: planner segment bounds and the junctions of legs."""
+    times = {0.0}
+    for seg in s_profile.segments:
+        times.update((seg.start, seg.end))
+    origin = s_profile.origin_ns
+    for s0 in starts[1:]:
+        hit = s_profile.first_crossing(s0, origin)
+        if hit is not None:
+            times.add((hit - origin) / 1e9)
+    end = s_profile.duration
+    return sorted(t for t in times if 0 <= t <= end)
+
+
+class _Sampler:
+    """Exact axis positions and velocities along the planned path at any time."""
+
+    def __init__(self, s_profile: Profile, legs: Sequence[Leg], starts: list[float],
+                 total: float) -> None:
+        self.s_profile, self.legs, self.starts, self.total = s_profile, legs, starts, total
+        self.end_time = s_profile.duration
+
+    def state(self, t: float) -> tuple[float, float, float, float]:
+        """(x, y, vx, vy) at ``t`` seconds from the origin."""
+        s, v, _ = self.s_profile.state_at(self.s_profile.origin_ns + round(t * 1e9))
+        s = self.total if t >= self.end_time else min(max(s, 0.0), self.total)
+        i = max(bisect_right(self.starts, s) - 1, 0)
+        if i > 0 and s == self.starts[i] and t < self.end_time:
+            i -= 1          # a junction belongs to the leg that ends there
+        path, local = self.legs[i].path, s - self.starts[i]
+        (x, y), (tx, ty) = path.point(local), path.tangent(local)
+        return x, y, tx * v, ty * v
+
+
+def _pieces(sampler: _Sampler, t0: float, t1: float, depth: int = 0) -> list[tuple[float, float]]:
+    """Split [t0, t1] until each cubic Hermite piece is within MAX_ERROR of the path."""
+    h = t1 - t0
+    a, b = sampler.state(t0), sampler.state(t1)
+    x_seg = _hermite(t0, h, a[0], a[2], b[0], b[2])
+    y_seg = _hermite(t0, h, a[1], a[3], b[1], b[3])
+    if depth < 24:
+        for f in (0.25, 0.5, 0.75):
+            x, y, _, _ = sampler.state(t0 + f * h)
+            if math.hypot(x_seg.position(f * h) - x, y_seg.position(f * h) - y) > MAX_ERROR:
+                mid = t0 + h / 2
+                return _pieces(sampler, t0, mid, depth + 1) + _pieces(sampler, mid, t1, depth + 1)
+    return [(t0, t1)]
+
+
+def plan_interpolation(start: Point, start_speed: float, legs: Sequence[Leg],
+                       origin_ns: int) -> tuple[Profile, Profile, Profile]:
+    """Profiles of X, Y and of the path length ``s`` for ``legs`` travelled in turn.
+
+    ``start_speed`` is the path speed at the start (merge continuation).  Returns
+    ``(x_profile, y_profile, s_profile)``.
+    """
+    starts, total = [], 0.0
+    for leg in legs:
+        starts.append(total)
+        total += leg.path.length
+    if total == 0:
+        raise PathError("the path has no length")
+    waypoints = [Waypoint(s0 + leg.path.length, leg.limits) for s0, leg in zip(starts, legs)]
+    s_profile = plan_moves((0.0, start_speed, 0.0), waypoints, origin_ns)
+
+    sampler = _Sampler(s_profile, legs, starts, total)
+    x_segs: list[Segment] = []
+    y_segs: list[Segment] = []
+    times = _knots(s_profile, starts)
+    for t0, t1 in zip(times, times[1:]):
+        if t1 - t0 <= 0:
+            continue
+        for p0, p1 in _pieces(sampler, t0, t1):
+            a, b = sampler.state(p0), sampler.state(p1)
+            x_segs.append(_hermite(p0, p1 - p0, a[0], a[2], b[0], b[2]))
+            y_segs.append(_hermite(p0, p1 - p0, a[1], a[3], b[1], b[3]))
+    end = legs[-1].path.point(legs[-1].path.length)
+    x_profile = Profile(origin_ns, x_segs, final_position=end[0])
+    y_profile = Profile(origin_ns, y_segs, final_position=end[1])
+    return x_profile, y_profile, s_profile

@@ -1,0 +1,106 @@
+"""Direct mode through the device API: listings, saving as a power cycle, routing.
+
+cml-users-guide.txt 2.1.2 "$" (save), ch. 3 (K changes persist by themselves),
+6.6 (?P ?N ?R ?999), 1.1 (motor IDs on a chain).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from coolmuscle.chain import Chain
+from coolmuscle.sim.kernel import seconds
+
+
+def test_6_6_position_listing_has_200_values_four_to_a_line() -> None:
+    chain = Chain()
+    chain.execute("P200.1=-42")
+    lines = chain.execute("?P.1")
+    assert len(lines) == 50
+    assert lines[0] == "P1.1=0, P2.1=0, P3.1=0, P4.1=0"
+    assert lines[-1] == "P197.1=0, P198.1=0, P199.1=0, P200.1=-42"
+
+
+def test_6_6_all_data_list_is_p_s_a_t_m_n_r_v_in_order() -> None:
+    chain = Chain()
+    lines = chain.execute("?999.1")
+    firsts = [line.split("=")[0] for line in lines]
+    starts = [i for i, name in enumerate(firsts) if name.startswith(("P1.", "S1.", "A1.",
+              "T1.", "M1.", "N1.", "R1.", "V1."))]
+    assert [firsts[i][0] for i in starts] == list("PSATMNRV")
+    assert len(lines) == 50 + 4 + 2 + 2 + 2 + 50 + 50 + 4
+
+
+def test_2_1_2_save_then_power_cycle_restores_saved_data_only(tmp_path: Path) -> None:
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("P1.1=1234, V2.1=\"abcd\", S3.1=-77")
+    assert chain.execute("$.1") == ["saved.1"]
+    chain.execute("P1.1=999, P2.1=555")          # not saved: lost at power off
+    chain.close()
+    again = Chain(state_dir=tmp_path)
+    try:
+        assert again.execute("P1.1") == ["P1.1=1234"]
+        assert again.execute("P2.1") == ["P2.1=0"]
+        assert again.execute("V2.1") == ['V2.1="abcd"']
+        assert again.execute("S3.1") == ["S3.1=-77"]
+    finally:
+        again.close()
+
+
+def test_ch3_k_changes_persist_without_save(tmp_path: Path) -> None:
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("K23.1=17")
+    chain.execute("K70.1=0")
+    chain.execute("K37.1=9")                      # out of range: not applied, not saved
+    chain.close()
+    again = Chain(state_dir=tmp_path)
+    try:
+        assert again.execute("K23.1") == ["K23.1=17"]
+        assert again.execute("K70.1") == ["K70.1=0"]
+        assert again.execute("K37.1") == ["K37.1=3"]
+    finally:
+        again.close()
+
+
+def test_power_cycle_starts_at_position_zero_in_position(tmp_path: Path) -> None:
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("P.1=3000, ^.1")
+    chain.kernel.run(until=seconds(2))
+    chain.execute("$.1")
+    chain.close()
+    again = Chain(state_dir=tmp_path)
+    try:
+        assert again.execute("?96.1") == ["Px.1=0"]
+        assert again.execute("?99.1") == ["Ux.1=8"]
+        assert again.execute("P.1") == ["P.1=3000"]
+    finally:
+        again.close()
+
+
+def test_k68_zero_powers_up_motor_free(tmp_path: Path) -> None:
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("K68.1=0")
+    chain.close()
+    again = Chain(state_dir=tmp_path)
+    try:
+        assert again.execute("?99.1") == ["Ux.1=16"]
+    finally:
+        again.close()
+
+
+def test_1_1_statements_go_to_the_motor_their_id_names() -> None:
+    chain = Chain(motors=3)
+    assert chain.execute("P1.2=22, P1.3=33, P1.1=11") == []
+    assert chain.execute("P1.1, P1.2, P1.3") == ["P1.1=11", "P1.2=22", "P1.3=33"]
+    assert chain.execute("?96.4") == []           # no ID4 on the chain: nobody answers
+    assert chain.execute("P1") == ["P1.1=11"]     # no ID: the motor the host is on (ID1)
+
+
+def test_api_replies_do_not_appear_on_the_host_line() -> None:
+    chain = Chain()
+    seen: list[bytes] = []
+    chain.host_line.add_listener(seen.append)
+    assert chain.execute("?96.1") == ["Px.1=0"]
+    assert seen == []
+    chain.host_line.feed(b"?96.1\r")
+    assert b"".join(seen) == b"?96.1\r\nPx.1=0\r\n"

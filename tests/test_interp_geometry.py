@@ -1,0 +1,128 @@
+"""Interpolation geometry and timing (cml-users-guide.txt 4.4.1–4.4.3).
+
+Endpoints are exact, sampled points lie on the documented arc or line within 1 pulse,
+the direction and the major/minor choice match 4.4, and the path speed never exceeds S.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from coolmuscle.motor.interp import (Arc, Leg, Line, PathError, arc_from_center,
+                                     arc_from_radius, plan_interpolation)
+from coolmuscle.motor.planner import limits_from_data
+
+S100_A100 = limits_from_data(100, 100, k37=3, k44=100, k51=0, k69=0)   # 10000 pps path speed
+
+
+def samples(x_profile, y_profile, n=400):
+    end = x_profile.end_ns
+    for i in range(n + 1):
+        t = x_profile.origin_ns + (end - x_profile.origin_ns) * i // n
+        yield t, x_profile.position_at(t), y_profile.position_at(t)
+
+
+def check_on_ellipse(xp, yp, center, rx, ry):
+    for _, x, y in samples(xp, yp):
+        # distance to the ellipse, approximated by the radial error on the unit circle
+        ux, uy = (x - center[0]) / rx, (y - center[1]) / ry
+        radial = math.hypot(ux, uy)
+        assert abs(radial - 1) * min(rx, ry) <= 1.0, (x, y)
+
+
+def orientation(xp, yp, center):
+    """Sum of the z cross product (p - c) x dp: negative = clockwise."""
+    total = 0.0
+    pts = list(samples(xp, yp, 50))
+    for (_, x0, y0), (_, x1, y1) in zip(pts, pts[1:]):
+        total += (x0 - center[0]) * (y1 - y0) - (y0 - center[1]) * (x1 - x0)
+    return total
+
+
+@pytest.mark.parametrize("minor, cw", [(False, True), (True, False), (True, True),
+                                        (False, False)])
+def test_4_4_1_radius_arc_major_minor_and_direction(minor: bool, cw: bool) -> None:
+    """4.4.1: from (0,0) to (1000,1000), R=2000: four trajectories, + CW / - CCW."""
+    path = arc_from_radius((0, 0), (1000, 1000), 2000, 2000, minor=minor, cw=cw)
+    assert isinstance(path, Arc)
+    assert (abs(path.sweep) <= math.pi) == minor
+    assert (path.sweep < 0) == cw
+    xp, yp, sp = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+    assert xp.final_position == 1000 and yp.final_position == 1000
+    assert xp.position_at(xp.end_ns) == pytest.approx(1000, abs=1e-6)
+    assert yp.position_at(yp.end_ns) == pytest.approx(1000, abs=1e-6)
+    check_on_ellipse(xp, yp, path.center, path.rx, path.ry)
+    assert (orientation(xp, yp, path.center) < 0) == cw
+    chord_angle = 2 * math.asin(math.dist((0, 0), (1000, 1000)) / 2 / 2000)
+    expected = chord_angle if minor else 2 * math.pi - chord_angle
+    assert path.length == pytest.approx(2000 * expected, rel=1e-9)
+
+
+def test_4_4_2_center_arc_cw_and_ccw() -> None:
+    """4.4.2: centre N=(-823, 1823), from (0,0) to (1000,1000)."""
+    for cw in (True, False):
+        path = arc_from_center((0, 0), (1000, 1000), (-823, 1823), cw=cw)
+        xp, yp, _ = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+        r = math.dist((0, 0), (-823, 1823))
+        check_on_ellipse(xp, yp, (-823, 1823), r, r)
+        assert (orientation(xp, yp, (-823, 1823)) < 0) == cw
+        assert xp.position_at(xp.end_ns) == pytest.approx(1000, abs=1e-6)
+
+
+def test_4_4_3_radius_zero_is_a_straight_line() -> None:
+    path = arc_from_radius((0, 0), (1000, 1000), 0, 0, minor=False, cw=True)
+    assert isinstance(path, Line)
+    xp, yp, sp = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+    for _, x, y in samples(xp, yp):
+        assert abs(x - y) <= 1e-6
+    assert sp.end_ns == xp.end_ns
+
+
+def test_oval_with_different_radii_per_axis() -> None:
+    path = arc_from_radius((0, 0), (3000, 1000), 3000, 1000, minor=True, cw=False)
+    xp, yp, _ = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+    check_on_ellipse(xp, yp, path.center, 3000, 1000)
+
+
+def test_full_circle_by_centre() -> None:
+    path = arc_from_center((0, 0), (0, 0), (500, 0), cw=True)
+    assert path.sweep == pytest.approx(-2 * math.pi)
+    xp, yp, _ = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+    check_on_ellipse(xp, yp, (500, 0), 500, 500)
+
+
+def test_arc_by_radius_needs_two_points() -> None:
+    with pytest.raises(PathError):
+        arc_from_radius((5, 5), (5, 5), 100, 100, minor=True, cw=True)
+
+
+def test_merge_through_two_legs_does_not_stop_at_the_junction() -> None:
+    line = Line((0, 0), (2000, 0))
+    arc = arc_from_radius((2000, 0), (3000, 1000), 1000, 1000, minor=True, cw=False)
+    xp, yp, sp = plan_interpolation((0, 0), 0.0, [Leg(line, S100_A100), Leg(arc, S100_A100)], 0)
+    t_junction = sp.first_crossing(2000.0, 0)
+    assert t_junction is not None and sp.velocity_at(t_junction) > 1000
+    assert xp.position_at(xp.end_ns) == pytest.approx(3000, abs=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(x1=st.integers(-20000, 20000), y1=st.integers(-20000, 20000),
+       r=st.integers(1, 50000), minor=st.booleans(), cw=st.booleans(),
+       s=st.integers(1, 300), a=st.integers(1, 500))
+def test_path_speed_never_exceeds_s_and_points_stay_on_the_arc(x1, y1, r, minor, cw, s, a):
+    if (x1, y1) == (0, 0):
+        return
+    path = arc_from_radius((0, 0), (x1, y1), r, r, minor=minor, cw=cw)
+    lim = limits_from_data(s, a, k37=3, k44=100, k51=0, k69=0)
+    xp, yp, sp = plan_interpolation((0, 0), 0.0, [Leg(path, lim)], 0)
+    assert xp.position_at(xp.end_ns) == pytest.approx(x1, abs=1e-6)
+    assert yp.position_at(yp.end_ns) == pytest.approx(y1, abs=1e-6)
+    if isinstance(path, Arc):
+        check_on_ellipse(xp, yp, path.center, path.rx, path.ry)
+    for t, _, _ in samples(xp, yp, 200):
+        speed = math.hypot(xp.velocity_at(t), yp.velocity_at(t))
+        assert speed <= lim.speed * (1 + 1e-3) + 1e-6
