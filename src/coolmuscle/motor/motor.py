@@ -162,7 +162,8 @@ class Motor(Supervision):
         """``Ux.n=..`` event when K23 includes 1 (in-position and alarms)."""
         if self.reports(Report.IN_POSITION_AND_ALARM):
             ux = self.status
-            self.bus.emit(self.id, "status", status_line(self.id, ux), value=ux)
+            kind = "alarm" if self.alarm else "status"
+            self.bus.emit(self.id, kind, status_line(self.id, ux), value=ux)
 
     def report_outputs(self) -> None:
         """``OUT.n=..`` event when K23 includes 4 (general outputs only)."""
@@ -267,7 +268,7 @@ class Motor(Supervision):
 
     def reset_alarm(self) -> None:
         """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
-        if self.alarm:
+        if self.alarm or self.push_error:
             self.enable()
 
     def jog(self, direction: int) -> None:
@@ -306,7 +307,7 @@ class Motor(Supervision):
         if function == OUT_IN_POSITION:
             return self.status & Ux.IN_POSITION != 0
         if function == OUT_ALARM:
-            return self.alarm != 0
+            return self.alarm != 0 or self.push_error
         if function == OUT_ORIGIN_DONE:
             return self.origin_done and self.status == Ux.IN_POSITION
         if function == OUT_MERGE_PULSE:
@@ -368,6 +369,8 @@ class Motor(Supervision):
             self.params.set(index, value)
             return
         self.memory.set(kind, index, value)
+        if kind == "M" and index == 0:
+            self.set_torque_limit(int(self.memory.get("M", 0)))
 
     def write_state(self, name: str, value: int) -> None:
         """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).

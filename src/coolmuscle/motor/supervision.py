@@ -91,6 +91,11 @@ class Supervision:
             self.torque_limit = percent
             self.axis.refresh()
 
+    @property
+    def push_error(self: "Motor") -> bool:
+        """The push error (Ux=256) is latched (4.1.4 "alarm state")."""
+        return self.push.status_bits() == int(Ux.PUSH_ERROR)
+
     def position_error_exempt(self: "Motor") -> bool:
         """No position error overflow while pushing or searching a stopper."""
         return self.push.active or (self.origin.active and self.origin.source == STOPPER)
