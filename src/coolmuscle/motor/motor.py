@@ -432,6 +432,6 @@ class Motor(Supervision):
 
     def power_on(self) -> None:
         """Power-up: servo on or motor free per K68 (ch. 3 K68)."""
-        if self.k(68) == 0:
+        if self.k(68) == 0 and self.firmware.name != "cm1":   # CM1 K68: S-curve function
             self.free()
         self._power_on_search()

@@ -121,6 +121,8 @@ class Supervision:
         """The case is at ``celsius`` now (fault injection, machine file)."""
         self.thermal.advance(self.axis.motion, self.kernel.now)
         self.thermal.reset(celsius, self.kernel.now)
+        if celsius > self.thermal.alarm:
+            self.raise_alarm(int(Ux.TEMPERATURE))
         self.axis.refresh()
 
     def z_position(self: "Motor") -> float:
