@@ -84,8 +84,10 @@ class Chain:
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
         self._restore()
-        if machine is not None:
+        if machine is not None:           # wired before power-up (K46 odd searches then)
             self.load_machine(machine)
+        for motor in self.motors.values():
+            motor.power_on()
 
     def load_machine(self, machine: "Path | str | Machine") -> None:
         """Install a machine file (docs/machine-file.md) on the motors it names."""
@@ -205,7 +207,6 @@ class Chain:
                 store = self.store
                 motor.params.on_change(
                     lambda k, old, new, m=motor.id: store.save_param(m, k, new))
-            motor.power_on()
 
     def close(self) -> None:
         """Close the store (unsaved data is lost, as at power off)."""
