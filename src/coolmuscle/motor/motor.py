@@ -234,13 +234,16 @@ class Motor(Supervision):
     def stop(self) -> None:
         """``]``/``}``-style decelerating stop at the motion's deceleration."""
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
+        if self._stop_push():
+            return
         self.abandon_motion()
         self.axis.stop(lim.decel, lim.scurve)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
-        self.abandon_motion()
-        self.axis.stop(ESTOP_DECEL)
+        if not self._stop_push():
+            self.abandon_motion()
+            self.axis.stop(ESTOP_DECEL)
         if not self.estopped:
             self.estopped = True
             self.report_status()

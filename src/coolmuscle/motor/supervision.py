@@ -157,6 +157,15 @@ class Supervision:
         """Fault injection through the device API (docs/machine-file.md "Faults")."""
         self.faults.inject(fault, **params)
 
+    def _stop_push(self: "Motor") -> bool:
+        """A stop while pushing: the shaft's position becomes the target (ch. 3 K55
+        "the stopped position is recognized as the target position")."""
+        if not self.push.active:
+            return False
+        self.abandon_motion()
+        self.axis.follow(self.axis.position())
+        return True
+
     def abandon_motion(self: "Motor") -> None:
         """A push or origin search in progress ends without completing."""
         self.push.clear()

@@ -1,0 +1,110 @@
+"""4.1.4 push motion with ``Q``/``Z`` given directly (2.2.2 "Q", "Z"; ch. 3 K60, K61).
+
+Ux=32 while pushing (6.6 ?99) and the K34 function 9 output, 40 when the push has held
+K60 for K61 ms, 256 when the target is reached with nothing to push (not with an odd
+K60), endless with K61=0; ``motion_done()`` and the motion listeners are what a program
+bank waits on.  The object pushed is a stopper of the machine file.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from coolmuscle.chain import Chain
+from coolmuscle.machine import parse_machine
+from coolmuscle.sim.kernel import NS_PER_S, seconds
+
+OBJECT_AT = "[[axis]]\n[axis.stoppers]\ncw = 5000\n"
+
+
+def _chain(machine: str = OBJECT_AT) -> tuple[Chain, list[tuple[float, str]]]:
+    chain = Chain(machine=parse_machine(machine))
+    events: list[tuple[float, str]] = []
+    chain.subscribe(lambda ev: events.append((round(ev.time / NS_PER_S, 4), ev.text))
+                    if ev.kind in ("status", "alarm") else None)
+    chain.execute("K34.1=9, P1.1=8000, S.1=20, A.1=100")    # output 1: in push motion
+    return chain, events
+
+
+@pytest.mark.parametrize("command", ["Q1.1", "Z1.1"])
+def test_4_1_4_push_holds_k60_for_k61_ms_then_ux_40(command: str) -> None:
+    chain, events = _chain()
+    chain.execute("K60.1=50, K61.1=500")
+    motor = chain.motors[1]
+    chain.execute(command)
+    chain.kernel.run(until=seconds(1))
+    assert chain.execute("?99.1") == ["Ux.1=32"]
+    assert chain.execute("?51.1") == ["OUT1.1=1"]
+    contact = 5000 / 2000 + 0.02 / 2 + 1 / 300 - 0.0      # 2000 pps, shaft lag 1/kp
+    chain.kernel.run(until=seconds(2.8))
+    assert motor.position() == 5000
+    assert chain.execute("?98.1") == ["Ix.1=50"]            # pushing at K60
+    assert not motor.motion_done()
+    chain.kernel.run(until=seconds(5))
+    (when, text), = events
+    assert text == "Ux.1=40" and abs(when - (contact + 0.5)) < 2e-3
+    assert chain.execute("?99.1") == ["Ux.1=40"]
+    assert chain.execute("?51.1") == ["OUT1.1=0"]
+    assert chain.execute("?98.1") == ["Ix.1=0"]             # it holds, no longer pushes
+    assert motor.motion_done()
+
+
+def test_4_1_4_nothing_to_push_is_ux_256() -> None:
+    chain, events = _chain("[[axis]]\n")
+    done: list[str] = []
+    chain.motors[1].add_motion_listener(done.append)
+    chain.execute("K34.1=92")                     # output 1: alarm, output 2: push
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(6))
+    assert [t for _, t in events] == ["Ux.1=256"]
+    assert done == ["push-error"]
+    assert chain.execute("?99.1") == ["Ux.1=256"]
+    assert chain.execute("?51.1") == ["OUT1.1=1"] and chain.execute("?52.1") == ["OUT2.1=0"]
+    assert chain.execute("?96.1") == ["Px.1=8000"]
+    chain.motors[1].reset_alarm()                           # input function 1
+    assert chain.execute("?99.1") == ["Ux.1=8"]
+    assert chain.execute("?51.1") == ["OUT1.1=0"]
+
+
+def test_ch3_k60_odd_no_push_error() -> None:
+    chain, events = _chain("[[axis]]\n")
+    chain.execute("K60.1=31")
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(6))
+    assert [t for _, t in events] == ["Ux.1=8"]
+
+
+def test_ch3_k61_zero_pushes_without_end() -> None:
+    chain, events = _chain()
+    chain.execute("K61.1=0")
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(60))
+    assert events == [] and chain.execute("?99.1") == ["Ux.1=32"]
+    assert chain.execute("?98.1") == ["Ix.1=30"]            # K60 default
+    chain.execute("]1.1")                         # a stop ends it where the shaft is
+    chain.kernel.run(until=seconds(61))
+    assert events == [(60.0, "Ux.1=8")]
+    assert chain.execute("?99.1") == ["Ux.1=8"] and chain.execute("?98.1") == ["Ix.1=0"]
+
+
+def test_push_is_not_a_position_error_overflow() -> None:
+    chain, events = _chain()
+    chain.execute("K56.1=1, K61.1=2000")                    # 100 pulses; Pe reaches 3000
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(6))
+    assert [t for _, t in events] == ["Ux.1=40"]
+
+
+def test_push_via_a_passing_point_changes_the_level_there() -> None:
+    # 4.1.4's line "S3.1, A1.1, P1.1, S1.1, Q2.1": merge through P1, push toward P2
+    chain, events = _chain()
+    motor = chain.motors[1]
+    fast = motor.limits(30, 100)
+    slow = motor.limits(10, 100)
+    motor.push_to(8000.0, slow, via=[(2000.0, fast)])
+    chain.kernel.run(until=seconds(0.5))
+    assert motor.speed_units() == 30 and chain.execute("?99.1") == ["Ux.1=32"]
+    chain.kernel.run(until=seconds(1.5))
+    assert motor.speed_units() == 10
+    chain.kernel.run(until=seconds(6))
+    assert [t for _, t in events] == ["Ux.1=40"]
