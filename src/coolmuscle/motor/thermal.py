@@ -24,6 +24,9 @@ _NODES = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
 _WEIGHTS = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
             0.4786286704993665, 0.2369268850561891)
 
+#: A motion that cannot heat the case by more than this (°C) only lets it cool.
+NEGLIGIBLE = 0.1
+
 #: Beyond this many time constants of the tracking loop its transient is gone.
 _SETTLED = 20.0
 
@@ -54,7 +57,7 @@ class Thermal:
         """The temperature at ``t_ns`` >= the state's time."""
         if t_ns <= self.at_ns:
             return self.temp
-        if self.rise_at_rated * _peak_square(motion) < 1e-3:
+        if self.rise_at_rated * _peak_square(motion) < NEGLIGIBLE:
             return self._after(self.temp, 0.0, (t_ns - self.at_ns) / NS_PER_S)
         temp = self.temp
         for q, dt in _stretches(motion, self.at_ns, t_ns):
