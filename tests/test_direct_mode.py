@@ -104,3 +104,20 @@ def test_api_replies_do_not_appear_on_the_host_line() -> None:
     assert seen == []
     chain.host_line.feed(b"?96.1\r")
     assert b"".join(seen) == b"?96.1\r\nPx.1=0\r\n"
+
+
+def test_device_api_reads_a_numeric_v_as_an_int() -> None:
+    chain = Chain()
+    chain.execute("V1.1=-5, V2.1=\"ab\", V3.1=\"Px\"")
+    assert chain.get_register(1, "V", 1) == -5
+    assert chain.get_register(1, "V", 2) == '"ab"'
+    assert chain.get_register(1, "V", 3) == '"Px"'
+
+
+def test_a_branch_statement_for_an_absent_id_does_not_run_on_this_motor() -> None:
+    chain = Chain(motors=2)
+    chain.execute("V1.1=1")
+    chain.execute("V1.1, P5.3=77, P5.3=66")
+    assert chain.execute("P5.1") == ["P5.1=0"]
+    chain.execute("V1.1, P5.2=77, P5.2=66")
+    assert chain.execute("P5.2") == ["P5.2=77"]

@@ -124,7 +124,9 @@ def active_limits(profile: Profile, t_ns: int, bounds: list[Limits]) -> Limits:
 
 
 def direction(seg: Segment) -> float:
-    v = seg.velocity(min(seg.duration, 1e9) / 2.0)
+    """Direction of motion in a segment (ramps never reverse; speed may touch 0)."""
+    length = min(seg.duration, 1e9)
+    v = max((seg.velocity(length * f) for f in (0.0, 0.25, 0.5, 0.75, 1.0)), key=abs)
     return math.copysign(1.0, v) if v != 0.0 else 0.0
 
 

@@ -3,7 +3,8 @@
 The host line enters at ID1 and every statement goes to the motor its ``.n`` names
 (cml-users-guide.txt 1.1 "up to 15 motors can be controlled on a single network").
 A statement without an ID goes to ID1 in direct mode.  A statement for an ID that is
-not on the chain goes around the chain unanswered (docs/fidelity.md "Daisy chain").
+not on the chain goes around the chain unanswered (docs/fidelity.md "Daisy chain"),
+unless it is for "final ID + 1" while COM1 is a Modbus host (5.6.6, :mod:`.modbus`).
 
 This module is the :class:`coolmuscle.device.Device` every front end uses.
 """
@@ -19,9 +20,10 @@ from .cml.parser import parse
 from .device import Event, EventListener, MotorSnapshot, TargetStream
 from .errors import CmlSyntaxError, MotorError, NoSuchMotorError, OutOfRangeError
 from .hostline import BAUD_RATES, HostLine, LineSettings
-from .motor.direct import inner_motor, run_statement
+from .motor.direct import MotorEval, inner_motor, run_statement
+from .motor.evaluate import evaluate
 from .motor.firmware import get_firmware
-from .motor.memory import VState
+from .motor.memory import VNumber, VState
 from .motor.motor import Context, Motor
 from .motor.status import Report
 from .motor.store import Store
@@ -83,6 +85,7 @@ class Chain:
             self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
+        self._attach_modbus()
         self._restore()
         if machine is not None:           # wired before power-up (K46 odd searches then)
             self.load_machine(machine)
@@ -127,9 +130,13 @@ class Chain:
         if self._recorder is not None:
             self._recorder.capture()
 
-    def execute(self, line: str, *, origin: str = "api") -> list[str]:
-        """Run a CML line as ``origin``; return the replies it produced at once."""
-        ctx = Context(origin=origin, replies=[])
+    def execute(self, line: str, *, origin: str = "api", motor: int | None = None) -> list[str]:
+        """Run a CML line as ``origin``; return the replies it produced at once.
+
+        ``motor`` is the ID statements without ``.n`` go to (default ID1).
+        """
+        ctx = Context(origin=origin, replies=[],
+                      default_motor=1 if motor is None else self._require(motor).id)
         self._execute_text(line, ctx)
         self._changed()
         return ctx.replies or []
@@ -138,13 +145,16 @@ class Chain:
         try:
             lines = parse(text)
         except CmlSyntaxError as error:
-            self.motors[1].report_error(ctx, error)
+            self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
             return
         for line in lines:
             for stmt in line.statements:
-                motor = self.motors.get(inner_motor(stmt) or ctx.default_motor)
+                motor_id = inner_motor(stmt) or ctx.default_motor
+                motor = self.motors.get(motor_id)
                 if motor is not None:
                     run_statement(motor, stmt, ctx)
+                else:
+                    self.beyond_chain(motor_id, stmt, ctx)
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
@@ -229,6 +239,52 @@ class Chain:
         from .plot import plot_trace
         return plot_trace(self.record(), path, title=title)
 
+    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.modbus ----------
+    def _attach_modbus(self) -> None:
+        from .modbus import Com1Port, ModbusSlave, RtuSlaveLine
+        self.modbus = ModbusSlave(self)
+        self.modbus_line = RtuSlaveLine(self, self.modbus)
+        self.host_line.mode = self.modbus_line
+        self.motors[1].params.on_change(
+            lambda k, _old, _new: self.modbus_line.k81_written() if k == 81 else None)
+        self.com1 = Com1Port(self, self.emit)
+
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
+        """A statement for an ID not on the chain (also from banks): the COM1 Modbus
+        slave takes it when it is "final ID + 1" (5.6.6); else it goes unanswered."""
+        if not self.com1.serves(motor_id):
+            return False
+        self._com1_statement(stmt, ctx)
+        return True
+
+    def _com1_statement(self, stmt: ast.Statement, ctx: Context) -> None:
+        """A statement for the COM1 Modbus slave, "final ID + 1" (5.6.6, 5.6.7)."""
+        origin, io = ctx.origin, self.com1.io_id
+        if isinstance(stmt, ast.Query) and stmt.letter is None and stmt.number in (50, 70):
+            if stmt.number == 50:
+                self.com1.read_outputs(origin)
+            else:
+                self.com1.read_inputs(origin)
+        elif isinstance(stmt, ast.Output):
+            if 1 <= stmt.index <= 16:
+                self.com1.write_output(stmt.index, stmt.on, origin)
+            else:
+                self._com1_error(io, ctx)
+        elif isinstance(stmt, ast.OutputWord):
+            word = evaluate(stmt.value, MotorEval(self.motors[self.com1.final_motor]))
+            if 0 <= word <= 0xFFFF:
+                self.com1.write_outputs(word, origin)
+            else:
+                self._com1_error(io, ctx)
+
+    def _com1_error(self, io: int, ctx: Context) -> None:
+        final = self.motors[self.com1.final_motor]
+        if final.reports(Report.MESSAGES):
+            text = OutOfRangeError().motor_line(io)
+            if ctx.replies is not None:
+                ctx.replies.append(text)
+            self.emit(io, "message", text, origin=ctx.origin)
+
     # -- device API: data -------------------------------------------------------
     def get_param(self, motor: int, k: int) -> int:
         return self._require(motor).k(k)
@@ -239,7 +295,14 @@ class Chain:
     def get_register(self, motor: int, kind: str, index: int) -> int | str:
         from .motor.queries import format_value
         value = self._require(motor).memory.get(kind, index)
+        if isinstance(value, VNumber):
+            return value.value
         return int(value) if isinstance(value, int) else format_value(value)
+
+    def register_value(self, motor: int, kind: str, index: int) -> int:
+        """The number the motor computes with: V strings packed, V states read live."""
+        m = self._require(motor)
+        return m.register_number(ast.Reg(kind.upper(), index, None))
 
     def set_register(self, motor: int, kind: str, index: int, value: int | str) -> None:
         self._require(motor).write_register(kind, index, value)

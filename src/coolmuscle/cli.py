@@ -109,12 +109,15 @@ def _setup_logging(verbose: bool) -> None:
 
 
 # -- sim -----------------------------------------------------------------
-def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool) -> list[Transport]:
+def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
+                modbus: tuple[str | None, str | None, str | None] = (None, None, None),
+                ) -> list[Transport]:
     from . import transports
     from .transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
-    if tcp is None and not (pty or pty_link or stdio):
+    modbus_rtu, modbus_tcp, com1 = modbus
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
         try:
@@ -126,6 +129,26 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool) 
         chosen.append(transports.create("pty", link=pty_link))
     if stdio:
         chosen.append(transports.create("stdio"))
+    chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
+    return chosen
+
+
+def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> list[Transport]:
+    """``--modbus-rtu``, ``--modbus-tcp``, ``--com1`` (docs/modbus.md)."""
+    from . import transports
+    from .transports.tcp import parse_address
+
+    chosen: list[Transport] = []
+    if rtu is not None:
+        chosen.append(transports.create("modbus-rtu", where=rtu))
+    if tcp is not None:
+        try:
+            host, port = parse_address(tcp)
+        except TransportError as exc:
+            raise UsageError(f"--modbus-tcp: {exc}") from None
+        chosen.append(transports.create("modbus-tcp", host=host, port=port))
+    if com1 is not None:
+        chosen.append(transports.create("com1", where=com1))
     return chosen
 
 
@@ -139,6 +162,10 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
     where = "   ".join(t.describe() for t in chosen)
     shown = _show_path(state) if state is not None else "none, not saved"
     err.print(f"{where}   (state: {shown})", markup=False)
+    station = _modbus_station(chain)
+    if station:
+        err.print(f"COM0 speaks Modbus RTU, station {station} (K81.1={station}); for the text "
+                  "line send FFFFFFFFF, then K81.1=0 (5.6.9)", markup=False)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -151,6 +178,11 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         await service.close()
 
 
+def _modbus_station(chain: Any) -> int:
+    line = getattr(chain, "modbus_line", None)
+    return line.station() if line is not None and line.active() else 0
+
+
 @app.command()
 def sim(
     tcp: Optional[str] = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
@@ -161,6 +193,17 @@ def sim(
                                             help="Stable symlink to the pty (implies --pty)."),
     stdio: bool = typer.Option(False, "--stdio",
                                help="Serve stdin/stdout (ends at end of input)."),
+    modbus_rtu: Optional[str] = typer.Option(
+        None, "--modbus-rtu", metavar="pty|DEVICE",
+        help="COM0 as a Modbus RTU slave on a new pty or a serial device (sets K81.1=1 "
+             "when it is 0)."),
+    modbus_tcp: Optional[str] = typer.Option(
+        None, "--modbus-tcp", metavar="[HOST:]PORT",
+        help="Serve the Modbus map over Modbus TCP (e.g. 1502; host 127.0.0.1)."),
+    com1: Optional[str] = typer.Option(
+        None, "--com1", metavar="pty|DEVICE",
+        help="COM1 of the final motor (Modbus host when its K84=1) on a new pty or a "
+             "serial device."),
     state: Optional[Path] = typer.Option(
         None, "--state", metavar="DIR",
         help="State directory (default: ~/.local/share/coolmuscle/state)."),
@@ -182,7 +225,9 @@ def sim(
     if not time_scale > 0:
         raise UsageError("--time-scale must be > 0")
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
-    chosen = _transports(tcp, pty, pty_link, stdio)
+    if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
+        raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
+    chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
     chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))

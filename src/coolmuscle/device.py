@@ -87,9 +87,11 @@ class Device(Protocol):
     def motor_ids(self) -> tuple[int, ...]:
         """IDs on the chain, 1..N."""
 
-    def execute(self, line: str, *, origin: Origin = "api") -> list[str]:
+    def execute(self, line: str, *, origin: Origin = "api",
+                motor: int | None = None) -> list[str]:
         """Run one CML line as if sent by ``origin``; return the reply lines it produced
-        at once (queries, error messages).  Later events arrive via :meth:`subscribe`."""
+        at once (queries, error messages).  Later events arrive via :meth:`subscribe`.
+        Statements without ``.n`` go to ``motor`` (default ID1)."""
 
     def get_param(self, motor: int, k: int) -> int:
         """Read K parameter ``k`` of ``motor``."""
@@ -99,6 +101,9 @@ class Device(Protocol):
 
     def get_register(self, motor: int, kind: str, index: int) -> int | str:
         """Read data memory (P S A M T V N R H).  A V string reads as ``'"abcd"'``."""
+
+    def register_value(self, motor: int, kind: str, index: int) -> int:
+        """The number a register stands for: V strings packed, V states read live."""
 
     def set_register(self, motor: int, kind: str, index: int, value: int | str) -> None:
         """Write data memory; raises ``OutOfRangeError``/``LookupError`` when invalid."""

@@ -12,13 +12,17 @@ This is motor behaviour, so it lives in the model, not in a transport:
 Transports (TCP, pty, stdio, pyserial URL) only shuttle bytes: they call
 :meth:`HostLine.feed` with what the host sent and subscribe to the bytes the
 motor sends with :meth:`HostLine.add_listener`.
+
+COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
+:attr:`HostLine.mode` then takes the received bytes instead of the text line,
+and text replies are not sent while it is active.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Protocol
 
 from .sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
 
@@ -40,6 +44,16 @@ class LineSettings:
     echo: bool = True           # K23 without 8
     delimiter: bytes = b"\r\n"  # K70: 0 -> CR, 1 -> CRLF
     baud: int = 38400           # K20
+
+
+class LineMode(Protocol):
+    """Another protocol on COM0 (Modbus RTU, 5.6): takes the bytes while active."""
+
+    def active(self) -> bool:
+        """Whether received bytes go to this mode (and text output is muted)."""
+
+    def receive(self, data: bytes) -> None:
+        """Bytes from the host, arrived at ``kernel.now``."""
 
 
 def byte_time_ns(baud: int) -> int:
@@ -69,6 +83,8 @@ class HostLine:
         self._rx_free_at = 0
         self.bytes_in = 0
         self.bytes_out = 0
+        #: COM0 in another protocol's mode (Modbus RTU); ``None``: always text.
+        self.mode: LineMode | None = None
 
     # -- output ---------------------------------------------------------
     def add_listener(self, listener: ByteListener) -> Callable[[], None]:
@@ -94,7 +110,9 @@ class HostLine:
                                 priority=PRIO_REPORT, name="hostline-tx")
 
     def send_line(self, text: str) -> None:
-        """Send one reply line followed by the K70 delimiter."""
+        """Send one reply line followed by the K70 delimiter (not in Modbus mode)."""
+        if self.mode is not None and self.mode.active():
+            return
         self.write(text.encode("latin-1", "replace") + self._settings().delimiter)
 
     def _deliver(self, data: bytes) -> None:
@@ -121,6 +139,13 @@ class HostLine:
 
     def _receive(self, data: bytes) -> None:
         self.bytes_in += len(data)
+        if self.mode is not None and self.mode.active():
+            self.mode.receive(data)
+            return
+        self.receive_text(data)
+
+    def receive_text(self, data: bytes) -> None:
+        """Bytes for the RS-232 text line (also what follows a Modbus escape, 5.6.9)."""
         settings = self._settings()
         echo = bytearray()
         failure: Exception | None = None

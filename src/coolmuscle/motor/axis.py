@@ -169,11 +169,17 @@ class Axis:
             self.target_raw = profile.final_position
         self._start(profile)
 
-    def stop(self, decel: float, scurve: int = 0) -> None:
-        """Decelerate to a stop; the stop point becomes the target (ch. 3 K55)."""
+    def stop(self, decel: float, scurve: int = 0, *, creep: float = 0.0,
+             speed: float | None = None) -> None:
+        """Decelerate to a stop; the stop point becomes the target (ch. 3 K55).
+
+        ``creep`` and ``speed`` (of the motion being stopped) give the K51 end jump and
+        the K69 jerk, as for a planned stop.
+        """
         if not self.moving:
             return
-        profile = planner.plan_stop(self._raw_state(), decel, self.kernel.now, scurve)
+        profile = planner.plan_stop(self._raw_state(), decel, self.kernel.now, scurve,
+                                    creep=creep, speed=speed)
         self.target_raw = profile.final_position
         self._start(profile)
 

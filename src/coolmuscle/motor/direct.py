@@ -114,10 +114,20 @@ def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
     elif isinstance(stmt, ast.Branch):
         branch = stmt.then if condition(stmt.condition, MotorEval(motor)) else stmt.orelse
         for inner in branch:
-            target = motor.bus.motor(inner_motor(inner) or motor.id) or motor
-            run_statement(target, inner, ctx)
+            route(motor, inner, ctx)
     else:
         motor.bus.bank_command(motor, stmt, ctx)
+
+
+def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+    """Run ``stmt`` on the motor it names (``motor`` when it names none); a statement
+    for an ID not on the chain goes to the chain (the COM1 device, or nobody)."""
+    motor_id = inner_motor(stmt) or motor.id
+    target = motor.bus.motor(motor_id)
+    if target is not None:
+        run_statement(target, stmt, ctx)
+    else:
+        motor.bus.beyond_chain(motor_id, stmt, ctx)
 
 
 def inner_motor(stmt: ast.Statement) -> int | None:

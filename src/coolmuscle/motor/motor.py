@@ -24,7 +24,7 @@ from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
                  OUT_ORIGIN_DONE, OUT_PUSH, DigitalIO)
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
-from .planner import Limits, limits_from_data
+from .planner import ESTOP_DECEL, Limits, limits_from_data
 from .plant import DEFAULT_KP, STEPPER_KP, Plant
 from .status import Report, Ux, io_word_hex, status_line
 from .supervision import Supervision
@@ -34,8 +34,6 @@ log = logging.getLogger(__name__)
 #: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
 WRITABLE_STATES = frozenset({"Dx", "ST"})
 
-#: Maximum deceleration used by the emergency stop ``*`` (pulses/s²), docs/fidelity.md.
-ESTOP_DECEL = 32767 * 1000.0
 
 
 class MotorBus(Protocol):
@@ -237,7 +235,7 @@ class Motor(Supervision):
         if self._stop_push():
             return
         self.abandon_motion()
-        self.axis.stop(lim.decel, lim.scurve)
+        self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
@@ -287,7 +285,8 @@ class Motor(Supervision):
 
     def feed_stop(self) -> None:
         """End of manual feed: decelerate with K43 (5.1)."""
-        self.axis.stop(self.limits(self.k(49), self.k(43)).decel)
+        lim = self.limits(self.k(49), self.k(43))
+        self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""

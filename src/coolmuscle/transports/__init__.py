@@ -28,6 +28,10 @@ BUILTIN: dict[str, str] = {
     "tcp": "coolmuscle.transports.tcp:TcpTransport",
     "pty": "coolmuscle.transports.pty:PtyTransport",
     "stdio": "coolmuscle.transports.stdio:StdioTransport",
+    "modbus-tcp": "coolmuscle.transports.modbus_tcp:ModbusTcpTransport",
+    "modbus-rtu": "coolmuscle.transports.serial_line:ModbusRtuTransport",
+    "serial-device": "coolmuscle.transports.serial_line:SerialTransport",
+    "com1": "coolmuscle.transports.serial_line:Com1Transport",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).

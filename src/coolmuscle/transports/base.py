@@ -36,12 +36,22 @@ class Port:
 
     With a ``driver`` every delivery first runs the kernel up to the wall clock,
     and wakes the driver afterwards (the line may have scheduled events).
+    ``device`` is the chain behind the line, for front ends that speak another
+    protocol through the device API (Modbus TCP, COM1).
     """
 
-    def __init__(self, host_line: HostLine, driver: RealtimeDriver | None = None) -> None:
+    def __init__(self, host_line: HostLine, driver: RealtimeDriver | None = None,
+                 device: Any = None) -> None:
         self.host_line = host_line
         self.driver = driver
+        self.device = device
         self.errors = 0
+
+    def call(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """Run ``fn(*args)`` at the wall-clock instant now (caught up), then wake the driver."""
+        if self.driver is None:
+            return fn(*args)
+        return self.driver.call(fn, *args)
 
     def feed(self, data: bytes) -> None:
         """Deliver bytes from a host; model failures are logged, never raised.

@@ -30,7 +30,7 @@ class Service:
         self.chain = chain
         self.transports = list(transports)
         self.driver = RealtimeDriver(chain.kernel, scale=scale, on_behind=on_behind)
-        self.port = Port(chain.host_line, self.driver)
+        self.port = Port(chain.host_line, self.driver, chain)
         self._driver_task: asyncio.Task[None] | None = None
         self._started: list[Transport] = []
 
