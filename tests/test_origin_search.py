@@ -150,3 +150,34 @@ def test_a_stop_abandons_the_search() -> None:
     chain.execute("]1.1")
     chain.kernel.run(until=seconds(10))
     assert events == ["Ux.1=8"] and not chain.motors[1].origin_done
+
+
+def test_ch3_k45_saved_reverse_coordinates_apply_at_power_up(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("K45.1=3")
+    chain.close()
+    chain = Chain(state_dir=tmp_path)
+    chain.execute("S.1=10, P.1=100")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    assert chain.execute("?96.1") == ["Px.1=100"]
+    assert abs(chain.motors[1].axis.raw_actual() + 100.0) < 1e-3   # CCW is positive
+    chain.close()
+
+
+@pytest.mark.parametrize("firmware, k46, k48, origin", [("cm1", 16, 2, -3000.0 + 200),
+                                                        ("rt3", 0, 2, -3000.0 + 2)])
+def test_other_firmware_stopper_search(firmware: str, k46: int, k48: int,
+                                       origin: float) -> None:
+    # CM1: K46 16 = stopper without power-up search, K48 in 100 pulses; RT3 as CM2
+    chain = Chain(firmware=firmware, machine=parse_machine(
+        "[[axis]]\n[axis.stoppers]\nccw = -3017\n"))
+    events: list[str] = []
+    chain.subscribe(lambda ev: events.append(ev.text) if ev.kind in ("status", "origin")
+                    else None)
+    chain.execute(f"K46.1={k46}, K45.1=1, K48.1={k48}" if firmware == "cm1"
+                  else f"K46.1={k46}, K45.1=21, K48.1={k48}")
+    chain.execute("|.1")
+    chain.kernel.run(until=seconds(10))
+    assert events == ["Origin.1=150", "Ux.1=8"]
+    assert abs(chain.motors[1].axis.raw_actual() - origin) < 1e-3

@@ -108,3 +108,25 @@ def test_push_via_a_passing_point_changes_the_level_there() -> None:
     assert motor.speed_units() == 10
     chain.kernel.run(until=seconds(6))
     assert [t for _, t in events] == ["Ux.1=40"]
+
+
+def test_cm1_push_level_is_k60_of_80_percent_of_full_torque() -> None:
+    # cm1-ethernetip-interface-manual.txt Appendix A K60: "pushmode % is based on 80% of
+    # full torque"; K61 = 30001 is the endless push
+    chain = Chain(firmware="cm1", machine=parse_machine(OBJECT_AT))
+    chain.execute("K60.1=25, K61.1=30001, P1.1=8000, S.1=20, A.1=100")
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(60))
+    assert chain.execute("?99.1") == ["Ux.1=32"]
+    assert chain.execute("?98.1") == ["Ix.1=60"]            # 25 % x 80 % x 300 %
+    assert chain.execute("?95.1") == ["Pe.1=3000"]          # a stepper pressed, not moving
+
+
+def test_rt3_push_as_cm2() -> None:
+    chain = Chain(firmware="rt3", machine=parse_machine(OBJECT_AT))
+    events: list[str] = []
+    chain.subscribe(lambda ev: events.append(ev.text) if ev.kind == "status" else None)
+    chain.execute("P1.1=8000, S.1=20, A.1=100")
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(5))
+    assert events == ["Ux.1=40"]

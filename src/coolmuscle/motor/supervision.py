@@ -270,6 +270,8 @@ class Supervision:
             self.set_input_level(number, self.input_driven[number])
 
     def _power_on_search(self: "Motor") -> None:
-        """Odd K46: an origin search starts at power-up (ch. 3 K46)."""
+        """Power-up: saved K45 / K71 take effect; odd K46 starts an origin search."""
+        self._supervision_param(45)
+        self.thermal.alarm = self._temperature_alarm()
         if auto_start(self.k(46)) and self.axis.enabled:
             self.kernel.call_soon(self.origin_search, name="power-on origin search")
