@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -206,3 +207,13 @@ def test_any_load_and_limit_settles_at_the_target(inertia: float, friction: floa
     if not stuck:
         chain.kernel.run(until=seconds(abs(target) / (s * 100) + 20))
         assert abs(motor.axis.position() - target) <= 5
+
+
+def test_6_6_ix_is_friction_while_cruising_and_zero_at_rest() -> None:
+    chain, motor = _chain()
+    chain.execute("S.1=100, A.1=100, P.1=10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(0.5))
+    assert motor.axis.torque_percent() == pytest.approx(100 * 0.004 / 0.32, rel=1e-6)
+    chain.kernel.run(until=seconds(2))
+    assert chain.execute("?98.1") == ["Ix.1=0"] and motor.axis.torque_percent() == 0.0

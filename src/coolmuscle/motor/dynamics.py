@@ -11,7 +11,8 @@ should be limited by M data").
 Modes (docs/fidelity.md "Servo, load and alarms"):
 
 * ``track``: the position loop follows the command, ``e' = v_cmd - kp·e`` (actual speed
-  ``kp·e``, Pe = e); the torque is what the inertia, friction and load need.  A stepper
+  ``kp·e``, Pe = e); the torque is what the inertia, friction and load need (Coulomb
+  friction drops out once the shaft creeps slower than V_STILL onto a standing command).  A stepper
   (``kp = inf``, CM1) follows the command exactly.
 * ``sat``: the needed torque exceeds the limit; the motor gives the limit, so the shaft
   accelerates at a constant rate (a quadratic) and lags until it meets the speed the
@@ -46,6 +47,8 @@ TRACK, SAT, BRAKE, VSAT, STALL, CONTACT, FREE, LOST = (
 
 #: Searches for a mode's end start this long after the mode began (s): no Zeno chains.
 TAU_MIN = 1e-9
+#: Settling slower than this (pulses/s) on a standing command needs no friction torque.
+V_STILL = 0.5
 #: A speed mismatch the torque limit would close within this time (s) is closed at once.
 SNAP_TIME = 1e-6
 #: Relative margin by which a mode's end condition must hold (float noise at a switch).
@@ -326,10 +329,17 @@ class Motion:
         e: F = (c0, c1, c2, 0.0, (cmd[0] - p) - c0)
         pos = xp.sub(cmd, e)
         sgn, turn = _stretch_sign(e, k, dur)
+        still: list = []
+        if sgn and cmd[1] == cmd[2] == cmd[3] == 0.0:
+            # settling on a standing command: once creeping, static friction holds
+            if abs(k * e[-1]) <= V_STILL:
+                sgn, turn = 0, None
+            else:
+                still = [("still", [xp.plus(xp.scale(e, -sgn * k), V_STILL)])]
         acc = xp.deriv(xp.deriv(pos, k), k)
         torque = xp.plus(acc, sgn * d.a_friction + d.a_load)
         exits = self._walls(pos) + _beyond("limit", torque, dur, d.a_limit)
-        exits += _beyond("vmax", xp.scale(e, k), dur, d.v_max)
+        exits += _beyond("vmax", xp.scale(e, k), dur, d.v_max) + still
         if turn is not None:
             exits.append(("vzero", turn))
         return Piece(t, math.inf, TRACK, pos, cmd, torque, k), exits
