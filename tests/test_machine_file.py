@@ -11,7 +11,7 @@ import pytest
 
 from coolmuscle import cli
 from coolmuscle.chain import Chain
-from coolmuscle.machine import MachineFileError, load_machine, parse_machine
+from coolmuscle.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))

@@ -8,6 +8,8 @@ cml-users-guide.txt 5.3, 5.3.1-5.3.3; ch. 3 K27, K34 (function 4), K42-K48.  The
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from coolmuscle.chain import Chain
@@ -152,7 +154,7 @@ def test_a_stop_abandons_the_search() -> None:
     assert events == ["Ux.1=8"] and not chain.motors[1].origin_done
 
 
-def test_ch3_k45_saved_reverse_coordinates_apply_at_power_up(tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_ch3_k45_saved_reverse_coordinates_apply_at_power_up(tmp_path: Path) -> None:
     chain = Chain(state_dir=tmp_path)
     chain.execute("K45.1=3")
     chain.close()

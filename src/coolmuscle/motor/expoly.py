@@ -8,7 +8,8 @@ This module owns that form (``F``, a tuple ending with ``d``, with the rate ``k`
 alongside) and the instants where such a function changes sign, found by a derivative
 cascade: the n-th derivative of ``f`` is ``n! cn + d (-k)ⁿ e^(-kτ)``, monotonic, so it
 has at most one root, which bounds the monotonic stretches of every lower derivative;
-each root is then bracketed and refined (safeguarded Newton).  Nothing is sampled on a time grid (docs/architecture.md rule 2).
+each root is then bracketed and refined (safeguarded Newton).  Nothing is sampled on a
+time grid (docs/architecture.md rule 2).
 """
 
 from __future__ import annotations
