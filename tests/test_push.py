@@ -130,3 +130,20 @@ def test_rt3_push_as_cm2() -> None:
     chain.execute("Q1.1")
     chain.kernel.run(until=seconds(5))
     assert events == ["Ux.1=40"]
+
+
+def test_4_1_4_trace_torque_clamped_at_k60_status_32_then_40() -> None:
+    chain, _ = _chain()
+    recorder = chain.record()
+    chain.execute("K60.1=40, K61.1=300")
+    chain.execute("Q1.1")
+    chain.kernel.run(until=seconds(4))
+    samples = [recorder.sample(1, t) for t in recorder.times(0.001)]
+    assert max(abs(s.torque) for s in samples) <= 40.0 + 1e-9
+    assert max(s.position for s in samples) <= 5000.0 + 1e-6
+    statuses = [s.status for s in samples]
+    first40 = statuses.index(40)
+    assert set(statuses[:first40]) == {32} and set(statuses[first40:]) == {40}
+    touching = [s.time for s in samples if s.status == 32 and abs(s.torque) > 39.999]
+    assert abs((samples[first40].time - touching[0]) / NS_PER_S - 0.3) < 0.002
+    assert all(s.outputs & 1 for s in samples[:first40])      # K34=9 while pushing
