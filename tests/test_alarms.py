@@ -77,15 +77,31 @@ def test_ch3_k57_overload_after_k57_ms_beyond_rated_torque() -> None:
     _free_and_recover(chain, 4, by_reset=True)
 
 
-def test_ch3_k40_over_speed() -> None:
+def test_ch3_k40_over_speed_when_the_load_runs_away() -> None:
+    # a hanging load of 200 % rated against a torque limit of 30 % (M=10): the shaft is
+    # dragged down past 1.2 x K40 = 1200 min⁻¹ = 20 000 pps
     chain, events = _chain()
-    chain.execute("K40.1=1000, S.1=250, A.1=100, P.1=100000")  # 25 000 pps > 1.2 x 16 667
-    chain.execute("^.1")
-    chain.kernel.run(until=seconds(1))
+    chain.execute("K40.1=1000, M.1=10")
+    chain.inject_fault(1, "overload", torque=200)       # held by +torque: it pulls CCW
+    motor = chain.motors[1]
+    assert chain.kernel.run_until(lambda: bool(events), seconds(1))
     (when, text), = _reports(events)
     assert text == "Ux.1=2"
+    assert motor.axis.velocity() == pytest.approx(-20000, rel=1e-6)
+    chain.inject_fault(1, "overload", clear=True)
     chain.kernel.run(until=seconds(2))
     _free_and_recover(chain, 2)
+
+
+def test_ch3_k40_the_loop_never_asks_more_than_k40() -> None:
+    # a command faster than K40 is not followed: the motor runs at K40 and falls behind
+    chain, events = _chain()
+    chain.execute("K40.1=1000, S.1=250, A.1=100, P.1=100000")  # 25 000 pps > 16 667
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(0.5))
+    assert chain.motors[1].axis.velocity() == pytest.approx(1000 * 1000 / 60)
+    chain.kernel.run(until=seconds(2))
+    assert [t for _, t in _reports(events)] == ["Ux.1=1"]
 
 
 def test_6_6_temperature_rises_and_cools_in_closed_form_then_alarms() -> None:

@@ -217,3 +217,27 @@ def test_6_6_ix_is_friction_while_cruising_and_zero_at_rest() -> None:
     assert motor.axis.torque_percent() == pytest.approx(100 * 0.004 / 0.32, rel=1e-6)
     chain.kernel.run(until=seconds(2))
     assert chain.execute("?98.1") == ["Ix.1=0"] and abs(motor.axis.torque_percent()) < 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(steps=st.lists(st.tuples(st.sampled_from([0.0, 1e-9, 0.0031, 0.05, 0.3, 1.0, "arrive"]),
+                                st.integers(-3000, 3000), st.integers(5, 200)),
+                      min_size=2, max_size=8),
+       inertia=st.sampled_from([0.0, 2e-4]), m=st.sampled_from([100, 10]))
+def test_replanning_at_any_moment_keeps_the_motion_finite(
+        steps: list[tuple[object, int, int]], inertia: float, m: int) -> None:
+    """New targets arriving at arbitrary instants, also the very instant a move comes in
+    position (where Pe and the speed are nearly zero), never chatter."""
+    chain, motor = _chain(load_inertia=inertia)
+    chain.execute(f"K56.1=32767, K57.1=10000, A.1=100, M.1={m}")
+    for delay, target, s in steps:
+        if delay == "arrive":
+            chain.kernel.run_until(lambda: not motor.axis.moving, seconds(30))
+        else:
+            chain.kernel.run(until=chain.kernel.now + seconds(float(delay)))  # type: ignore[arg-type]
+        chain.execute(f"S.1={s}, P.1={target}")
+        chain.execute("^.1")
+        assert len(motor.axis.motion.pieces) < 200
+        _continuous(motor.axis.motion)
+    chain.kernel.run(until=chain.kernel.now + seconds(60))
+    assert abs(motor.axis.position() - steps[-1][1]) <= 5

@@ -18,8 +18,10 @@ from typing import TYPE_CHECKING, Callable
 from .cml import ast
 from .cml.parser import parse
 from .device import Event, EventListener, MotorSnapshot, TargetStream
-from .errors import CmlSyntaxError, MotorError, NoSuchMotorError, OutOfRangeError
+from .errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
+                     NoSuchMotorError, OutOfRangeError)
 from .hostline import BAUD_RATES, HostLine, LineSettings
+from .motor.banks import BankUploads
 from .motor.direct import MotorEval, inner_motor, run_statement
 from .motor.evaluate import evaluate
 from .motor.firmware import get_firmware
@@ -79,10 +81,12 @@ class Chain:
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
         self._listeners: list[EventListener] = []
+        self._watchers: list[Callable[[], None]] = []
         self._recorder: TraceRecorder | None = None
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
             self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
+        self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
         self._attach_modbus()
@@ -142,10 +146,14 @@ class Chain:
         return ctx.replies or []
 
     def _execute_text(self, text: str, ctx: Context) -> None:
+        if self.uploads.consume(text, ctx):   # a bank definition is being typed
+            return
         try:
             lines = parse(text)
         except CmlSyntaxError as error:
             self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
+            return
+        if self.uploads.begins(lines, ctx):    # B#.n / L#.n (2.2.2, 2.2.3)
             return
         for line in lines:
             for stmt in line.statements:
@@ -155,6 +163,23 @@ class Chain:
                     run_statement(motor, stmt, ctx)
                 else:
                     self.beyond_chain(motor_id, stmt, ctx)
+        self.poke()
+
+    # -- bank waits (W#, program lines): re-checked on events, never polled -------
+    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call ``callback`` at every :meth:`poke` until the returned remover is called."""
+        self._watchers.append(callback)
+
+        def remove() -> None:
+            if callback in self._watchers:
+                self._watchers.remove(callback)
+        return remove
+
+    def poke(self) -> None:
+        """Something changed (a line, an input, a motion, a ladder scan): look again."""
+        if self._watchers:
+            for callback in list(self._watchers):
+                callback()
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
@@ -180,27 +205,69 @@ class Chain:
     # -- chain-wide commands and banks (cml-users-guide.txt 2.1.2) ------------
     def chain_command(self, motor: Motor, stmt: ast.Exec, ctx: Context) -> None:
         """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``, ``<``."""
-        del ctx
-        if stmt.op == "pause":
+        op = stmt.op
+        if op == "pause":          # 2.1.2 "]": stop all motors, pause the banks
+            for each in self.motors.values():
+                each.program.pause()
             for each in self.motors.values():
                 each.stop()
-        elif stmt.op == "pause_motor":
+        elif op == "pause_motor":
             motor.stop()
-        elif stmt.op == "estop":
+        elif op == "estop":
             for each in self.motors.values():
                 each.emergency_stop()
-        elif stmt.op == "estop_release":
+                each.program.emergency()
+        elif op == "estop_release":
             for each in self.motors.values():
                 each.emergency_release()
+            for each in self.motors.values():
+                if not each.estopped:
+                    each.program.emergency_released()
+        elif op == "stop_after_line":
+            motor.program.stop_after_line()
+        elif op == "next_line":
+            motor.program.next_line(ctx)
+        elif op == "prev_line":
+            motor.program.prev_line(ctx)
 
     def bank_command(self, motor: Motor, stmt: ast.Statement, ctx: Context) -> None:
-        """Bank definition and execution commands (program/ladder banks)."""
-        del motor, stmt, ctx
+        """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
+        if isinstance(stmt, ast.StartBank):
+            if stmt.kind == "B":
+                if stmt.index is None:
+                    motor.program.resume()
+                else:
+                    motor.program.start(stmt.index, ctx)
+                return
+            runner = motor.logic_motion if stmt.kind == "LM" else motor.ladder
+            if stmt.index is None:
+                runner.resume()
+            else:
+                runner.start(stmt.index, ctx)
+        elif isinstance(stmt, ast.StopBank):
+            (motor.logic_motion if stmt.kind == "LM" else motor.ladder).pause()
+        elif isinstance(stmt, ast.ClearBanks):
+            if stmt.ladder:
+                motor.ladder.stop()
+                motor.logic_motion.stop()
+            else:
+                motor.program.terminate()
+            motor.banks.clear(stmt.ladder)
+        # C J CL JL X X- W END typed outside a bank mean nothing in direct mode
 
     def bank_query(self, motor: Motor, query: ast.Query) -> list[str] | None:
-        """Bank listings ``?#``, ``?L#``, ``?1000``."""
-        del motor, query
-        return None
+        """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6); error05/06 for a missing bank."""
+        if query.number is None:
+            return None
+        if query.letter is None and query.number == 1000:
+            return motor.banks.all_listing(motor.id)
+        ladder = query.letter == "L"
+        if not 1 <= query.number <= motor.banks.count(ladder):
+            return None
+        lines = motor.banks.listing(ladder, query.number)
+        if lines is None:
+            raise NoLadderBankError() if ladder else NoProgramBankError()
+        return lines
 
     # -- saving ---------------------------------------------------------------
     def save(self, motor: Motor) -> None:

@@ -20,7 +20,8 @@ Modes (docs/fidelity.md "Servo, load and alarms"):
 * ``brake``: after a lag, the shaft brakes at the limit torque so as to land on the
   command's speed where the loop would have it (the braking curve u² = 2·a·ε of the
   speed and position differences), instead of overshooting.
-* ``vsat``: the loop asks for more than the maximum speed; the shaft runs at it.
+* ``vsat``: the loop asks for more than the maximum speed (K40); the shaft runs at it
+  (a load the torque limit cannot hold drags it beyond: over speed).
 * ``stall``: the torque limit cannot overcome the friction and load.
 * ``contact``: the shaft is held by a hard stopper; Pe grows, the torque is the limit.
 * ``free``: servo off (or a stepper that lost its steps, ``lost``): only friction and
@@ -253,7 +254,7 @@ class Motion:
             end, kind = c_end - t, "command"
             for name, conds in exits:
                 if isinstance(conds, float):
-                    tau: float | None = conds
+                    tau: float | None = max(conds, min(TAU_MIN, end / 2.0))
                 else:
                     conds = [_strict(c) for c in conds]
                     tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
@@ -357,9 +358,10 @@ class Motion:
         e = xp.sub(cmd, pos)
         exits = self._walls(pos) + [
             ("track", [xp.scale(xp.sub(vel, xp.scale(e, d.kp)), float(s))]),
-            ("vmax", [xp.sub(xp.scale(vel, float(s)), xp.const(d.v_max))]),
             ("vzero", [xp.scale(vel, -float(sgn))]),
         ] + self._brake_exit(pos, cmd, s)
+        if abs(s * d.a_friction + d.a_load) <= d.a_limit:     # it can hold the top speed
+            exits.append(("vmax", [xp.sub(xp.scale(vel, float(s)), xp.const(d.v_max))]))
         return Piece(t, math.inf, SAT, pos, cmd, xp.const(s * d.a_limit), 0.0, s), exits
 
     def _braking(self, s: int) -> float:
@@ -471,9 +473,12 @@ def _wall_side(p: float, d: Drive) -> int:
 
 
 def _stretch_sign(f: F, k: float, dur: float) -> tuple[int, float | None]:
-    """Sign of ``f`` on its first stretch after 0, and where it ends (within ``dur``)."""
-    found = xp.roots(f, k, 0.0, dur)
-    probe = found[0] / 2.0 if found else (dur / 2.0 if math.isfinite(dur) else 1.0)
+    """Sign of ``f`` on its first stretch after TAU_MIN, and where it ends (within
+    ``dur``); a sign change closer to the start than TAU_MIN is float noise."""
+    lo = min(TAU_MIN, dur / 2.0)
+    found = xp.roots(f, k, lo, dur)
+    end = found[0] if found else (dur if math.isfinite(dur) else lo + 2.0)
+    probe = (lo + end) / 2.0
     return _sign(xp.value(f, k, probe)), (found[0] if found else None)
 
 

@@ -80,10 +80,3 @@ class TravelLimits:
             self.motor.report_error(None, self.error(direction))
             return True
         return False
-
-    def from_inputs(self, number: int) -> None:
-        """An input changed: inputs with K27 function 6 / 9 are the limit sensors."""
-        m = self.motor
-        function = digit(m.k(27), number)
-        if function in (6, 9):
-            self.sensor(1 if function == 6 else -1, m.io.input_signal(number))

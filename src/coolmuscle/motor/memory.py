@@ -175,6 +175,20 @@ class Memory:
         self._check_index(kind, index)
         return self._data[kind][index]
 
+    def cells(self, kind: str) -> list[Any]:
+        """The live cells of ``kind`` (index = memory number), for fast reads by the
+        ladder scanner; read only.  The list is replaced when the allocation changes."""
+        return self._data[kind]
+
+    def set_v_number(self, index: int, value: int) -> None:
+        """``V#=value`` with a number, as :meth:`set` checks it (fast path for ladder scans)."""
+        cells = self._data["V"]
+        if not (type(value) is int and -LIMIT_1E9 <= value <= LIMIT_1E9):
+            raise OutOfRangeError(f"V={value!r} is out of range")
+        if not 0 <= index < len(cells):
+            raise NoSuchRegisterError(f"V{index} does not exist (V0..V{len(cells) - 1})")
+        cells[index] = VNumber(value)
+
     def set(self, kind: str, index: int, value: int | str | VValue) -> None:
         """Store ``value``; nothing changes if it is refused.
 
@@ -227,7 +241,7 @@ class Memory:
         return VNumber(value)
 
     def _check_index(self, kind: str, index: int) -> None:
-        top = self.limit(kind)
+        top = len(self._data[kind]) - 1   # the cells are sized to limit(kind) + 1
         if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index <= top:
             raise NoSuchRegisterError(f"{kind}{index} does not exist ({kind}0..{kind}{top})")
 
@@ -324,7 +338,12 @@ class Memory:
                 self.set(kind, index, value)
 
 
+_CANONICAL_KINDS = frozenset(REGISTER_KINDS)
+
+
 def _kind(kind: str) -> str:
+    if isinstance(kind, str) and kind in _CANONICAL_KINDS:   # fast path (ladder scans)
+        return kind
     upper = kind.upper() if isinstance(kind, str) else ""
     if upper not in REGISTER_KINDS:
         raise ValueError(f"unknown register kind {kind!r}")

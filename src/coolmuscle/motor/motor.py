@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Callable, Protocol, Sequence
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -45,6 +45,15 @@ class MotorBus(Protocol):
 
     def motor(self, motor_id: int) -> "Motor | None":
         """Another motor of the chain (None when absent)."""
+
+    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call ``callback`` at every poke until the returned remover is called."""
+
+    def poke(self) -> None:
+        """Something changed (input, data, motion): re-check the bank waits."""
+
+    def chain_command(self, motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
+        """Chain-wide execution commands (``]``, ``*``, ``*1`` ...)."""
 
 
 @dataclass
@@ -89,6 +98,21 @@ class Motor(Supervision):
         self.analog = 0
         self.encoder_count = 0
         self._last_limits: Limits | None = None
+        # -- banks, ladder, input functions (issue 4).  Imported here: the executors
+        # use .direct, which imports this module.
+        from .banks import BankStore
+        from .inputs import InputFunctions
+        from .ladder import LadderRunner
+        from .program import ProgramExecutor
+        self.banks = BankStore(firmware)
+        self.program = ProgramExecutor(self)
+        self.ladder = LadderRunner(self)
+        self.logic_motion = LadderRunner(self, motion=True)
+        self.inputs = InputFunctions(self)
+        self._go_target: int | None = None     # P0 of a running "^" (S0 stays live)
+        self._go_speed: int | None = None
+        self._go_data: tuple[int, int, int] | None = None
+        self._state_readers: dict[str, Callable[[], int]] | None = None
 
     # -- parameters and units ----------------------------------------------
     def k(self, number: int) -> int:
@@ -190,6 +214,7 @@ class Motor(Supervision):
 
     def move_to(self, waypoints: list[tuple[float, Limits]]) -> None:
         """Start (or re-plan) a move through user-coordinate waypoints."""
+        self._go_target = None
         if not self.can_move() or not waypoints:
             return
         waypoints = [(self.travel.clamp(t), lim) for t, lim in waypoints]
@@ -201,6 +226,7 @@ class Motor(Supervision):
 
     def run_continuous(self, s_value: int, limits: Limits) -> None:
         """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
+        self._go_target = None
         if not self.can_move():
             return
         self.abandon_motion()
@@ -210,16 +236,40 @@ class Motor(Supervision):
         self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
 
     def go(self) -> None:
-        """``^``: execute the direct data P0, S0, A0, M0 (2.1.2)."""
-        s0 = int(self.memory.get("S", 0))
-        a0 = int(self.memory.get("A", 0))
+        """``^``: execute the direct data P0, S0, A0, M0 (2.1.2).
+
+        S0 stays live while the motion runs: writing S0 changes its speed, S0 = 0
+        halts it short of P0 until S0 is set again (2.2.3 operation example, where a
+        ladder bank switches S.1 during a ``^`` move; cm-banks-rt3.txt 7.1-7.3).
+        """
         p0 = int(self.memory.get("P", 0))
         self.torque_limit = int(self.memory.get("M", 0))
-        lim = self.limits(s0, a0)
-        if p0 == units.CONTINUOUS:
-            self.run_continuous(s0, lim)
+        same = (p0, int(self.memory.get("S", 0)), int(self.memory.get("A", 0)))
+        if self._go_target is not None and self.axis.moving and same == self._go_data:
+            return   # that very motion is running already (RT3 7.2 sends ^ every scan)
+        self._run_go(p0)
+
+    def _run_go(self, p0: int) -> None:
+        s0 = int(self.memory.get("S", 0))
+        a0 = int(self.memory.get("A", 0))
+        if s0 == 0 or a0 == 0:
+            if self.axis.moving:
+                self.stop()
         else:
-            self.move_to([(float(p0), lim)])
+            lim = self.limits(s0, a0)
+            if p0 == units.CONTINUOUS:
+                self.run_continuous(s0, lim)
+            else:
+                self.move_to([(float(p0), lim)])
+        self._go_target, self._go_speed, self._go_data = p0, s0, (p0, s0, a0)
+
+    def direct_speed_changed(self) -> None:
+        """S0 was written: a running ``^`` motion takes the new speed (see :meth:`go`)."""
+        target = self._go_target
+        if target is None or int(self.memory.get("S", 0)) == self._go_speed:
+            return
+        if self.can_move():
+            self._run_go(target)
 
     def go_origin(self) -> None:
         """``|1``: move to position 0 with K42 speed and K43 acceleration (2.1.2)."""
@@ -231,6 +281,7 @@ class Motor(Supervision):
 
     def stop(self) -> None:
         """``]``/``}``-style decelerating stop at the motion's deceleration."""
+        self._go_target = None
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
         if self._stop_push():
             return
@@ -239,6 +290,7 @@ class Motor(Supervision):
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
+        self._go_target = None
         if not self._stop_push():
             self.abandon_motion()
             self.axis.stop(ESTOP_DECEL)
@@ -246,9 +298,13 @@ class Motor(Supervision):
             self.estopped = True
             self.report_status()
 
-    def emergency_release(self) -> None:
-        """``*1``: cancel the emergency stop and enable the motor (2.1.2)."""
-        if self.estopped:
+    def emergency_release(self, *, force: bool = False) -> None:
+        """``*1``: cancel the emergency stop and enable the motor (2.1.2).
+
+        Not while an input with function 7 holds it (ch. 3 K27 "can not be canceled
+        by CML command"); the input itself releases with ``force``.
+        """
+        if self.estopped and (force or not self.inputs.estop_held()):
             self.estopped = False
             self.enable()
 
@@ -258,14 +314,17 @@ class Motor(Supervision):
         self.abandon_motion()
         self.axis.hold_here()
         self.axis.enabled = True
+        self.motion_settled()
 
     def free(self) -> None:
         """``)``: motor free (servo off); the shaft coasts to rest where it is."""
+        self._go_target = None
         self.abandon_motion()
         was_moving = not self.motion_done()
         self.axis.enabled = False
         if was_moving:
             self.notify_motion_done("free")
+        self.motion_settled()
 
     def reset_alarm(self) -> None:
         """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
@@ -290,18 +349,30 @@ class Motor(Supervision):
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
-        self._alarm_latched(bits)
+        if self._alarm_latched(bits):
+            self.program.alarm()
+            self.motion_settled()
 
     def capture(self, index: int) -> None:
         """``#x``: P[x] := current position (2.1.2)."""
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
+        if self._go_speed:            # a "^" reached P0 (not halted by S0 = 0): done
+            self._go_target = None
         self._arrival()
+        self.motion_settled()
+
+    # -- motion completion (issue 4: bank executors wait on these) -----------------
+    def motion_settled(self) -> None:
+        """A motion ended: let waiting bank lines look again (no polling)."""
+        self.bus.poke()
 
     def _passing_point(self, index: int) -> None:
         del index
         self.merge_pulse_until = self.kernel.now + self.k(73) * 1_000_000
+        # an event where the K34=6 pulse ends, so traces and waits see the output fall
+        self.kernel.schedule_at(self.merge_pulse_until, self.bus.poke, name="merge-pulse-end")
 
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
@@ -326,15 +397,25 @@ class Motor(Supervision):
             self.report_outputs()
 
     def set_input_level(self, number: int, on: bool) -> None:
-        """Drive an input's electrical level (device API, machine file)."""
+        """Drive an input's electrical level (device API, machine file); the input
+        functions of K27-K32 follow (:mod:`.inputs`), faults may hold it (:mod:`.faults`)."""
         if self.io.set_level(number, self._input_driven(number, on)):
             self.report_inputs()
             self._input_changed(number)
+            self.inputs.signal_changed(number)
+        self.bus.poke()
 
     # -- V registers and live states --------------------------------------------
     def state_value(self, name: str) -> int:
         """A bound V state read live (2.2.1 "V"; cm-banks-rt3.txt 1.3)."""
-        readers = {
+        readers = self._state_readers
+        if readers is None:
+            readers = self._state_readers = self._make_state_readers()
+        reader = readers.get(name)
+        return int(reader()) if reader else 0
+
+    def _make_state_readers(self) -> dict[str, Callable[[], int]]:
+        return {
             "Px": self.position, "Sx": self.speed_units, "Ix": self.torque,
             "Ux": lambda: self.status, "Pe": lambda: round(self.axis.position_error()),
             "ADIN": lambda: self.analog, "PT": lambda: round(self.axis.target())
@@ -344,8 +425,6 @@ class Motor(Supervision):
             else 0,
             "Fx": lambda: 0, "Cx": lambda: self.encoder_count,
         }
-        reader = readers.get(name)
-        return int(reader()) if reader else 0
 
     def v_numeric(self, value: VNumber | VString | VState) -> int:
         if isinstance(value, VState):
@@ -373,6 +452,8 @@ class Motor(Supervision):
         self.memory.set(kind, index, value)
         if kind == "M" and index == 0:
             self.set_torque_limit(int(self.memory.get("M", 0)))
+        if kind == "S" and index == 0:
+            self.direct_speed_changed()
 
     def write_state(self, name: str, value: int) -> None:
         """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).
@@ -415,7 +496,8 @@ class Motor(Supervision):
     # -- saving and power ---------------------------------------------------------
     def to_snapshot(self) -> dict[str, object]:
         """What ``$`` stores: parameters, data and banks (2.1.2 "$")."""
-        return {"params": self.params.values(), "memory": self.memory.to_dict()}
+        return {"params": self.params.values(), "memory": self.memory.to_dict(),
+                "banks": self.banks.to_dict()}
 
     def load_snapshot(self, saved: dict[str, object]) -> None:
         """Restore what was saved (power-up).  Data that no longer fits is skipped."""
@@ -431,9 +513,15 @@ class Motor(Supervision):
             except ValueError as exc:
                 log.warning("motor %d: saved data skipped: %s", self.id, exc)
         self.memory.k37 = self.k(37)
+        banks = saved.get("banks")
+        if isinstance(banks, dict):
+            self.banks.load_dict(banks)
 
     def power_on(self) -> None:
-        """Power-up: servo on or motor free per K68 (ch. 3 K68)."""
+        """Power-up: servo on or motor free per K68 (ch. 3 K68); input levels; the
+        K62 (RT3: K85) ladder bank starts; power-up origin search (K46)."""
         if self.k(68) == 0 and self.firmware.name != "cm1":   # CM1 K68: S-curve function
             self.free()
+        self.inputs.power_up()
+        self.ladder.power_up()
         self._power_on_search()

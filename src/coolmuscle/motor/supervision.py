@@ -61,6 +61,7 @@ class Supervision:
     def _attach_supervision(self: "Motor") -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
         self.axis.before_resolve.append(self.thermal.advance)
+        self.plant.on_change = self.axis.refresh
         for watcher in (*alarm_watchers(self), self.push, self.origin):
             self.axis.add_watcher(watcher)
 
@@ -82,7 +83,7 @@ class Supervision:
         extra = self.faults.extra_load_percent / 100.0 * self.plant.rated_torque
         return self.plant.drive(ppr, limit_percent_of_rated=limit, enabled=True,
                                 speed_scale=self.faults.speed_scale(), extra_load_nm=extra,
-                                walls=self.geometry.walls(ppr))
+                                walls=self.geometry.walls(ppr), speed_limit=self.k(40))
 
     def set_torque_limit(self: "Motor", percent: int) -> None:
         """``M`` (2.1.1): the torque limit, % of the maximum torque, applies at once."""
@@ -153,6 +154,11 @@ class Supervision:
         """A CW (+1) / CCW (-1) limit sensor changed (input functions 6, 9)."""
         self.travel.sensor(direction, on)
 
+    @property
+    def limit_sensors(self: "Motor") -> dict[int, bool]:
+        """Limit sensor states: {+1: CW on, -1: CCW on} (read only)."""
+        return dict(self.travel.on)
+
     def inject_fault(self: "Motor", fault: str, **params: object) -> None:
         """Fault injection through the device API (docs/machine-file.md "Faults")."""
         self.faults.inject(fault, **params)
@@ -211,6 +217,7 @@ class Supervision:
     def notify_motion_done(self: "Motor", reason: str) -> None:
         for listener in list(self._motion_listeners):
             listener(reason)
+        self.motion_settled()
 
     def push_finished(self: "Motor", ux: int, reason: str) -> None:
         """The push completed (40), failed (256) or ended at its target (8)."""
@@ -260,9 +267,9 @@ class Supervision:
         return self.faults.input_level(number, bool(on))
 
     def _input_changed(self: "Motor", number: int) -> None:
-        """Signal of input ``number`` changed: origin sensor and limit sensors (K27)."""
+        """Signal of input ``number`` changed: the origin search watches its sensor (the
+        limit sensors come through the input functions, :mod:`.inputs`)."""
         self.origin.on_input(number)
-        self.travel.from_inputs(number)
 
     def refresh_inputs(self: "Motor") -> None:
         """Re-apply the faults to every driven input level."""

@@ -1,0 +1,60 @@
+"""Helpers for the bank, ladder and I/O function tests: a chain driven line by line."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from coolmuscle.chain import Chain
+from coolmuscle.device import Event
+from coolmuscle.sim.kernel import seconds
+
+
+@dataclass
+class Rig:
+    """A chain, what it printed (time ns, text) and shortcuts to type and to wait."""
+
+    chain: Chain
+    printed: list[tuple[int, str]] = field(default_factory=list)
+
+    @property
+    def kernel(self) -> Any:
+        return self.chain.kernel
+
+    def motor(self, motor_id: int = 1) -> Any:
+        return self.chain.motors[motor_id]
+
+    def type(self, *lines: str) -> None:
+        """Lines as typed on the host line (replies are recorded in ``printed``)."""
+        for line in lines:
+            self.chain.execute(line, origin="host")
+
+    def wait(self, s: float) -> None:
+        self.kernel.advance(seconds(s))
+
+    def until(self, s: float) -> None:
+        self.kernel.run(until=seconds(s))
+
+    def texts(self, since: int = 0) -> list[str]:
+        return [text for t, text in self.printed if t >= since]
+
+    def times(self, text: str) -> list[int]:
+        return [t for t, seen in self.printed if seen == text]
+
+    def clear(self) -> None:
+        self.printed.clear()
+
+
+def rig(*lines: str, motors: int = 1, firmware: str = "cm2", k23: int = 25,
+        **options: Any) -> Rig:
+    """A fresh chain with K23 = ``k23`` (no echo, messages on) and ``lines`` typed."""
+    chain = Chain(motors=motors, firmware=firmware, **options)
+    result = Rig(chain)
+
+    def listen(event: Event) -> None:
+        if event.origin in ("host", "bank", "ladder", "motor"):
+            result.printed.append((event.time, event.text))
+    chain.subscribe(listen)
+    result.type(f"K23.1={k23}")
+    result.type(*lines)
+    return result

@@ -1,0 +1,100 @@
+"""Output functions K34 with the output logic of K33, and the K23 output reports.
+
+cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K73;
+6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and push motion (9) belong to other models.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from bank_support import Rig, rig
+from coolmuscle.sim.kernel import NS_PER_MS, seconds
+
+MS = NS_PER_MS
+
+
+def outputs(r: Rig) -> str:
+    (reply,) = r.chain.execute("?50.1")
+    return reply
+
+
+def test_k34_1_in_position_output() -> None:
+    r = rig("K34.1=0001", "S.1=100", "P.1=1000")
+    assert outputs(r) == "OUT.1=01"
+    r.type("^.1")
+    assert outputs(r) == "OUT.1=00"
+    r.wait(0.5)
+    assert outputs(r) == "OUT.1=01"
+
+
+def test_k33_low_active_inverts_the_port() -> None:
+    r = rig("K34.1=0001", "K33.1=1110", "S.1=100", "P.1=1000", "^.1")
+    assert outputs(r) == "OUT.1=01"            # moving: signal off, low active: port on
+    r.wait(0.5)
+    assert outputs(r) == "OUT.1=00"
+    assert r.chain.execute("?51.1") == ["OUT1.1=0"]
+
+
+def test_k34_2_alarm_and_8_motor_free() -> None:
+    r = rig("K34.1=0082")
+    assert outputs(r) == "OUT.1=00"
+    r.motor().raise_alarm(4)
+    assert outputs(r) == "OUT.1=03"            # alarm, and the motor is free
+    r.type("(.1")
+    assert outputs(r) == "OUT.1=00"
+    r.type(").1")
+    assert outputs(r) == "OUT.1=02"
+
+
+def test_k34_3_general_outputs_from_banks_and_k23_reports() -> None:
+    """K23 4: "Automatically report ... when output status changes. only for general
+    output": O/F from a program and a ladder bank report, in-position does not."""
+    r = rig("K23.1=29", "K34.1=0331", "S.1=100", "P1.1=1000", "B1.1", "O2.1", "P1.1", "END",
+            "L1.1", "I1.1, O3.1, F3.1", "END", "K63.1=10")
+    r.clear()
+    r.type("[1.1")
+    r.wait(0.5)
+    assert r.texts() == ["OUT.1=03", "Ux.1=8"]
+    r.type("[L1.1")
+    r.chain.set_input(1, 1, True)
+    r.wait(0.015)
+    assert r.texts()[-1] == "OUT.1=07"
+    r.chain.set_input(1, 1, False)
+    r.wait(0.015)
+    assert r.texts()[-1] == "OUT.1=03"
+    assert r.texts().count("OUT.1=07") == 1     # reported on change only
+
+
+def test_k34_4_origin_done_only_after_an_origin_search() -> None:
+    r = rig("K34.1=0004")
+    assert outputs(r) == "OUT.1=00"
+    r.motor().origin_done = True              # set by the origin search model (5.3)
+    assert outputs(r) == "OUT.1=01"
+
+
+def test_k34_6_merge_pulses_of_k73_at_passing_points_only() -> None:
+    """K73: "Pulse signals are sent out only at the passing points but not at the
+    starting and end points"; the pulse lasts K73 ms."""
+    r = rig("K34.1=0006", "K73.1=20", "S1.1=100", "A1.1=100", "P1.1=2000", "P2.1=4000",
+            "P3.1=6000", "B1.1", "S1.1, A1.1, P1.1, P2.1, P3.1", "END")
+    trace = r.chain.record()
+    r.type("[1.1")
+    r.until(2)
+    changes = []
+    last = 0
+    for t in range(0, seconds(2), MS // 4):
+        out = trace.sample(1, t).outputs
+        if out != last:
+            changes.append((t, out))
+            last = out
+    (on1, _), (off1, _), (on2, _), (off2, _) = changes
+    assert off1 - on1 == 20 * MS and off2 - on2 == 20 * MS
+    assert on2 - on1 == 200 * MS               # 2000 pulses at 10000 pps
+    assert r.times("Ux.1=8") and r.times("Ux.1=8")[0] > off2
+
+
+@pytest.mark.parametrize("function", [0, 5])
+def test_k34_0_and_5_have_no_function(function: int) -> None:
+    r = rig(f"K34.1=000{function}", "O1.1")
+    assert outputs(r) == "OUT.1=00"
