@@ -166,6 +166,8 @@ def test_overload_fault_is_a_jam_the_motor_answers() -> None:
     chain.kernel.run(until=seconds(1))
     assert [(e.time, e.text) for e in events if e.kind == "alarm"] == \
         [(seconds(0.2) + 1, "Ux.1=4")]                       # "more than" K57 ms
+    chain.inject_fault(1, "overload", clear=True)
+    _free_and_recover(chain, 4)
 
 
 def test_power_cable_broken_no_torque_then_position_error() -> None:
@@ -176,6 +178,11 @@ def test_power_cable_broken_no_torque_then_position_error() -> None:
     chain.kernel.run(until=seconds(2))
     assert chain.motors[1].position() == 0
     assert [t for _, t in _reports(events)] == ["Ux.1=1"]
+    chain.inject_fault(1, "broken_cable", cable="power", clear=True)
+    _free_and_recover(chain, 1)
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(6))
+    assert chain.execute("?96.1") == ["Px.1=2000"]
 
 
 def test_supply_voltage_drop_shows_in_vsen_and_limits_speed() -> None:
