@@ -52,6 +52,10 @@ TAU_MIN = 1e-9
 V_STILL = 0.5
 #: A speed mismatch the torque limit would close within this time (s) is closed at once.
 SNAP_TIME = 1e-6
+#: After this many pieces shorter than 0.1 µs in a row the solver tracks through
+#: (the torque limit is exceeded by a hair for at most SLIDE seconds): no chattering.
+CHATTER = 8
+SLIDE = 1e-4
 #: Relative margin by which a mode's end condition must hold (float noise at a switch).
 REL_TOL = 1e-9
 #: Pieces one motion may hold before the model gives up saturating (a safety net).
@@ -241,17 +245,22 @@ class Motion:
     # -- building ---------------------------------------------------------------
     def _build(self, p: float, v: float) -> None:
         t, ci = 0.0, 0
-        kind_prev, s_prev = "", 0
+        kind_prev, s_prev, tiny = "", 0, 0
         while len(self.pieces) < MAX_PIECES:
             while self._cmd[ci][1] <= t:
                 ci += 1
             c_start, c_end, c_poly = self._cmd[ci]
             cmd = xp.shift(c_poly, 0.0, t - c_start)
-            if kind_prev == "brake":
+            end, kind = c_end - t, "command"
+            if tiny >= CHATTER and self.drive.enabled and not self.drive.stepper:
+                # a sliding edge between tracking and the limit: track through it
+                piece, exits = self._track(t, p, cmd, end)
+                exits = [x for x in exits if x[0] != "limit"]
+                end, kind, tiny = min(end, SLIDE), "slide", 0
+            elif kind_prev == "brake":
                 piece, exits = self._brake(t, p, v, cmd, s_prev)
             else:
                 piece, exits = self._choose(t, p, v, cmd, c_end - t)
-            end, kind = c_end - t, "command"
             for name, conds in exits:
                 if isinstance(conds, float):
                     tau: float | None = max(conds, min(TAU_MIN, end / 2.0))
@@ -264,6 +273,7 @@ class Motion:
             self._append(piece)
             if math.isinf(end):
                 return
+            tiny = tiny + 1 if end < 1e-7 else 0
             p, v = self._after(piece, end, kind)
             t = piece.end
             kind_prev, s_prev = kind, piece.s
