@@ -10,7 +10,8 @@ errors to one-line messages and exit codes.  No traceback reaches the user
 
 ``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
 SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
-its expectations (docs/scripts.md).
+its expectations (docs/scripts.md); ``check``, ``upload`` and ``term`` are the host
+tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
 """
 
 from __future__ import annotations
@@ -298,6 +299,14 @@ def run(
         sys.stdout.write(f"coolmuscle: {result.summary()}\n")
     elif script.expectations:
         err.print(f"coolmuscle: {result.summary()}", markup=False)
+
+
+def _register_tools() -> None:
+    from .tools.commands import register
+    register(app)
+
+
+_register_tools()  # check, upload, term (coolmuscle.tools)
 
 
 @app.command()
