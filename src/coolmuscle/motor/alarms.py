@@ -68,6 +68,8 @@ class PositionErrorWatch(_AlarmWatch):
         if not self.active(axis) or self.motor.position_error_exempt():
             return None
         limit, motion = self.limit(), axis.motion
+        if motion.peak("err") <= limit:       # every piece would be skipped
+            return None
         return motion.first(after_ns, *_beyond(Piece.err, limit),
                             skip=lambda p: motion.reach(p, "err") <= limit)
 
@@ -83,6 +85,8 @@ class OverSpeedWatch(_AlarmWatch):
         ppr = self.motor.resolution.pulses_per_rev
         limit = OVER_SPEED_FACTOR * self.motor.k(40) * ppr / 60.0
         motion = axis.motion
+        if motion.peak("vel") <= limit:       # every piece would be skipped
+            return None
         return motion.first(after_ns, *_beyond(Piece.vel, limit),
                             skip=lambda p: motion.reach(p, "vel") <= limit)
 
@@ -109,6 +113,8 @@ class OverloadWatch(_AlarmWatch):
         motion = axis.motion
         if self.since is None:
             self._action = "enter"
+            if motion.peak("torque") <= rated:    # every piece would be skipped
+                return None
             return motion.first(after_ns, *_beyond(lambda p: p.torque, rated),
                                 skip=lambda p: motion.reach(p, "torque") <= rated)
         deadline = self.since + self.motor.k(57) * 1_000_000 + 1

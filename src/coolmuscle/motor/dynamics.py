@@ -83,29 +83,72 @@ class Drive:
         return math.isinf(self.kp)
 
 
-@dataclass(frozen=True, slots=True)
 class Piece:
-    """One stretch of motion in one mode; τ is local (0 at ``start``)."""
+    """One stretch of motion in one mode; τ is local (0 at ``start``).
 
-    start: float
-    end: float
-    mode: str
-    pos: F
-    cmd: F
-    torque: F
-    k: float
-    s: int = 0
-    exit: str = ""
+    Immutable in meaning.  Its derived functions (speed, error) and their bounds are
+    computed once, on first use, and kept: watchers and evaluations ask for them many
+    times per motion (the arithmetic is the same as computing them afresh)."""
+
+    __slots__ = ("start", "end", "mode", "pos", "cmd", "torque", "k", "s", "exit",
+                 "_vel", "_err", "_bounds")
+
+    def __init__(self, start: float, end: float, mode: str, pos: F, cmd: F, torque: F,
+                 k: float, s: int = 0, exit: str = "") -> None:
+        self.start = start
+        self.end = end
+        self.mode = mode
+        self.pos = pos
+        self.cmd = cmd
+        self.torque = torque
+        self.k = k
+        self.s = s
+        self.exit = exit
+        self._vel: F | None = None
+        self._err: F | None = None
+        self._bounds: dict[str, float] | None = None
+
+    def __repr__(self) -> str:
+        return (f"Piece(start={self.start!r}, end={self.end!r}, mode={self.mode!r}, "
+                f"pos={self.pos!r}, cmd={self.cmd!r}, torque={self.torque!r}, "
+                f"k={self.k!r}, s={self.s!r}, exit={self.exit!r})")
 
     @property
     def duration(self) -> float:
         return self.end - self.start
 
     def vel(self) -> F:
-        return xp.deriv(self.pos, self.k)
+        """The actual speed (d pos / dτ)."""
+        found = self._vel
+        if found is None:
+            found = self._vel = xp.deriv(self.pos, self.k)
+        return found
 
     def err(self) -> F:
-        return xp.sub(self.cmd, self.pos)
+        """Pe = command - actual."""
+        found = self._err
+        if found is None:
+            found = self._err = xp.sub(self.cmd, self.pos)
+        return found
+
+    def reach(self, what: str) -> float:
+        """A bound of |err|, |vel| or |torque| (``what``) over the piece."""
+        bounds = self._bounds
+        if bounds is None:
+            bounds = self._bounds = {}
+        found = bounds.get(what)
+        if found is None:
+            f = self.err() if what == "err" else self.vel() if what == "vel" else self.torque
+            found = bounds[what] = xp.abs_bound(f, self.end - self.start)
+        return found
+
+    def ended(self, end: float, exit: str) -> "Piece":
+        """The same piece ending at ``end`` by ``exit`` (the derived functions carry over;
+        bounds depend on the duration and do not)."""
+        out = Piece(self.start, end, self.mode, self.pos, self.cmd, self.torque, self.k,
+                    self.s, exit)
+        out._vel, out._err = self._vel, self._err
+        return out
 
 
 def _sign(x: float) -> int:
@@ -143,7 +186,7 @@ class Motion:
         self.kp = drive.kp
         self.pieces: list[Piece] = []
         self._starts: list[float] = []
-        self._reach: dict[tuple[int, str], float] = {}
+        self._peaks: dict[str, float] = {}
         self._cmd = command_pieces(profile, self.origin_ns)
         self._build(float(position), float(velocity))
 
@@ -202,11 +245,16 @@ class Motion:
 
     def reach(self, piece: Piece, what: str) -> float:
         """A bound of |err|, |vel| or |torque| (``what``) over a piece (cached)."""
-        key = (id(piece), what)
-        found = self._reach.get(key)
+        return piece.reach(what)
+
+    def peak(self, what: str) -> float:
+        """The largest :meth:`reach` of any piece: a bound over the whole motion.
+
+        A watcher whose threshold is at or above it skips every piece, so it can
+        answer "never" without walking them (cached per motion)."""
+        found = self._peaks.get(what)
         if found is None:
-            f = piece.err() if what == "err" else piece.vel() if what == "vel" else piece.torque
-            found = self._reach[key] = xp.abs_bound(f, piece.duration)
+            found = self._peaks[what] = max(p.reach(what) for p in self.pieces)
         return found
 
     def span(self, piece: Piece) -> tuple[float, float]:
@@ -269,7 +317,7 @@ class Motion:
                     tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
                 if tau is not None and tau < end:
                     end, kind = tau, name
-            piece = _with_end(piece, t + end, kind)
+            piece = piece.ended(t + end, kind)
             self._append(piece)
             if math.isinf(end):
                 return
@@ -466,11 +514,6 @@ class Motion:
 def _strict(f: F) -> F:
     """``f - tol``: a mode ends only when its condition holds beyond float noise."""
     return xp.plus(f, -REL_TOL * max(1.0, max(f), -min(f)))
-
-
-def _with_end(piece: Piece, end: float, exit: str = "") -> Piece:
-    return Piece(piece.start, end, piece.mode, piece.pos, piece.cmd, piece.torque,
-                 piece.k, piece.s, exit)
 
 
 def _wall_side(p: float, d: Drive) -> int:

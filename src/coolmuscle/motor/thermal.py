@@ -93,7 +93,7 @@ class Thermal:
 
 def _peak_square(motion: Motion) -> float:
     """A bound of (torque / rated)² over the whole motion."""
-    peak = max((motion.reach(p, "torque") for p in motion.pieces), default=0.0)
+    peak = motion.peak("torque")
     return (peak * motion.drive.percent_per_accel / 100.0) ** 2
 
 
