@@ -187,6 +187,7 @@ class Motion:
         self.pieces: list[Piece] = []
         self._starts: list[float] = []
         self._peaks: dict[str, float] = {}
+        self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
         self._cmd = command_pieces(profile, self.origin_ns)
         self._build(float(position), float(velocity))
 
@@ -349,10 +350,11 @@ class Motion:
         d = self.drive
         if not d.enabled:
             return self._free(t, p, v, cmd, FREE, 0)
-        e_probe = xp.value(cmd, 0.0, TAU_MIN) - (p + v * TAU_MIN)
-        wall = _wall_side(p, d)
-        if wall and wall * e_probe > 0.0 and wall * v >= 0.0:
-            return self._contact(t, wall, cmd)
+        wall = _wall_side(p, d) if self._walled else 0
+        if wall:
+            e_probe = xp.value(cmd, 0.0, TAU_MIN) - (p + v * TAU_MIN)
+            if wall * e_probe > 0.0 and wall * v >= 0.0:
+                return self._contact(t, wall, cmd)
         if d.stepper:
             return self._stepper(t, p, v, cmd, dur)
         e0 = cmd[0] - p
@@ -379,29 +381,39 @@ class Motion:
         return out
 
     def _track(self, t: float, p: float, cmd: F, dur: float) -> tuple[Piece, list]:
-        """First-order tracking of the command from error cmd(0) - p."""
+        """First-order tracking of the command from error cmd(0) - p.
+
+        The hot path of every motion: the expoly operations (sub, deriv, plus) are
+        written out on the 5-tuples, with the same arithmetic."""
         d, k = self.drive, self.drive.kp
-        b0, b1, b2 = cmd[1], 2.0 * cmd[2], 3.0 * cmd[3]
-        c2 = b2 / k
-        c1 = (b1 - 2.0 * c2) / k
-        c0 = (b0 - c1) / k
-        e: F = (c0, c1, c2, 0.0, (cmd[0] - p) - c0)
-        pos = xp.sub(cmd, e)
+        q0, q1, q2, q3, q4 = cmd
+        c2 = 3.0 * q3 / k
+        c1 = (2.0 * q2 - 2.0 * c2) / k
+        c0 = (q1 - c1) / k
+        ed = (q0 - p) - c0
+        e: F = (c0, c1, c2, 0.0, ed)
+        pos: F = (q0 - c0, q1 - c1, q2 - c2, q3 - 0.0, q4 - ed)            # cmd - e
         sgn, turn = _stretch_sign(e, k, dur)
         still: list = []
-        if sgn and cmd[1] == cmd[2] == cmd[3] == 0.0:
+        if sgn and q1 == q2 == q3 == 0.0:
             # settling on a standing command: once creeping, static friction holds
-            if abs(k * e[-1]) <= V_STILL:
+            if abs(k * ed) <= V_STILL:
                 sgn, turn = 0, None
             else:
                 still = [("still", [xp.plus(xp.scale(e, -sgn * k), V_STILL)])]
-        acc = xp.deriv(xp.deriv(pos, k), k)
-        torque = xp.plus(acc, sgn * d.a_friction + d.a_load)
-        exits = self._walls(pos) + _beyond("limit", torque, dur, d.a_limit)
-        exits += _beyond("vmax", xp.scale(e, k), dur, d.v_max) + still
+        vel: F = (pos[1], 2.0 * pos[2], 3.0 * pos[3], 0.0, -k * pos[4])   # pos'
+        load = sgn * d.a_friction + d.a_load
+        torque: F = (vel[1] + load, 2.0 * vel[2], 3.0 * vel[3], 0.0, -k * vel[4])  # pos'' + load
+        exits = self._walls(pos) if self._walled else []
+        exits += _beyond("limit", torque, dur, d.a_limit)
+        exits += _beyond("vmax", (c0 * k, c1 * k, c2 * k, 0.0 * k, ed * k), dur, d.v_max)
+        if still:
+            exits += still
         if turn is not None:
             exits.append(("vzero", turn))
-        return Piece(t, math.inf, TRACK, pos, cmd, torque, k), exits
+        piece = Piece(t, math.inf, TRACK, pos, cmd, torque, k)
+        piece._vel = vel
+        return piece, exits
 
     def _sat(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
         """The torque limit in direction ``s``: constant acceleration, the shaft lags."""
@@ -530,9 +542,10 @@ def _stretch_sign(f: F, k: float, dur: float) -> tuple[int, float | None]:
     ``dur``); a sign change closer to the start than TAU_MIN is float noise."""
     lo = min(TAU_MIN, dur / 2.0)
     found = xp.roots(f, k, lo, dur)
-    end = found[0] if found else (dur if math.isfinite(dur) else lo + 2.0)
-    probe = (lo + end) / 2.0
-    return _sign(xp.value(f, k, probe)), (found[0] if found else None)
+    if found:
+        return _sign(xp.value(f, k, (lo + found[0]) / 2.0)), found[0]
+    end = dur if dur != math.inf else lo + 2.0
+    return _sign(xp.value(f, k, (lo + end) / 2.0)), None
 
 
 def _beyond(name: str, f: F, dur: float, limit: float) -> list:

@@ -99,6 +99,18 @@ def spread(f: F, b: float) -> float:
 def abs_bound(f: F, b: float) -> float:
     """A bound of ``|f|`` on [0, b] (∞ when b is and ``f`` has a τ term)."""
     out = abs(f[0]) + abs(f[-1])
+    if len(f) == 5:
+        c1, c2, c3 = f[1], f[2], f[3]
+        if c1 or c2 or c3:
+            if math.isinf(b):
+                return INF
+            if c1:
+                out += abs(c1) * b ** 1
+            if c2:
+                out += abs(c2) * b ** 2
+            if c3:
+                out += abs(c3) * b ** 3
+        return out
     for i in range(1, len(f) - 1):
         c = f[i]
         if c:
@@ -143,6 +155,9 @@ def shift(f: F, k: float, a: float) -> F:
 
 
 def _degree(f: F) -> int:
+    if len(f) == 5:
+        return (3 if f[3] != 0.0 else 2 if f[2] != 0.0 else 1 if f[1] != 0.0
+                else 0 if f[0] != 0.0 else -1)
     for i in range(len(f) - 2, -1, -1):
         if f[i] != 0.0:
             return i
@@ -178,6 +193,35 @@ def _limit_sign(f: F) -> int:
 
 def _refine(f: F, k: float, lo: float, hi: float, flo: float) -> float:
     """The root of ``f`` in [lo, hi] where ``f`` is monotonic and changes sign."""
+    if len(f) != 5:
+        return _refine_any(f, k, lo, hi, flo)
+    # value(f) and value(f') written out (the same expressions, no calls): hot path
+    c0, c1, c2, c3, d = f
+    s1, s2, s3, sd = f[1], 2.0 * c2, 3.0 * c3, -k * d      # deriv(f, k)
+    exp = math.exp
+    t = 0.5 * (lo + hi)
+    for _ in range(_ITERATIONS):
+        ft = c0 + t * (c1 + t * (c2 + t * c3))
+        if d:
+            ft = ft + d * exp(-k * t)
+        if ft == 0.0:
+            return t
+        if (ft < 0.0) == (flo < 0.0):
+            lo, flo = t, ft
+        else:
+            hi = t
+        if hi - lo <= 1e-15 * max(1.0, abs(hi)):
+            break
+        slope = s1 + t * (s2 + t * (s3 + t * 0.0))
+        if sd:
+            slope = slope + sd * exp(-k * t)
+        step = t - ft / slope if slope != 0.0 else lo - 1.0
+        t = step if lo < step < hi else 0.5 * (lo + hi)
+    return 0.5 * (lo + hi)
+
+
+def _refine_any(f: F, k: float, lo: float, hi: float, flo: float) -> float:
+    """:func:`_refine` for any degree."""
     df = deriv(f, k)
     t = 0.5 * (lo + hi)
     for _ in range(_ITERATIONS):
@@ -248,20 +292,72 @@ def roots(f: F, k: float, a: float, b: float) -> list[float]:
     """Instants in (a, b) where ``f`` changes sign, ascending (``b`` may be ∞)."""
     if b <= a:
         return []
-    f = _fold(f, k)
+    if k == 0.0:
+        f = _fold(f, k)
+    if len(f) == 5:
+        return _roots5(f[0], f[1], f[2], f[3], f[4], k, a, b)
     deg, d = _degree(f), f[-1]
-    if deg <= 0 and d == 0.0:
-        return []
     if deg <= 0:
+        if d == 0.0:
+            return []
         # c0 + d e^{-kτ}: monotonic; at most one root
         if f[0] == 0.0 or (-f[0] / d) <= 0.0:
             return []
         r = -math.log(-f[0] / d) / k
         return [r] if a < r < b else []
-    cuts = [a, *_critical(f, k, a, b), b]
+    return _roots_between(f, k, [a, *_critical(f, k, a, b), b])
+
+
+def _roots5(c0: float, c1: float, c2: float, c3: float, d: float, k: float,
+            a: float, b: float) -> list[float]:
+    """:func:`roots` of the 5-tuple (c0, c1, c2, c3, d) on (a, b), b > a, already folded.
+
+    The hot path of the dynamics: the same derivative cascade and the same arithmetic
+    as the general code (:func:`_critical`, :func:`value`), on scalars."""
+    deg = 3 if c3 != 0.0 else 2 if c2 != 0.0 else 1 if c1 != 0.0 else 0 if c0 != 0.0 else -1
+    if deg <= 0:
+        if d == 0.0:
+            return []
+        # c0 + d e^{-kτ}: monotonic; at most one root
+        if c0 == 0.0 or (-c0 / d) <= 0.0:
+            return []
+        r = -math.log(-c0 / d) / k
+        return [r] if a < r < b else []
+    # critical points: where f' = (c1, 2 c2, 3 c3, 0, -k d) changes sign
+    s0, s1, s2, sd = c1, 2.0 * c2, 3.0 * c3, -k * d
+    if sd == 0.0 or k == 0.0:
+        if s2 != 0.0:
+            critical = [r for r in _quadratic(s2, s1, s0) if a < r < b]
+        elif s1 != 0.0:
+            r = -s0 / s1
+            critical = [r] if a < r < b else []
+        else:
+            critical = []
+    else:
+        critical = _roots5(s0, s1, s2, 0.0, sd, k, a, b)
+    if not critical and not math.isinf(b):
+        # one monotonic stretch (the usual case): f at both ends
+        exp = math.exp
+        flo = c0 + a * (c1 + a * (c2 + a * c3))
+        fhi = c0 + b * (c1 + b * (c2 + b * c3))
+        if d:
+            flo = flo + d * exp(-k * a)
+            fhi = fhi + d * exp(-k * b)
+        if flo == 0.0 or fhi == 0.0 or (flo < 0.0) == (fhi < 0.0):
+            return []
+        return [_refine((c0, c1, c2, c3, d), k, a, b, flo)]
+    return _roots_between((c0, c1, c2, c3, d), k, [a, *critical, b])
+
+
+def _roots_between(f: F, k: float, cuts: list[float]) -> list[float]:
+    """Sign changes of ``f`` on each stretch between consecutive ``cuts`` (on which it
+    is monotonic); the last cut may be ∞."""
     found: list[float] = []
-    for lo, hi in zip(cuts, cuts[1:]):
-        flo = value(f, k, lo)
+    fnext: float | None = None      # f at the previous stretch's (finite) end
+    for i in range(len(cuts) - 1):
+        lo, hi = cuts[i], cuts[i + 1]
+        flo = value(f, k, lo) if fnext is None else fnext
+        fnext = None
         if math.isinf(hi):
             want = _limit_sign(f)
             if want == 0 or want == _sign(flo) or flo == 0.0:
@@ -269,7 +365,9 @@ def roots(f: F, k: float, a: float, b: float) -> list[float]:
             hi = _bracket_end(f, k, lo, want)
             if math.isinf(hi):
                 continue
-        fhi = value(f, k, hi)
+            fhi = value(f, k, hi)
+        else:
+            fhi = fnext = value(f, k, hi)
         if flo == 0.0 or fhi == 0.0 or (flo < 0.0) == (fhi < 0.0):
             continue
         found.append(_refine(f, k, lo, hi, flo))
