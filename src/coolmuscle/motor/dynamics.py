@@ -86,9 +86,10 @@ class Drive:
 class Piece:
     """One stretch of motion in one mode; τ is local (0 at ``start``).
 
-    Immutable in meaning.  Its derived functions (speed, error) and their bounds are
-    computed once, on first use, and kept: watchers and evaluations ask for them many
-    times per motion (the arithmetic is the same as computing them afresh)."""
+    Immutable in meaning once :class:`Motion` has set its ``end`` and ``exit``.  Its
+    derived functions (speed, error) and their bounds are computed once, on first use,
+    and kept: watchers and evaluations ask for them many times per motion (the
+    arithmetic is the same as computing them afresh)."""
 
     __slots__ = ("start", "end", "mode", "pos", "cmd", "torque", "k", "s", "exit",
                  "_vel", "_err", "_bounds")
@@ -135,20 +136,11 @@ class Piece:
         """A bound of |err|, |vel| or |torque| (``what``) over the piece."""
         bounds = self._bounds
         if bounds is None:
-            bounds = self._bounds = {}
-        found = bounds.get(what)
-        if found is None:
-            f = self.err() if what == "err" else self.vel() if what == "vel" else self.torque
-            found = bounds[what] = xp.abs_bound(f, self.end - self.start)
-        return found
-
-    def ended(self, end: float, exit: str) -> "Piece":
-        """The same piece ending at ``end`` by ``exit`` (the derived functions carry over;
-        bounds depend on the duration and do not)."""
-        out = Piece(self.start, end, self.mode, self.pos, self.cmd, self.torque, self.k,
-                    self.s, exit)
-        out._vel, out._err = self._vel, self._err
-        return out
+            dur = self.end - self.start
+            bounds = self._bounds = {"err": xp.abs_bound(self.err(), dur),
+                                     "vel": xp.abs_bound(self.vel(), dur),
+                                     "torque": xp.abs_bound(self.torque, dur)}
+        return bounds[what]
 
 
 def _sign(x: float) -> int:
@@ -255,7 +247,13 @@ class Motion:
         answer "never" without walking them (cached per motion)."""
         found = self._peaks.get(what)
         if found is None:
-            found = self._peaks[what] = max(p.reach(what) for p in self.pieces)
+            pieces = self.pieces
+            found = pieces[0].reach(what)
+            for piece in pieces[1:]:              # max() without the generator
+                r = piece.reach(what)
+                if r > found:
+                    found = r
+            self._peaks[what] = found
         return found
 
     def span(self, piece: Piece) -> tuple[float, float]:
@@ -318,7 +316,7 @@ class Motion:
                     tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
                 if tau is not None and tau < end:
                     end, kind = tau, name
-            piece = piece.ended(t + end, kind)
+            piece.end, piece.exit = t + end, kind     # a fresh piece: finished in place
             self._append(piece)
             if math.isinf(end):
                 return
@@ -334,15 +332,14 @@ class Motion:
 
     def _after(self, piece: Piece, tau: float, kind: str) -> tuple[float, float]:
         """The state where a piece ends, with the exit's exact values."""
-        p = xp.value(piece.pos, piece.k, tau)
-        v = xp.value(piece.vel(), piece.k, tau)
         if kind == "wall_hi":
             return self.drive.wall_hi, 0.0
         if kind == "wall_lo":
             return self.drive.wall_lo, 0.0
+        p = xp.value(piece.pos, piece.k, tau)
         if kind == "vzero":
             return p, 0.0
-        return p, v
+        return p, xp.value(piece.vel(), piece.k, tau)
 
     # -- choosing a mode ------------------------------------------------------------
     def _choose(self, t: float, p: float, v: float, cmd: F,

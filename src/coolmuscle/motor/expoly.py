@@ -169,6 +169,20 @@ def upper_bound(f: F, k: float, a: float, b: float) -> float:
     g = shift(f, k, a) if a else f
     w = b - a
     out = g[0]
+    if len(g) == 5:
+        g1, g2, g3, gd = g[1], g[2], g[3], g[4]
+        if g1 > 0.0 or g2 > 0.0 or g3 > 0.0:
+            if math.isinf(w):
+                return INF
+            if g1 > 0.0:
+                out += g1 * w ** 1
+            if g2 > 0.0:
+                out += g2 * w ** 2
+            if g3 > 0.0:
+                out += g3 * w ** 3
+        if gd > 0.0:
+            out += gd
+        return out
     for i in range(1, len(g) - 1):
         if g[i] > 0.0:
             if math.isinf(w):
@@ -386,11 +400,16 @@ def first_true(conds: Sequence[F], k: float, a: float, b: float) -> float | None
     for cond in conds:
         if upper_bound(cond, k, a, b) <= 0.0:
             return None
-    cuts = sorted({a, *_all_roots(conds, k, a, b)})
+    found = _all_roots(conds, k, a, b)
+    cuts = sorted({a, *found}) if found else [a]
+    last = len(cuts) - 1
     for i, lo in enumerate(cuts):
-        hi = cuts[i + 1] if i + 1 < len(cuts) else b
+        hi = cuts[i + 1] if i < last else b
         mid = lo + 1.0 if math.isinf(hi) else 0.5 * (lo + hi)
-        if all(value(c, k, mid) > 0.0 for c in conds):
+        for c in conds:
+            if not value(c, k, mid) > 0.0:
+                break
+        else:
             return lo
     return None
 
