@@ -37,8 +37,27 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+_NO_ECHO = int(Report.NO_ECHO)
+
 #: Origins whose replies are printed on the host line (docs/device-api.md).
 HOST_LINE_ORIGINS = frozenset({"host", "bank", "ladder", "motor"})
+
+
+#: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a host
+#: or PLC sends the same few lines over and over.  Bounded; errors are not kept.
+_PARSED: dict[str, tuple[ast.Line, ...]] = {}
+_PARSED_MAX = 256
+
+
+def _parse(text: str) -> list[ast.Line]:
+    """:func:`parse`, remembering recent lines."""
+    found = _PARSED.get(text)
+    if found is None:
+        found = tuple(parse(text))
+        if len(_PARSED) >= _PARSED_MAX:
+            _PARSED.clear()
+        _PARSED[text] = found
+    return list(found)
 
 
 class _Stream:
@@ -83,6 +102,7 @@ class Chain:
         self._listeners: list[EventListener] = []
         self._watchers: list[Callable[[], None]] = []
         self._recorder: TraceRecorder | None = None
+        self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
             self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
@@ -121,9 +141,13 @@ class Chain:
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:
         first = self.motors[1]
-        return LineSettings(echo=not first.k(23) & Report.NO_ECHO,
-                            delimiter=b"\r\n" if first.k(70) == 1 else b"\r",
-                            baud=BAUD_RATES.get(first.k(20), 38400))
+        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
+        found = self._settings_cache.get(key)    # read at every line sent: no new object
+        if found is None:
+            found = self._settings_cache[key] = LineSettings(
+                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
+                baud=BAUD_RATES.get(key[2], 38400))
+        return found
 
     def _on_host_line(self, text: str) -> None:
         self._execute_text(text, Context(origin="host"))
@@ -149,7 +173,7 @@ class Chain:
         if self.uploads.consume(text, ctx):   # a bank definition is being typed
             return
         try:
-            lines = parse(text)
+            lines = _parse(text)
         except CmlSyntaxError as error:
             self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
             return

@@ -48,7 +48,7 @@ class _AlarmWatch:
         self.motor = motor
 
     def active(self, axis: "Axis") -> bool:
-        return axis.enabled and not self.motor.alarm & self.bit
+        return axis.enabled and not self.motor.alarm & self.bit.value   # int & int: no enum
 
     def fire(self, axis: "Axis") -> None:
         del axis
@@ -144,7 +144,7 @@ class TemperatureWatch(_AlarmWatch):
     bit = Ux.TEMPERATURE
 
     def active(self, axis: "Axis") -> bool:
-        return not self.motor.alarm & self.bit
+        return not self.motor.alarm & self.bit.value
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):

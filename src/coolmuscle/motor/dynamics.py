@@ -107,7 +107,7 @@ class Piece:
         self.exit = exit
         self._vel: F | None = None
         self._err: F | None = None
-        self._bounds: dict[str, float] | None = None
+        self._bounds: tuple[float, float, float] | None = None
 
     def __repr__(self) -> str:
         return (f"Piece(start={self.start!r}, end={self.end!r}, mode={self.mode!r}, "
@@ -137,10 +137,31 @@ class Piece:
         bounds = self._bounds
         if bounds is None:
             dur = self.end - self.start
-            bounds = self._bounds = {"err": xp.abs_bound(self.err(), dur),
-                                     "vel": xp.abs_bound(self.vel(), dur),
-                                     "torque": xp.abs_bound(self.torque, dur)}
-        return bounds[what]
+            bounds = self._bounds = (_abs_bound(self.err(), dur), _abs_bound(self.vel(), dur),
+                                     _abs_bound(self.torque, dur))
+        return bounds[_REACH[what]]
+
+
+_REACH = {"err": 0, "vel": 1, "torque": 2}
+
+
+def _abs_bound(f: F, b: float) -> float:
+    """:func:`expoly.abs_bound` written out for the 5-tuple (the same arithmetic):
+    every motion asks it of every piece for each watcher."""
+    if len(f) != 5:
+        return xp.abs_bound(f, b)
+    c0, c1, c2, c3, d = f
+    out = abs(c0) + abs(d)
+    if c1 or c2 or c3:
+        if b == math.inf:
+            return math.inf
+        if c1:
+            out += abs(c1) * b ** 1
+        if c2:
+            out += abs(c2) * b ** 2
+        if c3:
+            out += abs(c3) * b ** 3
+    return out
 
 
 def _sign(x: float) -> int:

@@ -38,6 +38,8 @@ from .trajectory import Timeline
 
 log = logging.getLogger(__name__)
 
+_IN_POSITION = int(Ux.IN_POSITION)
+
 #: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
 WRITABLE_STATES = frozenset({"Dx", "ST"})
 
@@ -147,7 +149,7 @@ class Motor(Supervision):
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
-        return bool(self.k(23) & flag)
+        return bool(self.k(23) & flag.value)    # int & int (no IntFlag object made)
 
     # -- status ---------------------------------------------------------------
     @property
@@ -162,7 +164,7 @@ class Motor(Supervision):
         special = self._supervision_status()
         if special is not None:
             return special
-        return 0 if self.axis.moving else int(Ux.IN_POSITION)
+        return 0 if self.axis.moving else _IN_POSITION
 
     def position(self) -> int:
         """Px (?96), whole pulses."""

@@ -172,8 +172,10 @@ class ParamTable:
 
     def get(self, k: int) -> int:
         """The current value of K``k``."""
-        self.spec(k)
-        return self._values[k]
+        try:
+            return self._values[k]          # holds exactly the K numbers of the specs
+        except (KeyError, TypeError):
+            raise NoSuchParameterError(f"K{k} does not exist") from None
 
     def __getitem__(self, k: int) -> int:
         return self.get(k)

@@ -27,6 +27,10 @@ if TYPE_CHECKING:
 
 PUSHING, COMPLETE, ERROR = "pushing", "complete", "error"
 
+#: Ux per push state (plain ints: read at every status report).
+_STATUS_BITS = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
+                ERROR: int(Ux.PUSH_ERROR)}
+
 #: The torque counts as "at the push level" within this relative margin.
 _AT_LEVEL = 1.0 - 1e-6
 
@@ -47,8 +51,7 @@ class Push:
 
     def status_bits(self) -> int:
         """The Ux value the push contributes (6.6 ?99): 32, 40, 256 or 0."""
-        return {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
-                ERROR: int(Ux.PUSH_ERROR)}.get(self.state or "", 0)
+        return _STATUS_BITS.get(self.state or "", 0)
 
     def level_percent(self) -> float:
         """Push torque, % of rated torque (K60)."""
