@@ -201,6 +201,8 @@ class Motion:
         self._starts: list[float] = []
         self._peaks: dict[str, float] = {}
         self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
+        self._is_stepper = drive.stepper
+        self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = command_pieces(profile, self.origin_ns)
         self._build(float(position), float(velocity))
 
@@ -373,17 +375,26 @@ class Motion:
             e_probe = xp.value(cmd, 0.0, TAU_MIN) - (p + v * TAU_MIN)
             if wall * e_probe > 0.0 and wall * v >= 0.0:
                 return self._contact(t, wall, cmd)
-        if d.stepper:
+        if self._is_stepper:
             return self._stepper(t, p, v, cmd, dur)
         e0 = cmd[0] - p
         vref = max(-d.v_max, min(d.v_max, d.kp * e0))
         if abs(v - vref) <= max(1e-6 * abs(v), SNAP_TIME * d.a_limit, 1e-9):
             track = self._track(t, p, cmd, dur)
             piece = track[0]
-            e_t = xp.value(piece.err(), piece.k, TAU_MIN)
+            # err() and the values at TAU_MIN written out (xp.sub, xp.value: same arithmetic)
+            pos, x = piece.pos, self._exp_tau_min
+            c0, c1, c2, c3, cd = piece._err = (cmd[0] - pos[0], cmd[1] - pos[1], cmd[2] - pos[2],
+                                               cmd[3] - pos[3], cmd[4] - pos[4])
+            e_t = c0 + TAU_MIN * (c1 + TAU_MIN * (c2 + TAU_MIN * c3))
+            if cd:
+                e_t = e_t + cd * x
             if d.kp * abs(e_t) > d.v_max:
                 return self._vsat(t, p, cmd, _sign(e_t))
-            torque = xp.value(piece.torque, piece.k, TAU_MIN)
+            c0, c1, c2, c3, cd = piece.torque
+            torque = c0 + TAU_MIN * (c1 + TAU_MIN * (c2 + TAU_MIN * c3))
+            if cd:
+                torque = torque + cd * x
             if abs(torque) <= d.a_limit:
                 return track
             return self._sat(t, p, v, cmd, _sign(torque))
@@ -411,7 +422,19 @@ class Motion:
         ed = (q0 - p) - c0
         e: F = (c0, c1, c2, 0.0, ed)
         pos: F = (q0 - c0, q1 - c1, q2 - c2, q3 - 0.0, q4 - ed)            # cmd - e
-        sgn, turn = _stretch_sign(e, k, dur)
+        # _stretch_sign(e, k, dur) written out (the value at the probe as xp.value)
+        lo = min(TAU_MIN, dur / 2.0)
+        found = xp.roots(e, k, lo, dur)
+        if found:
+            turn: float | None = found[0]
+            probe = (lo + found[0]) / 2.0
+        else:
+            turn = None
+            probe = (lo + (dur if dur != math.inf else lo + 2.0)) / 2.0
+        ep = c0 + probe * (c1 + probe * (c2 + probe * 0.0))
+        if ed:
+            ep = ep + ed * math.exp(-k * probe)
+        sgn = (ep > 0.0) - (ep < 0.0)
         still: list = []
         if sgn and q1 == q2 == q3 == 0.0:
             # settling on a standing command: once creeping, static friction holds
@@ -423,8 +446,11 @@ class Motion:
         load = sgn * d.a_friction + d.a_load
         torque: F = (vel[1] + load, 2.0 * vel[2], 3.0 * vel[3], 0.0, -k * vel[4])  # pos'' + load
         exits = self._walls(pos) if self._walled else []
-        exits += _beyond("limit", torque, dur, d.a_limit)
-        exits += _beyond("vmax", (c0 * k, c1 * k, c2 * k, 0.0 * k, ed * k), dur, d.v_max)
+        if _abs_bound(torque, dur) > d.a_limit:                 # _beyond("limit", ...)
+            exits += _beyond("limit", torque, dur, d.a_limit)
+        kev = (c0 * k, c1 * k, c2 * k, 0.0 * k, ed * k)
+        if _abs_bound(kev, dur) > d.v_max:                       # _beyond("vmax", ...)
+            exits += _beyond("vmax", kev, dur, d.v_max)
         if still:
             exits += still
         if turn is not None:
