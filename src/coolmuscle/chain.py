@@ -22,6 +22,7 @@ from .errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBan
                      NoSuchMotorError, OutOfRangeError)
 from .hostline import BAUD_RATES, HostLine, LineSettings
 from .motor.banks import BankUploads
+from .motor.coordinated import end_of_line
 from .motor.direct import MotorEval, inner_motor, run_statement
 from .motor.evaluate import evaluate
 from .motor.firmware import get_firmware
@@ -150,6 +151,7 @@ class Chain:
                     run_statement(motor, stmt, ctx)
                 else:
                     self.beyond_chain(motor_id, stmt, ctx)
+            end_of_line(ctx)          # an "@" left without its adjacent partner (4.4)
         self.poke()
 
     # -- bank waits (W#, program lines): re-checked on events, never polled -------

@@ -22,7 +22,7 @@ from typing import Callable, Sequence
 from ..sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
 from .planner import Limits, Waypoint
-from .profile import Profile, hold
+from .profile import Profile, Segment, hold
 from .servo import DEFAULT_KP, Tracking
 
 log = logging.getLogger(__name__)
@@ -104,6 +104,15 @@ class Axis:
         profile = planner.plan_moves(self._raw_state(), raw, self.kernel.now)
         self.target_raw = raw[-1].target
         self._start(profile)
+
+    def run_profile(self, profile: Profile) -> None:
+        """Follow a precomputed closed-form profile in user coordinates (an axis of an
+        interpolation, 4.4) with the same tracking, in-position and passing points as
+        :meth:`move`.  Its origin may lie ahead (a command still on its way down the
+        chain): the axis holds its position until then."""
+        raw = _to_raw(profile, self.zero, self.sign)
+        self.target_raw = raw.final_position
+        self._start(raw)
 
     def run(self, velocity: float, limits: Limits) -> None:
         """Continuous rotation at a signed user velocity (pps)."""
@@ -201,3 +210,15 @@ class Axis:
     def _arrived(self) -> None:
         self.moving = False
         self._on_in_position()
+
+
+def _to_raw(profile: Profile, zero: float, sign: int) -> Profile:
+    """``profile`` (user pulses) in raw pulses: ``raw = zero + sign * user``."""
+    if zero == 0.0 and sign == 1:
+        return profile
+    p, v, a = profile.start_state
+    segments = [Segment(s.start, s.duration, zero + sign * s.p, sign * s.v, sign * s.a,
+                        sign * s.j) for s in profile.segments]
+    return Profile(profile.origin_ns, segments, start_state=(zero + sign * p, sign * v, sign * a),
+                   final_position=zero + sign * profile.final_position,
+                   passing_times=profile.passing_times)

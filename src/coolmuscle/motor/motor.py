@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -26,7 +26,11 @@ from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import ESTOP_DECEL, Limits, limits_from_data
 from .plant import Plant
+from .profile import Profile
 from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
+
+if TYPE_CHECKING:
+    from .coordinated import PairMotion
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +116,10 @@ class Motor:
         self._go_speed: int | None = None
         self._go_data: tuple[int, int, int] | None = None
         self._state_readers: dict[str, Callable[[], int]] | None = None
+        # -- interpolation (4.4, :mod:`.coordinated`): the path this axis follows and
+        # which of R0 / N0 direct-mode "@" uses (the one written last)
+        self.path: "PairMotion | None" = None
+        self.direct_interp_kind = "R"
 
     # -- parameters and units ----------------------------------------------
     def k(self, number: int) -> int:
@@ -216,6 +224,16 @@ class Motor:
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints)
 
+    def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
+        """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""
+        self._go_target = None
+        if not self.can_move():
+            return False
+        self._last_limits = limits
+        self.axis.run_profile(profile)
+        self.path = path
+        return True
+
     def run_continuous(self, s_value: int, limits: Limits) -> None:
         """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
         self._go_target = None
@@ -269,8 +287,12 @@ class Motor:
         self.axis.set_user_position(0.0)
 
     def stop(self) -> None:
-        """``]``/``}``-style decelerating stop at the motion's deceleration."""
+        """``]``/``}``-style decelerating stop at the motion's deceleration; an
+        interpolating pair decelerates along its path (docs/fidelity.md "Daisy chain")."""
         self._go_target = None
+        if self.path is not None and self.path.owns(self):
+            self.path.stop(self.kernel.now)
+            return
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
         self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
@@ -453,6 +475,8 @@ class Motor:
         self.memory.set(kind, index, value)
         if kind == "S" and index == 0:
             self.direct_speed_changed()
+        elif kind in ("N", "R") and index == 0:
+            self.direct_interp_kind = kind     # direct "@" draws by this one (4.4)
 
     def write_state(self, name: str, value: int) -> None:
         """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).

@@ -26,6 +26,8 @@ from ..errors import MotorError, NoProgramBankError, OutOfRangeError
 from ..sim.kernel import PRIO_LOGIC, Timer
 from . import units as units_mod
 from .bankcheck import expr_steps, statement_steps
+from .coordinated import LinePaths, PairMotion, Selection, report_leftovers, request
+from .interp import PathError
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns, wait_branch)
 from .planner import Limits
@@ -66,6 +68,7 @@ class _Motion:
     continuous: tuple[int, Limits] | None = None
     remaining: list[tuple[float, Limits]] | None = None  # what a pause interrupted
     profile: Profile | None = None                       # the plan that was issued
+    path: PairMotion | None = None                       # an interpolation (4.4)
 
 
 @dataclass
@@ -81,6 +84,7 @@ class _Run:
     accel_seen: dict[int, int] = field(default_factory=dict)
     decel: dict[int, int] = field(default_factory=dict)
     cancelled: bool = False
+    paths: LinePaths | None = None      # the "@" of this line (4.4, .coordinated)
 
 
 class ProgramExecutor:
@@ -94,6 +98,7 @@ class ProgramExecutor:
         self.runner = Runner(motor, self._unit_done)
         self.sel_s = 0          # S memory the next motion of this motor uses (2.2.2 "S")
         self.sel_a = 0          # A memory (2.2.2 "A")
+        self.sel_path = Selection()   # R / N memory of the next "@" (2.2.2 "N", "R")
         self.unwaited: set[int] = set()   # motors with a Y/Z motion nobody waited for
         self._current: _Run | None = None
         self._timer: Timer | None = None
@@ -237,8 +242,13 @@ class ProgramExecutor:
         if run is None:
             self._next()
             return
+        resumed: set[int] = set()
         for motion in run.motions.values():
-            if motion.remaining:
+            if motion.path is not None:
+                if id(motion.path) not in resumed:
+                    resumed.add(id(motion.path))
+                    motion.path.resume(self.kernel.now)
+            elif motion.remaining:
                 _issue(motion, motion.remaining)
             elif motion.continuous is not None:
                 motion.motor.run_continuous(*motion.continuous)
@@ -342,6 +352,8 @@ class ProgramExecutor:
                 return flow
             if self.state not in (RUNNING, STEPPING):
                 yield HOLD
+        if run.paths is not None:
+            report_leftovers(run.paths.pairing, self.ctx)
         waiting = tuple(m.motor for m in run.motions.values() if m.wait)
         if waiting:
             yield MotionWait(waiting)
@@ -359,8 +371,10 @@ class ProgramExecutor:
             return stmt
         elif isinstance(stmt, ast.StartBank) and stmt.kind == "B":
             return stmt if stmt.index is not None else None
-        elif isinstance(stmt, (ast.Interp, ast.Wait)):
-            return None  # interpolation: daisy-chain issue; W only inside a branch
+        elif isinstance(stmt, ast.Interp):
+            yield from self._interp(stmt, run)
+        elif isinstance(stmt, ast.Wait):
+            return None  # W only inside a branch
         else:
             self._plain(stmt, run)
         return None
@@ -400,6 +414,9 @@ class ProgramExecutor:
             target.program.sel_s = reg.number
         elif reg.kind == "A":
             self._accel(target, reg.number, run)
+        elif reg.kind in ("N", "R"):
+            target.program.sel_path = target.program.sel_path.select(reg.kind, reg.number,
+                                                                      stmt.modifier)
         elif reg.kind == "M":
             _guard(target, lambda: setattr(target, "torque_limit",
                                            int(target.memory.get("M", reg.number))))
@@ -426,6 +443,8 @@ class ProgramExecutor:
             if not target.motion_done():
                 yield MotionWait((target,))   # 4.3.2: a series of Y completes each motion
             self.unwaited.discard(target.id)
+        if run.paths is not None and run.paths.busy(target):
+            yield MotionWait((target,))       # a path of this line completes first (4.4)
         try:
             _add_motion(target, run, kind, index, modifier, self.kernel.now)
         except (MotorError, LookupError, ValueError):
@@ -433,6 +452,49 @@ class ProgramExecutor:
             return
         if kind in ("Y", "Z"):
             self.unwaited.add(target.id)
+
+
+    def _interp(self, stmt: ast.Interp, run: _Run) -> Step:
+        """``@#.n`` (2.1.2, 4.4): pairs with the ``@`` of an adjacent ID on this line;
+        the pair's motions still running complete first, unless the pair continues a
+        path of this line (merged legs, RT3 1.1 ";")."""
+        target = target_motor(self.motor, stmt)
+        if target is None:
+            return
+        if run.paths is None:
+            run.paths = LinePaths(self.kernel.now)
+        try:
+            req = request(target, stmt, target.program.sel_path, _path_limits(target, run))
+        except (MotorError, LookupError):
+            target.report_error(self.ctx, OutOfRangeError())
+            return
+        pair = run.paths.pairing.add(req)
+        if pair is None:
+            return
+        if run.paths.joining(*pair, self.kernel.now) is None:
+            busy = tuple(r.motor for r in pair if not r.motor.motion_done())
+            if busy:
+                yield MotionWait(busy)
+        for r in pair:
+            self.unwaited.discard(r.motor.id)
+        now = self.kernel.now
+        try:
+            path = run.paths.start(*pair, now)
+        except (PathError, LookupError, ValueError):
+            pair[0].motor.report_error(self.ctx, OutOfRangeError())
+            return
+        for r in pair:
+            motion = run.motions.get(r.motor.id)
+            if motion is None or motion.path is not path:
+                run.motions[r.motor.id] = _Motion(r.motor, issued_at=now, path=path)
+
+
+def _path_limits(target: "Motor", run: _Run) -> Limits | None:
+    """The S and A a path of ``target`` as the X axis runs at (None: S or A is 0)."""
+    try:
+        return _limits(target, run)
+    except ValueError:
+        return None
 
 
 def _bank_context(motor: "Motor") -> "Context":
