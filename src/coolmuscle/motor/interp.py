@@ -30,6 +30,11 @@ Point = tuple[float, float]
 
 #: Largest distance (pulses) between a cubic piece and the true path at its check points.
 MAX_ERROR = 0.05
+#: Largest relative error of the axis velocities of a piece at its check points, so the
+#: speed along the path stays at S (4.4 "synthetic speed by 2 axes").
+MAX_SPEED_ERROR = 1e-4
+#: Shortest piece (s): the kernel's clock has nanoseconds, pieces stop splitting here.
+MIN_PIECE = 1e-6
 #: A centre (4.4.2) whose distances to the start and the end differ by at most this
 #: much (pulses) draws a circular arc; a larger difference draws a spiral arc.
 RADIUS_TOLERANCE = 0.5
@@ -267,6 +272,8 @@ class _Sampler:
         self.s_profile, self.legs, self.starts, self.total = s_profile, legs, starts, total
         self.end_time = s_profile.duration
         self.s_end = min(max(s_profile.final_position, 0.0), total)
+        segments = s_profile.segments
+        self.end_speed = segments[-1].end_state()[1] if segments else 0.0
 
     def locate(self, s: float, at_end: bool = False) -> tuple[Path, float]:
         """The leg holding arc length ``s`` and the length along it."""
@@ -277,9 +284,12 @@ class _Sampler:
 
     def state(self, t: float) -> tuple[float, float, float, float]:
         """(x, y, vx, vy) at ``t`` seconds from the origin."""
-        s, v, _ = self.s_profile.state_at(self.s_profile.origin_ns + round(t * 1e9))
-        end = t >= self.end_time
-        s = self.s_end if end else min(max(s, 0.0), self.total)
+        if t >= self.end_time:
+            # the left limit: a creep-speed stop (K51) jumps to 0 only after the end
+            s, v = self.s_end, self.end_speed
+        else:
+            s, v, _ = self.s_profile.state_at(self.s_profile.origin_ns + round(t * 1e9))
+            s = min(max(s, 0.0), self.total)
         path, local = self.locate(s)
         (x, y), (tx, ty) = path.point(local), path.tangent(local)
         return x, y, tx * v, ty * v
@@ -296,10 +306,13 @@ def _pieces(sampler: _Sampler, t0: float, t1: float, depth: int = 0) -> list[tup
     a, b = sampler.state(t0), sampler.state(t1)
     x_seg = _hermite(t0, h, a[0], a[2], b[0], b[2])
     y_seg = _hermite(t0, h, a[1], a[3], b[1], b[3])
-    if depth < 24:
+    if depth < 24 and h > MIN_PIECE:
         for f in (0.25, 0.5, 0.75):
-            x, y, _, _ = sampler.state(t0 + f * h)
-            if math.hypot(x_seg.position(f * h) - x, y_seg.position(f * h) - y) > MAX_ERROR:
+            x, y, vx, vy = sampler.state(t0 + f * h)
+            tau = f * h
+            if (math.hypot(x_seg.position(tau) - x, y_seg.position(tau) - y) > MAX_ERROR
+                    or math.hypot(x_seg.velocity(tau) - vx, y_seg.velocity(tau) - vy)
+                    > MAX_SPEED_ERROR * max(math.hypot(vx, vy), 1.0)):
                 mid = t0 + h / 2
                 return _pieces(sampler, t0, mid, depth + 1) + _pieces(sampler, mid, t1, depth + 1)
     return [(t0, t1)]
