@@ -98,10 +98,21 @@ class Axis:
         return self.profile.state_at(self.kernel.now)
 
     # -- commands -----------------------------------------------------------
-    def move(self, waypoints: Sequence[tuple[float, Limits]]) -> None:
-        """Move through user-coordinate waypoints (merge when more than one)."""
+    def move(self, waypoints: Sequence[tuple[float, Limits]], *,
+             start_ns: int | None = None) -> None:
+        """Move through user-coordinate waypoints (merge when more than one).
+
+        ``start_ns``: the move starts then (a command still travelling down the chain);
+        only an axis at rest, or holding for a start not yet reached, can wait for it.
+        """
         raw = [Waypoint(self.to_raw(t), lim) for t, lim in waypoints]
-        profile = planner.plan_moves(self._raw_state(), raw, self.kernel.now)
+        now = self.kernel.now
+        start = now
+        if start_ns is not None and start_ns > now and (
+                not self.moving or self.profile.origin_ns > now):
+            start = start_ns
+        state = self.profile.state_at(start) if start > now else self._raw_state()
+        profile = planner.plan_moves(state, raw, start)
         self.target_raw = raw[-1].target
         self._start(profile)
 

@@ -22,7 +22,7 @@ in docs/fidelity.md "Daisy chain".
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -305,28 +305,100 @@ def direct_limits(motor: "Motor") -> Limits | None:
         return None
 
 
+#: Context.extra key of the :class:`LinePairs` of a direct-mode line.
+LINE_PAIRS = "@pairs"
+
+
+@dataclass
+class LinePairs:
+    """The ``@`` of one direct-mode line, paired before the line runs (4.4), and when
+    the line reaches each motor (``arrivals``, ns; empty without chain pacing)."""
+
+    partner: dict[int, tuple[ast.Interp, int]]   # id(X statement) -> (Y statement, Y id)
+    followers: set[int]                          # id(Y statement): started with its X
+    alone: set[int]                              # id(statement): no adjacent partner
+    arrivals: dict[int, int]
+
+
+def pair_line(line: Sequence[tuple[ast.Statement, int]], on_chain: Callable[[int], bool],
+              arrivals: dict[int, int]) -> LinePairs | None:
+    """Pair the ``@`` (with their routed motor IDs) of a line as :class:`Pairing` does;
+    ``None`` when the line has none."""
+    waiting: list[tuple[ast.Interp, int]] = []
+    pairs = LinePairs({}, set(), set(), arrivals)
+    for stmt, motor_id in line:
+        if not isinstance(stmt, ast.Interp) or not on_chain(motor_id):
+            continue
+        for other in waiting:
+            if other[1] == motor_id:
+                waiting.remove(other)
+                pairs.alone.add(id(other[0]))
+                break
+        partner = next((w for w in waiting if abs(w[1] - motor_id) == 1), None)
+        if partner is None:
+            waiting.append((stmt, motor_id))
+            continue
+        waiting.remove(partner)
+        x, y = sorted((partner, (stmt, motor_id)), key=lambda item: item[1])
+        pairs.partner[id(x[0])] = y
+        pairs.followers.add(id(y[0]))
+    pairs.alone.update(id(stmt) for stmt, _ in waiting)
+    if not (pairs.partner or pairs.alone):
+        return None
+    return pairs
+
+
 def direct_interp(motor: "Motor", stmt: ast.Interp, ctx: "Context") -> None:
-    """``@#.n`` in direct mode (2.1.2 "@.1+, @.2+"): pairs on the line, starts at once.
+    """``@#.n`` in direct mode (2.1.2 "@.1+, @.2+"): the pair starts when the X motor's
+    ``@`` runs; with chain pacing the Y motor starts when the line reaches it.
 
     Like a jog, a pair either of whose motors is moving (or cannot move) is not started.
+    An ``@`` that is not a statement of a paired line (a branch action, a ladder bank)
+    pairs with the ``@`` run at the same instant in the same context.
     """
+    pairs = ctx.extra.get(LINE_PAIRS)
+    key = id(stmt)
+    if isinstance(pairs, LinePairs) and (key in pairs.partner or key in pairs.followers
+                                         or key in pairs.alone):
+        if key in pairs.alone:
+            _direct_request(motor, stmt, ctx)        # error00 for a wrong type first
+            motor.report_error(ctx, OutOfRangeError())
+        elif key in pairs.partner:
+            y_stmt, y_id = pairs.partner[key]
+            partner = motor.bus.motor(y_id)
+            now = motor.kernel.now
+            delay = max(pairs.arrivals.get(y_id, now) - pairs.arrivals.get(motor.id, now), 0)
+            x = _direct_request(motor, stmt, ctx)
+            y = _direct_request(partner, y_stmt, ctx, delay) if partner is not None else None
+            if x is not None and y is not None:
+                _direct_start(LinePaths(now), x, y, ctx)
+        return
     now = motor.kernel.now
     line = ctx.extra.get("@")
     if not isinstance(line, LinePaths) or line.pairing.at != now:
         line = ctx.extra["@"] = LinePaths(now)
-    try:
-        req = request(motor, stmt, direct_selection(motor), direct_limits(motor))
-    except (MotorError, LookupError):
-        motor.report_error(ctx, OutOfRangeError())
+    req = _direct_request(motor, stmt, ctx)
+    if req is None:
         return
     pair = line.pairing.add(req)
-    if pair is None:
-        return
-    x, y = pair
+    if pair is not None:
+        _direct_start(line, *pair, ctx)
+
+
+def _direct_request(motor: "Motor", stmt: ast.Interp, ctx: "Context",
+                    delay_ns: int = 0) -> Request | None:
+    try:
+        return request(motor, stmt, direct_selection(motor), direct_limits(motor), delay_ns)
+    except (MotorError, LookupError):
+        motor.report_error(ctx, OutOfRangeError())
+        return None
+
+
+def _direct_start(line: LinePaths, x: Request, y: Request, ctx: "Context") -> None:
     if any(m.axis.moving or not m.can_move() for m in (x.motor, y.motor)):
         return
     try:
-        line.start(x, y, now)
+        line.start(x, y, x.motor.kernel.now)
     except (PathError, LookupError, ValueError):
         x.motor.report_error(ctx, OutOfRangeError())
 
@@ -344,4 +416,5 @@ def path_length(path: PairMotion) -> float:
 
 
 __all__ = ["Selection", "Request", "Pairing", "PairMotion", "LinePaths", "build_leg",
-           "direct_interp", "end_of_line", "request", "report_leftovers"]
+           "direct_interp", "end_of_line", "request", "report_leftovers", "LINE_PAIRS",
+           "LinePairs", "pair_line"]

@@ -216,13 +216,14 @@ class Motor:
         return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
                                 k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
 
-    def move_to(self, waypoints: list[tuple[float, Limits]]) -> None:
-        """Start (or re-plan) a move through user-coordinate waypoints."""
+    def move_to(self, waypoints: list[tuple[float, Limits]], delay_ns: int = 0) -> None:
+        """Start (or re-plan) a move through user-coordinate waypoints; ``delay_ns``: the
+        command is still on its way down the chain (ch. 3 K65), it starts that much later."""
         self._go_target = None
         if not self.can_move() or not waypoints:
             return
         self._last_limits = waypoints[-1][1]
-        self.axis.move(waypoints)
+        self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
 
     def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
         """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""

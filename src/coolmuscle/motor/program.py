@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Generator
 
 from ..cml import ast
+from ..cml.formatter import format_statement
 from ..errors import MotorError, NoProgramBankError, OutOfRangeError
 from ..sim.kernel import PRIO_LOGIC, Timer
 from . import units as units_mod
@@ -32,6 +33,7 @@ from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Slee
                        holds, program_units, run_plain, target_motor, timer_ns, wait_branch)
 from .planner import Limits
 from .profile import Profile
+from .direct import inner_motor
 from .queries import register_reply
 
 if TYPE_CHECKING:
@@ -69,6 +71,7 @@ class _Motion:
     remaining: list[tuple[float, Limits]] | None = None  # what a pause interrupted
     profile: Profile | None = None                       # the plan that was issued
     path: PairMotion | None = None                       # an interpolation (4.4)
+    delay: int = 0           # ns until the command reaches the motor (K65 chain timing)
 
 
 @dataclass
@@ -85,6 +88,7 @@ class _Run:
     decel: dict[int, int] = field(default_factory=dict)
     cancelled: bool = False
     paths: LinePaths | None = None      # the "@" of this line (4.4, .coordinated)
+    arrivals: dict[int, int] = field(default_factory=dict)  # when it reaches each motor
 
 
 class ProgramExecutor:
@@ -249,6 +253,7 @@ class ProgramExecutor:
                     resumed.add(id(motion.path))
                     motion.path.resume(self.kernel.now)
             elif motion.remaining:
+                motion.delay = 0
                 _issue(motion, motion.remaining)
             elif motion.continuous is not None:
                 motion.motor.run_continuous(*motion.continuous)
@@ -446,7 +451,8 @@ class ProgramExecutor:
         if run.paths is not None and run.paths.busy(target):
             yield MotionWait((target,))       # a path of this line completes first (4.4)
         try:
-            _add_motion(target, run, kind, index, modifier, self.kernel.now)
+            _add_motion(target, run, kind, index, modifier, self.kernel.now,
+                        self._delay(run, target))
         except (MotorError, LookupError, ValueError):
             target.report_error(self.ctx, OutOfRangeError())
             return
@@ -464,7 +470,8 @@ class ProgramExecutor:
         if run.paths is None:
             run.paths = LinePaths(self.kernel.now)
         try:
-            req = request(target, stmt, target.program.sel_path, _path_limits(target, run))
+            req = request(target, stmt, target.program.sel_path, _path_limits(target, run),
+                          self._delay(run, target))
         except (MotorError, LookupError):
             target.report_error(self.ctx, OutOfRangeError())
             return
@@ -487,6 +494,20 @@ class ProgramExecutor:
             motion = run.motions.get(r.motor.id)
             if motion is None or motion.path is not path:
                 run.motions[r.motor.id] = _Motion(r.motor, issued_at=now, path=path)
+
+
+    def _delay(self, run: _Run, target: "Motor") -> int:
+        """ns until this line's statements for ``target`` reach it over the chain: its
+        statements go down (or up) the chain in one message (ch. 3 K65; 0 unpaced)."""
+        if target is self.motor:
+            return 0
+        arrival = run.arrivals.get(target.id)
+        if arrival is None:
+            size = sum(len(format_statement(stmt)) + 1 for stmt in run.unit.statements
+                       if (inner_motor(stmt) or self.motor.id) == target.id)
+            arrival = run.arrivals[target.id] = self.motor.bus.relay(self.motor.id,
+                                                                     target.id, size)
+        return max(arrival - self.kernel.now, 0)
 
 
 def _path_limits(target: "Motor", run: _Run) -> Limits | None:
@@ -524,11 +545,11 @@ def _limits(target: "Motor", run: _Run) -> Limits:
 
 
 def _add_motion(target: "Motor", run: _Run, kind: str, index: int, modifier: str | None,
-                now: int) -> None:
+                now: int, delay: int = 0) -> None:
     value = int(target.memory.get("P", index))
     motion = run.motions.get(target.id)
     if motion is None or motion.issued_at != now:
-        motion = run.motions[target.id] = _Motion(target, issued_at=now)
+        motion = run.motions[target.id] = _Motion(target, issued_at=now, delay=delay)
     limits = _limits(target, run)
     motion.push, motion.wait = kind in ("Q", "Z"), kind in ("P", "Q")
     if value == units_mod.CONTINUOUS and modifier is None:
@@ -555,7 +576,7 @@ def _issue(motion: _Motion, waypoints: list[tuple[float, Limits]]) -> None:
         *via, (aim, limits) = waypoints
         motion.motor.push_to(aim, limits, via=via)
     else:
-        motion.motor.move_to(list(waypoints))
+        motion.motor.move_to(list(waypoints), delay_ns=motion.delay)
     motion.profile = motion.motor.axis.profile
     motion.waypoints = list(waypoints)
 
