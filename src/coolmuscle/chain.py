@@ -364,10 +364,12 @@ class Chain:
         """Record from now on; ``close()`` on the handle writes the CSV to ``path``."""
         return _TraceFile(self.record(), Path(path), step)
 
-    def plot(self, path: str | Path, title: str = "") -> Path:
-        """Plot what the recorder holds (position, speed, torque, status and I/O)."""
+    def plot(self, path: str | Path, title: str = "",
+             xy: list[tuple[int, int]] | None = None) -> Path:
+        """Plot what the recorder holds (position, speed, torque, status and I/O), and
+        the XY path of ``xy`` pairs (default: the pairs that interpolated, 4.4)."""
         from .plot import plot_trace
-        return plot_trace(self.record(), path, title=title)
+        return plot_trace(self.record(), path, title=title, xy=xy)
 
     # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.modbus ----------
     def _attach_modbus(self) -> None:
