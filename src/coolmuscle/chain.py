@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 from .cml import ast
 from .cml.parser import parse
@@ -81,7 +81,7 @@ class Chain:
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
         self._listeners: list[EventListener] = []
-        self._watchers: list[Callable[[], None]] = []
+        self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
         self._recorder: TraceRecorder | None = None
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
@@ -221,20 +221,26 @@ class Chain:
                 motor.params.set(65, value)
 
     # -- bank waits (W#, program lines): re-checked on events, never polled -------
-    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
-        """Call ``callback`` at every :meth:`poke` until the returned remover is called."""
-        self._watchers.append(callback)
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every :meth:`poke` until the returned remover is called;
+        with ``motors``, only at pokes about one of them (or about nothing in particular):
+        a bank line waiting for motions is not woken by the other motors' milestones."""
+        entry = (callback, None if motors is None else frozenset(motors))
+        self._watchers.append(entry)
 
         def remove() -> None:
-            if callback in self._watchers:
-                self._watchers.remove(callback)
+            if entry in self._watchers:
+                self._watchers.remove(entry)
         return remove
 
-    def poke(self) -> None:
-        """Something changed (a line, an input, a motion, a ladder scan): look again."""
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (a line, an input, a motion, a ladder scan): look again.
+        ``motor``: only the motion of that motor changed."""
         if self._watchers:
-            for callback in list(self._watchers):
-                callback()
+            for callback, motors in list(self._watchers):
+                if motors is None or motor is None or motor in motors:
+                    callback()
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,

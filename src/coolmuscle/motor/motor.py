@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Protocol, Sequence
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -49,11 +49,12 @@ class MotorBus(Protocol):
     def motor(self, motor_id: int) -> "Motor | None":
         """Another motor of the chain (None when absent)."""
 
-    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
-        """Call ``callback`` at every poke until the returned remover is called."""
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every poke (about ``motors``) until the remover is called."""
 
-    def poke(self) -> None:
-        """Something changed (input, data, motion): re-check the bank waits."""
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (input, data, motion of ``motor``): re-check the bank waits."""
 
     def chain_command(self, motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
         """Chain-wide execution commands (``]``, ``*``, ``*1`` ...)."""
@@ -381,7 +382,7 @@ class Motor:
 
     def motion_settled(self) -> None:
         """A motion ended: let waiting bank lines look again (no polling)."""
-        self.bus.poke()
+        self.bus.poke(self.id)
 
     def limit_sensor(self, direction: int, on: bool) -> None:
         """CW (+1) / CCW (-1) limit sensor input (K27 functions 6, 9).
