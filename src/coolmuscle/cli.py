@@ -10,7 +10,8 @@ errors to one-line messages and exit codes.  No traceback reaches the user
 
 ``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
 SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
-its expectations (docs/scripts.md).
+its expectations (docs/scripts.md); ``check``, ``upload`` and ``term`` are the host
+tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
 """
 
 from __future__ import annotations
@@ -307,6 +308,14 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
     if not (1 <= x <= motors and 1 <= y <= motors) or x == y:
         raise UsageError(f"--xy {text}: two different IDs of the chain (1..{motors})")
     return [(x, y)]
+
+
+def _register_tools() -> None:
+    from .tools.commands import register
+    register(app)
+
+
+_register_tools()  # check, upload, term (coolmuscle.tools)
 
 
 @app.command()

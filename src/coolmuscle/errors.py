@@ -130,6 +130,63 @@ class AlarmError(CoolMuscleError):
         self.status = status
         super().__init__(message or f"motor alarm Ux={status}")
 
+    @property
+    def flags(self) -> object:
+        """The Ux value decoded (:class:`coolmuscle.motor.status.Ux`)."""
+        return alarm_flags(self.status)
+
 
 class ProtocolError(CoolMuscleError):
     """A reply from the motor that could not be understood (host library)."""
+
+
+# -- host library (coolmuscle.client) ------------------------------------------
+
+class MotionInterruptedError(CoolMuscleError):
+    """A wait for in-position ended because the motor stopped trying: an emergency
+    stop (Ux=512) or motor free (Ux=16) (6.6 ?99); ``status`` is that Ux value."""
+
+    def __init__(self, status: int, message: str = "") -> None:
+        self.status = status
+        super().__init__(message or f"motion interrupted: Ux={status}")
+
+
+class BankVerifyError(CoolMuscleError):
+    """A bank read back (``?#.n``, ``?L#.n``) differs from what was uploaded;
+    ``differences`` lists what differs, one human-readable line each."""
+
+    def __init__(self, message: str, differences: list[str] | None = None) -> None:
+        self.differences = list(differences or [])
+        super().__init__(message)
+
+
+def alarm_flags(status: int) -> "object":
+    """The Ux value decoded as :class:`coolmuscle.motor.status.Ux` flags (6.6 ?99)."""
+    from .motor.status import Ux
+    return Ux(status)
+
+
+#: errorNN number -> the exception class the motor's message stands for (K23 16).
+MOTOR_ERROR_CLASSES: dict[int, type[MotorError]] = {
+    cls.number: cls for cls in (
+        OutOfRangeError, CmlSyntaxError, TooManyStepsError, NotAllowedInBankError,
+        CannotFollowError, NoProgramBankError, NoLadderBankError, CwLimitError,
+        CcwLimitError)
+}
+
+
+def motor_error(number: int, text: str, motor: int | None = None) -> MotorError:
+    """The exception for a reported ``errorNN.n: text`` line (ch. 3 K23 function 16).
+
+    ``motor`` is the ID that reported it (kept as ``.motor``); an unknown number
+    gives a plain :class:`MotorError` carrying that number.
+    """
+    cls = MOTOR_ERROR_CLASSES.get(number, MotorError)
+    shown = f"error{number:02d}" + (f".{motor}" if motor is not None else "") + f": {text}"
+    error = cls.__new__(cls)
+    MotorError.__init__(error, shown)  # the motor's own words, not the class's template
+    if isinstance(error, CmlSyntaxError):
+        error.text_line, error.position = "", 0
+    error.number = number
+    error.motor = motor  # type: ignore[attr-defined]
+    return error

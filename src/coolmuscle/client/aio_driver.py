@@ -1,0 +1,195 @@
+"""The asyncio driver: runs sans-IO operations as coroutines over any pyserial port.
+
+The twin of :mod:`coolmuscle.client.driver`.  A helper thread does the blocking reads
+(pyserial has no asyncio interface) and hands the bytes to the event loop, where they
+feed the shared :class:`~coolmuscle.client.protocol.Protocol`; events reach subscribers
+as they arrive.  Requests wait on a condition the reader notifies; every wait has its
+timeout (wall clock, the loop's time).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from typing import Any, Callable
+
+import serial
+
+from ..errors import CoolMuscleError, CoolMuscleTimeout, TransportError
+from . import ops
+from .driver import Listener
+from .protocol import Exchange, MotorEvent
+
+log = logging.getLogger(__name__)
+
+__all__ = ["AsyncDriver"]
+
+
+class _ThreadedReader:
+    """Blocking reads in a thread; bytes are handed to ``on_data`` in the loop."""
+
+    def __init__(self, port: Any, loop: asyncio.AbstractEventLoop,
+                 on_data: Callable[[bytes | BaseException], None]) -> None:
+        self._port = port
+        self._loop = loop
+        self._on_data = on_data
+        self._stop = threading.Event()
+        self._socket = type(port).__module__.endswith("protocol_socket")
+        self._thread = threading.Thread(target=self._main, name="coolmuscle-reader",
+                                        daemon=True)
+
+    def start(self) -> None:
+        self._port.timeout = 0.05
+        self._thread.start()
+
+    def _main(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._port.read(1)
+                if data and self._socket:  # socket:// in_waiting only says 0 or 1
+                    self._port.timeout = 0
+                    data += self._port.read(65536)
+                    self._port.timeout = 0.05
+                elif data and self._port.in_waiting:
+                    data += self._port.read(self._port.in_waiting)
+            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if not self._stop.is_set():
+                    self._loop.call_soon_threadsafe(self._on_data, exc)
+                return
+            if data and not self._stop.is_set():
+                try:
+                    self._loop.call_soon_threadsafe(self._on_data, data)
+                except RuntimeError:  # the loop is closed
+                    return
+
+    def stop(self) -> None:
+        self._stop.set()
+        cancel = getattr(self._port, "cancel_read", None)
+        if cancel is not None:
+            try:
+                cancel()
+            except (serial.SerialException, OSError):
+                pass
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(1.0)
+
+
+class AsyncDriver:
+    """Runs operations as coroutines; a reader feeds the shared protocol core."""
+
+    def __init__(self, port: Any, session: ops.Session) -> None:
+        self.port = port
+        self.session = session
+        self.listeners: list[tuple[Listener, Callable[[MotorEvent], bool]]] = []
+        #: ``tap(direction, data)`` sees every byte written (``">"``) and read (``"<"``).
+        self.taps: list[Callable[[str, bytes], None]] = []
+        self.lock = asyncio.Lock()
+        self._changed = asyncio.Condition()
+        self._failure: BaseException | None = None
+        self._loop = asyncio.get_running_loop()
+        self._reader = _ThreadedReader(port, self._loop, self._received)
+
+    def start(self) -> None:
+        self._reader.start()
+
+    def close(self) -> None:
+        self._reader.stop()
+
+    def now(self) -> float:
+        return self._loop.time()
+
+    def _received(self, data: bytes | BaseException) -> None:
+        if isinstance(data, BaseException):
+            self._failure = TransportError(f"cannot read from the port: {data}")
+        else:
+            self._tap("<", data)
+            for event in self.session.protocol.receive(data):
+                self._deliver(event)
+        self._loop.create_task(self._notify())
+
+    async def _notify(self) -> None:
+        async with self._changed:
+            self._changed.notify_all()
+
+    def _deliver(self, event: MotorEvent) -> None:
+        if event.kind == "garbled":
+            log.warning("unreadable line from the motor: %r", event.text)
+        for listener, accepts in list(self.listeners):
+            if accepts(event):
+                try:
+                    listener(event)
+                except Exception:
+                    log.exception("event listener failed")
+
+    async def _until(self, ready: Callable[[], bool], seconds: float) -> bool:
+        end = self.now() + seconds
+        async with self._changed:
+            while not ready():
+                if self._failure is not None:
+                    raise self._failure
+                remaining = end - self.now()
+                if remaining <= 0:
+                    return False
+                try:
+                    await asyncio.wait_for(self._changed.wait(), remaining)
+                except asyncio.TimeoutError:
+                    pass
+        return True
+
+    async def run(self, op: ops.Op[ops.T]) -> ops.T:
+        async with self.lock:
+            result: Any = None
+            error: BaseException | None = None
+            while True:
+                try:
+                    request = op.throw(error) if error is not None else op.send(result)
+                except StopIteration as stop:
+                    return stop.value  # type: ignore[no-any-return]
+                result, error = None, None
+                try:
+                    result = await self._do(request)
+                except CoolMuscleError as exc:
+                    error = exc
+
+    async def _do(self, request: Any) -> Any:
+        protocol = self.session.protocol
+        if isinstance(request, ops.Now):
+            return self.now()
+        if isinstance(request, ops.Pause):
+            await self._until(lambda: False, request.seconds)
+            return None
+        if isinstance(request, ops.Listen):
+            found: list[MotorEvent] = []
+
+            def matched() -> bool:
+                found[:] = [e for e in protocol.events_since(request.since)
+                            if request.match(e)][:1]
+                return bool(found)
+            await self._until(matched, request.timeout)
+            return found[0] if found else None
+        if isinstance(request, Exchange):
+            self.write(protocol.begin(request))
+            if not await self._until(lambda: request.complete, request.timeout):
+                protocol.abandon()
+                if request.errors:  # the motor said why it did not answer
+                    raise request.errors[0]
+                raise CoolMuscleTimeout(f"{request.describe()} within {request.timeout:g} s")
+            return request
+        raise TypeError(f"unknown request {request!r}")
+
+    def _tap(self, direction: str, data: bytes) -> None:
+        for tap in list(self.taps):
+            try:
+                tap(direction, data)
+            except Exception:
+                log.exception("byte tap failed")
+
+    def write(self, data: bytes) -> None:
+        if not data:
+            return
+        self._tap(">", data)
+        try:
+            self.port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise TransportError(f"cannot write to the port: {exc}") from exc

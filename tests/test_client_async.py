@@ -1,0 +1,92 @@
+"""The asyncio twin: same operations, same core, on the three targets; same API."""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+
+from client_targets import TARGETS, Target, target_fixture
+from coolmuscle import connect_async
+from coolmuscle.client import AsyncCoolMuscle, AsyncMotor, CoolMuscle, Motor, MotorEvent
+from coolmuscle.errors import AlarmError, CmlSyntaxError, CoolMuscleTimeout, OutOfRangeError
+
+
+@pytest.fixture(params=TARGETS)
+def target(request: Any, tmp_path: Path) -> Iterator[Target]:
+    yield from target_fixture(request.param, tmp_path, motors=2)
+
+
+def run(coro: Any) -> Any:
+    return asyncio.run(asyncio.wait_for(coro, 30))
+
+
+def url_of(target: Target) -> str:
+    # in-process: a realtime chain (fast mode would let a reader thread run time freely)
+    return "coolmuscle://?motors=2&scale=4" if target.name == "inproc" else target.url
+
+
+def test_async_operations_on_each_target(target: Target) -> None:
+    async def session() -> dict[str, Any]:
+        async with await connect_async(url_of(target)) as m:
+            events: list[MotorEvent] = []
+            m.subscribe(events.append, kinds=["status"])
+            record = {"position": await m.get_position(), "status": int(await m.get_status()),
+                      "version": (await m.get_version()).series}
+            await m.write_param(44, 120)
+            record["k44"] = await m.read_param(44)
+            with pytest.raises(OutOfRangeError):
+                await m.write_register("M", 1, 500)
+            await m.move_to(1500, speed=300, accel=1000)
+            record["arrived"] = int(await m.wait_in_position(timeout=5))
+            await asyncio.sleep(0.1)
+            record["at"] = await m.get_position()
+            record["motor2"] = await m.motor(2).get_position()
+            await m.write_param(23, 17)
+            with pytest.raises(CmlSyntaxError):
+                await m.send("hello")
+            with pytest.raises(CoolMuscleTimeout):
+                await m.motor(3).get_position()
+            record["events"] = [e.text for e in events]
+            return record
+    assert run(session()) == {"position": 0, "status": 8, "version": "CM2", "k44": 120,
+                              "arrived": 8, "at": 1500, "motor2": 0,
+                              "events": ["Ux.1=8"]}
+
+
+def test_events_arrive_between_calls_and_alarms_raise(target: Target) -> None:
+    async def session() -> None:
+        async with await connect_async(url_of(target)) as m:
+            await m.move_to(100000, speed=20, accel=100)
+            stream = m.events(kinds=["status"])
+            raise_alarm(target, m, 2)
+            event = await asyncio.wait_for(stream.__anext__(), 3)   # no call in between
+            await stream.aclose()
+            assert (event.kind, event.value) == ("status", 2)
+            with pytest.raises(AlarmError) as caught:
+                await m.wait_in_position(timeout=3)
+            assert caught.value.status == 2
+    run(session())
+
+
+def raise_alarm(target: Target, m: AsyncCoolMuscle, bits: int) -> None:
+    """An alarm now, in the model's thread (the in-process port's lock for coolmuscle://)."""
+    if target.name == "inproc":
+        with m.port._cond:
+            m.port.chain.motors[1].raise_alarm(bits)
+    else:
+        target.inject(lambda chain: chain.motors[1].raise_alarm(bits))
+
+
+def test_the_async_api_mirrors_the_sync_api() -> None:
+    def public(cls: type) -> set[str]:
+        return {name for name, value in vars(cls).items()
+                if not name.startswith("_") and callable(value)}
+    sync_methods = public(Motor) | public(CoolMuscle)
+    async_methods = public(AsyncMotor) | public(AsyncCoolMuscle)
+    assert sync_methods - {"poll"} <= async_methods | {"poll"}
+    for name in public(Motor):
+        assert inspect.iscoroutinefunction(getattr(AsyncMotor, name)), name
