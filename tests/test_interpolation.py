@@ -358,3 +358,20 @@ def test_chord_longer_than_twice_the_radius_is_a_half_circle() -> None:
     for a, b in samples(recorder, t0, t1):
         assert abs(math.dist((a.command, b.command), (1000, 0)) - 1000) <= 1.0
     check_end(r, 2000, 0)
+
+
+def test_6_5_at_in_a_ladder_bank_pairs_within_the_scan() -> None:
+    """6.5 marks ``@`` usable in ladder banks: the pair of one scan starts a path from
+    the direct data (R0 = 0: a line); later scans leave the running path alone."""
+    r = rig("K63.1=10", "S.1=100", "A.1=100", "P.1=1000", "P.2=500", "R.1=0", "R.2=0",
+            motors=2)
+    recorder = r.chain.record()
+    r.type("L1.1", "@.1+, @.2+", "END", "[L1.1")
+    r.wait(1)
+    r.type("]L.1", "]L.1")
+    t0, t1 = path_window(r, 1, 1000.0)
+    assert path_window(r, 2, 500.0) == (t0, t1)
+    assert len([p for _, p, *_ in r.motor(1).axis.history if p.segments]) == 1
+    for a, b in samples(recorder, t0, t1):
+        assert abs(a.command - 2 * b.command) <= 1.0
+    check_end(r, 1000, 500)

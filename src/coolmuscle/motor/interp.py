@@ -55,9 +55,9 @@ class Line:
         self.length = math.dist(start, end)
 
     def point(self, s: float) -> Point:
-        if self.length == 0:
+        if self.length == 0 or s >= self.length:
             return self.end
-        f = min(max(s / self.length, 0.0), 1.0)
+        f = max(s / self.length, 0.0)
         return (self.start[0] + f * (self.end[0] - self.start[0]),
                 self.start[1] + f * (self.end[1] - self.start[1]))
 
@@ -217,7 +217,7 @@ def arc_from_radius(start: Point, end: Point, rx: float, ry: float, *, minor: bo
     return Arc((c[0], c[1] / k), r, r / k, t0, sweep, end)
 
 
-def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Arc:
+def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Path:
     """4.4.2: start, end and centre (start == end: a full circle).
 
     The radius is the start's distance from the centre; when the end is farther or
@@ -231,6 +231,8 @@ def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Arc
     t0 = math.atan2(start[1] - center[1], start[0] - center[0])
     t1 = math.atan2(end[1] - center[1], end[0] - center[0])
     sweep = _sweep(t0, t1, cw, math.dist(start, end) < 0.5)
+    if sweep == 0.0:
+        return Line(start, end)        # the end lies straight out from the centre
     if abs(r_end - r) <= RADIUS_TOLERANCE:
         return Arc(center, r, r, t0, sweep, end)
     return SpiralArc(center, r, r_end, t0, sweep, end)
