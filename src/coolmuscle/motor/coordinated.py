@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
+from ..cml.formatter import format_statement
 from ..errors import MotorError, OutOfRangeError
 from .interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
 from .interp import follow_path, leg_starts, plan_path
@@ -277,6 +278,22 @@ class LinePaths:
         path.add(build_leg(x, y, start), now)
         return path
 
+    def busy_before(self, x: Request, y: Request, now: int) -> tuple["Motor", ...]:
+        """The pair's motors still running another motion: a bank line lets it complete
+        first (4.3.2), unless the pair continues a path of this line."""
+        if self.joining(x, y, now) is not None:
+            return ()
+        return tuple(r.motor for r in (x, y) if not r.motor.motion_done())
+
+    def start_or_report(self, x: Request, y: Request, now: int,
+                        ctx: "Context | None") -> PairMotion | None:
+        """:meth:`start`; a path that cannot be drawn is error00 of the X motor."""
+        try:
+            return self.start(x, y, now)
+        except (PathError, LookupError, ValueError):
+            x.motor.report_error(ctx, OutOfRangeError())
+            return None
+
     def busy(self, motor: "Motor") -> bool:
         """``motor`` runs a path of this line."""
         path = self.paths.get(motor.id)
@@ -395,12 +412,16 @@ def _direct_request(motor: "Motor", stmt: ast.Interp, ctx: "Context",
 
 
 def _direct_start(line: LinePaths, x: Request, y: Request, ctx: "Context") -> None:
-    if any(m.axis.moving or not m.can_move() for m in (x.motor, y.motor)):
-        return
-    try:
-        line.start(x, y, x.motor.kernel.now)
-    except (PathError, LookupError, ValueError):
-        x.motor.report_error(ctx, OutOfRangeError())
+    if not any(m.axis.moving or not m.can_move() for m in (x.motor, y.motor)):
+        line.start_or_report(x, y, x.motor.kernel.now, ctx)
+
+
+def message_bytes(statements: Sequence[ast.Statement], motor_id: int, default: int) -> int:
+    """Bytes of the statements of a bank line for ``motor_id`` sent down the chain as
+    one message: their canonical text and a separator each (ch. 3 K65 timing)."""
+    from .direct import inner_motor      # .direct imports this module
+    return sum(len(format_statement(stmt)) + 1 for stmt in statements
+               if (inner_motor(stmt) or default) == motor_id)
 
 
 def end_of_line(ctx: "Context") -> None:
@@ -417,4 +438,4 @@ def path_length(path: PairMotion) -> float:
 
 __all__ = ["Selection", "Request", "Pairing", "PairMotion", "LinePaths", "build_leg",
            "direct_interp", "end_of_line", "request", "report_leftovers", "LINE_PAIRS",
-           "LinePairs", "pair_line"]
+           "LinePairs", "pair_line", "message_bytes"]

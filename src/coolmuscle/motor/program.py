@@ -22,18 +22,16 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Generator
 
 from ..cml import ast
-from ..cml.formatter import format_statement
 from ..errors import MotorError, NoProgramBankError, OutOfRangeError
 from ..sim.kernel import PRIO_LOGIC, Timer
 from . import units as units_mod
 from .bankcheck import expr_steps, statement_steps
-from .coordinated import LinePaths, PairMotion, Selection, report_leftovers, request
-from .interp import PathError
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns, wait_branch)
+from .coordinated import (LinePaths, PairMotion, Selection, message_bytes, report_leftovers,
+                          request)
 from .planner import Limits
 from .profile import Profile
-from .direct import inner_motor
 from .queries import register_reply
 
 if TYPE_CHECKING:
@@ -459,63 +457,44 @@ class ProgramExecutor:
         if kind in ("Y", "Z"):
             self.unwaited.add(target.id)
 
-
     def _interp(self, stmt: ast.Interp, run: _Run) -> Step:
-        """``@#.n`` (2.1.2, 4.4): pairs with the ``@`` of an adjacent ID on this line;
-        the pair's motions still running complete first, unless the pair continues a
-        path of this line (merged legs, RT3 1.1 ";")."""
+        """``@#.n`` (2.1.2, 4.4, :mod:`.coordinated`): pairs with the ``@`` of an adjacent
+        ID on the line; the pair's running motions complete first, unless it continues
+        a path of this line (merged legs, RT3 1.1 ";")."""
         target = target_motor(self.motor, stmt)
         if target is None:
             return
-        if run.paths is None:
-            run.paths = LinePaths(self.kernel.now)
+        paths = run.paths = run.paths or LinePaths(self.kernel.now)
         try:
-            req = request(target, stmt, target.program.sel_path, _path_limits(target, run),
-                          self._delay(run, target))
+            limits = _limits(target, run)
+        except ValueError:
+            limits = None                    # S or A is 0: no path (error00 if X)
+        try:
+            pair = paths.pairing.add(request(target, stmt, target.program.sel_path, limits,
+                                             self._delay(run, target)))
         except (MotorError, LookupError):
             target.report_error(self.ctx, OutOfRangeError())
             return
-        pair = run.paths.pairing.add(req)
-        if pair is None:
-            return
-        if run.paths.joining(*pair, self.kernel.now) is None:
-            busy = tuple(r.motor for r in pair if not r.motor.motion_done())
+        if pair is not None:
+            busy = paths.busy_before(*pair, self.kernel.now)
             if busy:
                 yield MotionWait(busy)
-        for r in pair:
-            self.unwaited.discard(r.motor.id)
-        now = self.kernel.now
-        try:
-            path = run.paths.start(*pair, now)
-        except (PathError, LookupError, ValueError):
-            pair[0].motor.report_error(self.ctx, OutOfRangeError())
-            return
-        for r in pair:
-            motion = run.motions.get(r.motor.id)
-            if motion is None or motion.path is not path:
-                run.motions[r.motor.id] = _Motion(r.motor, issued_at=now, path=path)
-
+            self.unwaited.difference_update(r.motor.id for r in pair)
+            path = paths.start_or_report(*pair, self.kernel.now, self.ctx)
+            for r in pair if path is not None else ():
+                if getattr(run.motions.get(r.motor.id), "path", None) is not path:
+                    run.motions[r.motor.id] = _Motion(r.motor, issued_at=self.kernel.now,
+                                                      path=path)
 
     def _delay(self, run: _Run, target: "Motor") -> int:
-        """ns until this line's statements for ``target`` reach it over the chain: its
-        statements go down (or up) the chain in one message (ch. 3 K65; 0 unpaced)."""
+        """ns until this line's statements for ``target`` reach it down (or up) the chain
+        as one message (ch. 3 K65; 0 without pacing)."""
         if target is self.motor:
             return 0
-        arrival = run.arrivals.get(target.id)
-        if arrival is None:
-            size = sum(len(format_statement(stmt)) + 1 for stmt in run.unit.statements
-                       if (inner_motor(stmt) or self.motor.id) == target.id)
-            arrival = run.arrivals[target.id] = self.motor.bus.relay(self.motor.id,
-                                                                     target.id, size)
-        return max(arrival - self.kernel.now, 0)
-
-
-def _path_limits(target: "Motor", run: _Run) -> Limits | None:
-    """The S and A a path of ``target`` as the X axis runs at (None: S or A is 0)."""
-    try:
-        return _limits(target, run)
-    except ValueError:
-        return None
+        if target.id not in run.arrivals:
+            size = message_bytes(run.unit.statements, target.id, self.motor.id)
+            run.arrivals[target.id] = self.motor.bus.relay(self.motor.id, target.id, size)
+        return max(run.arrivals[target.id] - self.kernel.now, 0)
 
 
 def _bank_context(motor: "Motor") -> "Context":
