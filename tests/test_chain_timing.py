@@ -161,3 +161,29 @@ def test_without_pacing_everything_happens_at_once() -> None:
     received = host(chain)
     chain.host_line.feed(b"?96.3\r")
     assert received[-1] == (0, b"Px.3=0\r\n")
+
+
+def test_pause_of_a_paced_path_keeps_each_axis_on_its_own_time_line() -> None:
+    """``]`` while the Y axis runs a hop behind: each axis decelerates from where it is
+    (no jump in the command), the pair stops near the arc, ``[`` finishes it exactly."""
+    chain = Chain(motors=2, pacing=True)
+    chain.execute("K65.1=1")
+    for line in ("A1.1=100", "S1.1=100", "P2.1=1000", "R1.1=2000", "P2.2=1000", "R1.2=2000",
+                 "B1.1", "S1.1,A1.1,R1.1,R1.2,@2.2+,@2.1+", "END"):
+        chain.execute(line)
+    recorder = chain.record()
+    chain.execute("[1.1")
+    chain.kernel.run(until=seconds(0.6))
+    now = chain.kernel.now
+    before = [recorder.sample(m, now).command for m in (1, 2)]
+    chain.execute("]")
+    after = [recorder.sample(m, now).command for m in (1, 2)]
+    # the new pieces start on the exact path: within interp.MAX_ERROR of the old ones
+    assert all(abs(b - a) <= 0.05 for b, a in zip(before, after))
+    chain.kernel.advance(seconds(0.5))
+    centre = (500 - 1322.8757, 500 + 1322.8757)
+    here = (chain.motors[1].position(), chain.motors[2].position())
+    assert abs(math.dist(here, centre) - 2000) < 60        # the lag of 9.6 kbps
+    chain.execute("[")
+    chain.kernel.advance(seconds(3))
+    assert chain.execute("?96.1") == ["Px.1=1000"] and chain.execute("?96.2") == ["Px.2=1000"]

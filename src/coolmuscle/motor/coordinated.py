@@ -208,16 +208,38 @@ class PairMotion:
 
     # -- stop and resume (2.1.2 "]", "[") ---------------------------------------------
     def stop(self, now: int) -> None:
-        """Decelerate along the path at the deceleration of the leg being travelled."""
+        """Decelerate along the path at the deceleration of the leg being travelled.
+
+        Each motor stops on its own time line: with chain pacing the Y axis runs its
+        part of the path a hop later than the X axis (``delays``)."""
         if self.s_profile is None or self._stopped_at == now or not self.moving():
             return
-        state = self.s_profile.state_at(now)
-        if state[1] == 0.0 and state[2] == 0.0 and now >= (self.s_profile.end_ns or now):
-            return
-        lim = self._leg_at(state[0]).limits
-        stop = plan_stop(state, lim.decel, now, lim.scurve, creep=lim.creep, speed=lim.speed)
-        self._follow(stop, [m for m in self.motors if self.owns(m)])
         self._stopped_at = now
+        plans: dict[int, Profile] = {}
+        for motor, delay in zip(self.motors, self.delays):
+            if not self.owns(motor):
+                continue
+            t = now - delay
+            state = self.s_profile.state_at(t)
+            lim = self._leg_at(state[0]).limits
+            plans[motor.id] = plan_stop(state, lim.decel, t, lim.scurve, creep=lim.creep,
+                                        speed=lim.speed)
+        if not plans:
+            return
+        if len(plans) == 2 and self.delays[0] == self.delays[1]:
+            plans[self.y.id] = plans[self.x.id]          # one time line: one plan
+        limits = self.legs[-1].limits
+        followed: dict[int, tuple[Profile, Profile]] = {}
+        for motor, delay in zip(self.motors, self.delays):
+            plan = plans.get(motor.id)
+            if plan is None:
+                continue
+            if id(plan) not in followed:
+                followed[id(plan)] = follow_path(self.legs, plan)
+            profile = followed[id(plan)][0 if motor is self.x else 1]
+            if motor.run_path(self, _shifted(profile, delay), limits):
+                self._raw[motor.id] = motor.axis.profile
+        self.s_profile = plans.get(self.x.id) or plans[self.y.id]
 
     def _leg_at(self, s: float) -> Leg:
         starts, _ = leg_starts(self.legs)
