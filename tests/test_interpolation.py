@@ -375,3 +375,26 @@ def test_6_5_at_in_a_ladder_bank_pairs_within_the_scan() -> None:
     for a, b in samples(recorder, t0, t1):
         assert abs(a.command - 2 * b.command) <= 1.0
     check_end(r, 1000, 500)
+
+
+def test_two_pairs_each_merge_their_legs_across_semicolon() -> None:
+    """Two pairs on one line joined by ``;`` to a second line: each pair's two legs are
+    one path (4.4 merge "during even at the interpolation"), the pairs run side by side."""
+    data = ("S1.1=100", "A1.1=100", "S1.3=100", "A1.3=100",
+        "P1.1=1000", "P1.2=0", "P2.1=1000", "P2.2=1000", "R1.1=0", "R1.2=0",
+        "P1.3=1000", "P1.4=0", "P2.3=1000", "P2.4=1000", "R1.3=0", "R1.4=0")
+    r, recorder = run_bank(data, "S1.1,A1.1,S1.3,A1.3",
+                           "R1.1,R1.2,R1.3,R1.4,@1.1,@1.2,@1.3,@1.4;",
+                           "@2.1,@2.2,@2.3,@2.4", motors=4)
+    for x_id, y_id in ((1, 2), (3, 4)):
+        hist = [(t, p) for t, p, *_ in r.motor(y_id).axis.history if p.segments]
+        assert len({t for t, _ in hist}) == 1    # one path (the second leg re-planned
+        t0, profile = hist[-1]                   # it at once): no stop at (1000, 0)
+        corner = profile.first_crossing(500.0, t0)
+        assert corner is not None and recorder.sample(x_id, corner).command == pytest.approx(
+            1000, abs=1.0)
+        assert math.hypot(recorder.sample(x_id, corner).speed,
+                          recorder.sample(y_id, corner).speed) > 1000
+    assert r.motor(1).axis.history[-1][0] == r.motor(3).axis.history[-1][0]
+    check_end(r, 1000, 1000)
+    assert r.chain.execute("?96.3") == ["Px.3=1000"] and r.chain.execute("?96.4") == ["Px.4=1000"]
