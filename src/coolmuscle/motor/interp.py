@@ -298,6 +298,9 @@ class _Sampler:
 
     def end_point(self) -> Point:
         """Where the path profile comes to rest: the exact end of a leg when it gets there."""
+        if self.s_end >= self.total - 1e-9 * max(1.0, self.total):
+            last = self.legs[-1].path       # the sum of the legs' lengths may round
+            return last.point(last.length)
         path, local = self.locate(self.s_end)
         return path.point(path.length if local >= path.length else local)
 
