@@ -187,3 +187,20 @@ def test_pause_of_a_paced_path_keeps_each_axis_on_its_own_time_line() -> None:
     chain.execute("[")
     chain.kernel.advance(seconds(3))
     assert chain.execute("?96.1") == ["Px.1=1000"] and chain.execute("?96.2") == ["Px.2=1000"]
+
+
+def test_the_chain_model_reads_no_clock_and_opens_no_threads_or_sockets() -> None:
+    """docs/architecture.md rule 1 for the chain, its links and the motor model."""
+    import ast as pyast
+
+    import coolmuscle
+    root = Path(coolmuscle.__file__).parent
+    files = [root / "chain.py", root / "links.py", root / "hostline.py",
+             *sorted((root / "motor").glob("*.py"))]
+    for path in files:
+        for node in pyast.walk(pyast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, pyast.Import)
+                     else [node.module or ""] if isinstance(node, pyast.ImportFrom) else [])
+            for name in names:
+                assert name.split(".")[0] not in {"time", "asyncio", "socket", "threading"}, (
+                    path, name)
