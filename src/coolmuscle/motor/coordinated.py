@@ -453,11 +453,6 @@ def end_of_line(ctx: "Context") -> None:
         report_leftovers(line.pairing, ctx)
 
 
-def path_length(path: PairMotion) -> float:
-    """Total length of the legs a path holds (pulses)."""
-    return leg_starts(path.legs)[1] if path.legs else 0.0
-
-
 __all__ = ["Selection", "Request", "Pairing", "PairMotion", "LinePaths", "build_leg",
            "direct_interp", "end_of_line", "request", "report_leftovers", "LINE_PAIRS",
            "LinePairs", "pair_line", "message_bytes"]
