@@ -33,7 +33,7 @@ from .motor.motor import Context, Motor
 from .motor.status import Report
 from .motor.store import Store
 from .sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
-from .sim.trace import TraceRecorder
+from .sim.trace import TraceRecorder, check_trace_path
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +57,7 @@ class _Stream:
 
 
 class _TraceFile:
-    """A trace being recorded; :meth:`close` writes it (CSV)."""
+    """A trace being recorded; :meth:`close` writes it (CSV, or Parquet for .parquet)."""
 
     def __init__(self, recorder: TraceRecorder, path: Path, step: float) -> None:
         self.recorder = recorder
@@ -65,7 +65,7 @@ class _TraceFile:
         self.step = step
 
     def close(self) -> Path:
-        return self.recorder.write_csv(self.path, self.step)
+        return self.recorder.write(self.path, self.step)
 
 
 class Chain:
@@ -367,7 +367,9 @@ class Chain:
         return self._recorder
 
     def trace(self, path: str | Path, step: float = 0.001) -> "_TraceFile":
-        """Record from now on; ``close()`` on the handle writes the CSV to ``path``."""
+        """Record from now on; ``close()`` on the handle writes ``path``: CSV, or Parquet
+        for a ``.parquet`` path (``TraceFormatError`` at once when pyarrow is missing)."""
+        check_trace_path(path)
         return _TraceFile(self.record(), Path(path), step)
 
     def plot(self, path: str | Path, title: str = "",
@@ -455,7 +457,8 @@ class Chain:
             speed_pps=m.axis.velocity(), torque=m.torque(), status=m.status,
             inputs=m.io.input_word(), outputs=m.io.output_word(),
             temperature=m.temperature, voltage=m.voltage, analog=m.analog,
-            encoder_count=m.encoder_count, enabled=m.axis.enabled)
+            encoder_count=m.encoder_count, enabled=m.axis.enabled,
+            extra={"analog_output": m.analog_output()})   # K35 (Modbus K78+54)
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         self._require(motor).set_input_level(number, on)

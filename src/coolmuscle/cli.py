@@ -231,8 +231,9 @@ def run(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
     until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
                                           help="After the script, run on to this virtual time."),
-    trace: Optional[Path] = typer.Option(None, "--trace", metavar="OUT.csv",
-                                         help="Write a trace CSV."),
+    trace: Optional[Path] = typer.Option(
+        None, "--trace", metavar="OUT.csv",
+        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow)."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
     xy: Optional[str] = typer.Option(
         None, "--xy", metavar="X,Y",
@@ -259,6 +260,12 @@ def run(
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
     xy_pairs = _xy_pairs(xy, motors)
+    if trace is not None:
+        from .sim.trace import TraceFormatError, check_trace_path
+        try:
+            check_trace_path(trace)
+        except TraceFormatError as exc:
+            raise UsageError(str(exc)) from None
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
     try:
         if plot is not None:

@@ -50,6 +50,9 @@ class Axis:
         self._timers: list[Timer] = []
         #: (time_ns, profile, tracking, zero, sign) kept while a trace records.
         self.history: list[tuple[int, Profile, Tracking, float, int]] | None = None
+        #: Called after every trajectory change (rotation pulses, external encoder:
+        #: :class:`coolmuscle.motor.trajectory.Timeline`).
+        self.trajectory_listeners: list[Callable[[], None]] = []
 
     # -- coordinates ------------------------------------------------------
     def to_raw(self, user: float) -> float:
@@ -173,6 +176,29 @@ class Axis:
         self._timers.append(self.kernel.schedule_at(done, self._arrived,
                                                     priority=PRIO_MOTION, name="in-position"))
 
+    def nudge(self, user_target: float, window: float) -> bool:
+        """Shift the target of a motor at rest by no more than the in-position window,
+        silently: it stays in position (analog position control, ch. 3 K38=1).
+        Returns False (nothing done) when moving or when the step is larger."""
+        if self.moving:
+            return False
+        now = self.kernel.now
+        raw = self.to_raw(user_target)
+        e0 = self.tracking.error_at(now) + (raw - self.profile.position_at(now))
+        if abs(e0) > window:
+            return False
+        self._cancel()
+        self.profile = hold(raw, now)
+        self.tracking = Tracking(self.profile, e0, self.kp)
+        self.target_raw = raw
+        self._remember()
+        return True
+
+    def drive(self, profile: Profile) -> None:
+        """Follow a profile built outside the planner (analog speed/torque control)."""
+        self.target_raw = profile.final_position
+        self._start(profile)
+
     def set_user_position(self, user: float) -> None:
         """Declare the current actual position to be ``user`` (``|2``, counter reset)."""
         self.zero = self.raw_actual() - self.sign * user
@@ -191,6 +217,8 @@ class Axis:
         if self.history is not None:
             self.history.append((self.kernel.now, self.profile, self.tracking,
                                  self.zero, self.sign))
+        for listener in tuple(self.trajectory_listeners):
+            listener()
 
     # -- internals ----------------------------------------------------------
     def _cancel(self) -> None:

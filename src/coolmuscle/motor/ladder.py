@@ -62,6 +62,7 @@ class LadderRunner:
         self.scans = 0                 # completed scans (benchmarks, tests)
         self.scan_start = 0
         self.clock = 0                 # where the scan's steps have got to (ns)
+        self._last_scan = -STEP_NS       # start of the last scan (a restart waits a step)
         self._timer: Timer | None = None
         self._scan_id = 0
         self._running_id = 0
@@ -146,6 +147,9 @@ class LadderRunner:
         self._cancel()
         if at is None or self.state != RUNNING:
             return
+        # a scan lasts at least its first step (RT3 3.4), even when a bank restarts
+        # itself ([L# inside the bank): virtual time always moves between scans
+        at = max(at, self._last_scan + STEP_NS)
         self._timer = self.kernel.schedule_at(at, self._scan, priority=PRIO_LOGIC,
                                               name="ladder-scan")
 
@@ -161,7 +165,7 @@ class LadderRunner:
         self._timer = None
         if self.state != RUNNING or self.bank is None:
             return
-        self.scan_start = self.clock = self.kernel.now
+        self.scan_start = self.clock = self._last_scan = self.kernel.now
         self._running_id = self._scan_id
         start = self._fast_scan(self.bank)
         if start is None:

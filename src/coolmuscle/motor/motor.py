@@ -17,17 +17,24 @@ from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from . import units
+from .analog import AnalogInput, AnalogSource
+from .analog_control import AnalogControl
+from .analog_output import output_volts, volts_to_register
 from .axis import Axis
+from .encoder import ExternalEncoder, Gearing
 from .evaluate import pack_string
 from .firmware import Firmware
 from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
-                 OUT_ORIGIN_DONE, OUT_PUSH, DigitalIO)
+                 OUT_ORIGIN_DONE, OUT_PUSH, OUT_ROTATION_PULSE, DigitalIO)
+from .manual import ManualMotion
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import ESTOP_DECEL, Limits, limits_from_data
 from .plant import Plant
 from .profile import Profile
+from .pulses import RotationPulses
 from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
+from .trajectory import Timeline
 
 if TYPE_CHECKING:
     from .coordinated import PairMotion
@@ -95,12 +102,17 @@ class Motor:
         self.estopped = False
         self.origin_done = False
         self.merge_pulse_until = 0
-        self.analog = 0
-        self.encoder_count = 0
         self.temperature = 40
         self.voltage = 240
         self.torque_limit = 100
         self._last_limits: Limits | None = None
+        # -- signals (5.1, 5.2, 5.4, 5.5; K24, K35, K38-K41, K71-K77): own modules
+        self.timeline = Timeline(self.axis)
+        self.pulses = RotationPulses(self, self.timeline)
+        self.analog_input = AnalogInput(lambda: kernel.now)
+        self.analog_control = AnalogControl(self, self.analog_input)
+        self.encoder = ExternalEncoder(self, self.timeline)
+        self.manual = ManualMotion(self)
         # -- banks, ladder, input functions (issue 4).  Imported here: the executors
         # use .direct, which imports this module.
         from .banks import BankStore
@@ -168,9 +180,13 @@ class Motor:
         """Ix (?98): % of rated torque."""
         if not self.axis.enabled:
             return 0
-        return round(self.plant.torque_percent(self.axis.command_acceleration(),
-                                               self.axis.velocity(),
-                                               self.resolution.pulses_per_rev))
+        commanded = self.analog_control.torque_percent()
+        if commanded is not None:
+            return round(commanded)
+        load = self.analog_control.load_percent()       # a torque-sensor load (5.5)
+        return round(load + self.plant.torque_percent(self.axis.command_acceleration(),
+                                                      self.axis.velocity(),
+                                                      self.resolution.pulses_per_rev))
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",
@@ -212,16 +228,26 @@ class Motor:
     def can_move(self) -> bool:
         return self.axis.enabled and not self.alarm and not self.estopped
 
-    def limits(self, s_value: int, a_value: int, decel_a: int | None = None) -> Limits:
-        """Motion limits from S/A data and K37, K44, K51, K69 (ch. 3)."""
+    def limits(self, s_value: int, a_value: int, decel_a: int | None = None) -> Limits | None:
+        """Motion limits from S/A data and K37, K44, K51, K69 (ch. 3).
+
+        ``None`` when the speed, acceleration or deceleration data is 0: such a motion
+        does not move (docs/fidelity.md "Motion").
+        """
+        if s_value == 0 or a_value == 0 or decel_a == 0:
+            return None
         return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
                                 k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
 
-    def move_to(self, waypoints: list[tuple[float, Limits]], delay_ns: int = 0) -> None:
-        """Start (or re-plan) a move through user-coordinate waypoints; ``delay_ns``: the
-        command is still on its way down the chain (ch. 3 K65), it starts that much later."""
+    def move_to(self, waypoints: Sequence[tuple[float, Limits | None]],
+                delay_ns: int = 0) -> None:
+        """Start (or re-plan) a move through user-coordinate waypoints.
+
+        A waypoint without limits (zero speed) means no motion at all.  ``delay_ns``: the
+        command is still on its way down the chain (ch. 3 K65), it starts that much later.
+        """
         self._go_target = None
-        if not self.can_move() or not waypoints:
+        if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
             return
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
@@ -236,10 +262,17 @@ class Motor:
         self.path = path
         return True
 
-    def run_continuous(self, s_value: int, limits: Limits) -> None:
-        """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S."""
+    def run_continuous(self, s_value: int, limits: Limits | None) -> None:
+        """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S.
+
+        Zero speed (no limits) stops a rotation in progress.
+        """
         self._go_target = None
         if not self.can_move():
+            return
+        if limits is None:
+            if self.axis.moving:
+                self.stop()
             return
         self._last_limits = limits
         self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
@@ -266,7 +299,9 @@ class Motor:
                 self.stop()
         else:
             lim = self.limits(s0, a0)
-            if p0 == units.CONTINUOUS:
+            if self.encoder.handles_go(p0, s0, lim) or self.analog_control.handles_go(p0, lim):
+                pass                          # index / feedback (K71), torque feedback (K38)
+            elif p0 == units.CONTINUOUS:
                 self.run_continuous(s0, lim)
             else:
                 self.move_to([(float(p0), lim)])
@@ -336,20 +371,16 @@ class Motor:
             self.enable()
 
     def jog(self, direction: int) -> None:
-        """Manual jog (5.1): K50 pulses CW (+1) or CCW (-1) at the feed speed K49, K43."""
-        if self.axis.moving:
-            return
-        target = self.axis.target() + direction * self.k(50)
-        self.move_to([(target, self.limits(self.k(49), self.k(43)))])
+        """Manual jog (5.1): K50 pulses CW (+1) or CCW (-1); see :mod:`.manual`."""
+        self.manual.jog(direction)
 
     def feed(self, direction: int) -> None:
-        """Manual feed (5.1): rotate CW (+1) / CCW (-1) at K49 with K43 while the input is on."""
-        self.run_continuous(direction * self.k(49), self.limits(self.k(49), self.k(43)))
+        """Manual feed on (5.1): rotate CW (+1) / CCW (-1) at K49 with K43."""
+        self.manual.feed(direction)
 
     def feed_stop(self) -> None:
-        """End of manual feed: decelerate with K43 (5.1)."""
-        lim = self.limits(self.k(49), self.k(43))
-        self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
+        """Manual feed off: decelerate; a blocked feed may start again (5.1)."""
+        self.manual.feed_stop()
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
@@ -395,6 +426,8 @@ class Motor:
             self.stop()
 
     def _passing_point(self, index: int) -> None:
+        """K34=6: the output is on for K73 ms from each passing point; a point within
+        the pulse of the previous one lengthens it (ch. 3 K73)."""
         del index
         self.merge_pulse_until = self.kernel.now + self.k(73) * 1_000_000
         # an event where the K34=6 pulse ends, so traces and waits see the output fall
@@ -402,7 +435,6 @@ class Motor:
 
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
-        del number
         if function == OUT_IN_POSITION:
             return self.status & Ux.IN_POSITION != 0
         if function == OUT_ALARM:
@@ -411,6 +443,8 @@ class Motor:
             return self.origin_done and self.status == Ux.IN_POSITION
         if function == OUT_MERGE_PULSE:
             return self.kernel.now < self.merge_pulse_until
+        if function == OUT_ROTATION_PULSE:
+            return self.pulses.signal(number)
         if function == OUT_MOTOR_FREE:
             return not self.axis.enabled
         if function == OUT_PUSH:
@@ -448,7 +482,7 @@ class Motor:
             "ST": lambda: int(self.memory.get("S", 0)), "CT": lambda: self.encoder_count,
             "Dx": lambda: round(self.axis.target()) if abs(self.axis.target()) != float("inf")
             else 0,
-            "Fx": lambda: 0, "Cx": lambda: self.encoder_count,
+            "Fx": lambda: round(self.encoder.frequency()), "Cx": lambda: self.encoder_count,
         }
 
     def v_numeric(self, value: VNumber | VString | VState) -> int:
@@ -518,8 +552,8 @@ class Motor:
         else:
             self.push_to(target, lim)
 
-    def push_to(self, target: float, limits: Limits,
-                via: Sequence[tuple[float, Limits]] = ()) -> None:
+    def push_to(self, target: float, limits: Limits | None,
+                via: Sequence[tuple[float, Limits | None]] = ()) -> None:
         """Push motion toward ``target`` (4.1.4); the push model lives in the plant.
 
         ``via``: merge waypoints before the push (4.1.4 "S3.1, A1.1, P1.1, S1.1, Q2.1").
@@ -556,11 +590,64 @@ class Motor:
 
     def power_on(self) -> None:
         """Power-up: servo on or motor free per K68 (ch. 3 K68); input levels; the
-        K62 (RT3: K85) ladder bank starts."""
+        K62 (RT3: K85) ladder bank starts; analog control starts (K38)."""
         if self.k(68) == 0:
             self.free()
         self.inputs.power_up()
         self.ladder.power_up()
+        self.analog_control.activate()
+
+    # -- analog input / output and the external encoder (own modules) -------------
+    @property
+    def analog(self) -> int:
+        """The analog input, 0..1023 (?74 ``ADI0``, V state ``ADIN``)."""
+        return self.analog_input.counts()
+
+    @analog.setter
+    def analog(self, counts: int) -> None:
+        self.analog_input.set_counts(counts)
+
+    def set_analog_source(self, source: AnalogSource) -> None:
+        """Drive the analog input from ``source`` from now on (machine file, tests)."""
+        source.bind(self)
+        self.analog_input.set_source(source)
+
+    @property
+    def analog_config(self) -> AnalogSource:
+        """The analog input's source; setting it (machine file ``[axis.analog]``) drives
+        the input from now on (docs/machine-file.md)."""
+        return self.analog_input.source
+
+    @analog_config.setter
+    def analog_config(self, source: AnalogSource) -> None:
+        self.set_analog_source(source)
+
+    @property
+    def encoder_config(self) -> Gearing:
+        """The external encoder's gearing (machine file ``[axis.encoder]``)."""
+        return self.encoder.gearing
+
+    @encoder_config.setter
+    def encoder_config(self, gearing: Gearing) -> None:
+        self.encoder.set_gearing(gearing)
+
+    @property
+    def encoder_count(self) -> int:
+        """The external encoder count (?76 ``Ecnt``, V states ``CT``/``Ecnt``, 5.4)."""
+        return self.encoder.count()
+
+    def analog_output_volts(self) -> float:
+        """The analog output now (ch. 3 K35), volts."""
+        target = self.axis.target()
+        return output_volts(self.k(35), target=target if abs(target) != float("inf")
+                            else self.axis.command_position(),
+                            position=self.axis.position(), error=self.axis.position_error(),
+                            speed_pps=self.axis.velocity(), torque=float(self.torque()),
+                            pulses_per_rev=self.resolution.pulses_per_rev)
+
+    def analog_output(self) -> int:
+        """The analog output as the Modbus register reads it (K78+54): 0..1023."""
+        return volts_to_register(self.analog_output_volts())
 
     def inject_fault(self, fault: str, **params: float) -> None:
         """Fault injection through the device API (docs/machine-file.md)."""

@@ -514,7 +514,7 @@ def _has_flow(unit: Unit) -> bool:
                for s in unit.statements)
 
 
-def _limits(target: "Motor", run: _Run) -> Limits:
+def _limits(target: "Motor", run: _Run) -> Limits | None:
     prog = target.program
     s_value = int(target.memory.get("S", prog.sel_s))
     a_value = int(target.memory.get("A", prog.sel_a))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
+from typing import Callable
 
 from .profile import Profile
 from ..sim.kernel import NS_PER_S
@@ -100,3 +101,68 @@ class Tracking:
     def error_at_end(self) -> float:
         """Pe when the command stops (the settling starts from here)."""
         return self._e_end
+
+    # -- where the actual motion reverses (rotation pulses, external encoder) --
+    def velocity_zeros(self, t0_ns: int, t1_ns: int) -> list[int]:
+        """Kernel instants in (``t0_ns``, ``t1_ns``) where the actual speed changes sign.
+
+        Between two of them the actual position is monotonic, so positions reached
+        and band exits can be solved there (:mod:`coolmuscle.motor.trajectory`).
+        On a segment e(τ) = c0 + c1 τ + c2 τ² + d exp(-kp τ): e'' is monotonic, so
+        e' has at most two zeros and e at most three; each is bracketed and bisected.
+        After the command ends the error only decays, so there are none.
+        """
+        origin = self.profile.origin_ns
+        lo, hi = self._rel(t0_ns), self._rel(t1_ns)
+        found: list[int] = []
+        for piece in self._pieces:
+            a, b = max(lo, piece.start), min(hi, piece.start + piece.duration)
+            if a >= b:
+                continue
+            for tau in _error_zeros(piece, self.kp, a - piece.start, b - piece.start):
+                t_ns = origin + round((piece.start + tau) * NS_PER_S)
+                if t0_ns < t_ns < t1_ns:
+                    found.append(t_ns)
+        return sorted(set(found))
+
+
+def _error_zeros(piece: _Piece, kp: float, lo: float, hi: float) -> list[float]:
+    """Sign changes of the piece's error in [lo, hi] (local seconds)."""
+    cuts = [lo, hi]
+    if piece.d != 0.0 and piece.c2 != 0.0:
+        ratio = -2.0 * piece.c2 / (kp * kp * piece.d)
+        if ratio > 0.0:
+            tau2 = -math.log(ratio) / kp
+            if lo < tau2 < hi:
+                cuts = [lo, tau2, hi]
+    slope_cuts = [cuts[0]]
+    for a, b in zip(cuts, cuts[1:]):
+        root = _bisect_sign(lambda t: piece.error_rate(t, kp), a, b)
+        if root is not None:
+            slope_cuts.append(root)
+        slope_cuts.append(b)
+    zeros = []
+    for a, b in zip(slope_cuts, slope_cuts[1:]):
+        root = _bisect_sign(lambda t: piece.error(t, kp), a, b)
+        if root is not None and lo < root < hi:
+            zeros.append(root)
+    return zeros
+
+
+def _bisect_sign(f: Callable[[float], float], a: float, b: float) -> float | None:
+    """A root of ``f`` in (a, b) when f(a) and f(b) have strictly opposite signs."""
+    fa, fb = f(a), f(b)
+    if fa == 0.0 or fb == 0.0 or (fa < 0.0) == (fb < 0.0):
+        return None
+    for _ in range(200):
+        mid = 0.5 * (a + b)
+        if mid <= a or mid >= b:
+            break
+        fm = f(mid)
+        if fm == 0.0:
+            return mid
+        if (fm < 0.0) == (fa < 0.0):
+            a, fa = mid, fm
+        else:
+            b = mid
+    return 0.5 * (a + b)

@@ -1,0 +1,169 @@
+"""Traces and plots (issue 3 scope 9): ``--trace`` CSV / Parquet, ``--plot`` panels.
+
+The trace samples the closed-form history exactly; position-derived outputs
+(rotation pulses) are evaluated at each sample and their edges are sample instants.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+import types
+from pathlib import Path
+from typing import Any
+
+import matplotlib.image
+import pytest
+
+from coolmuscle import cli
+from coolmuscle.chain import Chain
+from coolmuscle.motor.encoder import Gearing
+from coolmuscle.plot import status_class
+from coolmuscle.sim import trace as trace_module
+from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.sim.trace import FIELDS, TraceFormatError
+
+SCRIPT = """\
+K34.1=77
+K24.1=2000
+S.1=100
+A.1=100
+P.1=6000
+^.1
+@until ^Ux\\.1=8$
+@analog 700
+@wait 0.5
+"""
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    with path.open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], rows[1:]
+
+
+def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) -> None:
+    chain = Chain()
+    handle = chain.trace(tmp_path / "run.csv", step=0.01)
+    chain.set_param(1, 34, 77)
+    chain.set_param(1, 24, 2000)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
+    chain.set_param(1, 71, 5)
+    chain.set_param(1, 38, 0)                    # the input below must not move the motor
+    chain.execute("S.1=100, A.1=100, P.1=6000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    chain.set_analog(1, 700)
+    chain.kernel.run(until=seconds(1.2))
+    path = handle.close()
+    header, rows = _read_csv(path)
+    assert header == ["time_s"] + [f"m1.{f}" for f in FIELDS]
+    col = {name: i for i, name in enumerate(header)}
+    times = [round(float(r[0]) * NS_PER_S) for r in rows]
+    edges = chain.motors[1].pulses.edge_times(0, chain.kernel.now)
+    assert len(edges) == 11 and set(edges) <= set(times)
+    for edge in edges:
+        i = times.index(edge)
+        assert rows[i][col["m1.outputs"]] != rows[i - 1][col["m1.outputs"]]
+    last = rows[-1]
+    assert last[col["m1.analog_in"]] == "700" and last[col["m1.encoder"]] == "6000"
+    # K35=0: the target, ±1024 pulses per ±1.67 V, repeating: 6000 is -0.140625 of a range
+    assert float(last[col["m1.analog_out"]]) == pytest.approx(2.5 - 1.67 * 0.140625, abs=1e-6)
+    assert float(last[col["m1.position"]]) == pytest.approx(6000, abs=0.01)
+
+
+def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
+    chain = Chain()
+    rec = chain.record()
+    chain.set_param(1, 35, 2)                    # current position, ±1024 pulses
+    chain.execute("S.1=10, A.1=100, P.1=512")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert rec.sample(1, 0).analog_out == 2.5
+    assert rec.sample(1, seconds(2)).analog_out == pytest.approx(2.5 + 1.67 / 2, abs=1e-4)
+
+
+def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any) -> None:
+    monkeypatch.setattr(trace_module, "parquet_available", lambda: False)
+    with pytest.raises(TraceFormatError, match="pyarrow"):
+        Chain().trace(tmp_path / "run.parquet")
+    script = tmp_path / "s.cml"
+    script.write_text("?96.1\n")
+    with pytest.raises(SystemExit) as info:
+        cli.main(["run", str(script), "--trace", str(tmp_path / "run.parquet")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "Parquet traces need pyarrow" in err and "\n" == err[-1] and err.count("\n") == 1
+    assert not (tmp_path / "run.parquet").exists()
+
+
+def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Parquet writer against a stand-in for pyarrow (it is an optional
+    dependency): one int64 or float64 array per column, written to the path."""
+    written: dict[str, Any] = {}
+
+    class Array(list):
+        def __init__(self, values: list[Any], type: str) -> None:  # noqa: A002
+            super().__init__(values)
+            self.type = type
+
+    pa = types.ModuleType("pyarrow")
+    pa.int64 = lambda: "int64"                     # type: ignore[attr-defined]
+    pa.float64 = lambda: "float64"                 # type: ignore[attr-defined]
+    pa.array = Array                               # type: ignore[attr-defined]
+    pa.table = lambda arrays: dict(arrays)         # type: ignore[attr-defined]
+    pq = types.ModuleType("pyarrow.parquet")
+    pq.write_table = lambda table, where: written.update(table=table, where=where)  # type: ignore[attr-defined]
+    pa.parquet = pq                                # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "pyarrow", pa)
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", pq)
+    monkeypatch.setattr(trace_module, "parquet_available", lambda: True)
+    chain = Chain()
+    handle = chain.trace(tmp_path / "run.parquet", step=0.1)
+    chain.execute("S.1=100, A.1=100, P.1=1000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    handle.close()
+    table = written["table"]
+    assert written["where"] == str(tmp_path / "run.parquet")
+    assert list(table) == ["time_s"] + [f"m1.{f}" for f in FIELDS]
+    assert table["m1.status"].type == "int64" and table["m1.position"].type == "float64"
+    assert table["m1.status"][-1] == 8 and table["m1.position"][-1] == pytest.approx(1000)
+
+
+def test_cli_run_writes_trace_and_plot(tmp_path: Path, capsys: Any) -> None:
+    script = tmp_path / "pulses.cml"
+    script.write_text(SCRIPT)
+    out_csv, out_png = tmp_path / "run.csv", tmp_path / "run.png"
+    with pytest.raises(SystemExit) as info:
+        cli.main(["run", str(script), "--trace", str(out_csv), "--plot", str(out_png)])
+    assert info.value.code in (0, None)
+    header, rows = _read_csv(out_csv)
+    assert "m1.analog_in" in header and len(rows) > 100
+    image = matplotlib.image.imread(out_png)
+    assert image.shape[0] > 800 and image.shape[1] > 1000
+    capsys.readouterr()
+
+
+def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
+    heights = []
+    for motors in (1, 15):
+        chain = Chain(motors=motors)
+        chain.record()
+        for mid in chain.motor_ids:
+            chain.set_param(mid, 34, 1)
+            chain.execute(f"S.{mid}={10 * mid}, A.{mid}=100, P.{mid}={500 * mid}")
+            chain.execute(f"^.{mid}")
+        chain.kernel.run(until=seconds(1.5))
+        path = chain.plot(tmp_path / f"m{motors}.png", title=f"{motors} motors")
+        heights.append(matplotlib.image.imread(path).shape[0])
+    assert heights[1] > heights[0] * 1.5
+
+
+@pytest.mark.parametrize("ux, name", [(0, "moving"), (8, "in position"), (16, "motor free"),
+                                      (32, "push"), (40, "push"), (4, "alarm"),
+                                      (512, "emergency stop"), (256, "moving")])
+def test_6_6_status_classes_of_the_timeline(ux: int, name: str) -> None:
+    assert status_class(ux) == name
