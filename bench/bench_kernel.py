@@ -108,43 +108,20 @@ class BankLoop:
 
 # -- naive: a fixed 1 ms tick loop over the same moves -----------------------------------------
 def solve(axis: Axis, profile: Profile, now: int, previous: Any) -> Any:
-    """The servo model's shaft solution for ``profile`` from ``now``, built as the axis
-    builds it (first-order tracking, or the load model's piecewise motion)."""
-    try:
-        from coolmuscle.motor.servo import Tracking
-    except ImportError:                               # the load model (dynamics.Motion)
-        from coolmuscle.motor.dynamics import Motion
-        p, v = (previous.position_at(now), previous.velocity_at(now)) if previous else (0, 0)
-        return Motion(profile, now, p, v, axis._current_drive())
-    return Tracking(profile, previous.error_at(now) if previous else 0.0, axis.kp)
-
-
-try:                                       # first-order tracking, or the load model
-    import coolmuscle.motor.servo  # noqa: F401
-    LOAD_MODEL = False
-except ImportError:
-    LOAD_MODEL = True
+    """The load model's shaft solution for ``profile`` from ``now``, built as the axis
+    builds it (coolmuscle.motor.dynamics.Motion)."""
+    from coolmuscle.motor.dynamics import Motion
+    p, v = (previous.position_at(now), previous.velocity_at(now)) if previous else (0, 0)
+    return Motion(profile, now, p, v, axis._current_drive())
 
 
 def shaft(solution: Any, profile: Profile, t: int) -> tuple[float, float, float]:
-    """(command, actual position, actual speed), raw pulses: first-order tracking."""
-    command = profile.position_at(t)
-    error = solution.error_at(t)
-    return command, command - error, solution.kp * error
-
-
-def shaft_load(solution: Any, profile: Profile, t: int) -> tuple[float, float, float]:
-    """The same from the load model's motion."""
+    """(command, actual position, actual speed), raw pulses."""
     return solution.command_at(t), solution.position_at(t), solution.velocity_at(t)
 
 
 def torque(motor: Any, solution: Any, profile: Profile, t: int, speed: float) -> float:
-    """Ix as the trace computes it: the plant from the command."""
-    return motor.plant.torque_percent(profile.acceleration_at(t), speed, 1000)
-
-
-def torque_load(motor: Any, solution: Any, profile: Profile, t: int, speed: float) -> float:
-    """Ix from the load model's motion."""
+    """Ix from the shaft motion, as the trace computes it."""
     return solution.torque_percent_at(t)
 
 
@@ -174,8 +151,8 @@ class Naive:
         self.limits = limits_from_data(S_VALUE, A_VALUE, k37=3, k44=100, k51=0, k69=0)
         self.profile = hold(0.0, 0)
         self.tracking = solve(self.motor.axis, self.profile, 0, None)
-        self.shaft = shaft_load if LOAD_MODEL else shaft
-        self.torque = torque_load if LOAD_MODEL else torque
+        self.shaft = shaft
+        self.torque = torque
         self.target = 0.0
         self.moving = False
         self.moves = 0

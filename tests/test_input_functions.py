@@ -174,10 +174,14 @@ def test_k31_k32_slow_edges_run_banks() -> None:
 
 def test_k28_origin_search() -> None:
     r = with_functions("K28.1=7", "S.1=100", "P.1=500", "^.1")
+    r.motor().geometry.stopper_ccw = -700.0       # the search (K46=0, CCW) finds it
+    r.motor().axis.refresh()
     r.wait(0.5)
     pulse(r, 1, 0.01)
     r.wait(2)
+    assert r.texts()[-2:] == ["Origin.1=0", "Ux.1=8"]
     assert r.chain.execute("?96.1") in (["Px.1=0"], ["Px.1=1"], ["Px.1=-1"])
+    assert abs(r.motor().axis.raw_actual() + 700.0) < 1e-3
 
 
 @pytest.mark.parametrize(("k36", "expected"), [(0, ["Px.1=10", "Px.1=0"]),

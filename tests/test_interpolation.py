@@ -124,7 +124,8 @@ def test_4_4_1_program_1_long_arc_clockwise_with_radius_r1() -> None:
     r, recorder = run_bank(DATA_4_4_1, START_LINE, "R1.1,R1.2,@2.2+,@2.1+")
     t0, t1 = path_window(r)
     assert path_window(r, 2) == (t0, t1)               # both axes start and end together
-    assert recorder.sample(1, t1).command == 1000.0 and recorder.sample(2, t1).command == 1000.0
+    assert recorder.sample(1, t1).target == 1000.0 and recorder.sample(2, t1).target == 1000.0
+    assert all(abs(recorder.sample(m, t1).command - 1000.0) < 1e-6 for m in (1, 2))
     check_on_circle(recorder, t0, t1, CENTRE_4_4_1, 2000)
     angle = swept_angle(recorder, t0, t1, CENTRE_4_4_1)
     chord_angle = 2 * math.asin(math.dist((0, 0), (1000, 1000)) / 2 / 2000)
@@ -233,7 +234,8 @@ def test_rt3_1_1_semicolon_merges_two_interpolations() -> None:
     r, recorder = run_bank(data, "S1.1,A1.1,S1.2,A1.2",
                            "r2.1,r2.2,@1.2,@1.1; r1.1,r1.2,@2.2,@1.1", firmware="rt3")
     t0, t1 = path_window(r, 2, 2000.0)
-    assert recorder.sample(1, t1).command == 2000.0 and recorder.sample(2, t1).command == 2000.0
+    assert recorder.sample(1, t1).target == 2000.0 and recorder.sample(2, t1).target == 2000.0
+    assert all(abs(recorder.sample(m, t1).command - 2000.0) < 1e-6 for m in (1, 2))
     # the junction (2000, 0) is passed at speed: no stop between the two @ pairs
     hist = r.motor(1).axis.history
     profile = [p for start, p, *_ in hist if start == t0][0]

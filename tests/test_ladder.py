@@ -224,8 +224,10 @@ def test_rt3_1_5_sine_has_the_frequency_of_its_formula() -> None:
 
 def test_rt3_3_6_logic_motion_bank_follows_its_dx_curve() -> None:
     """[LM1 scans every 1 ms whatever K87 is; V3 bound to "Dx" is the target position."""
-    r = ladder("K87.1=100", 'V3="Dx"', "V2=10", "L1", "V1=V1+V2;", "V3=U2(V1);", "END",
-               firmware="rt3")
+    # the curve starts at U2(10) = 9980: a step that far is a position error overflow
+    # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised
+    r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10", "L1", "V1=V1+V2;",
+               "V3=U2(V1);", "END", firmware="rt3")
     trace = r.chain.record()
     r.type("[LM1")
     r.until(1.2)

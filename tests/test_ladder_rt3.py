@@ -64,7 +64,7 @@ def test_rt3_7_3_3_bidirectional_torque_speed_control_stops_under_load() -> None
     loaded = speeds(r, trace, 1.2, 4)
     assert min(loaded) < 1 and max(loaded) > 1999    # S0 goes S2 = 0, back to S1, ...
     moved = trace.sample(1, seconds(4)).position - trace.sample(1, seconds(1)).position
-    assert 1000 < moved < 3000                       # unloaded it would be 6000
+    assert 1000 < moved < 4500                       # unloaded it would be 6000
     r.motor().plant.coulomb_friction = 0.004
     r.until(5)
     assert min(speeds(r, trace, 4.5, 5)) > 1999

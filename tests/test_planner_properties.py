@@ -373,7 +373,11 @@ def test_continuous_rotation_and_stops(case: tuple[float, list[Waypoint]], frac:
         assert run.end_ns is not None and run.velocity_at(run.end_ns) == 0.0
     stop = plan_stop(state, lim.decel, cut, lim.scurve, creep=lim.creep, speed=lim.speed)
     check_continuity(stop, [lim])
-    check_limits(stop, [lim], speed_over=over)
+    # decelerating, the first ramp may steepen to a²/2|v| so the speed does not cross
+    # zero (docs/fidelity.md "S-curve re-plan"): a state with a tiny speed inherits it
+    unwind = (state[2] ** 2 / (2.0 * abs(state[1]))
+              if state[1] and state[1] * state[2] < 0.0 else 0.0)
+    check_limits(stop, [lim], speed_over=over, jerk_over=unwind)
     integrate(stop, [lim])
     if state[1] != 0.0 and state[2] * state[1] <= 0.0:  # no overshoot: not past the stop
         assert (stop.final_position - state[0]) * state[1] >= 0.0
@@ -446,3 +450,15 @@ def test_time_speed_below_hits_the_speed() -> None:
     assert bisect_right(starts, t) >= 3
     for probe in range(starts[2], t, max(1, (t - starts[2]) // 500)):
         assert abs(prof.velocity_at(probe)) > 2500.0 - 1e-6
+
+
+def test_stop_from_a_nearly_still_decelerating_state() -> None:
+    """Regression (hypothesis found it): v = 2e-13 pps, a = -0.005 pulses/s², K69 = 64.
+    The stop steepens its ramp to a²/2|v| rather than let the speed cross zero."""
+    lim = Limits(190.0, 19000.0, 19000.0, 0.0, 64)
+    state = (0.25, 2e-13, -0.005)
+    stop = plan_stop(state, lim.decel, 0, lim.scurve, creep=0.0, speed=lim.speed)
+    check_continuity(stop, [lim])
+    check_limits(stop, [lim], jerk_over=state[2] ** 2 / (2.0 * abs(state[1])))
+    assert stop.velocity_at(stop.end_ns) == 0.0
+    assert abs(stop.final_position - 0.25) < 1e-12

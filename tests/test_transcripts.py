@@ -2,7 +2,9 @@
 
 Each ``.cml`` file is a ``coolmuscle run`` script whose ``<<`` lines are the exact bytes
 the motor must send (docs/scripts.md).  A header comment ``# chain: motors=N
-firmware=NAME`` chooses the chain; the default is one CM2 motor.
+firmware=NAME machine=FILE`` chooses the chain; the default is one CM2 motor.  A
+machine file (docs/machine-file.md) is named relative to the transcript's directory
+(``machine=machines/stopper.toml``).
 """
 
 from __future__ import annotations
@@ -42,6 +44,8 @@ def test_golden_transcript(path: Path, tmp_path: Path) -> None:
     options = chain_options(text)
     if options.pop("state", None):
         options["state_dir"] = tmp_path
+    if "machine" in options:
+        options["machine"] = path.parent / str(options["machine"])
     chain = Chain(**options)  # type: ignore[arg-type]
     try:
         result = run_script(script, chain)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 from .cml import ast
 from .cml.parser import parse
@@ -34,6 +34,9 @@ from .motor.status import Report
 from .motor.store import Store
 from .sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
 from .sim.trace import TraceRecorder, check_trace_path
+
+if TYPE_CHECKING:
+    from .machine import Machine
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +76,7 @@ class Chain:
 
     def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
                  firmware: str = "cm2", state_dir: Path | str | None = None,
-                 pacing: bool = False) -> None:
+                 pacing: bool = False, machine: "Path | str | Machine | None" = None) -> None:
         if not 1 <= motors <= 15:
             raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
         self.kernel = kernel or Kernel()
@@ -94,6 +97,16 @@ class Chain:
             lambda k, _old, new: self._k65_written(new) if k == 65 else None)
         self._attach_modbus()
         self._restore()
+        if machine is not None:           # wired before power-up (K46 odd searches then)
+            self.load_machine(machine)
+        for motor in self.motors.values():
+            motor.power_on()
+
+    def load_machine(self, machine: "Path | str | Machine") -> None:
+        """Install a machine file (docs/machine-file.md) on the motors it names."""
+        from .machine import Machine, apply_machine, load_machine
+        apply_machine(machine if isinstance(machine, Machine) else load_machine(machine), self)
+        self._changed()
 
     # -- device API: identity ---------------------------------------------
     @property
@@ -352,7 +365,6 @@ class Chain:
                 store = self.store
                 motor.params.on_change(
                     lambda k, old, new, m=motor.id: store.save_param(m, k, new))
-            motor.power_on()
 
     def close(self) -> None:
         """Close the store (unsaved data is lost, as at power off)."""
@@ -472,8 +484,9 @@ class Chain:
     def target_stream(self, motor: int) -> TargetStream:
         return _Stream(self._require(motor))
 
-    def inject_fault(self, motor: int, fault: str, **params: float) -> None:
+    def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         self._require(motor).inject_fault(fault, **params)
+        self._changed()
 
 
 __all__ = ["Chain", "VState", "MotorError"]

@@ -31,6 +31,7 @@ from rich.console import Console
 
 from . import __version__
 from .errors import CoolMuscleError, TransportError
+from .machine import MachineFileError
 from .script import ScriptError, TranscriptEntry, load_script, run_script
 from .transports.base import Transport
 
@@ -80,14 +81,23 @@ def _show_path(path: Path) -> str:
     return text
 
 
-def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool) -> Any:
+def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
+                machine: Path | None = None) -> Any:
     if state is not None:
         try:
             state.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise TransportError(f"cannot use state directory {state}: "
                                  f"{exc.strerror or exc}") from exc
-    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace)
+    extra: dict[str, Any] = {}
+    if machine is not None:
+        from .machine import load_machine
+        extra["machine"] = load_machine(machine)
+    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace,
+                         **extra)
+
+
+_MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
 
 
 def _ids(motors: int) -> str:
@@ -206,6 +216,8 @@ def sim(
     time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
                                      help="Virtual seconds per wall second."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
+    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+                                           help=_MACHINE_HELP),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -217,7 +229,7 @@ def sim(
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
     chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
-    chain = _make_chain(motors, firmware, state_dir, pace)
+    chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
     finally:
@@ -251,6 +263,8 @@ def run(
     record: Optional[Path] = typer.Option(
         None, "--record", metavar="OUT.cml",
         help="Write the script with the received bytes as expectations."),
+    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+                                           help=_MACHINE_HELP),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
@@ -266,7 +280,8 @@ def run(
             check_trace_path(trace)
         except TraceFormatError as exc:
             raise UsageError(str(exc)) from None
-    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace)
+    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
+                        machine)
     try:
         if plot is not None:
             start_recording = getattr(chain, "record", None)
@@ -344,7 +359,7 @@ def main(argv: list[str] | None = None) -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         raise SystemExit(EXIT_FAILED) from None
-    except (UsageError, ScriptError) as exc:
+    except (UsageError, ScriptError, MachineFileError) as exc:
         _report(exc, EXIT_USAGE)
     except (CoolMuscleError, OSError) as exc:
         _report(exc, EXIT_FAILED)

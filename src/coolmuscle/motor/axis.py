@@ -1,14 +1,16 @@
-"""The servo axis: the commanded trajectory, the actual position, and motion milestones.
+"""The servo axis: the commanded trajectory, the actual shaft motion, and motion milestones.
 
-The command is a closed-form :class:`~coolmuscle.motor.profile.Profile`; the actual
-position follows it through :class:`~coolmuscle.motor.servo.Tracking`.  The axis
-schedules one kernel event per milestone (in-position; merge passing points) and
-re-plans from the current state when a new move, speed change or stop arrives, so a
+The command is a closed-form :class:`~coolmuscle.motor.profile.Profile`; the shaft
+follows it through :class:`~coolmuscle.motor.dynamics.Motion` (tracking error, torque
+limit, load, stoppers, servo off).  Whenever the command or the drive changes the axis
+re-solves the motion from the current actual state and schedules one kernel event per
+milestone: in-position, merge passing points, and whatever its *watchers* ask for
+(alarms, sensor edges, push and origin-search detection; see :class:`Watcher`).  A
 move costs a handful of events, not a tick per millisecond.
 
-Coordinates: the axis works in raw encoder pulses; the user coordinate is
-``sign * (raw - zero)``: ``|2`` moves ``zero`` (2.1.2), reverse coordinates (K45
-first digit 2/3, ch. 3 K45) flip ``sign``.
+Coordinates: the axis works in raw encoder pulses (the machine file's coordinates,
+docs/machine-file.md); the user coordinate is ``sign * (raw - zero)``: ``|2`` moves
+``zero`` (2.1.2), reverse coordinates (K45 first digit 2/3, ch. 3 K45) flip ``sign``.
 
 In-position (ch. 3 K55, Ux=8) is declared when the command has reached its target and
 the tracking error is within K55 (docs/fidelity.md "Motion").
@@ -17,42 +19,67 @@ the tracking error is within K55 (docs/fidelity.md "Motion").
 from __future__ import annotations
 
 import logging
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 from ..sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
+from .dynamics import LOST, Drive, Motion
+from .expoly import const, sub
 from .planner import Limits, Waypoint
 from .profile import Profile, Segment, hold
-from .servo import DEFAULT_KP, Tracking
 
 log = logging.getLogger(__name__)
+
+
+class Watcher(Protocol):
+    """Something that wants a kernel event when the motion reaches a condition."""
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never)."""
+
+    def fire(self, axis: "Axis") -> None:
+        """The instant has come (it may change the command or the drive)."""
+
+
+def _default_drive() -> Drive:
+    return Drive(kp=300.0, a_limit=1e12, a_friction=0.0, a_load=0.0, v_max=1e12)
 
 
 class Axis:
     """One motor shaft under position control."""
 
-    def __init__(self, kernel: Kernel, *, kp: float = DEFAULT_KP,
+    def __init__(self, kernel: Kernel, *, drive: Callable[[], Drive] = _default_drive,
                  in_position_window: Callable[[], int] = lambda: 5,
                  on_in_position: Callable[[], None] = lambda: None,
                  on_passing_point: Callable[[int], None] = lambda index: None) -> None:
         self.kernel = kernel
-        self.kp = kp
+        self._drive = drive
         self._window = in_position_window
         self._on_in_position = on_in_position
         self._on_passing_point = on_passing_point
         self.zero = 0.0
         self.sign = 1
-        self.enabled = True
+        self._enabled = True
         self.profile: Profile = hold(0.0, kernel.now)
-        self.tracking = Tracking(self.profile, 0.0, kp)
+        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive())
         self.target_raw = 0.0
         self.moving = False
+        self.generation = 0
+        self.watchers: list[Watcher] = []
+        #: Called with (the motion ending, now) before each re-solve (thermal model).
+        self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
-        #: (time_ns, profile, tracking, zero, sign) kept while a trace records.
-        self.history: list[tuple[int, Profile, Tracking, float, int]] | None = None
+        self._watch_timers: dict[int, Timer] = {}
+        #: (time_ns, profile, motion, zero, sign) kept while a trace records.
+        self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
         #: Called after every trajectory change (rotation pulses, external encoder:
         #: :class:`coolmuscle.motor.trajectory.Timeline`).
         self.trajectory_listeners: list[Callable[[], None]] = []
+
+    @property
+    def tracking(self) -> Motion:
+        """The shaft motion (kept under its former name for trace code)."""
+        return self.motion
 
     # -- coordinates ------------------------------------------------------
     def to_raw(self, user: float) -> float:
@@ -65,11 +92,13 @@ class Axis:
 
     # -- live values (closed form at kernel.now) --------------------------
     def raw_command(self) -> float:
-        return self.profile.position_at(self.kernel.now)
+        return self.motion.command_at(self.kernel.now)
 
     def raw_actual(self) -> float:
-        now = self.kernel.now
-        return self.profile.position_at(now) - self.tracking.error_at(now)
+        return self.motion.position_at(self.kernel.now)
+
+    def raw_velocity(self) -> float:
+        return self.motion.velocity_at(self.kernel.now)
 
     def position(self) -> float:
         """Actual position, user pulses (?96)."""
@@ -85,11 +114,15 @@ class Axis:
 
     def position_error(self) -> float:
         """Pe, pulses (?95), in the user direction."""
-        return self.sign * self.tracking.error_at(self.kernel.now)
+        return self.sign * self.motion.error_at(self.kernel.now)
 
     def velocity(self) -> float:
         """Actual speed, user pulses/s (?97 before unit conversion)."""
-        return self.sign * self.tracking.actual_velocity_at(self.kernel.now)
+        return self.sign * self.raw_velocity()
+
+    def torque_percent(self) -> float:
+        """Motor torque, % of rated, in the user direction (?98)."""
+        return self.sign * self.motion.torque_percent_at(self.kernel.now)
 
     def command_velocity(self) -> float:
         return self.sign * self.profile.velocity_at(self.kernel.now)
@@ -97,8 +130,30 @@ class Axis:
     def command_acceleration(self) -> float:
         return self.sign * self.profile.acceleration_at(self.kernel.now)
 
+    def mode(self) -> str:
+        """The dynamics mode now (``track``, ``sat``, ``contact``, ...)."""
+        return self.motion.mode_at(self.kernel.now)
+
     def _raw_state(self) -> tuple[float, float, float]:
-        return self.profile.state_at(self.kernel.now)
+        now = self.kernel.now
+        if not self._enabled or self.motion.mode_at(now) == LOST:
+            return self.raw_actual(), self.raw_velocity(), 0.0
+        return self.profile.state_at(now)
+
+    # -- servo on / off and the drive --------------------------------------
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    @enabled.setter
+    def enabled(self, on: bool) -> None:
+        if bool(on) != self._enabled:
+            self._enabled = bool(on)
+            self.hold_here()
+
+    def refresh(self) -> None:
+        """The drive changed (torque limit, load, stoppers): re-solve from now."""
+        self._resolve()
 
     # -- commands -----------------------------------------------------------
     def move(self, waypoints: Sequence[tuple[float, Limits]], *,
@@ -152,29 +207,18 @@ class Axis:
         self._start(profile)
 
     def hold_here(self) -> None:
-        """Servo on, holding the actual position with no error (enable, alarm reset)."""
-        self._cancel()
+        """Command := the actual position, at rest (enable, free, alarm reset)."""
         here = self.raw_actual()
         self.profile = hold(here, self.kernel.now)
-        self.tracking = Tracking(self.profile, 0.0, self.kp)
         self.target_raw = here
         self.moving = False
-        self._remember()
+        self._resolve()
 
     def follow(self, user_target: float) -> None:
         """Step the command to a new target; the servo follows with its lag (csp, Dx)."""
-        now = self.kernel.now
         raw = self.to_raw(user_target)
-        e0 = self.tracking.error_at(now) + (raw - self.profile.position_at(now))
-        self._cancel()
-        self.profile = hold(raw, now)
-        self.tracking = Tracking(self.profile, e0, self.kp)
         self.target_raw = raw
-        self.moving = True
-        self._remember()
-        done = now + self.tracking.settle_ns(float(self._window()))
-        self._timers.append(self.kernel.schedule_at(done, self._arrived,
-                                                    priority=PRIO_MOTION, name="in-position"))
+        self._start(hold(raw, self.kernel.now))
 
     def nudge(self, user_target: float, window: float) -> bool:
         """Shift the target of a motor at rest by no more than the in-position window,
@@ -184,14 +228,12 @@ class Axis:
             return False
         now = self.kernel.now
         raw = self.to_raw(user_target)
-        e0 = self.tracking.error_at(now) + (raw - self.profile.position_at(now))
+        e0 = self.motion.error_at(now) + (raw - self.profile.position_at(now))
         if abs(e0) > window:
             return False
-        self._cancel()
         self.profile = hold(raw, now)
-        self.tracking = Tracking(self.profile, e0, self.kp)
         self.target_raw = raw
-        self._remember()
+        self._resolve()
         return True
 
     def drive(self, profile: Profile) -> None:
@@ -207,6 +249,50 @@ class Axis:
         else:
             self._remember()
 
+    def place(self, raw: float) -> None:
+        """Put the shaft at raw position ``raw``, at rest, counting it as user 0."""
+        self._cancel()
+        self.zero = float(raw)
+        self.profile = hold(raw, self.kernel.now)
+        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self._drive())
+        self.target_raw = float(raw)
+        self.moving = False
+        self._resolve()
+
+    # -- watchers -------------------------------------------------------------
+    def add_watcher(self, watcher: Watcher) -> None:
+        self.watchers.append(watcher)
+        self._arm(watcher, self.kernel.now)
+
+    def remove_watcher(self, watcher: Watcher) -> None:
+        if watcher in self.watchers:
+            self.watchers.remove(watcher)
+        timer = self._watch_timers.pop(id(watcher), None)
+        if timer is not None:
+            timer.cancel()
+
+    def rearm(self, watcher: Watcher) -> None:
+        """Ask ``watcher`` again for its next instant (its own state changed)."""
+        if watcher in self.watchers:
+            self._arm(watcher, self.kernel.now)
+
+    def _arm(self, watcher: Watcher, after_ns: int) -> None:
+        old = self._watch_timers.pop(id(watcher), None)
+        if old is not None:
+            old.cancel()
+        at = watcher.next_time(self, after_ns)
+        if at is not None:
+            self._watch_timers[id(watcher)] = self.kernel.schedule_at(
+                at, lambda w=watcher: self._fire(w), priority=PRIO_MOTION,
+                name=type(watcher).__name__)
+
+    def _fire(self, watcher: Watcher) -> None:
+        self._watch_timers.pop(id(watcher), None)
+        generation = self.generation
+        watcher.fire(self)
+        if generation == self.generation and watcher in self.watchers:
+            self._arm(watcher, self.kernel.now + 1)
+
     # -- history (trace) ------------------------------------------------------
     def record_history(self, on: bool = True) -> None:
         """Keep every trajectory from now on so a trace can be sampled afterwards."""
@@ -215,7 +301,7 @@ class Axis:
 
     def _remember(self) -> None:
         if self.history is not None:
-            self.history.append((self.kernel.now, self.profile, self.tracking,
+            self.history.append((self.kernel.now, self.profile, self.motion,
                                  self.zero, self.sign))
         for listener in tuple(self.trajectory_listeners):
             listener()
@@ -225,26 +311,63 @@ class Axis:
         for timer in self._timers:
             timer.cancel()
         self._timers.clear()
+        for timer in self._watch_timers.values():
+            timer.cancel()
+        self._watch_timers.clear()
+
+    def _resolve(self) -> None:
+        """Re-solve the shaft motion from the actual state now and re-arm everything."""
+        now = self.kernel.now
+        p, v = self.raw_actual(), self.raw_velocity()
+        for hook in self.before_resolve:
+            hook(self.motion, now)
+        self._cancel()
+        self.generation += 1
+        self.motion = Motion(self.profile, now, p, v, self._current_drive())
+        if len(self.motion.pieces) >= 2000:
+            log.warning("axis: motion solver hit its piece limit at %d ns", now)
+        self._remember()
+        if self.moving:
+            self._schedule_milestones()
+        for watcher in list(self.watchers):
+            self._arm(watcher, now)
+
+    def _current_drive(self) -> Drive:
+        drive = self._drive()
+        if drive.enabled != self._enabled:
+            from dataclasses import replace
+            drive = replace(drive, enabled=self._enabled)
+        return drive
 
     def _start(self, profile: Profile) -> None:
-        now = self.kernel.now
-        e0 = self.tracking.error_at(now)
-        self._cancel()
         self.profile = profile
-        self.tracking = Tracking(profile, e0, self.kp)
         self.moving = True
-        self._remember()
-        for t_ns, index in profile.passing_times_ns():
+        self._resolve()
+
+    def _schedule_milestones(self) -> None:
+        now = self.kernel.now
+        for t_ns, index in self.profile.passing_times_ns():
             if t_ns >= now:
                 self._timers.append(self.kernel.schedule_at(
                     t_ns, lambda i=index: self._on_passing_point(i),
                     priority=PRIO_MOTION, name="passing-point"))
-        end = profile.end_ns
+        done = self.in_position_time(now)
+        if done is not None:
+            self._timers.append(self.kernel.schedule_at(done, self._arrived,
+                                                        priority=PRIO_MOTION,
+                                                        name="in-position"))
+
+    def in_position_time(self, after_ns: int) -> int | None:
+        """When the command has ended and |Pe| <= K55 (``None``: not in this motion)."""
+        end = self.profile.end_ns
         if end is None:
-            return
-        done = end + self.tracking.settle_ns(float(self._window()))
-        self._timers.append(self.kernel.schedule_at(done, self._arrived,
-                                                    priority=PRIO_MOTION, name="in-position"))
+            return None
+        window = float(self._window())
+
+        def inside(piece):  # type: ignore[no-untyped-def]
+            e = piece.err()
+            return [sub(const(window), e), sub(e, const(-window))]
+        return self.motion.first(max(after_ns, end), inside)
 
     def _arrived(self) -> None:
         self.moving = False

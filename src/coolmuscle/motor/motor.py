@@ -30,10 +30,11 @@ from .manual import ManualMotion
 from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import ESTOP_DECEL, Limits, limits_from_data
-from .plant import Plant
+from .plant import DEFAULT_KP, STEPPER_KP, Plant
 from .profile import Profile
 from .pulses import RotationPulses
-from .status import ALARM_BITS, Report, Ux, io_word_hex, status_line
+from .status import Report, Ux, io_word_hex, status_line
+from .supervision import Supervision
 from .trajectory import Timeline
 
 if TYPE_CHECKING:
@@ -80,7 +81,7 @@ class Context:
     extra: dict[str, object] = field(default_factory=dict)
 
 
-class Motor:
+class Motor(Supervision):
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
     def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
@@ -93,18 +94,19 @@ class Motor:
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
                             self._output_function_signal)
-        self.plant = Plant()
-        self.axis = Axis(kernel, kp=self.plant.kp,
+        self.torque_limit = 100
+        self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
+        self.alarm = 0
+        self.voltage = 240
+        self._init_supervision()
+        self.axis = Axis(kernel, drive=self.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
                          on_passing_point=self._passing_point)
-        self.alarm = 0
+        self._attach_supervision()
         self.estopped = False
         self.origin_done = False
         self.merge_pulse_until = 0
-        self.temperature = 40
-        self.voltage = 240
-        self.torque_limit = 100
         self._last_limits: Limits | None = None
         # -- signals (5.1, 5.2, 5.4, 5.5; K24, K35, K38-K41, K71-K77): own modules
         self.timeline = Timeline(self.axis)
@@ -124,7 +126,6 @@ class Motor:
         self.ladder = LadderRunner(self)
         self.logic_motion = LadderRunner(self, motion=True)
         self.inputs = InputFunctions(self)
-        self.limit_sensors = {1: False, -1: False}
         self._go_target: int | None = None     # P0 of a running "^" (S0 stays live)
         self._go_speed: int | None = None
         self._go_data: tuple[int, int, int] | None = None
@@ -151,6 +152,7 @@ class Motor:
         del old
         if k == 37:
             self.memory.k37 = new
+        self._supervision_param(k)
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
@@ -166,6 +168,9 @@ class Motor:
             return int(Ux.EMERGENCY_STOP)
         if not self.axis.enabled:
             return int(Ux.MOTOR_FREE)
+        special = self._supervision_status()
+        if special is not None:
+            return special
         return 0 if self.axis.moving else int(Ux.IN_POSITION)
 
     def position(self) -> int:
@@ -184,9 +189,7 @@ class Motor:
         if commanded is not None:
             return round(commanded)
         load = self.analog_control.load_percent()       # a torque-sensor load (5.5)
-        return round(load + self.plant.torque_percent(self.axis.command_acceleration(),
-                                                      self.axis.velocity(),
-                                                      self.resolution.pulses_per_rev))
+        return round(load + self.axis.torque_percent())
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",
@@ -206,7 +209,8 @@ class Motor:
         """``Ux.n=..`` event when K23 includes 1 (in-position and alarms)."""
         if self.reports(Report.IN_POSITION_AND_ALARM):
             ux = self.status
-            self.bus.emit(self.id, "status", status_line(self.id, ux), value=ux)
+            kind = "alarm" if self.alarm else "status"
+            self.bus.emit(self.id, kind, status_line(self.id, ux), value=ux)
 
     def report_outputs(self) -> None:
         """``OUT.n=..`` event when K23 includes 4 (general outputs only)."""
@@ -249,6 +253,10 @@ class Motor:
         self._go_target = None
         if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
             return
+        waypoints = [(self.travel.clamp(t), lim) for t, lim in waypoints]
+        if self._allowed_target(waypoints[-1][0]) is None:
+            return
+        self.abandon_motion()
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
 
@@ -274,7 +282,10 @@ class Motor:
             if self.axis.moving:
                 self.stop()
             return
+        self.abandon_motion()
         self._last_limits = limits
+        if self._continuous_blocked(s_value, limits):
+            return
         self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
 
     def go(self) -> None:
@@ -331,12 +342,17 @@ class Motor:
             self.path.stop(self.kernel.now)
             return
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
+        if self._stop_push():
+            return
+        self.abandon_motion()
         self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
         self._go_target = None
-        self.axis.stop(ESTOP_DECEL)
+        if not self._stop_push():
+            self.abandon_motion()
+            self.axis.stop(ESTOP_DECEL)
         if not self.estopped:
             self.estopped = True
             self.report_status()
@@ -354,20 +370,24 @@ class Motor:
     def enable(self) -> None:
         """``(``: servo on; also clears a latched alarm (CM1 manual 3.2.3 ControlWord 3)."""
         self.alarm = 0
+        self.abandon_motion()
         self.axis.hold_here()
         self.axis.enabled = True
         self.motion_settled()
 
     def free(self) -> None:
-        """``)``: motor free (servo off); the shaft stays where it is."""
+        """``)``: motor free (servo off); the shaft coasts to rest where it is."""
         self._go_target = None
-        self.axis.hold_here()
+        self.abandon_motion()
+        was_moving = not self.motion_done()
         self.axis.enabled = False
+        if was_moving:
+            self.notify_motion_done("free")
         self.motion_settled()
 
     def reset_alarm(self) -> None:
         """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
-        if self.alarm:
+        if self.alarm or self.push_error:
             self.enable()
 
     def jog(self, direction: int) -> None:
@@ -384,46 +404,24 @@ class Motor:
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
-        bits &= int(ALARM_BITS)
-        if not bits or self.alarm & bits == bits:
-            return
-        self.alarm |= bits
-        self.axis.hold_here()
-        self.axis.enabled = False
-        self.report_status()
-        self.program.alarm()
-        self.motion_settled()
+        if self._alarm_latched(bits):
+            self.program.alarm()
+            self.motion_settled()
 
     def capture(self, index: int) -> None:
         """``#x``: P[x] := current position (2.1.2)."""
         self.memory.set("P", index, self.position())
 
     def _arrived(self) -> None:
-        if not self.estopped and not self.alarm:   # those were reported when they began
-            self.report_status()
         if self._go_speed:            # a "^" reached P0 (not halted by S0 = 0): done
             self._go_target = None
+        self._arrival()
         self.motion_settled()
 
-    # -- motion completion and limit sensors (issue 4: bank executors wait on these) --
-    def motion_done(self) -> bool:
-        """The last motion is over: in position, or stopped for good (a program line
-        waits for it, 2.2.2 "P"; push motion replaces this notion with its own)."""
-        return not self.axis.moving
-
+    # -- motion completion (issue 4: bank executors wait on these) -----------------
     def motion_settled(self) -> None:
         """A motion ended: let waiting bank lines look again (no polling)."""
         self.bus.poke(self.id)
-
-    def limit_sensor(self, direction: int, on: bool) -> None:
-        """CW (+1) / CCW (-1) limit sensor input (K27 functions 6, 9).
-
-        Minimal stand-in: records the sensor and stops a motion heading into it; the
-        servo model owns the real behaviour (error07/error08, ch. 3 K23).
-        """
-        self.limit_sensors[direction] = on
-        if on and self.axis.moving and self.axis.command_velocity() * direction > 0:
-            self.stop()
 
     def _passing_point(self, index: int) -> None:
         """K34=6: the output is on for K73 ms from each passing point; a point within
@@ -438,7 +436,7 @@ class Motor:
         if function == OUT_IN_POSITION:
             return self.status & Ux.IN_POSITION != 0
         if function == OUT_ALARM:
-            return self.alarm != 0
+            return self.alarm != 0 or self.push_error
         if function == OUT_ORIGIN_DONE:
             return self.origin_done and self.status == Ux.IN_POSITION
         if function == OUT_MERGE_PULSE:
@@ -448,7 +446,7 @@ class Motor:
         if function == OUT_MOTOR_FREE:
             return not self.axis.enabled
         if function == OUT_PUSH:
-            return False
+            return self.push.active
         return False
 
     def set_output(self, number: int, on: bool) -> None:
@@ -458,9 +456,10 @@ class Motor:
 
     def set_input_level(self, number: int, on: bool) -> None:
         """Drive an input's electrical level (device API, machine file); the input
-        functions of K27-K32 follow (:mod:`.inputs`)."""
-        if self.io.set_level(number, on):
+        functions of K27-K32 follow (:mod:`.inputs`), faults may hold it (:mod:`.faults`)."""
+        if self.io.set_level(number, self._input_driven(number, on)):
             self.report_inputs()
+            self._input_changed(number)
             self.inputs.signal_changed(number)
         self.bus.poke()
 
@@ -509,6 +508,8 @@ class Motor:
             self.params.set(index, value)
             return
         self.memory.set(kind, index, value)
+        if kind == "M" and index == 0:
+            self.set_torque_limit(int(self.memory.get("M", 0)))
         if kind == "S" and index == 0:
             self.direct_speed_changed()
         elif kind in ("N", "R") and index == 0:
@@ -530,7 +531,7 @@ class Motor:
     def follow(self, target: float) -> None:
         """Jump the commanded position to ``target``; the servo follows (csp, Dx)."""
         if self.can_move():
-            self.axis.follow(target)
+            self.axis.follow(self.travel.clamp(target))
 
     def set_output_word(self, word: int) -> None:
         """``O.n=X``: set every general-use output from the bits of ``word``."""
@@ -551,18 +552,6 @@ class Motor:
             self.move_to([(target, lim)])
         else:
             self.push_to(target, lim)
-
-    def push_to(self, target: float, limits: Limits | None,
-                via: Sequence[tuple[float, Limits | None]] = ()) -> None:
-        """Push motion toward ``target`` (4.1.4); the push model lives in the plant.
-
-        ``via``: merge waypoints before the push (4.1.4 "S3.1, A1.1, P1.1, S1.1, Q2.1").
-        """
-        self.move_to([*via, (target, limits)])
-
-    def origin_search(self) -> None:
-        """``|``: origin search per K42, K43, K45, K46 (5.3)."""
-        self.move_to([(0.0, self.limits(self.k(42), self.k(43)))])
 
     # -- saving and power ---------------------------------------------------------
     def to_snapshot(self) -> dict[str, object]:
@@ -590,11 +579,13 @@ class Motor:
 
     def power_on(self) -> None:
         """Power-up: servo on or motor free per K68 (ch. 3 K68); input levels; the
-        K62 (RT3: K85) ladder bank starts; analog control starts (K38)."""
-        if self.k(68) == 0:
+        K62 (RT3: K85) ladder bank starts; power-up origin search (K46); analog control
+        starts (K38)."""
+        if self.k(68) == 0 and self.firmware.name != "cm1":   # CM1 K68: S-curve function
             self.free()
         self.inputs.power_up()
         self.ladder.power_up()
+        self._power_on_search()
         self.analog_control.activate()
 
     # -- analog input / output and the external encoder (own modules) -------------
@@ -648,8 +639,3 @@ class Motor:
     def analog_output(self) -> int:
         """The analog output as the Modbus register reads it (K78+54): 0..1023."""
         return volts_to_register(self.analog_output_volts())
-
-    def inject_fault(self, fault: str, **params: float) -> None:
-        """Fault injection through the device API (docs/machine-file.md)."""
-        del params
-        raise ValueError(f"unknown fault {fault!r}")

@@ -4,7 +4,7 @@ This module owns :class:`Piece` (one trajectory the axis followed: profile, trac
 solution and user coordinates), :class:`Schmitt` (a quantizer with hysteresis) and
 :class:`Track` / :class:`Timeline`, which keep quantizers in step with the axis
 without sampling: the actual position is monotonic between the instants where the
-servo reverses (:meth:`~coolmuscle.motor.servo.Tracking.velocity_zeros`), so a
+servo reverses (the shaft motion's velocity zeros), so a
 quantizer is advanced by the end points of those runs, and an edge time is solved
 by bisection on one run.
 

@@ -172,20 +172,20 @@ class TraceRecorder:
         history = motor.axis.history or []
         starts = log.starts(history)
         i = max(bisect_right(starts, t) - 1, 0)
-        _, profile, tracking, zero, sign = history[i]
-        command_raw = profile.position_at(t)
-        error = tracking.error_at(t)
+        _, profile, motion, zero, sign = history[i]
+        command_raw = motion.command_at(t)
+        actual_raw = motion.position_at(t)
         final = profile.final_position
         target = sign * (final - zero) if math.isfinite(final) else math.copysign(math.inf, final)
-        speed = sign * tracking.kp * error
-        accel = sign * profile.acceleration_at(t)
+        speed = sign * motion.velocity_at(t)
         status, inputs, outputs = log.state_at(t)
-        torque = 0.0
         ppr = motor.resolution.pulses_per_rev
+        torque = sign * motion.torque_percent_at(t)
         if not status & _NO_TORQUE:
-            torque = motor.plant.torque_percent(accel, speed, ppr) + _load(motor, t)
+            torque += _load(motor, t)
         command = sign * (command_raw - zero)
-        position = sign * (command_raw - error - zero)
+        position = sign * (actual_raw - zero)
+        error = command_raw - actual_raw
         analog_out = output_volts(motor.k(35), target=target if math.isfinite(target)
                                   else command, position=position, error=sign * error,
                                   speed_pps=speed, torque=torque, pulses_per_rev=ppr)

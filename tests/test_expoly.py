@@ -1,0 +1,80 @@
+"""Roots of polynomial-plus-exponential functions (motor/expoly.py), against dense sampling.
+
+The servo and load model (docs/fidelity.md "Servo, load and alarms") finds every switching
+instant with :func:`coolmuscle.motor.expoly.roots` / ``first_true``; here they are checked
+against a brute-force scan of the same functions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from coolmuscle.motor import expoly as xp
+
+coef = st.floats(-1e3, 1e3, allow_nan=False).map(lambda x: 0.0 if abs(x) < 1e-3 else x)
+
+
+def _sign_changes(f: xp.F, k: float, b: float, n: int = 200_001) -> np.ndarray:
+    t = np.linspace(0.0, b, n)
+    poly = np.zeros_like(t)
+    for c in reversed(f[:-1]):
+        poly = poly * t + c
+    values = poly + f[-1] * np.exp(-k * t)
+    s = np.sign(values)
+    idx = np.nonzero(s[:-1] * s[1:] < 0)[0]
+    return t[idx]
+
+
+@settings(max_examples=150, deadline=None)
+@given(c=st.tuples(coef, coef, coef, coef, coef), k=st.floats(0.1, 50.0))
+def test_roots_match_a_dense_scan(c: tuple[float, ...], k: float) -> None:
+    f = tuple(c)
+    found = xp.roots(f, k, 0.0, 2.0)
+    for r in found:
+        assert 0.0 < r < 2.0
+        scale = max(1.0, *(abs(x) for x in f))
+        assert abs(xp.value(f, k, r)) <= 1e-7 * scale
+    scanned = _sign_changes(f, k, 2.0)
+    # every sign change on the grid has a root within a grid step of it
+    for t in scanned:
+        assert any(abs(t - r) <= 2.0 / 200_000 * 2 for r in found), (t, found)
+
+
+def test_roots_of_a_cubic_plus_exponential_by_hand() -> None:
+    # (τ - 1)(τ - 2)(τ - 3) = τ³ - 6τ² + 11τ - 6, no exponential
+    assert [round(r, 12) for r in xp.roots((-6.0, 11.0, -6.0, 1.0, 0.0), 0.0, 0.0, 10.0)] \
+        == [1.0, 2.0, 3.0]
+    # 1 - 2 e^{-τ}: root at ln 2
+    (r,) = xp.roots((1.0, 0.0, 0.0, 0.0, -2.0), 1.0, 0.0, math.inf)
+    assert math.isclose(r, math.log(2.0), rel_tol=1e-12)
+
+
+def test_roots_on_an_endless_stretch() -> None:
+    # τ² - 1e6: one root at 1000 on [0, ∞)
+    (r,) = xp.roots((-1e6, 0.0, 1.0, 0.0, 0.0), 0.0, 0.0, math.inf)
+    assert math.isclose(r, 1000.0, rel_tol=1e-12)
+    assert xp.roots((1.0, 0.0, 0.0, 0.0, 5.0), 3.0, 0.0, math.inf) == []
+
+
+def test_first_true_needs_every_condition() -> None:
+    # τ > 1 and τ < 3 and sin-free: the first instant both hold is 1
+    above, below = (-1.0, 1.0, 0.0, 0.0, 0.0), (3.0, -1.0, 0.0, 0.0, 0.0)
+    assert math.isclose(xp.first_true([above, below], 0.0, 0.0, 10.0), 1.0)
+    assert xp.first_true([above, below], 0.0, 4.0, 10.0) is None
+    assert xp.first_true([above], 0.0, 2.0, 10.0) == 2.0
+
+
+def test_shift_mul_and_bounds() -> None:
+    f = (1.0, -2.0, 0.5, 0.25, 3.0)
+    g = xp.shift(f, 2.0, 0.7)
+    for t in (0.0, 0.3, 1.9):
+        assert math.isclose(xp.value(g, 2.0, t), xp.value(f, 2.0, t + 0.7), rel_tol=1e-12)
+    sq = xp.mul((1.0, 2.0, 0.0, 1.0, 0.0), (1.0, 2.0, 0.0, 1.0, 0.0))
+    assert math.isclose(xp.value(sq, 0.0, 1.5), (1.0 + 3.0 + 1.5 ** 3) ** 2)
+    for t in np.linspace(0.0, 2.0, 50):
+        assert abs(xp.value(f, 2.0, float(t))) <= xp.abs_bound(f, 2.0)
+        assert xp.value(f, 2.0, float(t)) <= xp.upper_bound(f, 2.0, 0.0, 2.0)

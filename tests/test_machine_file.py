@@ -1,0 +1,152 @@
+"""Machine files (issue 3 scope 8; docs/machine-file.md): schema checks, the examples,
+the shaft's start position and resolution scaling, input and fault schedules, the
+reserved analog/encoder tables, and ``coolmuscle run --machine``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from coolmuscle import cli
+from coolmuscle.chain import Chain
+from coolmuscle.machine import MachineFileError, parse_machine
+from coolmuscle.sim.kernel import NS_PER_S, seconds
+
+EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_examples_load(path: Path) -> None:
+    chain = Chain(machine=path)
+    chain.kernel.run(until=seconds(40))
+    assert chain.execute("?99.1")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[[axis]]\nmotro = 1\n", "unknown key 'motro'"),
+    ("[[axis]]\nmotor = 16\n", "outside 1..15"),
+    ("[[axis]]\n[axis.load]\ninertia = -1\n", "outside"),
+    ("[[axis]]\n[axis.load]\nmass = 1\n", "unknown key 'mass'"),
+    ("[[axis]]\n[axis.stoppers]\nccw = 10\ncw = 0\n", "ccw must be below cw"),
+    ("[[axis]]\n[axis.cw_limit]\ninput = 2\non = [5]\n", "expected [from, to]"),
+    ("[[axis]]\n[axis.cw_limit]\ninput = 9\non = [5, 6]\n", "outside 1..6"),
+    ("[[axis]]\n[[axis.input]]\nat = 1\ninput = 1\non = 1\n", "expected true or false"),
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'over_current'\nuntil = 2\n",
+     "not a lasting fault"),
+    ("[[axis]]\nparams = { X27 = 1 }\n", "not a K parameter"),
+    ("[[axis]]\nmotor = 1\n[[axis]]\nmotor = 1\n", "same motor"),
+    ("axis = 3\n", "[[axis]] tables"),
+    ("[[axis]\n", "not valid TOML"),
+])
+def test_schema_mistakes_name_the_key(text: str, message: str) -> None:
+    with pytest.raises(MachineFileError, match=message.replace("[", r"\[").replace("]", r"\]")
+                       .replace("(", r"\(").replace(")", r"\)")):
+        parse_machine(text, "m.toml")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[[axis]]\nmotor = 2\n", "no motor ID2"),
+    ("[[axis]]\nparams = { K27 = 7777777 }\n", "motor 1"),
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'gremlins'\n", "unknown fault"),
+    ("[[axis]]\n[axis.origin_sensor]\ninput = 6\non = [0, 1]\n", "this firmware has 1..4"),
+])
+def test_install_mistakes(text: str, message: str) -> None:
+    chain = Chain(firmware="cm2" if "input = 6" not in text else "rt3")
+    with pytest.raises(MachineFileError, match=message):
+        chain.load_machine(parse_machine(text))
+
+
+def test_reserved_tables_go_to_their_modules_or_say_so() -> None:
+    text = "[[axis]]\n[axis.encoder]\nratio = 2\n"
+    try:
+        import coolmuscle.motor.encoder as encoder  # noqa: F401
+    except ImportError:
+        with pytest.raises(MachineFileError, match="gearing_from_config"):
+            Chain(machine=parse_machine(text))
+
+
+def test_start_position_and_resolution_scaling() -> None:
+    text = ("[[axis]]\nppr = 500\nstart = 1000\n[axis.stoppers]\ncw = 1500\n")
+    chain = Chain(machine=parse_machine(text))        # K37=3: 1000 ppr, twice the file's
+    motor = chain.motors[1]
+    assert motor.axis.raw_actual() == 2000.0 and chain.execute("?96.1") == ["Px.1=0"]
+    chain.execute("S.1=10, P.1=5000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(5))
+    assert chain.execute("?96.1") == ["Px.1=1000"]    # the stopper at 3000 raw
+
+
+def test_scheduled_inputs_and_faults() -> None:
+    text = """
+[[axis]]
+params = { K23 = 3 }
+[[axis.input]]
+at = 0.5
+input = 2
+on = true
+[[axis.input]]
+at = 0.75
+input = 2
+on = false
+[[axis.fault]]
+at = 1.0
+fault = "supply_voltage"
+volts = 20.0
+until = 1.5
+[[axis.fault]]
+at = 2.0
+fault = "over_current"
+"""
+    chain = Chain(machine=parse_machine(text))
+    events: list[tuple[float, str]] = []
+    chain.subscribe(lambda ev: events.append((ev.time / NS_PER_S, ev.text))
+                    if ev.kind != "reply" else None)
+    chain.kernel.run(until=seconds(1.2))
+    assert chain.execute("?72.1") == ["VSEN.1=200"]
+    chain.kernel.run(until=seconds(1.6))
+    assert chain.execute("?72.1") == ["VSEN.1=240"]
+    chain.kernel.run(until=seconds(3))
+    assert events == [(0.5, "IN.1=02"), (0.75, "IN.1=00"), (2.0, "Ux.1=64")]
+
+
+def test_sensors_follow_the_actual_position_not_the_command() -> None:
+    text = "[[axis]]\nparams = { K23 = 2 }\n[[axis.sensor]]\nname = 'flag'\ninput = 4\n" \
+           "on = [1000, 2000]\n"
+    chain = Chain(machine=load_machine_text(text))
+    events: list[tuple[float, str]] = []
+    chain.subscribe(lambda ev: events.append((ev.time / NS_PER_S, ev.text)))
+    chain.execute("S.1=100, A.1=100, P.1=3000")
+    chain.execute("^.1")
+    motor = chain.motors[1]
+    chain.kernel.run(until=seconds(1))
+    (on_at, on), (off_at, off) = events
+    assert (on, off) == ("IN.1=08", "IN.1=00")
+    # the shaft lags the command by Pe = 10000/300 pulses at cruise
+    assert abs(on_at - (1000 + 500 + 10000 / 300) / 10000) < 1e-6
+    assert abs(off_at - (2000 + 500 + 10000 / 300) / 10000) < 1e-6
+    assert motor.axis.motion.position_at(round(on_at * NS_PER_S)) >= 1000.0
+
+
+def load_machine_text(text: str):  # type: ignore[no-untyped-def]
+    return parse_machine(text, "test.toml")
+
+
+def test_cli_run_with_a_machine_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    script = tmp_path / "origin.cml"
+    script.write_text("|.1\n@until Ux\\.1=8 30\n?96.1\n", encoding="utf-8")
+    machine = Path(__file__).resolve().parents[1] / "examples" / "linear-axis.toml"
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["run", str(script), "--machine", str(machine)])
+    out, err = capsys.readouterr()
+    assert exit_info.value.code in (0, None), err
+    assert "< Origin.1=" in out and "< Ux.1=8" in out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[axis]]\nbogus = 1\n", encoding="utf-8")
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["run", str(script), "--machine", str(bad)])
+    _, err = capsys.readouterr()
+    assert exit_info.value.code == 2
+    assert err.strip().startswith("coolmuscle: error:") and "bogus" in err
+    assert len(err.strip().splitlines()) == 1

@@ -1,0 +1,102 @@
+"""Software limits K58/K59 (unit: K45 third digit) and the CW/CCW limit sensors (K27
+functions 6 and 9; K23 messages ``error07.n: CW Limit!!`` / ``error08.n: CCW Limit!!``).
+
+cml-users-guide.txt ch. 3 K23, K27, K45, K58, K59; docs/fidelity.md "Motion".
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from coolmuscle.chain import Chain
+from coolmuscle.machine import parse_machine
+from coolmuscle.sim.kernel import NS_PER_S, seconds
+
+LIMITS = """
+[[axis]]
+params = { K27 = 960, K23 = 17 }
+[axis.cw_limit]
+input = 2
+on = [3000, inf]
+[axis.ccw_limit]
+input = 3
+on = [-inf, -2000]
+"""
+
+
+def _chain(machine: str = "[[axis]]\n") -> tuple[Chain, list[tuple[float, str]]]:
+    chain = Chain(machine=parse_machine(machine))
+    events: list[tuple[float, str]] = []
+    chain.subscribe(lambda ev: events.append((round(ev.time / NS_PER_S, 4), ev.text))
+                    if ev.kind in ("status", "message", "alarm") else None)
+    chain.execute("K23.1=17")
+    return chain, events
+
+
+@pytest.mark.parametrize("k45, k58, k59, high, low", [
+    (1, 25, -7, 2500, -700),            # third digit 0: 100 pulses
+    (101, 250, -70, 2500, -700),        # 1: 10 pulses
+    (201, 2500, -700, 2500, -700),      # 2: 1 pulse
+    (201, 0, 0, 10000, -10000),         # 0: no limit
+])
+def test_ch3_k58_k59_software_limits_stop_the_motion_there(k45: int, k58: int, k59: int,
+                                                           high: int, low: int) -> None:
+    chain, events = _chain()
+    chain.execute(f"K45.1={k45}, K58.1={k58}, K59.1={k59}, S.1=100, A.1=100, P.1=10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(3))
+    assert chain.execute("?96.1") == [f"Px.1={high}"]
+    chain.execute("P.1=-10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(6))
+    assert chain.execute("?96.1") == [f"Px.1={low}"]
+    assert [t for _, t in events] == ["Ux.1=8", "Ux.1=8"]     # no message: none exists
+
+
+def test_software_limit_ends_continuous_rotation() -> None:
+    chain, events = _chain()
+    chain.execute("K45.1=201, K58.1=4000, S.1=50, A.1=100, P.1=1000000000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(3))
+    assert chain.execute("?96.1") == ["Px.1=4000"] and events[-1][1] == "Ux.1=8"
+
+
+def test_ch3_k23_cw_limit_sensor_stops_the_motion_with_error07() -> None:
+    chain, events = _chain(LIMITS)
+    chain.execute("S.1=100, A.1=100, P.1=10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert [t for _, t in events] == ["error07.1: CW Limit!!", "Ux.1=8"]
+    limit_at = events[0][0]
+    assert abs(limit_at - (3000 + 10000 / 300 + 500) / 10000) < 1e-3
+    x = chain.motors[1].position()
+    assert 3000 < x < 3040                                    # maximum deceleration
+    chain.execute("P.1=5000")                                  # toward it: refused
+    chain.execute("^.1")
+    assert events[-1][1] == "error07.1: CW Limit!!"
+    chain.execute("P.1=0")                                     # away from it: moves
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(4))
+    assert chain.execute("?96.1") == ["Px.1=0"]
+
+
+def test_ch3_k23_ccw_limit_sensor_error08_and_the_device_api() -> None:
+    chain, events = _chain(LIMITS)
+    chain.execute("S.1=100, A.1=100, P.1=-10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert [t for _, t in events] == ["error08.1: CCW Limit!!", "Ux.1=8"]
+    motor = chain.motors[1]
+    motor.limit_sensor(-1, True)                               # idempotent
+    assert len(events) == 2
+    chain.execute("S.1=-10, P.1=1000000000")                   # CCW rotation refused
+    chain.execute("^.1")
+    assert events[-1][1] == "error08.1: CCW Limit!!"
+
+
+def test_limit_messages_need_k23_16() -> None:
+    chain, events = _chain(LIMITS)
+    chain.execute("K23.1=1, S.1=100, A.1=100, P.1=10000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(2))
+    assert [t for _, t in events] == ["Ux.1=8"]
