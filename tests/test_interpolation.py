@@ -400,3 +400,16 @@ def test_two_pairs_each_merge_their_legs_across_semicolon() -> None:
     assert r.motor(1).axis.history[-1][0] == r.motor(3).axis.history[-1][0]
     check_end(r, 1000, 1000)
     assert r.chain.execute("?96.3") == ["Px.3=1000"] and r.chain.execute("?96.4") == ["Px.4=1000"]
+
+
+def test_a_path_ending_beyond_a_software_limit_moves_neither_motor() -> None:
+    """ch. 3 K58/K59 software limits: a move is clamped to them; a path cannot be, so a
+    path whose end lies beyond them on either motor is not started at all."""
+    r = rig("K58.2=5", "S.1=100", "A.1=100", "P.1=1000", "P.2=1000", "R.1=0", "R.2=0",
+            motors=2)
+    r.type("@.1, @.2")
+    r.wait(1)
+    assert [r.motor(m).position() for m in (1, 2)] == [0, 0]
+    r.type("P.2=400", "@.1, @.2")
+    r.wait(1)
+    check_end(r, 1000, 400)

@@ -194,7 +194,16 @@ class PairMotion:
             for motor, target in zip(self.motors, end):
                 motor.move_to([(target, leg.limits)])
             return
+        if not self._allowed():
+            self.legs.pop()
+            return
         self._follow(s_profile, self.motors)
+
+    def _allowed(self) -> bool:
+        """Both motors may go to the end (software limits, limit sensors): else neither
+        moves (docs/fidelity.md "Daisy chain")."""
+        end = self.end_point()
+        return all([motor.path_end_allowed(target) for motor, target in zip(self.motors, end)])
 
     def _follow(self, s_profile: Profile, motors: Sequence["Motor"]) -> None:
         self.s_profile = s_profile
@@ -272,7 +281,8 @@ class PairMotion:
         self.legs = rest
         self.delays = (0, 0)
         self.issued_at = now
-        self._follow(plan_path(self.legs, 0.0, now), self.motors)
+        if self._allowed():
+            self._follow(plan_path(self.legs, 0.0, now), self.motors)
 
 
 class LinePaths:

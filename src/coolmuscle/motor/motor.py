@@ -260,11 +260,18 @@ class Motor(Supervision):
         self._last_limits = waypoints[-1][1]
         self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
 
+    def path_end_allowed(self, user_end: float) -> bool:
+        """Whether an interpolation path may take this motor to ``user_end``: it can move,
+        the end is within the software limits (K58, K59) and not toward an active limit
+        sensor (which reports its error, as for a move)."""
+        return self.can_move() and self._allowed_target(user_end) == user_end
+
     def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
         """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""
         self._go_target = None
         if not self.can_move():
             return False
+        self.abandon_motion()
         self._last_limits = limits
         self.axis.run_profile(profile)
         self.path = path
