@@ -2,98 +2,118 @@
 
 Run: ``PYTHONPATH=src python examples/plot_4_1.py [OUT_DIR]`` (default docs/images).
 
-The manual's examples are program banks whose data table was lost with its figures;
-the values below are chosen to show each motion clearly.  Until program banks are on
-main the bank's lines are played through the Python API: each line starts when the
-previous one is in position, as a bank does (2.2.2).  Output 1 is the in-position
-signal in merge motion (K34=6, K73=30 ms), output 2 the in-position signal (K34=1).
+Each example is the manual's program bank, uploaded and run on a virtual motor in
+virtual time with the script runner (docs/scripts.md), then plotted from its trace.
+The data tables of 4.1 were lost with the manual's figures, so the values below are
+chosen to show each motion clearly.  Output 1 is the in-position signal in merge
+motion (K34=6, K73=30 ms), output 2 the in-position signal (K34=1).  4.1.4 pushes an
+object the machine file ``push-object.toml`` puts at 11000 pulses.
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Callable
 
 from coolmuscle.chain import Chain
-from coolmuscle.motor.motor import Motor
-from coolmuscle.sim.kernel import seconds
+from coolmuscle.script import run_script
 
-Line = Callable[[Motor], None]
+HERE = Path(__file__).parent
+OUTPUTS = "K34.1=16\nK73.1=30\n"
+
+EXAMPLES: dict[str, tuple[str, str, str | None]] = {
+    "4.1.1-basic-ptp": (
+        "4.1.1 basic PTP: S1 A1 P1 / P2 / S2 P3 (one motion a line)",
+        """S1.1=50
+S2.1=100
+A1.1=100
+P1.1=4000
+P2.1=8000
+P3.1=0
+B1.1
+S1.1, A1.1, P1.1
+P2.1
+S2.1, P3.1
+END
+[1.1
+@wait 3.2
+""", None),
+    "4.1.2-merge": (
+        "4.1.2 merge motion: S1 A1 P1, S2 P2, P3 (pulses at the passing points)",
+        """S1.1=50
+S2.1=100
+A1.1=100
+P1.1=3000
+P2.1=8000
+P3.1=12000
+B2.1
+S1.1, A1.1, P1.1, S2.1, P2.1, P3.1
+END
+[2.1
+@wait 2.0
+""", None),
+    "4.1.2-merge-reversal": (
+        "4.1.2 merge motion removed where the direction turns over",
+        """S1.1=80
+A1.1=100
+P1.1=3000
+P2.1=6000
+P3.1=1000
+B2.1
+S1.1, A1.1, P1.1, P2.1, P3.1
+END
+[2.1
+@wait 2.2
+""", None),
+    "4.1.3-accel-decel": (
+        "4.1.3 different acceleration and deceleration: S1 A1 P1, A2 P2",
+        """S1.1=100
+A1.1=30
+A2.1=300
+P1.1=6000
+P2.1=15000
+B3.1
+S1.1, A1.1, P1.1, A2.1, P2.1
+END
+[3.1
+@wait 2.2
+""", None),
+    "4.1.4-push": (
+        "4.1.4 push motion: S3 A1 P1, S1 Q2 (an object at 11000; K60 30 %, K61 200 ms)",
+        """K34.1=96
+S1.1=20
+S3.1=100
+A1.1=100
+P1.1=10000
+P2.1=12000
+B4.1
+S3.1, A1.1, P1.1, S1.1, Q2.1
+END
+[4.1
+@wait 1.8
+""", "push-object.toml"),
+}
 
 
-def _chain() -> tuple[Chain, Motor]:
-    chain = Chain()
-    chain.set_param(1, 34, 16)            # output 2: in position, output 1: merge pulse
-    chain.set_param(1, 73, 30)
+def plot(name: str, out: Path) -> Path:
+    """Run one example bank and draw its trace."""
+    title, script, machine = EXAMPLES[name]
+    chain = Chain(machine=HERE / machine if machine else None)
     chain.record()
-    return chain, chain.motors[1]
-
-
-def _bank(chain: Chain, motor: Motor, lines: list[Line], until: float) -> None:
-    """Run ``lines`` one after the other, each when the previous one is in position."""
-    pending = list(lines)
-
-    def step() -> None:
-        if pending:
-            pending.pop(0)(motor)
-
-    def on_event(event: object) -> None:
-        if getattr(event, "kind", "") == "status" and getattr(event, "value", 0) == 8:
-            chain.kernel.call_soon(step)
-
-    chain.subscribe(on_event)
-    step()
-    chain.kernel.run(until=seconds(until))
-
-
-def basic_ptp(out: Path) -> Path:
-    """4.1.1: S1, A1, P1 / P2 / S2, P3: one motion a line, data kept until changed."""
-    chain, motor = _chain()
-    s1, s2 = motor.limits(50, 100), motor.limits(100, 100)
-    _bank(chain, motor, [lambda m: m.move_to([(4000.0, s1)]),
-                         lambda m: m.move_to([(8000.0, s1)]),
-                         lambda m: m.move_to([(0.0, s2)])], until=3.2)
-    return chain.plot(out / "4.1.1-basic-ptp.png",
-                      title="4.1.1 basic PTP: S1 A1 P1 / P2 / S2 P3")
-
-
-def merge(out: Path) -> Path:
-    """4.1.2: S1, A1, P1, S2, P2, P3 in one line: no stop at P1 and P2."""
-    chain, motor = _chain()
-    s1, s2 = motor.limits(50, 100), motor.limits(100, 100)
-    _bank(chain, motor, [lambda m: m.move_to([(3000.0, s1), (8000.0, s2), (12000.0, s2)])],
-          until=2.0)
-    return chain.plot(out / "4.1.2-merge.png",
-                      title="4.1.2 merge motion: S1 A1 P1, S2 P2, P3 (pulses at the passing points)")
-
-
-def merge_reversal(out: Path) -> Path:
-    """4.1.2: a merge line whose direction turns over stops there, then goes on."""
-    chain, motor = _chain()
-    lim = motor.limits(80, 100)
-    _bank(chain, motor, [lambda m: m.move_to([(3000.0, lim), (6000.0, lim), (1000.0, lim)])],
-          until=2.2)
-    return chain.plot(out / "4.1.2-merge-reversal.png",
-                      title="4.1.2 merge motion removed where the direction turns over")
-
-
-def accel_decel(out: Path) -> Path:
-    """4.1.3: S1, A1, P1, A2, P2: slow acceleration, quick deceleration."""
-    chain, motor = _chain()
-    first = motor.limits(100, 30)
-    second = motor.limits(100, 30, decel_a=300)
-    _bank(chain, motor, [lambda m: m.move_to([(6000.0, first), (15000.0, second)])],
-          until=2.2)
-    return chain.plot(out / "4.1.3-accel-decel.png",
-                      title="4.1.3 different acceleration and deceleration: S1 A1 P1, A2 P2")
+    try:
+        result = run_script(OUTPUTS + script, chain)
+        if not result.ok:
+            raise RuntimeError(f"{name}: {result.summary()}")
+        return chain.plot(out / f"{name}.png", title=title)
+    finally:
+        chain.close()
 
 
 def main(argv: list[str]) -> int:
-    out = Path(argv[1]) if len(argv) > 1 else Path(__file__).parent.parent / "docs" / "images"
+    out = Path(argv[1]) if len(argv) > 1 else HERE.parent / "docs" / "images"
     out.mkdir(parents=True, exist_ok=True)
-    for make in (basic_ptp, merge, merge_reversal, accel_decel):
-        print(make(out))
+    for name in EXAMPLES:
+        print(plot(name, out))
     return 0
 
 

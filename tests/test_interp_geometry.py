@@ -12,9 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.motor.interp import (Arc, Leg, Line, PathError, arc_from_center,
+from coolmuscle.motor.interp import (Arc, Leg, Line, PathError, SpiralArc, SubPath,
+                                     arc_from_center, follow_path, plan_path,
                                      arc_from_radius, plan_interpolation)
-from coolmuscle.motor.planner import limits_from_data
+from coolmuscle.motor.planner import limits_from_data, plan_stop
 
 S100_A100 = limits_from_data(100, 100, k37=3, k44=100, k51=0, k69=0)   # 10000 pps path speed
 
@@ -126,3 +127,55 @@ def test_path_speed_never_exceeds_s_and_points_stay_on_the_arc(x1, y1, r, minor,
     for t, _, _ in samples(xp, yp, 200):
         speed = math.hypot(xp.velocity_at(t), yp.velocity_at(t))
         assert speed <= lim.speed * (1 + 1e-3) + 1e-6
+
+
+@settings(max_examples=40, deadline=None)
+@given(x1=st.integers(-20000, 20000), y1=st.integers(-20000, 20000),
+       rx=st.integers(50, 50000), ratio=st.floats(0.05, 20), minor=st.booleans(),
+       cw=st.booleans(), s=st.integers(1, 300), a=st.integers(1, 500),
+       k51=st.sampled_from([0, 5]), k69=st.sampled_from([0, 512, 1024]))
+def test_ovals_stay_on_the_ellipse_at_the_path_speed(x1, y1, rx, ratio, minor, cw, s, a,
+                                                     k51, k69):
+    """Different radii per axis (2.2.2 "R": an oval): on the ellipse, speed at most S
+    (within MAX_SPEED_ERROR), also with creep speed K51 and S-curves K69."""
+    if (x1, y1) == (0, 0):
+        return
+    ry = max(1, round(rx * ratio))
+    path = arc_from_radius((0, 0), (x1, y1), rx, ry, minor=minor, cw=cw)
+    lim = limits_from_data(s, a, k37=3, k44=100, k51=k51, k69=k69)
+    xp, yp, _ = plan_interpolation((0, 0), 0.0, [Leg(path, lim)], 0)
+    assert (xp.final_position, yp.final_position) == (x1, y1)
+    for t, x, y in samples(xp, yp, 300):
+        ux, uy = (x - path.center[0]) / path.rx, (y - path.center[1]) / path.ry
+        f = ux * ux + uy * uy - 1
+        grad = math.hypot(2 * ux / path.rx, 2 * uy / path.ry) or 1.0
+        assert abs(f) / grad <= 0.1
+        assert math.hypot(xp.velocity_at(t), yp.velocity_at(t)) <= lim.speed * (1 + 1e-4)
+
+
+def test_centre_farther_from_the_end_draws_a_spiral_to_the_exact_end() -> None:
+    path = arc_from_center((0, 0), (1200, 0), (500, 0), cw=False)
+    assert isinstance(path, SpiralArc)
+    xp, yp, _ = plan_interpolation((0, 0), 0.0, [Leg(path, S100_A100)], 0)
+    radii = [math.dist((x, y), (500, 0)) for _, x, y in samples(xp, yp)]
+    assert radii[0] == pytest.approx(500) and radii[-1] == pytest.approx(700)
+    assert all(r0 <= r1 + 0.1 for r0, r1 in zip(radii, radii[1:]))
+    assert (xp.final_position, yp.final_position) == (1200, 0)
+
+
+def test_stop_part_way_follows_the_path_and_the_rest_resumes_there() -> None:
+    """A stop re-plans only the path length; the axes stay on the arc (2.1.2 "]")."""
+    path = arc_from_center((0, 0), (0, 0), (1000, 0), cw=True)
+    legs = [Leg(path, S100_A100)]
+    s_profile = plan_path(legs, 0.0, 0)
+    t = s_profile.origin_ns + 300_000_000
+    stop = plan_stop(s_profile.state_at(t), S100_A100.decel, t)
+    xp, yp = follow_path(legs, stop)
+    for i in range(101):
+        tt = t + (stop.end_ns - t) * i // 100
+        assert abs(math.dist((xp.position_at(tt), yp.position_at(tt)), (1000, 0)) - 1000) < 0.1
+    rest = SubPath(path, stop.final_position)
+    assert rest.length == pytest.approx(path.length - stop.final_position)
+    assert math.dist(rest.point(0), (xp.final_position, yp.final_position)) < 1e-6
+    xr, yr, _ = plan_interpolation(rest.point(0), 0.0, [Leg(rest, S100_A100)], stop.end_ns)
+    assert (xr.final_position, yr.final_position) == (0, 0)

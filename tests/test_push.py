@@ -95,17 +95,22 @@ def test_push_is_not_a_position_error_overflow() -> None:
     assert [t for _, t in events] == ["Ux.1=40"]
 
 
-def test_push_via_a_passing_point_changes_the_level_there() -> None:
-    # 4.1.4's line "S3.1, A1.1, P1.1, S1.1, Q2.1": merge through P1, push toward P2
+def test_4_1_4_push_begins_at_the_passing_point() -> None:
+    # 4.1.4's line "S3.1, A1.1, P1.1, S1.1, Q2.1": "changes the speed to S1 at P1 and
+    # start performing Push Motion toward P2": a plain move (Ux=0, torque limit M) up to
+    # P1, the push (Ux=32, torque K60, K34 function 9) from P1 on
     chain, events = _chain()
     motor = chain.motors[1]
+    chain.execute("K34.1=9")
     fast = motor.limits(30, 100)
     slow = motor.limits(10, 100)
     motor.push_to(8000.0, slow, via=[(2000.0, fast)])
     chain.kernel.run(until=seconds(0.5))
-    assert motor.speed_units() == 30 and chain.execute("?99.1") == ["Ux.1=32"]
+    assert motor.speed_units() == 30 and chain.execute("?99.1") == ["Ux.1=0"]
+    assert chain.execute("?51.1") == ["OUT1.1=0"]
     chain.kernel.run(until=seconds(1.5))
-    assert motor.speed_units() == 10
+    assert motor.speed_units() == 10 and chain.execute("?99.1") == ["Ux.1=32"]
+    assert chain.execute("?51.1") == ["OUT1.1=1"]
     chain.kernel.run(until=seconds(6))
     assert [t for _, t in events] == ["Ux.1=40"]
 

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
@@ -220,6 +220,7 @@ def test_6_6_ix_is_friction_while_cruising_and_zero_at_rest() -> None:
 
 
 @settings(max_examples=40, deadline=None)
+@example(steps=[(0.0, -35, 17), (0.05, -42, 6)], inertia=0.0002, m=10)  # brake -> vzero jump
 @given(steps=st.lists(st.tuples(st.sampled_from([0.0, 1e-9, 0.0031, 0.05, 0.3, 1.0, "arrive"]),
                                 st.integers(-3000, 3000), st.integers(5, 200)),
                       min_size=2, max_size=8),

@@ -12,8 +12,9 @@ This module is the :class:`coolmuscle.device.Device` every front end uses.
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Iterable
 
 from .cml import ast
 from .cml.parser import parse
@@ -22,6 +23,8 @@ from .errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBan
                      NoSuchMotorError, OutOfRangeError)
 from .hostline import BAUD_RATES, HostLine, LineSettings
 from .motor.banks import BankUploads
+from .links import ChainLinks
+from .motor.coordinated import LINE_PAIRS, end_of_line, pair_line
 from .motor.direct import MotorEval, inner_motor, run_statement
 from .motor.evaluate import evaluate
 from .motor.firmware import get_firmware
@@ -29,7 +32,7 @@ from .motor.memory import VNumber, VState
 from .motor.motor import Context, Motor
 from .motor.status import Report
 from .motor.store import Store
-from .sim.kernel import Kernel
+from .sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
 from .sim.trace import TraceRecorder, check_trace_path
 
 if TYPE_CHECKING:
@@ -100,7 +103,7 @@ class Chain:
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
         self._listeners: list[EventListener] = []
-        self._watchers: list[Callable[[], None]] = []
+        self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
         self._recorder: TraceRecorder | None = None
         self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
         self.motors: dict[int, Motor] = {}
@@ -109,6 +112,9 @@ class Chain:
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
+        self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
+        self.motors[1].params.on_change(
+            lambda k, _old, new: self._k65_written(new) if k == 65 else None)
         self._attach_modbus()
         self._restore()
         if machine is not None:           # wired before power-up (K46 odd searches then)
@@ -179,38 +185,113 @@ class Chain:
             return
         if self.uploads.begins(lines, ctx):    # B#.n / L#.n (2.2.2, 2.2.3)
             return
-        for line in lines:
-            for stmt in line.statements:
-                motor_id = inner_motor(stmt) or ctx.default_motor
-                motor = self.motors.get(motor_id)
-                if motor is not None:
-                    run_statement(motor, stmt, ctx)
-                else:
-                    self.beyond_chain(motor_id, stmt, ctx)
+        routed = [[(stmt, inner_motor(stmt) or ctx.default_motor) for stmt in line.statements]
+                  for line in lines]
+        arrivals = (self._arrivals(routed, len(text) + 1)
+                    if ctx.origin == "host" and self.paced else {})
+        for line in routed:
+            pairs = pair_line(line, self.motors.__contains__, arrivals)  # "@" pairs (4.4)
+            line_ctx = replace(ctx, extra={**ctx.extra, LINE_PAIRS: pairs}) if pairs else ctx
+            if arrivals:
+                self._relay_line(line, line_ctx, arrivals)
+            else:
+                self._run_statements([stmt for stmt, _ in line], line_ctx)
         self.poke()
 
+    def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
+        for stmt in statements:
+            motor_id = inner_motor(stmt) or ctx.default_motor
+            motor = self.motors.get(motor_id)
+            if motor is not None:
+                run_statement(motor, stmt, ctx)
+            else:
+                self.beyond_chain(motor_id, stmt, ctx)
+        end_of_line(ctx)          # an "@" of a branch left without its partner (4.4)
+
+    # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
+    @property
+    def paced(self) -> bool:
+        """Wire-time pacing is on: bytes take their time on the host line and the links."""
+        return self.host_line.pacing
+
+    def relay(self, src: int, dst: int, nbytes: int) -> int:
+        """When ``nbytes`` ID ``src`` sends now reach ID ``dst`` (now without pacing)."""
+        now = self.kernel.now
+        return self.links.arrival(src, dst, nbytes, now) if self.paced else now
+
+    def _arrivals(self, routed: list[list[tuple[ast.Statement, int]]],
+                  nbytes: int) -> dict[int, int]:
+        """When the host line's text reaches each motor it addresses (and those between)."""
+        last = max((min(mid, len(self.motors)) for line in routed for _, mid in line),
+                   default=1)
+        arrivals = {1: self.kernel.now}
+        for motor_id in range(2, last + 1):
+            arrivals[motor_id] = self.links.arrival(motor_id - 1, motor_id, nbytes,
+                                                    arrivals[motor_id - 1])
+        return arrivals
+
+    def _relay_line(self, line: list[tuple[ast.Statement, int]], ctx: Context,
+                    arrivals: dict[int, int]) -> None:
+        """Each motor runs its statements of the line when the line reaches it."""
+        groups: dict[int, list[ast.Statement]] = {}
+        for stmt, motor_id in line:
+            groups.setdefault(min(motor_id, len(self.motors)), []).append(stmt)
+        now = self.kernel.now
+        for hop_id in sorted(groups):
+            statements = groups[hop_id]
+            at = arrivals.get(hop_id, now)
+            if at <= now:
+                self._run_statements(statements, ctx)
+            else:
+                self.kernel.schedule_at(at, lambda st=statements: self._relayed(st, ctx),
+                                        priority=PRIO_IO, name="chain-relay")
+
+    def _relayed(self, statements: list[ast.Statement], ctx: Context) -> None:
+        self._run_statements(statements, ctx)
+        self.poke()
+        self._changed()
+
+    def _k65_written(self, value: int) -> None:
+        """K65 written on ID1 is written on every motor (ch. 3 K65)."""
+        for motor in self.motors.values():
+            if motor.id != 1:
+                motor.params.set(65, value)
+
     # -- bank waits (W#, program lines): re-checked on events, never polled -------
-    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
-        """Call ``callback`` at every :meth:`poke` until the returned remover is called."""
-        self._watchers.append(callback)
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every :meth:`poke` until the returned remover is called;
+        with ``motors``, only at pokes about one of them (or about nothing in particular):
+        a bank line waiting for motions is not woken by the other motors' milestones."""
+        entry = (callback, None if motors is None else frozenset(motors))
+        self._watchers.append(entry)
 
         def remove() -> None:
-            if callback in self._watchers:
-                self._watchers.remove(callback)
+            if entry in self._watchers:
+                self._watchers.remove(entry)
         return remove
 
-    def poke(self) -> None:
-        """Something changed (a line, an input, a motion, a ladder scan): look again."""
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (a line, an input, a motion, a ladder scan): look again.
+        ``motor``: only the motion of that motor changed."""
         if self._watchers:
-            for callback in list(self._watchers):
-                callback()
+            for callback, motors in list(self._watchers):
+                if motors is None or motor is None or motor in motors:
+                    callback()
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
              origin: str = "motor") -> None:
         """Report a line: on the host line (per origin) and to every subscriber."""
         if origin in HOST_LINE_ORIGINS:
-            self.host_line.send_line(text)
+            hop_from = min(motor, len(self.motors))
+            if self.paced and hop_from > 1:     # back up the chain to ID1 (ch. 3 K65)
+                size = len(text) + len(self._line_settings().delimiter)
+                at = self.links.arrival(hop_from, 1, size, self.kernel.now)
+                self.kernel.schedule_at(at, lambda: self.host_line.send_line(text),
+                                        priority=PRIO_REPORT, name="chain-reply")
+            else:
+                self.host_line.send_line(text)
         event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
         for listener in list(self._listeners):
             try:
@@ -327,10 +408,12 @@ class Chain:
         check_trace_path(path)
         return _TraceFile(self.record(), Path(path), step)
 
-    def plot(self, path: str | Path, title: str = "") -> Path:
-        """Plot what the recorder holds (position, speed, torque, status and I/O)."""
+    def plot(self, path: str | Path, title: str = "",
+             xy: list[tuple[int, int]] | None = None) -> Path:
+        """Plot what the recorder holds (position, speed, torque, status and I/O), and
+        the XY path of ``xy`` pairs (default: the pairs that interpolated, 4.4)."""
         from .plot import plot_trace
-        return plot_trace(self.record(), path, title=title)
+        return plot_trace(self.record(), path, title=title, xy=xy)
 
     # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.modbus ----------
     def _attach_modbus(self) -> None:

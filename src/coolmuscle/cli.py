@@ -247,6 +247,10 @@ def run(
         None, "--trace", metavar="OUT.csv",
         help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow)."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
+    xy: Optional[str] = typer.Option(
+        None, "--xy", metavar="X,Y",
+        help="With --plot: draw the XY path of motors X and Y (default: pairs that "
+             "interpolated; 'none' for no XY panel)."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
     state: Optional[Path] = typer.Option(
@@ -269,6 +273,7 @@ def run(
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
+    xy_pairs = _xy_pairs(xy, motors)
     if trace is not None:
         from .sim.trace import TraceFormatError, check_trace_path
         try:
@@ -291,7 +296,10 @@ def run(
                             on_entry=None if check else show)
         sys.stdout.flush()
         if plot is not None:
-            chain.plot(plot)
+            if xy_pairs is None:
+                chain.plot(plot)
+            else:
+                chain.plot(plot, xy=xy_pairs)
     finally:
         chain.close()
     if record is not None:
@@ -306,6 +314,22 @@ def run(
         sys.stdout.write(f"coolmuscle: {result.summary()}\n")
     elif script.expectations:
         err.print(f"coolmuscle: {result.summary()}", markup=False)
+
+
+def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
+    """``--xy 1,2`` -> [(1, 2)]; ``none`` -> []; absent -> None (automatic)."""
+    if text is None:
+        return None
+    if text.strip().lower() == "none":
+        return []
+    parts = text.split(",")
+    try:
+        x, y = (int(p) for p in parts)
+    except ValueError:
+        raise UsageError(f"--xy takes two motor IDs as X,Y, not {text!r}") from None
+    if not (1 <= x <= motors and 1 <= y <= motors) or x == y:
+        raise UsageError(f"--xy {text}: two different IDs of the chain (1..{motors})")
+    return [(x, y)]
 
 
 def _register_tools() -> None:

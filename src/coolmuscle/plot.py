@@ -8,7 +8,9 @@ logic-analyser row for every input and output that is ever on.  Panels for the
 analog input/output and the external encoder count appear only when those change.
 Sample instants include every discrete change and solved pulse edge, so steps are
 drawn where they happen.  Readable for 1 to 15 motors (the figure grows with the
-number of timeline rows).  matplotlib runs headless (Agg).
+number of timeline rows).  When two motors interpolated (4.4), or when asked for, a
+panel beside the others draws the pair's XY path, as the figures of 4.4 do.
+matplotlib runs headless (Agg).
 """
 
 from __future__ import annotations
@@ -110,9 +112,23 @@ def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
     right.set_ylabel("min⁻¹")
 
 
+def interpolated_pairs(recorder: "TraceRecorder") -> list[tuple[int, int]]:
+    """(X, Y) IDs of every pair of motors that followed an interpolation path (4.4)."""
+    pairs: list[tuple[int, int]] = []
+    for motor in recorder.chain.motors.values():
+        path = getattr(motor, "path", None)
+        if path is not None and (path.x.id, path.y.id) not in pairs:
+            pairs.append((path.x.id, path.y.id))
+    return sorted(pairs)
+
+
 def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | None = None,
-               title: str = "") -> Path:
-    """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension)."""
+               title: str = "", xy: Sequence[tuple[int, int]] | None = None) -> Path:
+    """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension).
+
+    ``xy``: pairs of motor IDs whose XY path is drawn beside the time panels (default:
+    the pairs that interpolated; ``[]`` for none).
+    """
     end_ns = recorder.chain.kernel.now
     span = max((end_ns - recorder.start) / NS_PER_S, 1e-3)
     times = recorder.times(step or span / MAX_POINTS, end_ns)
@@ -136,9 +152,20 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     panels.append(("timeline", max(1.0, ROW_HEIGHT_IN * timeline_rows + 0.5)))
     heights = [h for _, h in panels]
     legend_outside = len(motors) > 4
-    fig, axes = plt.subplots(len(panels), 1, sharex=True,
-                             figsize=(12.5 if legend_outside else 11, sum(heights) + 1.2),
-                             gridspec_kw={"height_ratios": heights})
+    pairs = [p for p in (interpolated_pairs(recorder) if xy is None else xy)
+             if p[0] in data and p[1] in data]
+    width = 12.5 if legend_outside else 11
+    if pairs:
+        fig = plt.figure(figsize=(width + 7, max(sum(heights) + 1.2, 8)))
+        grid = fig.add_gridspec(len(panels), 2, height_ratios=heights,
+                                width_ratios=[width, 6.5])
+        axes = [fig.add_subplot(grid[0, 0])]
+        axes += [fig.add_subplot(grid[i, 0], sharex=axes[0]) for i in range(1, len(panels))]
+        _xy_panel(fig.add_subplot(grid[:, 1]), data, pairs, colors)
+    else:
+        fig, axes = plt.subplots(len(panels), 1, sharex=True,
+                                 figsize=(width, sum(heights) + 1.2),
+                                 gridspec_kw={"height_ratios": heights})
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
@@ -183,6 +210,27 @@ def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], 
     if "encoder" in ax:
         ax["encoder"].step(t, [s.encoder for s in samples], where="post", color=color,
                            linewidth=1.0)
+
+
+def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple[int, int]],
+              colors: dict[int, object]) -> None:
+    """Each pair's path: the X motor's position across, the Y motor's up (4.4 figures);
+    the command dashed, the start a circle, the end a square."""
+    for x_id, y_id in pairs:
+        xs, ys = data[x_id], data[y_id]
+        color = colors[x_id]
+        ax.plot([s.position for s in xs], [s.position for s in ys], color=color,
+                linewidth=1.3, label=f"ID{x_id} x ID{y_id}")
+        ax.plot([s.command for s in xs], [s.command for s in ys], "--", color=color,
+                linewidth=0.8, alpha=0.7)
+        ax.plot([xs[0].position], [ys[0].position], "o", color=color)
+        ax.plot([xs[-1].position], [ys[-1].position], "s", color=color)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("X axis position [pulse]")
+    ax.set_ylabel("Y axis position [pulse]")
+    ax.set_title("XY path (\u25cb start, \u25a1 end, command dashed)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
 
 
 def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],

@@ -26,7 +26,7 @@ from . import planner
 from .dynamics import LOST, Drive, Motion
 from .expoly import const, sub
 from .planner import Limits, Waypoint
-from .profile import Profile, hold
+from .profile import Profile, Segment, hold
 
 log = logging.getLogger(__name__)
 
@@ -156,12 +156,32 @@ class Axis:
         self._resolve()
 
     # -- commands -----------------------------------------------------------
-    def move(self, waypoints: Sequence[tuple[float, Limits]]) -> None:
-        """Move through user-coordinate waypoints (merge when more than one)."""
+    def move(self, waypoints: Sequence[tuple[float, Limits]], *,
+             start_ns: int | None = None) -> None:
+        """Move through user-coordinate waypoints (merge when more than one).
+
+        ``start_ns``: the move starts then (a command still travelling down the chain);
+        only an axis at rest, or holding for a start not yet reached, can wait for it.
+        """
         raw = [Waypoint(self.to_raw(t), lim) for t, lim in waypoints]
-        profile = planner.plan_moves(self._raw_state(), raw, self.kernel.now)
+        now = self.kernel.now
+        start = now
+        if start_ns is not None and start_ns > now and (
+                not self.moving or self.profile.origin_ns > now):
+            start = start_ns
+        state = self.profile.state_at(start) if start > now else self._raw_state()
+        profile = planner.plan_moves(state, raw, start)
         self.target_raw = raw[-1].target
         self._start(profile)
+
+    def run_profile(self, profile: Profile) -> None:
+        """Follow a precomputed closed-form profile in user coordinates (an axis of an
+        interpolation, 4.4) with the same tracking, in-position and passing points as
+        :meth:`move`.  Its origin may lie ahead (a command still on its way down the
+        chain): the axis holds its position until then."""
+        raw = _to_raw(profile, self.zero, self.sign)
+        self.target_raw = raw.final_position
+        self._start(raw)
 
     def run(self, velocity: float, limits: Limits) -> None:
         """Continuous rotation at a signed user velocity (pps)."""
@@ -352,3 +372,15 @@ class Axis:
     def _arrived(self) -> None:
         self.moving = False
         self._on_in_position()
+
+
+def _to_raw(profile: Profile, zero: float, sign: int) -> Profile:
+    """``profile`` (user pulses) in raw pulses: ``raw = zero + sign * user``."""
+    if zero == 0.0 and sign == 1:
+        return profile
+    p, v, a = profile.start_state
+    segments = [Segment(s.start, s.duration, zero + sign * s.p, sign * s.v, sign * s.a,
+                        sign * s.j) for s in profile.segments]
+    return Profile(profile.origin_ns, segments, start_state=(zero + sign * p, sign * v, sign * a),
+                   final_position=zero + sign * profile.final_position,
+                   passing_times=profile.passing_times)

@@ -191,7 +191,7 @@ class Runner:
                     return
             self._cancel_watch()
             self.kernel.call_soon(fire, priority=PRIO_LOGIC, name="bank-in-position")
-        self._unwatch = self.motor.bus.watch(check)
+        self._unwatch = self.motor.bus.watch(check, [m.id for m in request.motors])
         check()
 
     def _arm_watch(self, request: Watch, left: int | None) -> None:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
+from .coordinated import direct_interp
 from .evaluate import EvalHost, condition, evaluate
 from .memory import VState
 from .motor import WRITABLE_STATES
@@ -109,6 +110,8 @@ def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.capture(stmt.index)
     elif isinstance(stmt, ast.Move):
         motor.direct_move(stmt)
+    elif isinstance(stmt, ast.Interp):
+        direct_interp(motor, stmt, ctx)          # 2.1.2 "@", 4.4 (.coordinated)
     elif isinstance(stmt, ast.Alloc):
         motor.memory.allocate(stmt.kind, stmt.count)
     elif isinstance(stmt, ast.Branch):

@@ -315,7 +315,7 @@ class Motion:
     # -- building ---------------------------------------------------------------
     def _build(self, p: float, v: float) -> None:
         t, ci = 0.0, 0
-        kind_prev, s_prev, tiny = "", 0, 0
+        kind_prev, mode_prev, s_prev, tiny = "", "", 0, 0
         while len(self.pieces) < MAX_PIECES:
             while self._cmd[ci][1] <= t:
                 ci += 1
@@ -327,7 +327,9 @@ class Motion:
                 piece, exits = self._track(t, p, cmd, end)
                 exits = [x for x in exits if x[0] != "limit"]
                 end, kind, tiny = min(end, SLIDE), "slide", 0
-            elif kind_prev == "brake":
+            elif kind_prev == "brake" or (kind_prev == "vzero" and mode_prev == BRAKE):
+                # braking onto the command's speed goes on through zero speed (only the
+                # friction turns round): the command may be running the other way
                 piece, exits = self._brake(t, p, v, cmd, s_prev)
             else:
                 piece, exits = self._choose(t, p, v, cmd, c_end - t)
@@ -346,7 +348,7 @@ class Motion:
             tiny = tiny + 1 if end < 1e-7 else 0
             p, v = self._after(piece, end, kind)
             t = piece.end
-            kind_prev, s_prev = kind, piece.s
+            kind_prev, mode_prev, s_prev = kind, piece.mode, piece.s
         self._append(_rest_piece(t, p, self._cmd[-1][2], self.drive))
 
     def _append(self, piece: Piece) -> None:
@@ -497,7 +499,12 @@ class Motion:
     def _brake(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
         """Braking at the limit torque (against ``s``) onto the command's speed."""
         d = self.drive
-        sgn = _sign(v) or s
+        sgn = _sign(v)
+        if not sgn:
+            pull = -s * d.a_limit - d.a_load
+            if abs(pull) <= d.a_friction:               # the limit cannot move it: held
+                return self._choose(t, p, v, cmd)
+            sgn = _sign(pull)
         acc = -s * d.a_limit - sgn * d.a_friction - d.a_load
         pos: F = (p, v, acc / 2.0, 0.0, 0.0)
         vel = xp.deriv(pos, 0.0)

@@ -4,7 +4,8 @@ Geometry: the start point is the current position of the X motor (the lower ID) 
 the Y motor; the end point is their P data.  With ``R`` the path is an arc of that
 radius (equal radii: a circle; different radii: an oval whose semi-axes are the two
 radii), the major arc for a positive radius and the minor arc for a negative radius
-or the ``-`` modifier (4.4.1); with ``N`` the arc is centred on the N data (4.4.2);
+or the ``-`` modifier (4.4.1); with ``N`` the arc is centred on the N data (4.4.2; when the end is not as far from
+the centre as the start, the radius changes evenly with the angle, a spiral arc);
 ``R`` = 0 draws a straight line (4.4.3).  ``+`` turns CW, ``-`` CCW.
 
 Timing: the arc length ``s(t)`` is planned as a one-dimensional move with the
@@ -29,6 +30,14 @@ Point = tuple[float, float]
 
 #: Largest distance (pulses) between a cubic piece and the true path at its check points.
 MAX_ERROR = 0.05
+#: Largest relative error of the axis velocities of a piece at its check points, so the
+#: speed along the path stays at S (4.4 "synthetic speed by 2 axes").
+MAX_SPEED_ERROR = 1e-4
+#: Shortest piece (s): the kernel's clock has nanoseconds, pieces stop splitting here.
+MIN_PIECE = 1e-6
+#: A centre (4.4.2) whose distances to the start and the end differ by at most this
+#: much (pulses) draws a circular arc; a larger difference draws a spiral arc.
+RADIUS_TOLERANCE = 0.5
 _GAUSS = ((-0.906179845938664, 0.236926885056189), (-0.538469310105683, 0.478628670499366),
           (0.0, 0.568888888888889), (0.538469310105683, 0.478628670499366),
           (0.906179845938664, 0.236926885056189))
@@ -46,9 +55,9 @@ class Line:
         self.length = math.dist(start, end)
 
     def point(self, s: float) -> Point:
-        if self.length == 0:
+        if self.length == 0 or s >= self.length:
             return self.end
-        f = min(max(s / self.length, 0.0), 1.0)
+        f = max(s / self.length, 0.0)
         return (self.start[0] + f * (self.end[0] - self.start[0]),
                 self.start[1] + f * (self.end[1] - self.start[1]))
 
@@ -117,7 +126,54 @@ class Arc:
         return (sign * dx / norm, sign * dy / norm)
 
 
-Path = Line | Arc
+class SpiralArc(Arc):
+    """An arc round ``center`` whose radius goes evenly from ``r0`` to ``r1`` with the
+    angle: a centre (4.4.2) not equally far from the start and the end still starts at
+    the start and ends exactly at the end (docs/fidelity.md "Daisy chain")."""
+
+    def __init__(self, center: Point, r0: float, r1: float, theta0: float, sweep: float,
+                 end: Point | None = None) -> None:
+        self.r0, self.growth = r0, (r1 - r0) / sweep if sweep else 0.0
+        super().__init__(center, r0, r0, theta0, sweep, end)
+
+    def _radius(self, theta: float) -> float:
+        return self.r0 + self.growth * (theta - self.theta0)
+
+    def _speed(self, theta: float) -> float:
+        return math.hypot(self._radius(theta), self.growth)
+
+    def point(self, s: float) -> Point:
+        if self.exact_end is not None and s >= self.length:
+            return self.exact_end
+        t = self.theta(s)
+        r = self._radius(t)
+        return (self.center[0] + r * math.cos(t), self.center[1] + r * math.sin(t))
+
+    def tangent(self, s: float) -> Point:
+        t = self.theta(s)
+        r = self._radius(t)
+        dx = self.growth * math.cos(t) - r * math.sin(t)
+        dy = self.growth * math.sin(t) + r * math.cos(t)
+        norm = math.hypot(dx, dy) or 1.0
+        sign = 1.0 if self.sweep >= 0 else -1.0
+        return (sign * dx / norm, sign * dy / norm)
+
+
+class SubPath:
+    """The rest of ``path`` from arc length ``s0`` on (a path resumed after a pause)."""
+
+    def __init__(self, path: "Line | Arc | SubPath", s0: float) -> None:
+        self.path, self.s0 = path, min(max(s0, 0.0), path.length)
+        self.length = path.length - self.s0
+
+    def point(self, s: float) -> Point:
+        return self.path.point(self.s0 + min(max(s, 0.0), self.length))
+
+    def tangent(self, s: float) -> Point:
+        return self.path.tangent(self.s0 + min(max(s, 0.0), self.length))
+
+
+Path = Line | Arc | SubPath
 
 
 def _angle(center: Point, p: Point, rx: float, ry: float) -> float:
@@ -161,15 +217,25 @@ def arc_from_radius(start: Point, end: Point, rx: float, ry: float, *, minor: bo
     return Arc((c[0], c[1] / k), r, r / k, t0, sweep, end)
 
 
-def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Arc:
-    """4.4.2: start, end and centre (radius from the start; start == end: a full circle)."""
+def arc_from_center(start: Point, end: Point, center: Point, *, cw: bool) -> Path:
+    """4.4.2: start, end and centre (start == end: a full circle).
+
+    The radius is the start's distance from the centre; when the end is farther or
+    nearer by more than :data:`RADIUS_TOLERANCE` the radius changes evenly with the
+    angle (:class:`SpiralArc`), so the path still ends exactly at the end.
+    """
     r = math.dist(start, center)
-    if r == 0:
-        raise PathError("the centre is the start point")
+    r_end = math.dist(end, center)
+    if r == 0 or r_end == 0:
+        raise PathError("the centre is the start or the end point")
     t0 = math.atan2(start[1] - center[1], start[0] - center[0])
     t1 = math.atan2(end[1] - center[1], end[0] - center[0])
     sweep = _sweep(t0, t1, cw, math.dist(start, end) < 0.5)
-    return Arc(center, r, r, t0, sweep, end)
+    if sweep == 0.0:
+        return Line(start, end)        # the end lies straight out from the centre
+    if abs(r_end - r) <= RADIUS_TOLERANCE:
+        return Arc(center, r, r, t0, sweep, end)
+    return SpiralArc(center, r, r_end, t0, sweep, end)
 
 
 @dataclass(frozen=True)
@@ -207,17 +273,36 @@ class _Sampler:
                  total: float) -> None:
         self.s_profile, self.legs, self.starts, self.total = s_profile, legs, starts, total
         self.end_time = s_profile.duration
+        self.s_end = min(max(s_profile.final_position, 0.0), total)
+        segments = s_profile.segments
+        self.end_speed = segments[-1].end_state()[1] if segments else 0.0
+
+    def locate(self, s: float, at_end: bool = False) -> tuple[Path, float]:
+        """The leg holding arc length ``s`` and the length along it."""
+        i = max(bisect_right(self.starts, s) - 1, 0)
+        if i > 0 and s == self.starts[i] and not at_end:
+            i -= 1          # a junction belongs to the leg that ends there
+        return self.legs[i].path, s - self.starts[i]
 
     def state(self, t: float) -> tuple[float, float, float, float]:
         """(x, y, vx, vy) at ``t`` seconds from the origin."""
-        s, v, _ = self.s_profile.state_at(self.s_profile.origin_ns + round(t * 1e9))
-        s = self.total if t >= self.end_time else min(max(s, 0.0), self.total)
-        i = max(bisect_right(self.starts, s) - 1, 0)
-        if i > 0 and s == self.starts[i] and t < self.end_time:
-            i -= 1          # a junction belongs to the leg that ends there
-        path, local = self.legs[i].path, s - self.starts[i]
+        if t >= self.end_time:
+            # the left limit: a creep-speed stop (K51) jumps to 0 only after the end
+            s, v = self.s_end, self.end_speed
+        else:
+            s, v, _ = self.s_profile.state_at(self.s_profile.origin_ns + round(t * 1e9))
+            s = min(max(s, 0.0), self.total)
+        path, local = self.locate(s)
         (x, y), (tx, ty) = path.point(local), path.tangent(local)
         return x, y, tx * v, ty * v
+
+    def end_point(self) -> Point:
+        """Where the path profile comes to rest: the exact end of a leg when it gets there."""
+        if self.s_end >= self.total - 1e-9 * max(1.0, self.total):
+            last = self.legs[-1].path       # the sum of the legs' lengths may round
+            return last.point(last.length)
+        path, local = self.locate(self.s_end)
+        return path.point(path.length if local >= path.length else local)
 
 
 def _pieces(sampler: _Sampler, t0: float, t1: float, depth: int = 0) -> list[tuple[float, float]]:
@@ -226,32 +311,42 @@ def _pieces(sampler: _Sampler, t0: float, t1: float, depth: int = 0) -> list[tup
     a, b = sampler.state(t0), sampler.state(t1)
     x_seg = _hermite(t0, h, a[0], a[2], b[0], b[2])
     y_seg = _hermite(t0, h, a[1], a[3], b[1], b[3])
-    if depth < 24:
+    if depth < 24 and h > MIN_PIECE:
         for f in (0.25, 0.5, 0.75):
-            x, y, _, _ = sampler.state(t0 + f * h)
-            if math.hypot(x_seg.position(f * h) - x, y_seg.position(f * h) - y) > MAX_ERROR:
+            x, y, vx, vy = sampler.state(t0 + f * h)
+            tau = f * h
+            if (math.hypot(x_seg.position(tau) - x, y_seg.position(tau) - y) > MAX_ERROR
+                    or math.hypot(x_seg.velocity(tau) - vx, y_seg.velocity(tau) - vy)
+                    > MAX_SPEED_ERROR * max(math.hypot(vx, vy), 1.0)):
                 mid = t0 + h / 2
                 return _pieces(sampler, t0, mid, depth + 1) + _pieces(sampler, mid, t1, depth + 1)
     return [(t0, t1)]
 
 
-def plan_interpolation(start: Point, start_speed: float, legs: Sequence[Leg],
-                       origin_ns: int) -> tuple[Profile, Profile, Profile]:
-    """Profiles of X, Y and of the path length ``s`` for ``legs`` travelled in turn.
-
-    ``start_speed`` is the path speed at the start (merge continuation).  Returns
-    ``(x_profile, y_profile, s_profile)``.
-    """
+def leg_starts(legs: Sequence[Leg]) -> tuple[list[float], float]:
+    """Arc length at the start of each leg, and the total length."""
     starts, total = [], 0.0
     for leg in legs:
         starts.append(total)
         total += leg.path.length
-    if total == 0:
-        raise PathError("the path has no length")
-    waypoints = [Waypoint(s0 + leg.path.length, leg.limits) for s0, leg in zip(starts, legs)]
-    s_profile = plan_moves((0.0, start_speed, 0.0), waypoints, origin_ns)
+    return starts, total
 
+
+def follow_path(legs: Sequence[Leg], s_profile: Profile) -> tuple[Profile, Profile]:
+    """X and Y profiles that follow ``legs`` as the path length ``s_profile`` says.
+
+    ``s_profile`` is any closed-form plan of the arc length (a full path from 0, or a
+    stop or a resumption part way along); the axis profiles are cubic Hermite pieces
+    within :data:`MAX_ERROR` of the path, and end exactly at the point where ``s`` rests.
+    """
+    starts, total = leg_starts(legs)
     sampler = _Sampler(s_profile, legs, starts, total)
+    origin = s_profile.origin_ns
+    end = sampler.end_point()
+    if not s_profile.segments:
+        x0, y0, _, _ = sampler.state(0.0)
+        return (Profile(origin, (), start_state=(x0, 0.0, 0.0), final_position=end[0]),
+                Profile(origin, (), start_state=(y0, 0.0, 0.0), final_position=end[1]))
     x_segs: list[Segment] = []
     y_segs: list[Segment] = []
     times = _knots(s_profile, starts)
@@ -262,7 +357,30 @@ def plan_interpolation(start: Point, start_speed: float, legs: Sequence[Leg],
             a, b = sampler.state(p0), sampler.state(p1)
             x_segs.append(_hermite(p0, p1 - p0, a[0], a[2], b[0], b[2]))
             y_segs.append(_hermite(p0, p1 - p0, a[1], a[3], b[1], b[3]))
-    end = legs[-1].path.point(legs[-1].path.length)
-    x_profile = Profile(origin_ns, x_segs, final_position=end[0])
-    y_profile = Profile(origin_ns, y_segs, final_position=end[1])
+    passing = s_profile.passing_times
+    x_profile = Profile(origin, x_segs, final_position=end[0], passing_times=passing)
+    y_profile = Profile(origin, y_segs, final_position=end[1], passing_times=passing)
+    return x_profile, y_profile
+
+
+def plan_path(legs: Sequence[Leg], start_speed: float, origin_ns: int) -> Profile:
+    """The path length ``s(t)`` from 0 through every leg, merged at the junctions
+    (4.4 "CM2 can operate merge motion, during even at the interpolation")."""
+    starts, total = leg_starts(legs)
+    if total == 0:
+        raise PathError("the path has no length")
+    waypoints = [Waypoint(s0 + leg.path.length, leg.limits) for s0, leg in zip(starts, legs)]
+    return plan_moves((0.0, start_speed, 0.0), waypoints, origin_ns)
+
+
+def plan_interpolation(start: Point, start_speed: float, legs: Sequence[Leg],
+                       origin_ns: int) -> tuple[Profile, Profile, Profile]:
+    """Profiles of X, Y and of the path length ``s`` for ``legs`` travelled in turn.
+
+    ``start_speed`` is the path speed at the start (merge continuation).  Returns
+    ``(x_profile, y_profile, s_profile)``.
+    """
+    del start   # the first leg starts there
+    s_profile = plan_path(legs, start_speed, origin_ns)
+    x_profile, y_profile = follow_path(legs, s_profile)
     return x_profile, y_profile, s_profile

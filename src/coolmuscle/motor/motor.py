@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Protocol, Sequence
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -31,10 +31,14 @@ from .memory import Memory, VNumber, VState, VString
 from .params import ParamTable
 from .planner import ESTOP_DECEL, Limits, limits_from_data
 from .plant import DEFAULT_KP, STEPPER_KP, Plant
+from .profile import Profile
 from .pulses import RotationPulses
 from .status import Report, Ux, io_word_hex, status_line
 from .supervision import Supervision
 from .trajectory import Timeline
+
+if TYPE_CHECKING:
+    from .coordinated import PairMotion
 
 log = logging.getLogger(__name__)
 
@@ -55,11 +59,12 @@ class MotorBus(Protocol):
     def motor(self, motor_id: int) -> "Motor | None":
         """Another motor of the chain (None when absent)."""
 
-    def watch(self, callback: Callable[[], None]) -> Callable[[], None]:
-        """Call ``callback`` at every poke until the returned remover is called."""
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every poke (about ``motors``) until the remover is called."""
 
-    def poke(self) -> None:
-        """Something changed (input, data, motion): re-check the bank waits."""
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (input, data, motion of ``motor``): re-check the bank waits."""
 
     def chain_command(self, motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
         """Chain-wide execution commands (``]``, ``*``, ``*1`` ...)."""
@@ -127,6 +132,10 @@ class Motor(Supervision):
         self._go_speed: int | None = None
         self._go_data: tuple[int, int, int] | None = None
         self._state_readers: dict[str, Callable[[], int]] | None = None
+        # -- interpolation (4.4, :mod:`.coordinated`): the path this axis follows and
+        # which of R0 / N0 direct-mode "@" uses (the one written last)
+        self.path: "PairMotion | None" = None
+        self.direct_interp_kind = "R"
 
     # -- parameters and units ----------------------------------------------
     def k(self, number: int) -> int:
@@ -236,10 +245,12 @@ class Motor(Supervision):
         return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
                                 k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
 
-    def move_to(self, waypoints: Sequence[tuple[float, Limits | None]]) -> None:
+    def move_to(self, waypoints: Sequence[tuple[float, Limits | None]],
+                delay_ns: int = 0) -> None:
         """Start (or re-plan) a move through user-coordinate waypoints.
 
-        A waypoint without limits (zero speed) means no motion at all.
+        A waypoint without limits (zero speed) means no motion at all.  ``delay_ns``: the
+        command is still on its way down the chain (ch. 3 K65), it starts that much later.
         """
         self._go_target = None
         if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
@@ -249,7 +260,24 @@ class Motor(Supervision):
             return
         self.abandon_motion()
         self._last_limits = waypoints[-1][1]
-        self.axis.move(waypoints)
+        self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
+
+    def path_end_allowed(self, user_end: float) -> bool:
+        """Whether an interpolation path may take this motor to ``user_end``: it can move,
+        the end is within the software limits (K58, K59) and not toward an active limit
+        sensor (which reports its error, as for a move)."""
+        return self.can_move() and self._allowed_target(user_end) == user_end
+
+    def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
+        """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""
+        self._go_target = None
+        if not self.can_move():
+            return False
+        self.abandon_motion()
+        self._last_limits = limits
+        self.axis.run_profile(profile)
+        self.path = path
+        return True
 
     def run_continuous(self, s_value: int, limits: Limits | None) -> None:
         """Continuous rotation, P=1000000000 (2.1.1): direction from the sign of S.
@@ -316,8 +344,12 @@ class Motor(Supervision):
         self.axis.set_user_position(0.0)
 
     def stop(self) -> None:
-        """``]``/``}``-style decelerating stop at the motion's deceleration."""
+        """``]``/``}``-style decelerating stop at the motion's deceleration; an
+        interpolating pair decelerates along its path (docs/fidelity.md "Daisy chain")."""
         self._go_target = None
+        if self.path is not None and self.path.owns(self):
+            self.path.stop(self.kernel.now)
+            return
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
         if self._stop_push():
             return
@@ -398,7 +430,7 @@ class Motor(Supervision):
     # -- motion completion (issue 4: bank executors wait on these) -----------------
     def motion_settled(self) -> None:
         """A motion ended: let waiting bank lines look again (no polling)."""
-        self.bus.poke()
+        self.bus.poke(self.id)
 
     def _passing_point(self, index: int) -> None:
         """K34=6: the output is on for K73 ms from each passing point; a point within
@@ -489,6 +521,8 @@ class Motor(Supervision):
             self.set_torque_limit(int(self.memory.get("M", 0)))
         if kind == "S" and index == 0:
             self.direct_speed_changed()
+        elif kind in ("N", "R") and index == 0:
+            self.direct_interp_kind = kind     # direct "@" draws by this one (4.4)
 
     def write_state(self, name: str, value: int) -> None:
         """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).

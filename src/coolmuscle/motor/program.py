@@ -28,6 +28,8 @@ from . import units as units_mod
 from .bankcheck import expr_steps, statement_steps
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns, wait_branch)
+from .coordinated import (LinePaths, PairMotion, Selection, message_bytes, report_leftovers,
+                          request)
 from .planner import Limits
 from .profile import Profile
 from .queries import register_reply
@@ -66,6 +68,8 @@ class _Motion:
     continuous: tuple[int, Limits] | None = None
     remaining: list[tuple[float, Limits]] | None = None  # what a pause interrupted
     profile: Profile | None = None                       # the plan that was issued
+    path: PairMotion | None = None                       # an interpolation (4.4)
+    delay: int = 0           # ns until the command reaches the motor (K65 chain timing)
 
 
 @dataclass
@@ -81,6 +85,8 @@ class _Run:
     accel_seen: dict[int, int] = field(default_factory=dict)
     decel: dict[int, int] = field(default_factory=dict)
     cancelled: bool = False
+    paths: LinePaths | None = None      # the "@" of this line (4.4, .coordinated)
+    arrivals: dict[int, int] = field(default_factory=dict)  # when it reaches each motor
 
 
 class ProgramExecutor:
@@ -94,6 +100,7 @@ class ProgramExecutor:
         self.runner = Runner(motor, self._unit_done)
         self.sel_s = 0          # S memory the next motion of this motor uses (2.2.2 "S")
         self.sel_a = 0          # A memory (2.2.2 "A")
+        self.sel_path = Selection()   # R / N memory of the next "@" (2.2.2 "N", "R")
         self.unwaited: set[int] = set()   # motors with a Y/Z motion nobody waited for
         self._current: _Run | None = None
         self._timer: Timer | None = None
@@ -237,8 +244,14 @@ class ProgramExecutor:
         if run is None:
             self._next()
             return
+        resumed: set[int] = set()
         for motion in run.motions.values():
-            if motion.remaining:
+            if motion.path is not None:
+                if id(motion.path) not in resumed:
+                    resumed.add(id(motion.path))
+                    motion.path.resume(self.kernel.now)
+            elif motion.remaining:
+                motion.delay = 0
                 _issue(motion, motion.remaining)
             elif motion.continuous is not None:
                 motion.motor.run_continuous(*motion.continuous)
@@ -342,6 +355,8 @@ class ProgramExecutor:
                 return flow
             if self.state not in (RUNNING, STEPPING):
                 yield HOLD
+        if run.paths is not None:
+            report_leftovers(run.paths.pairing, self.ctx)
         waiting = tuple(m.motor for m in run.motions.values() if m.wait)
         if waiting:
             yield MotionWait(waiting)
@@ -359,8 +374,10 @@ class ProgramExecutor:
             return stmt
         elif isinstance(stmt, ast.StartBank) and stmt.kind == "B":
             return stmt if stmt.index is not None else None
-        elif isinstance(stmt, (ast.Interp, ast.Wait)):
-            return None  # interpolation: daisy-chain issue; W only inside a branch
+        elif isinstance(stmt, ast.Interp):
+            yield from self._interp(stmt, run)
+        elif isinstance(stmt, ast.Wait):
+            return None  # W only inside a branch
         else:
             self._plain(stmt, run)
         return None
@@ -400,6 +417,9 @@ class ProgramExecutor:
             target.program.sel_s = reg.number
         elif reg.kind == "A":
             self._accel(target, reg.number, run)
+        elif reg.kind in ("N", "R"):
+            target.program.sel_path = target.program.sel_path.select(reg.kind, reg.number,
+                                                                      stmt.modifier)
         elif reg.kind == "M":
             _guard(target, lambda: setattr(target, "torque_limit",
                                            int(target.memory.get("M", reg.number))))
@@ -426,13 +446,55 @@ class ProgramExecutor:
             if not target.motion_done():
                 yield MotionWait((target,))   # 4.3.2: a series of Y completes each motion
             self.unwaited.discard(target.id)
+        if run.paths is not None and run.paths.busy(target):
+            yield MotionWait((target,))       # a path of this line completes first (4.4)
         try:
-            _add_motion(target, run, kind, index, modifier, self.kernel.now)
+            _add_motion(target, run, kind, index, modifier, self.kernel.now,
+                        self._delay(run, target))
         except (MotorError, LookupError, ValueError):
             target.report_error(self.ctx, OutOfRangeError())
             return
         if kind in ("Y", "Z"):
             self.unwaited.add(target.id)
+
+    def _interp(self, stmt: ast.Interp, run: _Run) -> Step:
+        """``@#.n`` (2.1.2, 4.4, :mod:`.coordinated`): pairs with the ``@`` of an adjacent
+        ID on the line; the pair's running motions complete first, unless it continues
+        a path of this line (merged legs, RT3 1.1 ";")."""
+        target = target_motor(self.motor, stmt)
+        if target is None:
+            return
+        paths = run.paths = run.paths or LinePaths(self.kernel.now)
+        try:
+            limits = _limits(target, run)
+        except ValueError:
+            limits = None                    # S or A is 0: no path (error00 if X)
+        try:
+            pair = paths.pairing.add(request(target, stmt, target.program.sel_path, limits,
+                                             self._delay(run, target)))
+        except (MotorError, LookupError):
+            target.report_error(self.ctx, OutOfRangeError())
+            return
+        if pair is not None:
+            busy = paths.busy_before(*pair, self.kernel.now)
+            if busy:
+                yield MotionWait(busy)
+            self.unwaited.difference_update(r.motor.id for r in pair)
+            path = paths.start_or_report(*pair, self.kernel.now, self.ctx)
+            for r in pair if path is not None else ():
+                if getattr(run.motions.get(r.motor.id), "path", None) is not path:
+                    run.motions[r.motor.id] = _Motion(r.motor, issued_at=self.kernel.now,
+                                                      path=path)
+
+    def _delay(self, run: _Run, target: "Motor") -> int:
+        """ns until this line's statements for ``target`` reach it down (or up) the chain
+        as one message (ch. 3 K65; 0 without pacing)."""
+        if target is self.motor:
+            return 0
+        if target.id not in run.arrivals:
+            size = message_bytes(run.unit.statements, target.id, self.motor.id)
+            run.arrivals[target.id] = self.motor.bus.relay(self.motor.id, target.id, size)
+        return max(run.arrivals[target.id] - self.kernel.now, 0)
 
 
 def _bank_context(motor: "Motor") -> "Context":
@@ -462,11 +524,11 @@ def _limits(target: "Motor", run: _Run) -> Limits | None:
 
 
 def _add_motion(target: "Motor", run: _Run, kind: str, index: int, modifier: str | None,
-                now: int) -> None:
+                now: int, delay: int = 0) -> None:
     value = int(target.memory.get("P", index))
     motion = run.motions.get(target.id)
     if motion is None or motion.issued_at != now:
-        motion = run.motions[target.id] = _Motion(target, issued_at=now)
+        motion = run.motions[target.id] = _Motion(target, issued_at=now, delay=delay)
     limits = _limits(target, run)
     motion.push, motion.wait = kind in ("Q", "Z"), kind in ("P", "Q")
     if value == units_mod.CONTINUOUS and modifier is None:
@@ -493,7 +555,7 @@ def _issue(motion: _Motion, waypoints: list[tuple[float, Limits]]) -> None:
         *via, (aim, limits) = waypoints
         motion.motor.push_to(aim, limits, via=via)
     else:
-        motion.motor.move_to(list(waypoints))
+        motion.motor.move_to(list(waypoints), delay_ns=motion.delay)
     motion.profile = motion.motor.axis.profile
     motion.waypoints = list(waypoints)
 

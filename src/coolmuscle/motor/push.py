@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Sequence
 
+from ..sim.kernel import PRIO_MOTION, Timer
 from . import expoly as xp
 from .planner import Limits
 from .status import Ux
@@ -25,7 +26,7 @@ if TYPE_CHECKING:
     from .axis import Axis
     from .motor import Motor
 
-PUSHING, COMPLETE, ERROR = "pushing", "complete", "error"
+APPROACH, PUSHING, COMPLETE, ERROR = "approach", "pushing", "complete", "error"
 
 #: Ux per push state (plain ints: read at every status report).
 _STATUS_BITS = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
@@ -43,6 +44,7 @@ class Push:
         self.state: str | None = None
         self.since: int | None = None
         self._action = ""
+        self._begin_timer: Timer | None = None
 
     @property
     def active(self) -> bool:
@@ -62,13 +64,39 @@ class Push:
 
     def start(self, target: float, limits: Limits,
               via: Sequence[tuple[float, Limits]] = ()) -> None:
-        """Push toward user position ``target`` (after merging through ``via``)."""
-        self.state, self.since = PUSHING, None
-        self.motor.axis.move([*via, (target, limits)])
+        """Push toward user position ``target`` (after merging through ``via``).
+
+        With merge points before it (4.1.4 "S3.1, A1.1, P1.1, S1.1, Q2.1": "changes the
+        speed to S1 at P1 and start performing Push Motion toward P2") the push begins
+        when the motion passes the last of them; until then it is a plain move.
+        """
+        self.clear()
+        axis = self.motor.axis
+        self.state = APPROACH if via else PUSHING
+        axis.move([*via, (target, limits)])
+        if not via:
+            return
+        passing = [t for t, index in axis.profile.passing_times_ns() if index == len(via) - 1]
+        if passing:
+            self._begin_timer = self.motor.kernel.schedule_at(
+                max(passing[0], self.motor.kernel.now), self._begin, priority=PRIO_MOTION,
+                name="push-begins")
+        else:
+            self._begin()
+
+    def _begin(self) -> None:
+        """The last merge point is passed: the push proper starts (K60 torque)."""
+        self._begin_timer = None
+        if self.state == APPROACH:
+            self.state, self.since = PUSHING, None
+            self.motor.axis.refresh()
 
     def clear(self) -> None:
         """Forget the push (a new motion, stop, free, alarm)."""
         self.state, self.since = None, None
+        if self._begin_timer is not None:
+            self._begin_timer.cancel()
+            self._begin_timer = None
 
     # -- watcher --------------------------------------------------------------
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
