@@ -23,6 +23,10 @@ form only, since a bank starts its next line at the exact in-position instant, w
 a 1 ms loop cannot reproduce.
 
 Goals: closed form >= 10,000x real time; closed form >= 50x faster than the 1 ms loop.
+
+A repeated move reuses its solved shaft motion (the solution depends only on the
+drive and the move relative to where it starts: docs/performance.md); the benchmark
+prints the reuse count and, for comparison, the rate with every move solved afresh.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from coolmuscle.chain import Chain
 from coolmuscle.device import Event
 from coolmuscle.motor.analog_output import output_volts
 from coolmuscle.motor.axis import Axis
+from coolmuscle.motor.dynamics import _solved
 from coolmuscle.motor.planner import Waypoint, limits_from_data, plan_moves
 from coolmuscle.motor.profile import Profile, hold
 from coolmuscle.motor.status import status_line
@@ -81,6 +86,16 @@ class ClosedForm:
 
     def run(self, seconds: float) -> None:
         self.chain.kernel.run(until=round(seconds * NS_PER_S))
+
+
+class Afresh(ClosedForm):
+    """The closed form with every move solved afresh: the solved-motion cache
+    (coolmuscle.motor.dynamics._solved) is emptied before each move, as if no two
+    moves of the machine were alike."""
+
+    def _go(self) -> None:
+        _solved.cache_clear()
+        super()._go()
 
 
 class BankLoop:
@@ -230,7 +245,9 @@ def main() -> int:
     samples = compare_traces()
     print(f"traces identical at all {samples} millisecond samples of {WINDOW_S} s "
           "(command, position, speed, torque, status, outputs, analog out)")
+    _solved.cache_clear()
     wall_closed, closed = timed(ClosedForm, CLOSED_S)
+    reuse = _solved.cache_info()
     wall_naive, naive = timed(Naive, NAIVE_S)
     assert isinstance(closed, ClosedForm)
     events = closed.chain.kernel.events_run
@@ -242,6 +259,12 @@ def main() -> int:
           f"-> {rt_closed:,.0f}x real time")
     print(f"naive 1 ms  : {NAIVE_S:>6} s simulated in {wall_naive:6.3f} s wall, "
           f"{naive.moves} moves, 1000 ticks a second -> {rt_naive:,.0f}x real time")
+    print(f"              (repeated moves reuse their solution: {reuse.hits} hits, "
+          f"{reuse.misses} solves over the 3 runs)")
+    wall_fresh, _ = timed(Afresh, CLOSED_S / 4)
+    rt_fresh = CLOSED_S / 4 / wall_fresh
+    print(f"every move solved afresh: {CLOSED_S // 4:>6} s simulated in {wall_fresh:6.3f} s wall "
+          f"-> {rt_fresh:,.0f}x real time (no goal: shows what the reuse is worth)")
     ok_rt, ok_speed = rt_closed >= GOAL_REALTIME, speedup >= GOAL_SPEEDUP
     wall_bank, bank = timed(BankLoop, CLOSED_S)
     assert isinstance(bank, BankLoop)

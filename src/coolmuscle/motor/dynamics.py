@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Callable, Sequence
 
 from ..sim.kernel import NS_PER_S
@@ -118,6 +119,15 @@ class Piece:
     def duration(self) -> float:
         return self.end - self.start
 
+    def shifted(self, ref: float) -> "Piece":
+        """The same piece ``ref`` pulses further on (speed, error, torque and their
+        bounds are shared: they do not depend on where the axis is)."""
+        pos, cmd = self.pos, self.cmd
+        out = Piece(self.start, self.end, self.mode, (pos[0] + ref,) + pos[1:],
+                    (cmd[0] + ref,) + cmd[1:], self.torque, self.k, self.s, self.exit)
+        out._vel, out._err, out._bounds = self.vel(), self.err(), self._bounds
+        return out
+
     def vel(self) -> F:
         """The actual speed (d pos / dτ)."""
         found = self._vel
@@ -197,14 +207,14 @@ class Motion:
         self.origin_ns = int(origin_ns)
         self.drive = drive
         self.kp = drive.kp
-        self.pieces: list[Piece] = []
-        self._starts: list[float] = []
-        self._peaks: dict[str, float] = {}
-        self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
-        self._is_stepper = drive.stepper
-        self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = command_pieces(profile, self.origin_ns)
-        self._build(float(position), float(velocity))
+        ref = self._cmd[0][2][0]
+        if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+            drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+        rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in self._cmd)
+        solved, self._peaks = _solved(drive, float(position) - ref, float(velocity), rel_cmd)
+        self.pieces = [piece.shifted(ref) for piece in solved]
+        self._starts = [piece.start for piece in solved]
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
@@ -267,17 +277,8 @@ class Motion:
         """The largest :meth:`reach` of any piece: a bound over the whole motion.
 
         A watcher whose threshold is at or above it skips every piece, so it can
-        answer "never" without walking them (cached per motion)."""
-        found = self._peaks.get(what)
-        if found is None:
-            pieces = self.pieces
-            found = pieces[0].reach(what)
-            for piece in pieces[1:]:              # max() without the generator
-                r = piece.reach(what)
-                if r > found:
-                    found = r
-            self._peaks[what] = found
-        return found
+        answer "never" without walking them."""
+        return self._peaks[what]
 
     def span(self, piece: Piece) -> tuple[float, float]:
         """Bounds (lowest, highest) of the actual position over a piece."""
@@ -311,6 +312,35 @@ class Motion:
                 at = self.origin_ns + math.ceil((piece.start + best) * NS_PER_S)
                 return max(after_ns, at)
         return None
+
+
+@lru_cache(maxsize=1024)
+def _solved(drive: Drive, position: float, velocity: float,
+            cmd: tuple[tuple[float, float, F], ...]) -> tuple[tuple[Piece, ...], dict[str, float]]:
+    """The pieces of a motion relative to the command's position at its origin, with
+    their bounds and the motion's peaks.  The solution depends on nothing else, so a
+    machine that repeats a cycle solves each of its moves once (docs/performance.md);
+    a hit and a miss give the same numbers."""
+    solver = _Solver(drive, list(cmd))
+    solver._build(position, velocity)
+    pieces = tuple(solver.pieces)
+    peaks = {}
+    for what in _REACH:
+        peaks[what] = max(piece.reach(what) for piece in pieces)
+    return pieces, peaks
+
+
+class _Solver:
+    """Builds the pieces of one motion, in coordinates relative to the command's
+    position at the motion's origin (so a repeated move is solved once: :func:`_solved`)."""
+
+    def __init__(self, drive: Drive, cmd: list[tuple[float, float, F]]) -> None:
+        self.drive = drive
+        self.pieces: list[Piece] = []
+        self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
+        self._is_stepper = drive.stepper
+        self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
+        self._cmd = cmd
 
     # -- building ---------------------------------------------------------------
     def _build(self, p: float, v: float) -> None:
@@ -353,7 +383,6 @@ class Motion:
 
     def _append(self, piece: Piece) -> None:
         self.pieces.append(piece)
-        self._starts.append(piece.start)
 
     def _after(self, piece: Piece, tau: float, kind: str) -> tuple[float, float]:
         """The state where a piece ends, with the exit's exact values."""
