@@ -41,7 +41,7 @@ from coolmuscle.chain import Chain
 from coolmuscle.device import Event
 from coolmuscle.motor.analog_output import output_volts
 from coolmuscle.motor.axis import Axis
-from coolmuscle.motor.dynamics import _solved
+from coolmuscle.motor.dynamics import clear_solutions, solution_reuse
 from coolmuscle.motor.planner import Waypoint, limits_from_data, plan_moves
 from coolmuscle.motor.profile import Profile, hold
 from coolmuscle.motor.status import status_line
@@ -90,11 +90,11 @@ class ClosedForm:
 
 class Afresh(ClosedForm):
     """The closed form with every move solved afresh: the solved-motion cache
-    (coolmuscle.motor.dynamics._solved) is emptied before each move, as if no two
+    (coolmuscle.motor.dynamics.clear_solutions) is emptied before each move, as if no two
     moves of the machine were alike."""
 
     def _go(self) -> None:
-        _solved.cache_clear()
+        clear_solutions()
         super()._go()
 
 
@@ -245,9 +245,9 @@ def main() -> int:
     samples = compare_traces()
     print(f"traces identical at all {samples} millisecond samples of {WINDOW_S} s "
           "(command, position, speed, torque, status, outputs, analog out)")
-    _solved.cache_clear()
+    clear_solutions()
     wall_closed, closed = timed(ClosedForm, CLOSED_S)
-    reuse = _solved.cache_info()
+    hits, solves = solution_reuse()
     wall_naive, naive = timed(Naive, NAIVE_S)
     assert isinstance(closed, ClosedForm)
     events = closed.chain.kernel.events_run
@@ -259,8 +259,8 @@ def main() -> int:
           f"-> {rt_closed:,.0f}x real time")
     print(f"naive 1 ms  : {NAIVE_S:>6} s simulated in {wall_naive:6.3f} s wall, "
           f"{naive.moves} moves, 1000 ticks a second -> {rt_naive:,.0f}x real time")
-    print(f"              (repeated moves reuse their solution: {reuse.hits} hits, "
-          f"{reuse.misses} solves over the 3 runs)")
+    print(f"              (repeated moves reuse their solution: {hits} reused, "
+          f"{solves} solved over the 3 runs)")
     wall_fresh, _ = timed(Afresh, CLOSED_S / 4)
     rt_fresh = CLOSED_S / 4 / wall_fresh
     print(f"every move solved afresh: {CLOSED_S // 4:>6} s simulated in {wall_fresh:6.3f} s wall "

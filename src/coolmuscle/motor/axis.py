@@ -24,7 +24,6 @@ from typing import Callable, Protocol, Sequence
 from ..sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
 from .dynamics import LOST, Drive, Motion
-from .expoly import const, sub
 from .planner import Limits, Waypoint
 from .profile import Profile, Segment, hold
 
@@ -362,12 +361,7 @@ class Axis:
         end = self.profile.end_ns
         if end is None:
             return None
-        window = float(self._window())
-
-        def inside(piece):  # type: ignore[no-untyped-def]
-            e = piece.err()
-            return [sub(const(window), e), sub(e, const(-window))]
-        return self.motion.first(max(after_ns, end), inside)
+        return self.motion.settled(float(self._window()), max(after_ns, end))
 
     def _arrived(self) -> None:
         self.moving = False

@@ -26,7 +26,7 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
-from .memory import VNumber, VState
+from .memory import LIMIT_1E9, VNumber, VState
 from .motor import WRITABLE_STATES
 from .queries import register_reply
 
@@ -71,7 +71,7 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
     if kind == "V":
         def read_v() -> int:
             try:
-                cell = motor.memory.cells("V")[index]
+                cell = motor.memory.data["V"][index]
             except IndexError:
                 return 0
             cls = cell.__class__
@@ -84,7 +84,7 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
 
     def read() -> int:
         try:
-            return motor.memory.cells(kind)[index]
+            return motor.memory.data[kind][index]
         except IndexError:
             return 0
     return read
@@ -178,11 +178,14 @@ def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool, clock
             result = value()
             if kind == "V":
                 memory = motor.memory
-                cell = memory.cells("V")[index]
+                cells = memory.data["V"]
+                cell = cells[index]
                 if cell.__class__ is VState and cell.name in WRITABLE_STATES:
                     motor.write_state(cell.name, result)
+                elif type(result) is int and -LIMIT_1E9 <= result <= LIMIT_1E9:
+                    cells[index] = VNumber(result)       # memory.set_v_number, inline
                 else:
-                    memory.set_v_number(index, result)
+                    memory.set_v_number(index, result)   # raises its error
             else:
                 motor.write_register(kind, index, result)
             if not quiet:

@@ -207,23 +207,23 @@ class Motion:
         self.origin_ns = int(origin_ns)
         self.drive = drive
         self.kp = drive.kp
+        #: The pieces, in order (shared with other motions that are the same move at the
+        #: same place: read only).
+        self.pieces: Sequence[Piece]
         self._cmd = command_pieces(profile, self.origin_ns)
-        ref = self._cmd[0][2][0]
-        if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
-            drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
-        rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in self._cmd)
-        solved, self._peaks = _solved(drive, float(position) - ref, float(velocity), rel_cmd)
-        self.pieces = [piece.shifted(ref) for piece in solved]
-        self._starts = [piece.start for piece in solved]
+        self.pieces, self._starts, self._peaks, self._memo = _placed(
+            drive, float(position), float(velocity), tuple(self._cmd))
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
         return (t_ns - self.origin_ns) / NS_PER_S
 
     def _locate(self, t_ns: int) -> tuple[Piece, float]:
-        rel = max(0.0, self._rel(t_ns))
-        i = max(0, bisect_right(self._starts, rel) - 1)
-        piece = self.pieces[i]
+        rel = (t_ns - self.origin_ns) / NS_PER_S
+        if rel < 0.0:
+            rel = 0.0
+        i = bisect_right(self._starts, rel) - 1
+        piece = self.pieces[i if i > 0 else 0]
         return piece, rel - piece.start
 
     def position_at(self, t_ns: int) -> float:
@@ -280,6 +280,19 @@ class Motion:
         answer "never" without walking them."""
         return self._peaks[what]
 
+    def settled(self, window: float, after_ns: int) -> int | None:
+        """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
+        this motion).  Remembered with the solution: a repeated move asks it again."""
+        key = (window, after_ns - self.origin_ns)
+        found = self._memo.get(key, self)
+        if found is self:
+            def inside(piece: Piece) -> list[F]:
+                e = piece.err()
+                return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
+            at = self.first(after_ns, inside)
+            found = self._memo[key] = None if at is None else at - self.origin_ns
+        return None if found is None else self.origin_ns + found
+
     def span(self, piece: Piece) -> tuple[float, float]:
         """Bounds (lowest, highest) of the actual position over a piece."""
         spread = xp.spread(piece.pos, piece.duration)
@@ -328,6 +341,33 @@ def _solved(drive: Drive, position: float, velocity: float,
     for what in _REACH:
         peaks[what] = max(piece.reach(what) for piece in pieces)
     return pieces, peaks
+
+
+@lru_cache(maxsize=1024)
+def _placed(drive: Drive, position: float, velocity: float,
+            cmd: tuple[tuple[float, float, F], ...]
+            ) -> tuple[tuple[Piece, ...], list[float], dict[str, float], dict]:
+    """The pieces of a motion where it is: :func:`_solved` moved to the command's
+    position at the motion's origin (cached too: a cycle repeats its moves in place)."""
+    ref = cmd[0][2][0]
+    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+        drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+    rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
+    solved, peaks = _solved(drive, position - ref, velocity, rel_cmd)
+    return (tuple(piece.shifted(ref) for piece in solved), [p.start for p in solved], peaks,
+            {})
+
+
+def clear_solutions() -> None:
+    """Forget every solved motion (benchmarks: to time every move solved afresh)."""
+    _placed.cache_clear()
+    _solved.cache_clear()
+
+
+def solution_reuse() -> tuple[int, int]:
+    """(motions that reused a solution, motions solved) since the last clear."""
+    placed, solved = _placed.cache_info(), _solved.cache_info()
+    return placed.hits + solved.hits, solved.misses
 
 
 class _Solver:

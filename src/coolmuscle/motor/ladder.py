@@ -169,7 +169,17 @@ class LadderRunner:
         self._running_id = self._scan_id
         start = self._fast_scan(self.bank)
         if start is None:
-            self._scan_done(None)
+            # _scan_done(None) written out for the common case (a scan ran through)
+            self.scans += 1
+            self.motor.bus.poke()
+            period = self._period
+            if self.state == RUNNING and period is not None and self._timer is None:
+                now = self.kernel.now
+                at = max(self.scan_start + period, self.clock, now, self._last_scan + STEP_NS)
+                self._timer = self.kernel.schedule_at(at, self._scan, priority=PRIO_LOGIC,
+                                                      name="ladder-scan")
+            elif self.state == RUNNING:
+                self._schedule(self._due())
         elif start is not _GONE:
             self.runner.run(self._scan_gen(*start))  # type: ignore[misc]
 

@@ -131,6 +131,9 @@ class Memory:
         self.k37 = k37
         self._alloc: dict[str, int] = {}
         self._data: dict[str, list[Any]] = {}
+        #: The live cells by kind (index = memory number), read only: the ladder
+        #: scanner's fast reads.  The same dict for the life of the memory.
+        self.data = self._data
         self.reset()
 
     # -- shape -----------------------------------------------------------------
@@ -290,7 +293,7 @@ class Memory:
     def reset(self) -> None:
         """Factory state: default values, factory allocation."""
         self._alloc = self._factory_allocation()
-        self._data = {}
+        self._data.clear()
         for kind in REGISTER_KINDS:
             size = self.limit(kind) + 1
             fill: Any = VNumber(0) if kind == "V" else _DEFAULTS[kind]

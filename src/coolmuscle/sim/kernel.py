@@ -51,7 +51,7 @@ def to_seconds(ns: int) -> float:
     return ns / NS_PER_S
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Timer:
     """A scheduled callback; :meth:`cancel` keeps it from running."""
 
@@ -156,13 +156,23 @@ class Kernel:
         events run.
         """
         count = 0
-        while True:
-            nxt = self.peek()
-            if nxt is None or (until is not None and nxt > until):
+        queue, pop, observers = self._queue, heapq.heappop, self._observers
+        while queue:                       # peek() and step() written out: the hot loop
+            at, _prio, _count, timer = queue[0]
+            if timer.cancelled:
+                pop(queue)
+                continue
+            if until is not None and at > until:
                 break
             if max_events is not None and count >= max_events:
                 return count
-            self.step()
+            pop(queue)
+            self._now = at
+            timer.cancelled = True
+            self._events_run += 1
+            timer.callback()
+            for observer in observers:
+                observer()
             count += 1
         if until is not None and until > self._now:
             self._now = until
