@@ -242,3 +242,40 @@ def test_replanning_at_any_moment_keeps_the_motion_finite(
         _continuous(motor.axis.motion)
     chain.kernel.run(until=chain.kernel.now + seconds(60))
     assert abs(motor.axis.position() - steps[-1][1]) <= 5
+
+
+def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> None:
+    """docs/performance.md: a move solved once is reused when the machine repeats it
+    (same drive, same command relative to where it starts); the reused motion is the
+    one a fresh solve gives, to the last bit, and the same move elsewhere differs only
+    by where it is."""
+    from coolmuscle.motor.dynamics import clear_solutions, solution_reuse
+
+    chain, motor = _chain(load_inertia=2e-4)
+    chain.execute("S.1=50, A.1=30, M.1=40, P.1=3000")
+    chain.execute("^.1")
+    chain.kernel.run(until=chain.kernel.now + seconds(0.01))
+    axis = motor.axis
+    args = (axis.profile, axis.motion.origin_ns, axis.motion.position_at(axis.motion.origin_ns),
+            axis.motion.velocity_at(axis.motion.origin_ns), axis.motion.drive)
+    reused_before, _ = solution_reuse()
+    again = Motion(*args)
+    assert solution_reuse()[0] == reused_before + 1
+    clear_solutions()
+    fresh = Motion(*args)
+    assert solution_reuse() == (0, 1)
+    for a, b in zip(again.pieces, fresh.pieces, strict=True):
+        assert (a.start, a.end, a.mode, a.pos, a.cmd, a.torque, a.err(), a.vel()) == \
+               (b.start, b.end, b.mode, b.pos, b.cmd, b.torque, b.err(), b.vel())
+    t = again.origin_ns + seconds(0.2)
+    assert again.settled(5.0, t) == fresh.settled(5.0, t) is not None
+    # the same move 1,000,000 pulses further on: the same errors, speeds and torques
+    from coolmuscle.motor.axis import _to_raw
+    far = Motion(_to_raw(axis.profile, 1_000_000.0, 1), args[1], args[2] + 1_000_000,
+                 args[3], args[4])
+    assert len(far.pieces) == len(fresh.pieces)
+    for a, b in zip(far.pieces, fresh.pieces):
+        assert a.mode == b.mode and a.start == pytest.approx(b.start, abs=1e-9)
+        assert a.pos[0] - 1_000_000 == pytest.approx(b.pos[0], abs=1e-6)
+        assert xp.value(a.err(), a.k, 0.0) == pytest.approx(xp.value(b.err(), b.k, 0.0),
+                                                          abs=1e-6)
