@@ -62,7 +62,7 @@ def run(motors: int, virtual_s: float) -> tuple[float, float, int, int]:
 
 def main() -> None:
     virtual_s = float(sys.argv[1]) if len(sys.argv) > 1 else 60.0
-    repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 3
+    repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 7
     print(f"virtual time {virtual_s:.0f} s per run, best of {repeats}")
     print(f"{'motors':>6} {'moves':>7} {'events':>8} {'wall s':>8} {'sim/wall':>9} "
           f"{'sim/cpu':>8} {'us/move':>8} {'ms per motor-s':>15}")

@@ -44,7 +44,7 @@ def run(virtual_s: float) -> tuple[float, float, int, int, int]:
 
 def main() -> None:
     virtual_s = float(sys.argv[1]) if len(sys.argv) > 1 else 20.0
-    repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 5
+    repeats = int(sys.argv[2]) if len(sys.argv) > 2 else 15
     results = [run(virtual_s) for _ in range(repeats)]
     wall = min(r[0] for r in results)
     cpu = min(r[1] for r in results)
