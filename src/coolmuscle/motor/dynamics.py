@@ -147,31 +147,13 @@ class Piece:
         bounds = self._bounds
         if bounds is None:
             dur = self.end - self.start
-            bounds = self._bounds = (_abs_bound(self.err(), dur), _abs_bound(self.vel(), dur),
-                                     _abs_bound(self.torque, dur))
+            bounds = self._bounds = (xp.abs_bound(self.err(), dur),
+                                     xp.abs_bound(self.vel(), dur),
+                                     xp.abs_bound(self.torque, dur))
         return bounds[_REACH[what]]
 
 
 _REACH = {"err": 0, "vel": 1, "torque": 2}
-
-
-def _abs_bound(f: F, b: float) -> float:
-    """:func:`expoly.abs_bound` written out for the 5-tuple (the same arithmetic):
-    every motion asks it of every piece for each watcher."""
-    if len(f) != 5:
-        return xp.abs_bound(f, b)
-    c0, c1, c2, c3, d = f
-    out = abs(c0) + abs(d)
-    if c1 or c2 or c3:
-        if b == math.inf:
-            return math.inf
-        if c1:
-            out += abs(c1) * b ** 1
-        if c2:
-            out += abs(c2) * b ** 2
-        if c3:
-            out += abs(c3) * b ** 3
-    return out
 
 
 def _sign(x: float) -> int:
@@ -517,10 +499,10 @@ class _Solver:
         load = sgn * d.a_friction + d.a_load
         torque: F = (vel[1] + load, 2.0 * vel[2], 3.0 * vel[3], 0.0, -k * vel[4])  # pos'' + load
         exits = self._walls(pos) if self._walled else []
-        if _abs_bound(torque, dur) > d.a_limit:                 # _beyond("limit", ...)
+        if xp.abs_bound(torque, dur) > d.a_limit:              # _beyond("limit", ...)
             exits += _beyond("limit", torque, dur, d.a_limit)
         kev = (c0 * k, c1 * k, c2 * k, 0.0 * k, ed * k)
-        if _abs_bound(kev, dur) > d.v_max:                       # _beyond("vmax", ...)
+        if xp.abs_bound(kev, dur) > d.v_max:                    # _beyond("vmax", ...)
             exits += _beyond("vmax", kev, dur, d.v_max)
         if still:
             exits += still
