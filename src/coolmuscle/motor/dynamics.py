@@ -119,13 +119,15 @@ class Piece:
     def duration(self) -> float:
         return self.end - self.start
 
-    def shifted(self, ref: float) -> "Piece":
-        """The same piece ``ref`` pulses further on (speed, error, torque and their
-        bounds are shared: they do not depend on where the axis is)."""
-        pos, cmd = self.pos, self.cmd
-        out = Piece(self.start, self.end, self.mode, (pos[0] + ref,) + pos[1:],
-                    (cmd[0] + ref,) + cmd[1:], self.torque, self.k, self.s, self.exit)
-        out._vel, out._err, out._bounds = self.vel(), self.err(), self._bounds
+    def placed(self, p0: float, cmd: F) -> "Piece":
+        """This piece (solved relative to where its command started) where it is: the
+        shaft from ``p0``, under the absolute command ``cmd``.  The error is computed
+        afresh against the command, so Pe = command - position holds in absolute terms
+        and a command ends exactly on its target.  Speed and torque do not depend on
+        where the axis is: they are shared."""
+        out = Piece(self.start, self.end, self.mode, (p0,) + self.pos[1:], cmd,
+                    self.torque, self.k, self.s, self.exit)
+        out._vel = self.vel()
         return out
 
     def vel(self) -> F:
@@ -311,18 +313,13 @@ class Motion:
 
 @lru_cache(maxsize=1024)
 def _solved(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...]) -> tuple[tuple[Piece, ...], dict[str, float]]:
-    """The pieces of a motion relative to the command's position at its origin, with
-    their bounds and the motion's peaks.  The solution depends on nothing else, so a
+            cmd: tuple[tuple[float, float, F], ...]) -> tuple[Piece, ...]:
+    """The pieces of a motion relative to the command's position at its origin.  The solution depends on nothing else, so a
     machine that repeats a cycle solves each of its moves once (docs/performance.md);
     a hit and a miss give the same numbers."""
     solver = _Solver(drive, list(cmd))
     solver._build(position, velocity)
-    pieces = tuple(solver.pieces)
-    peaks = {}
-    for what in _REACH:
-        peaks[what] = max(piece.reach(what) for piece in pieces)
-    return pieces, peaks
+    return tuple(solver.pieces)
 
 
 @lru_cache(maxsize=1024)
@@ -332,12 +329,36 @@ def _placed(drive: Drive, position: float, velocity: float,
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (cached too: a cycle repeats its moves in place)."""
     ref = cmd[0][2][0]
+    rel_drive = drive
     if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
-        drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+        rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
     rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
-    solved, peaks = _solved(drive, position - ref, velocity, rel_cmd)
-    return (tuple(piece.shifted(ref) for piece in solved), [p.start for p in solved], peaks,
-            {})
+    solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
+    pieces: list[Piece] = []
+    ci = 0
+    for piece in solved:
+        t = piece.start
+        while ci < len(cmd) - 1 and cmd[ci][1] <= t:     # the command piece it began in
+            ci += 1
+        c_start, _, c_poly = cmd[ci]
+        p0 = piece.pos[0]
+        if p0 == rel_drive.wall_hi:                      # at a stopper: exactly there
+            p0 = drive.wall_hi
+        elif p0 == rel_drive.wall_lo:
+            p0 = drive.wall_lo
+        else:
+            p0 += ref
+        if piece.exit == "" and piece.mode == STALL:     # the safety net's hold
+            shown = cmd[-1][2]
+        else:
+            shown = xp.shift(c_poly, 0.0, t - c_start)
+        if piece.mode == FREE and not drive.enabled:     # servo off: the command follows
+            shown = (p0,) + piece.cmd[1:]
+        elif piece.pos is piece.cmd:                     # a stepper on its command
+            p0 = shown[0]
+        pieces.append(piece.placed(p0, shown))
+    peaks = {what: max(piece.reach(what) for piece in pieces) for what in _REACH}
+    return tuple(pieces), [p.start for p in pieces], peaks, {}
 
 
 def clear_solutions() -> None:
