@@ -158,17 +158,49 @@ def _new_pty() -> tuple[int, int, str]:
     return master, slave, os.ttyname(slave)
 
 
-class SerialTransport(Transport):
-    """The host line (COM0) on a serial device, at K20 baud and K82 parity."""
+class _PumpedLine(Transport):
+    """A line whose bytes a :class:`_FdPump` moves to and from a file descriptor (a
+    serial device, whose settings follow the parameters, or a pseudo-terminal)."""
 
-    name = "serial-device"
-
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str | None) -> None:
         super().__init__()
         self.path = path
         self._dev: _Device | None = None
         self._pump: _FdPump | None = None
         self._unsubscribe: Any = None
+
+    def _send(self, data: bytes) -> None:
+        if self._pump is not None:
+            if self._dev is not None:
+                self._dev.follow_settings()
+            self._pump.send(data)
+
+    def info(self) -> dict[str, Any]:
+        return {"path": self.path}
+
+    def _release(self) -> None:
+        """What a subclass holds beyond the pump and the device."""
+
+    async def close(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if self._pump is not None:
+            self._pump.close()
+        if self._dev is not None:
+            self._dev.close()
+        self._release()
+        self.finished.set()
+
+
+class SerialTransport(_PumpedLine):
+    """The host line (COM0) on a serial device, at K20 baud and K82 parity."""
+
+    name = "serial-device"
+
+    def __init__(self, path: str) -> None:
+        super().__init__(path)
+        self.path: str = path
 
     def _settings(self) -> tuple[int, str]:
         from ..modbus.rtu import byte_baud
@@ -189,26 +221,8 @@ class SerialTransport(Transport):
         self._dev.follow_settings()
         self.port.feed(data)
 
-    def _send(self, data: bytes) -> None:
-        if self._pump is not None and self._dev is not None:
-            self._dev.follow_settings()
-            self._pump.send(data)
-
     def describe(self) -> str:
         return f"serial: {self.path}"
-
-    def info(self) -> dict[str, Any]:
-        return {"path": self.path}
-
-    async def close(self) -> None:
-        if self._unsubscribe is not None:
-            self._unsubscribe()
-            self._unsubscribe = None
-        if self._pump is not None:
-            self._pump.close()
-        if self._dev is not None:
-            self._dev.close()
-        self.finished.set()
 
 
 def ensure_modbus_mode(device: Any) -> int:
@@ -253,19 +267,15 @@ class ModbusRtuTransport(Transport):
         self.finished.set()
 
 
-class Com1Transport(Transport):
+class Com1Transport(_PumpedLine):
     """COM1 of the final motor, a Modbus host when its K84 is 1, on a pty or a device."""
 
     name = "com1"
 
     def __init__(self, where: str = "pty") -> None:
-        super().__init__()
+        super().__init__(None)
         self.where = where
-        self.path: str | None = None
-        self._dev: _Device | None = None
-        self._pump: _FdPump | None = None
         self._fds: tuple[int, int] | None = None
-        self._unsubscribe: Any = None
         self._com1: Any = None
 
     def _settings(self) -> tuple[int, str]:
@@ -295,26 +305,10 @@ class Com1Transport(Transport):
             self._dev.follow_settings()
         self.port.call(self._com1.feed, data)
 
-    def _send(self, data: bytes) -> None:
-        if self._pump is not None:
-            if self._dev is not None:
-                self._dev.follow_settings()
-            self._pump.send(data)
-
     def describe(self) -> str:
         return f"com1: {self.path or self.where}"
 
-    def info(self) -> dict[str, Any]:
-        return {"path": self.path}
-
-    async def close(self) -> None:
-        if self._unsubscribe is not None:
-            self._unsubscribe()
-            self._unsubscribe = None
-        if self._pump is not None:
-            self._pump.close()
-        if self._dev is not None:
-            self._dev.close()
+    def _release(self) -> None:
         if self._fds is not None:
             for fd in self._fds:
                 try:
@@ -322,4 +316,3 @@ class Com1Transport(Transport):
                 except OSError:
                     pass
             self._fds = None
-        self.finished.set()
