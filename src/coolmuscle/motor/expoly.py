@@ -97,7 +97,8 @@ def spread(f: F, b: float) -> float:
 
 
 def abs_bound(f: F, b: float) -> float:
-    """A bound of ``|f|`` on [0, b] (∞ when b is and ``f`` has a τ term)."""
+    """A bound of ``|f|`` on [0, b] (∞ when b is and ``f`` has a τ term): |c0| plus
+    :func:`spread`, written out for the 5-tuple every motion piece is."""
     out = abs(f[0]) + abs(f[-1])
     if len(f) == 5:
         c1, c2, c3 = f[1], f[2], f[3]
@@ -111,13 +112,7 @@ def abs_bound(f: F, b: float) -> float:
             if c3:
                 out += abs(c3) * b ** 3
         return out
-    for i in range(1, len(f) - 1):
-        c = f[i]
-        if c:
-            if math.isinf(b):
-                return INF
-            out += abs(c) * b ** i
-    return out
+    return abs(f[0]) + spread(f, b)
 
 
 def mul(f: F, g: F) -> F:
