@@ -20,10 +20,12 @@ from ...cml import ast
 from ...errors import MotorError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .banks import Bank, condition_only
-from .direct import MotorEval, inner_motor, route
+from ...cml.ast import inner_motor
+from .direct import MotorEval, route
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 #: RT3 3.4 "Typically steps take 250 µs to execute".
 STEP_NS = 250_000

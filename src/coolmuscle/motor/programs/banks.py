@@ -31,7 +31,8 @@ from ..state.firmware import Firmware
 from ..status import Report
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 log = logging.getLogger(__name__)
 

@@ -27,11 +27,12 @@ from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
 from ..state.memory import LIMIT_1E9, VNumber, VState
-from ..motor import WRITABLE_STATES
+from ..state.memory import WRITABLE_STATES
 from .queries import register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 Reader = Callable[[], int]
 Compiled = Callable[[], object]

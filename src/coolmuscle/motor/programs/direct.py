@@ -12,15 +12,17 @@ import logging
 from typing import TYPE_CHECKING
 
 from ...cml import ast
+from ...cml.ast import inner_motor
 from ...errors import MotorError, OutOfRangeError
-from ..motion.coordinated import direct_interp
+from .coordinated import direct_interp
 from .evaluate import EvalHost, condition, evaluate
 from ..state.memory import VState
-from ..motor import WRITABLE_STATES
+from ..state.memory import WRITABLE_STATES
 from .queries import query_lines, register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 log = logging.getLogger(__name__)
 
@@ -131,15 +133,6 @@ def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         run_statement(target, stmt, ctx)
     else:
         motor.bus.beyond_chain(motor_id, stmt, ctx)
-
-
-def inner_motor(stmt: ast.Statement) -> int | None:
-    """The motor ID a statement names (None when it names none)."""
-    if isinstance(stmt, ast.Assign):
-        return stmt.target.motor
-    if isinstance(stmt, ast.Ref):
-        return stmt.reg.motor
-    return getattr(stmt, "motor", None)
 
 
 def _query(motor: "Motor", q: ast.Query, ctx: "Context") -> None:

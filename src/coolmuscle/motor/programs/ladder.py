@@ -35,7 +35,8 @@ from ..state.memory import VState
 from .queries import format_value, register_name, register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 IDLE, RUNNING, PAUSED = "idle", "running", "paused"
 MAX_CALL_DEPTH = 10   # 2.2.3 "CL": "The maximum layer (nesting) should be under 10"
@@ -51,7 +52,7 @@ class LadderRunner:
     """Scans one ladder bank: the ladder (``motion=False``) or the logic motion bank."""
 
     def __init__(self, motor: "Motor", *, motion: bool = False) -> None:
-        from ..motor import Context
+        from ..context import Context
         self.motor = motor
         self.kernel = motor.kernel
         self.motion = motion

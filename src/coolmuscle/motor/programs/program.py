@@ -29,14 +29,15 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns,
                        wait_branch)
-from ..motion.coordinated import (LinePaths, PairMotion, Selection, message_bytes,
-                                  report_leftovers, request)
+from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
+                          report_leftovers, request)
 from ..motion.planner import Limits
 from ..motion.profile import Profile
 from .queries import register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 IDLE, RUNNING, PAUSED, STEPPING, ESTOP = "idle", "running", "paused", "stepping", "estop"
 MAX_CALL_DEPTH = 10   # 2.2.2 "C": "The maximum layer (nesting) should be under 10"
@@ -499,7 +500,7 @@ class ProgramExecutor:
 
 
 def _bank_context(motor: "Motor") -> "Context":
-    from ..motor import Context
+    from ..context import Context
     return Context(origin="bank", default_motor=motor.id, program=True)
 
 

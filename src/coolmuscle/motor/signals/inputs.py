@@ -27,7 +27,8 @@ from ...sim.kernel import NS_PER_MS, PRIO_IO, Timer
 from .io import digit
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 # K27/K30 level functions (ch. 3 K27)
 LV_GENERAL, LV_ORIGIN, LV_FEED_CW, LV_FEED_CCW, LV_STOP_LADDER = 1, 2, 3, 4, 5
@@ -53,7 +54,7 @@ class InputFunctions:
     @property
     def ctx(self) -> "Context":
         if self._ctx is None:
-            from ..motor import Context
+            from ..context import Context
             self._ctx = Context(origin="motor", default_motor=self.motor.id)
         return self._ctx
 

@@ -27,13 +27,14 @@ from typing import TYPE_CHECKING, Callable, Sequence
 from ...cml import ast
 from ...cml.formatter import format_statement
 from ...errors import MotorError, OutOfRangeError
-from .interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
-from .interp import follow_path, leg_starts, plan_path
-from .planner import Limits, plan_stop
-from .profile import Profile
+from ..motion.interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
+from ..motion.interp import follow_path, leg_starts, plan_path
+from ..motion.planner import Limits, plan_stop
+from ..motion.profile import Profile
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..motor import Motor
+    from ..context import Context
 
 #: Arc length (pulses) below which the rest of a path counts as travelled.
 _DONE = 1e-6
@@ -451,7 +452,7 @@ def _direct_start(line: LinePaths, x: Request, y: Request, ctx: "Context") -> No
 def message_bytes(statements: Sequence[ast.Statement], motor_id: int, default: int) -> int:
     """Bytes of the statements of a bank line for ``motor_id`` sent down the chain as
     one message: their canonical text and a separator each (ch. 3 K65 timing)."""
-    from ..programs.direct import inner_motor      # .direct imports this module
+    from ...cml.ast import inner_motor
     return sum(len(format_statement(stmt)) + 1 for stmt in statements
                if (inner_motor(stmt) or default) == motor_id)
 
