@@ -225,18 +225,21 @@ def test_rt3_1_5_sine_has_the_frequency_of_its_formula() -> None:
 
 def test_rt3_3_6_logic_motion_bank_follows_its_dx_curve() -> None:
     """[LM1 scans every 1 ms whatever K87 is; V3 bound to "Dx" is the target position."""
-    # the curve starts at U2(10) = 9980: a step that far is a position error overflow
-    # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised
-    r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10", "L1", "V1=V1+V2;",
+    # the curve starts at U2(5) = 9995: a step that far is a position error overflow
+    # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised; V2 = 5 keeps the
+    # 2 s sine below K40's 50 000 pps
+    r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=5", "L1", "V1=V1+V2;",
                "V3=U2(V1);", "END", firmware="rt3")
     trace = record(r.chain)
     r.type("[LM1")
     r.until(1.2)
     motor = r.motor()
-    assert motor.logic_motion.scans == 801   # 6 steps (RT3 3.6 "does show 6 steps"): 1.5 ms
-    scan = 1500 * 1000
+    # RT3 3.6: "These banks execute on 1 ms intervals and are independent of K87" and
+    # of the 6-step example "the timing is less than 1ms": a scan every 1 ms, 0..1200 ms
+    assert motor.logic_motion.scans == 1201
+    scan = 1000 * 1000
     n = (seconds(1.2) // scan)
-    v1 = 10 * (n + 1)
+    v1 = 5 * (n + 1)
     assert motor.axis.target() == int(10000 * math.cos(2 * math.pi * (v1 % 10000) / 10000))
     assert abs(trace.sample(1, seconds(1.2)).position - motor.axis.target()) < 400
     r.type("]LM")
