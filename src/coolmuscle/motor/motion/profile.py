@@ -227,9 +227,7 @@ class Profile:
                 edge = center + math.copysign(window, off)
                 tau = _solve_monotone(seg, edge, lo, hi, seg.position(lo) - edge)
                 return self.origin_ns + round((seg.start + tau) * NS_PER_S)
-        if abs(self.start_state[0] - center) > window:
-            return self.origin_ns
-        return None if not self.segments else self.origin_ns
+        return self.origin_ns
 
     def time_speed_below(self, speed: float, after_ns: int) -> int | None:
         """First kernel time >= ``after_ns`` at which |velocity| <= ``speed``."""
