@@ -27,7 +27,7 @@ from typing import Any, Callable, Iterable
 
 import serial
 
-from ..errors import CoolMuscleTimeout, TransportError
+from ..errors import CoolMuscleTimeout, InvalidArgumentError, TransportError
 from ..frontends.urlhandler import register as register_url_handler
 from ..motor.status import Ux
 from . import banks, commands, ops
@@ -63,7 +63,7 @@ class Motor:
 
     def __init__(self, driver: SyncDriver, motor_id: int) -> None:
         if not 1 <= motor_id <= 15:
-            raise ValueError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
+            raise InvalidArgumentError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
         self._driver = driver
         self.id = motor_id
 
