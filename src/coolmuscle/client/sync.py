@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Any, Callable, Iterable
+from urllib.parse import urlsplit
 
 import serial
 
@@ -42,11 +43,26 @@ __all__ = ["connect", "CoolMuscle", "Motor", "open_port"]
 def open_port(url: str, *, baudrate: int = 38400, **kwargs: Any) -> Any:
     """Open any pyserial URL or device path (``coolmuscle://`` included)."""
     register_url_handler()
+    _check_socket_url(url)
     try:
         return serial.serial_for_url(url, baudrate=baudrate, timeout=ops.DEFAULT_TIMEOUT,
                                      **kwargs)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
+
+
+def _check_socket_url(url: str) -> None:
+    """``socket://`` needs a host and a port (pyserial's own error is a comparison)."""
+    if not url.lower().startswith("socket://"):
+        return
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if not parts.hostname or port is None:
+        raise TransportError(f"cannot open {url}: a socket URL is socket://HOST:PORT, e.g. "
+                             "socket://127.0.0.1:5150 (what 'coolmuscle sim' serves)")
 
 
 def program_of(source: str | Path | ProgramFile) -> ProgramFile:

@@ -332,6 +332,12 @@ def run(
             check_trace_path(trace)
         except TraceFormatError as exc:
             raise UsageError(str(exc)) from None
+    if plot is not None:
+        from .plot import PlotFormatError, check_plot_path
+        try:
+            check_plot_path(plot)
+        except PlotFormatError as exc:
+            raise UsageError(str(exc)) from None
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
                         machine)
     try:

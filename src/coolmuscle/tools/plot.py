@@ -43,6 +43,21 @@ ROW_HEIGHT_IN = 0.24
 MAX_POINTS = 2000
 
 
+class PlotFormatError(ValueError):
+    """A plot path whose extension matplotlib cannot write."""
+
+
+def check_plot_path(path: str | Path) -> None:
+    """Refuse, before anything runs, a plot file matplotlib could not write."""
+    suffix = Path(path).suffix.lower().lstrip(".")
+    formats = plt.figure().canvas.get_supported_filetypes()
+    plt.close("all")
+    if suffix not in formats:
+        known = ", ".join(f".{f}" for f in sorted(formats))
+        raise PlotFormatError(f"cannot plot to {path}: the extension decides the format; "
+                              f"one of {known}")
+
+
 def status_class(ux: int) -> str:
     """The timeline colour class of a Ux value."""
     if ux & int(ALARM_BITS):
