@@ -3,7 +3,8 @@
 Drawn like the charts of cml-users-guide.txt 4.1 (speed against time, with the
 in-position and output signals under it): one colour per motor in every panel, the
 target dashed, speed in pulses/s with min⁻¹ on the right, and a timeline with one
-status bar per motor (moving, in position, free, push, alarm, emergency stop) and a
+status bar per motor (moving, in position, free, push, push complete, alarm, emergency
+stop; the legend lists those that occur) and a
 logic-analyser row for every input and output that is ever on.  Panels for the
 analog input/output and the external encoder count appear only when those change.
 Sample instants include every discrete change and solved pulse edge, so steps are
@@ -37,7 +38,8 @@ if TYPE_CHECKING:
 #: Status classes of the timeline bar, in priority order (6.6 ?99).
 STATUS_COLORS = {
     "alarm": "#d62728", "emergency stop": "#7f0000", "motor free": "#f2c200",
-    "push": "#9467bd", "in position": "#2ca02c", "moving": "#9ecae1",
+    "push complete": "#3f007d", "push": "#9467bd", "in position": "#2ca02c",
+    "moving": "#9ecae1",
 }
 ROW_HEIGHT_IN = 0.24
 MAX_POINTS = 2000
@@ -67,7 +69,7 @@ def status_class(ux: int) -> str:
     if ux & Ux.MOTOR_FREE:
         return "motor free"
     if ux & Ux.PUSH:
-        return "push"
+        return "push complete" if ux & Ux.IN_POSITION else "push"   # Ux 40 (4.1.4)
     if ux & Ux.IN_POSITION:
         return "in position"
     return "moving"
