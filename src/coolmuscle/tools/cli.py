@@ -196,6 +196,9 @@ def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str
     """Why a plain ``sim`` answers no CML text: K81 (kept like every K) hands COM0 to
     Modbus RTU (5.6.1), and how to get the text line back (5.6.9, ``--reset``)."""
     saved = f" (saved in {_show_path(state)})" if state is not None else ""
+    if asked and state is None:
+        return (f"coolmuscle: note: K81.1={station}: COM0 speaks Modbus RTU; no state is "
+                "saved, so the next sim starts with K81.1=0 (CML text).")
     if asked:
         return (f"coolmuscle: note: K81.1={station}{saved}: COM0 speaks Modbus RTU; the "
                 "motor keeps K81, so later sims with this state speak Modbus on COM0 too, "
