@@ -340,6 +340,14 @@ def _register_tools() -> None:
 _register_tools()  # check, upload, term (coolmuscle.tools)
 
 
+def _register_batch() -> None:
+    from .tools.batch import register
+    register(app)
+
+
+_register_batch()  # batch, sweep (coolmuscle.tools.batch, docs/batch.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version."""

@@ -1,0 +1,163 @@
+"""Where the runs of a batch happen: in this process, a local process pool, or Dask.
+
+:func:`open_engine` checks everything that can be checked before a run starts (a bad
+``--jobs``, dask not installed, a scheduler that cannot be reached) and raises
+:class:`EngineError`; :meth:`Engine.run` then runs the jobs and calls ``on_done`` with
+each :class:`~coolmuscle.tools.batchjob.Outcome` as it arrives (in completion order),
+and returns the outcomes in job order (``None`` for runs a Ctrl-C left unfinished).
+
+Every engine runs the same function, :func:`coolmuscle.tools.batchjob.execute`, on
+the same plain-value job, so the outcomes are the same whichever engine ran them.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import multiprocessing
+import os
+import signal
+from typing import Any, Callable, Sequence
+
+from ..errors import CoolMuscleError
+from .batchjob import Job, Outcome, execute
+
+log = logging.getLogger(__name__)
+
+OnDone = Callable[[int, Outcome], None]
+
+#: Seconds to wait for a Dask scheduler to answer before giving up (exit 2).
+CONNECT_TIMEOUT = 5.0
+
+
+class EngineError(CoolMuscleError, ValueError):
+    """The runs cannot start: bad ``--jobs``, no dask, an unreachable scheduler."""
+
+
+class Engine:
+    """Runs jobs; :meth:`close` releases what it holds."""
+
+    description = "this process"
+
+    def run(self, jobs: Sequence[Job], on_done: OnDone) -> list[Outcome | None]:
+        outcomes: list[Outcome | None] = [None] * len(jobs)
+        for index, job in enumerate(jobs):
+            outcomes[index] = outcome = execute(job)
+            on_done(index, outcome)
+        return outcomes
+
+    def close(self) -> None:
+        return None
+
+
+def _ignore_sigint() -> None:
+    """Pool workers leave Ctrl-C to the parent, which stops them (no traceback each)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class PoolEngine(Engine):
+    """A ``concurrent.futures`` process pool of ``jobs`` processes on this machine."""
+
+    def __init__(self, jobs: int) -> None:
+        self.jobs = jobs
+        self.description = f"{jobs} local processes"
+        # forkserver: workers fork from a clean server that has imported the runner, not
+        # from this process (whose progress-bar thread a fork would copy mid-lock)
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(["coolmuscle.tools.batchjob", "coolmuscle.chain"])
+        self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=context,
+                                           initializer=_ignore_sigint)
+
+    def run(self, jobs: Sequence[Job], on_done: OnDone) -> list[Outcome | None]:
+        outcomes: list[Outcome | None] = [None] * len(jobs)
+        futures = {self.pool.submit(execute, job): i for i, job in enumerate(jobs)}
+        try:
+            for future in cf.as_completed(futures):
+                index = futures[future]
+                outcomes[index] = outcome = future.result()
+                on_done(index, outcome)
+        except BaseException:
+            self._stop()
+            raise
+        return outcomes
+
+    def _stop(self) -> None:
+        """Ctrl-C: drop the queued runs and end the running ones now."""
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        # the executor has no public way to end a running task; its processes are ours
+        for process in list(getattr(self.pool, "_processes", {}).values()):
+            if process.is_alive():
+                process.terminate()
+        self.pool.shutdown(wait=True)
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True)
+
+
+class DaskEngine(Engine):
+    """The runs as tasks on a Dask distributed cluster (``dask scheduler``/``worker``)."""
+
+    def __init__(self, address: str) -> None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise EngineError("--scheduler needs dask.distributed: pip install "
+                              "'coolmuscle[dask]'") from None
+        self.address = address
+        try:
+            self.client: Any = Client(address, timeout=CONNECT_TIMEOUT,
+                                      set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise EngineError(f"cannot reach the Dask scheduler at {address}: "
+                              f"{_short(exc)}") from None
+        workers = len(self.client.scheduler_info().get("workers", {}))
+        self.description = f"Dask scheduler {address} ({workers} worker(s) now)"
+
+    def run(self, jobs: Sequence[Job], on_done: OnDone) -> list[Outcome | None]:
+        from distributed import as_completed
+
+        outcomes: list[Outcome | None] = [None] * len(jobs)
+        futures = [self.client.submit(execute, job, pure=False, key=f"coolmuscle-run-{i}-"
+                                      f"{os.getpid()}-{id(jobs)}")
+                   for i, job in enumerate(jobs)]
+        index_of = {future.key: i for i, future in enumerate(futures)}
+        try:
+            for future in as_completed(futures):
+                index = index_of[future.key]
+                outcomes[index] = outcome = future.result()
+                on_done(index, outcome)
+        except BaseException:
+            self.client.cancel(futures)
+            raise
+        return outcomes
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def default_jobs() -> int:
+    """The CPU count this process may use."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def open_engine(jobs: int | None, scheduler: str | None) -> Engine:
+    """The engine for ``--jobs`` / ``--scheduler`` (raises :class:`EngineError`)."""
+    if scheduler is not None:
+        if jobs is not None:
+            raise EngineError("--jobs and --scheduler exclude each other (the cluster's "
+                              "workers decide how many runs go at once)")
+        if not scheduler.strip():
+            raise EngineError("--scheduler needs an address, e.g. tcp://127.0.0.1:8786")
+        return DaskEngine(scheduler.strip())
+    count = default_jobs() if jobs is None else jobs
+    if count < 1:
+        raise EngineError(f"--jobs must be at least 1, not {count}")
+    return Engine() if count == 1 else PoolEngine(count)

@@ -1,0 +1,98 @@
+"""Figures of one run for ``coolmuscle sweep`` / ``batch --results`` (docs/batch.md).
+
+Per motor ``m<ID>.``: ``final_position`` (pulses), ``peak_speed`` (|pulses/s|),
+``peak_torque`` (|% rated|), ``peak_temperature`` (°C, the ?71 reading, cml-users-guide
+6.6), ``in_position`` (the virtual instants, seconds, at which Ux gained the
+in-position bit 8, 6.6 ?99) and ``alarms`` (the Ux alarm bits seen, ch. 3 K56/K57).
+
+Position, speed, torque and status come from the chain's trace recorder
+(:class:`coolmuscle.sim.trace.TraceRecorder`) sampled exactly as ``coolmuscle run
+--trace`` samples it (a 1 ms grid plus every change), so a figure equals what that
+trace file shows.  The temperature is read through the device API
+(``Device.snapshot``) after every kernel event.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from ..motor.status import ALARM_BITS, Ux
+from ..sim.kernel import NS_PER_S
+from ..sim.trace import FIELDS as TRACE_FIELDS
+
+log = logging.getLogger(__name__)
+
+#: Trace grid of the figures: the same step as ``coolmuscle run --trace``.
+TRACE_STEP = 0.001
+
+#: Figure names per motor, in column order.
+FIGURES = ("final_position", "peak_speed", "peak_torque", "peak_temperature",
+           "in_position", "alarms")
+
+_ALARM_NAMES = tuple((int(flag), flag.name.lower()) for flag in Ux
+                     if flag.value and flag.value & int(ALARM_BITS) and flag.name)
+
+
+def alarm_names(bits: int) -> str:
+    """``4 | 128`` -> ``"overload;temperature"`` (Ux alarm bits, 6.6 ?99)."""
+    return ";".join(name for bit, name in _ALARM_NAMES if bits & bit)
+
+
+class FigureProbe:
+    """Attached to a chain before a run; :meth:`figures` after it."""
+
+    def __init__(self, chain: Any) -> None:
+        self.chain = chain
+        self.recorder = chain.record()
+        self.ids: tuple[int, ...] = tuple(chain.motor_ids)
+        self.peak_temperature = {m: chain.snapshot(m).temperature for m in self.ids}
+        self._remove = chain.kernel.add_observer(self._observe)
+
+    def _observe(self) -> None:
+        for motor in self.ids:
+            temperature = self.chain.snapshot(motor).temperature
+            if temperature > self.peak_temperature[motor]:
+                self.peak_temperature[motor] = temperature
+
+    def figures(self) -> dict[str, object]:
+        """Stop observing and return ``{"m1.final_position": ..., ...}``."""
+        self._remove()
+        self._observe()
+        rows = list(self.recorder.rows(TRACE_STEP))
+        out: dict[str, object] = {}
+        width = len(TRACE_FIELDS)
+        for index, motor in enumerate(self.ids):
+            base = 1 + index * width
+            position, speed, torque, status = (base + TRACE_FIELDS.index(name) for name in
+                                               ("position", "speed", "torque", "status"))
+            prefix = f"m{motor}."
+            out[prefix + "final_position"] = rows[-1][position] if rows else 0.0
+            out[prefix + "peak_speed"] = max((abs(r[speed]) for r in rows), default=0.0)
+            out[prefix + "peak_torque"] = max((abs(r[torque]) for r in rows), default=0.0)
+            out[prefix + "peak_temperature"] = self.peak_temperature[motor]
+            out[prefix + "in_position"] = in_position_times(
+                [(r[0], int(r[status])) for r in rows])
+            alarms = 0
+            for r in rows:
+                alarms |= int(r[status]) & int(ALARM_BITS)
+            out[prefix + "alarms"] = alarm_names(alarms)
+        return out
+
+
+def in_position_times(samples: list[tuple[float, int]]) -> str:
+    """``"1.100000;3.250000"``: instants (s) at which the status gained bit 8 (Ux=8)."""
+    times: list[str] = []
+    before = True  # a motor in position at the start has not arrived anywhere
+    for t, status in samples:
+        now = bool(status & int(Ux.IN_POSITION))
+        if now and not before:
+            times.append(f"{t:.6f}")
+        before = now
+    return ";".join(times)
+
+
+def ns_to_seconds(ns: int) -> str:
+    """Virtual time as text, to the nanosecond (``"1.100000000"``)."""
+    whole, frac = divmod(int(ns), NS_PER_S)
+    return f"{whole}.{frac:09d}"
