@@ -175,27 +175,29 @@ def _result_text(outcome: Outcome | None) -> str:
 
 def print_summary(run: BatchRun, value_names: Sequence[str] = (),
                   figures: Sequence[str] = ()) -> None:
-    """The summary table (stdout), each failure's first difference and a count (stderr)."""
-    out = Console(soft_wrap=False, highlight=False, width=max(Console().width, 100))
-    table = Table(show_lines=False, box=None, pad_edge=False)
+    """The summary table (stdout), each failure's first difference and a count (stderr).
+
+    A sweep's table shows the varied values instead of the script's name."""
+    probe = Console()
+    out = Console(highlight=False, width=probe.width if probe.is_terminal else 200)
+    table = Table(box=None, pad_edge=False)
     for name in value_names:
-        table.add_column(name)
-    table.add_column("script" if not value_names else "run")
-    table.add_column("result")
-    table.add_column("virtual s", justify="right")
+        table.add_column(name, overflow="fold")
+    if not value_names:
+        table.add_column("script", overflow="fold")
+    table.add_column("result", no_wrap=True)
+    table.add_column("virtual s", justify="right", no_wrap=True)
     for figure in figures:
-        table.add_column(figure, justify="right")
+        table.add_column(figure, justify="right", no_wrap=True)
     table.add_column("first difference", overflow="fold")
     for job, outcome in zip(run.jobs, run.outcomes):
         values = dict(job.values)
-        cells = [values.get(n, "") for n in value_names]
-        cells += [job.name, _result_text(outcome),
-                  ns_to_seconds(outcome.end_ns) if outcome else ""]
+        cells = [_escape(values.get(n, "")) for n in value_names] or [_escape(job.name)]
+        cells += [_result_text(outcome), ns_to_seconds(outcome.end_ns) if outcome else ""]
         shown = dict(outcome.figures) if outcome else {}
         cells += [_short_number(shown.get(f, "")) for f in figures]
-        cells.append(outcome.message if outcome else "")
-        table.add_row(*[_escape(c) if i != len(value_names) + 1 else c
-                        for i, c in enumerate(cells)])
+        cells.append(_escape(outcome.message if outcome else ""))
+        table.add_row(*cells)
     out.print(table)
     for outcome in run.failed:
         err.print(f"coolmuscle: FAIL {outcome.name}: {outcome.message}", markup=False)

@@ -16,7 +16,9 @@ import concurrent.futures as cf
 import logging
 import multiprocessing
 import os
+import re
 import signal
+import socket
 from typing import Any, Callable, Sequence
 
 from ..errors import CoolMuscleError
@@ -25,6 +27,9 @@ from .batchjob import Job, Outcome, execute
 log = logging.getLogger(__name__)
 
 OnDone = Callable[[int, Outcome], None]
+
+#: The port of ``dask scheduler`` when an address names none.
+DEFAULT_SCHEDULER_PORT = 8786
 
 #: Seconds to wait for a Dask scheduler to answer before giving up (exit 2).
 CONNECT_TIMEOUT = 5.0
@@ -83,9 +88,10 @@ class PoolEngine(Engine):
 
     def _stop(self) -> None:
         """Ctrl-C: drop the queued runs and end the running ones now."""
-        self.pool.shutdown(wait=False, cancel_futures=True)
         # the executor has no public way to end a running task; its processes are ours
-        for process in list(getattr(self.pool, "_processes", {}).values()):
+        processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
             if process.is_alive():
                 process.terminate()
         self.pool.shutdown(wait=True)
@@ -98,6 +104,7 @@ class DaskEngine(Engine):
     """The runs as tasks on a Dask distributed cluster (``dask scheduler``/``worker``)."""
 
     def __init__(self, address: str) -> None:
+        probe_scheduler(address)
         try:
             from distributed import Client
         except ImportError:
@@ -122,7 +129,7 @@ class DaskEngine(Engine):
                    for i, job in enumerate(jobs)]
         index_of = {future.key: i for i, future in enumerate(futures)}
         try:
-            for future in as_completed(futures):
+            for future in as_completed(futures, loop=self.client.loop):
                 index = index_of[future.key]
                 outcomes[index] = outcome = future.result()
                 on_done(index, outcome)
@@ -133,6 +140,23 @@ class DaskEngine(Engine):
 
     def close(self) -> None:
         self.client.close()
+
+
+def probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Fail at once (not after the client's retries) when nothing listens at a
+    ``tcp://HOST:PORT`` address; other protocols are left to the client."""
+    match = re.fullmatch(r"(?:tcp://)?(\[[^\]]+\]|[^:/\[\]]+)(?::(\d+))?/?", address)
+    if match is None:
+        if "://" in address and not address.startswith("tcp://"):
+            return
+        raise EngineError(f"--scheduler {address}: write tcp://HOST:PORT")
+    host = match.group(1).strip("[]")
+    port = int(match.group(2) or DEFAULT_SCHEDULER_PORT)
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        raise EngineError(f"cannot reach the Dask scheduler at {address}: "
+                          f"{exc.strerror or exc}") from None
 
 
 def _short(exc: BaseException) -> str:
