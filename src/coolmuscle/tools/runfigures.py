@@ -56,40 +56,42 @@ class FigureProbe:
                 self.peak_temperature[motor] = temperature
 
     def figures(self) -> dict[str, object]:
-        """Stop observing and return ``{"m1.final_position": ..., ...}``."""
+        """Stop observing and return ``{"m1.final_position": ..., ...}`` (one pass over
+        the trace rows, never held in memory)."""
         self._remove()
         self._observe()
-        rows = list(self.recorder.rows(TRACE_STEP))
-        out: dict[str, object] = {}
         width = len(TRACE_FIELDS)
-        for index, motor in enumerate(self.ids):
-            base = 1 + index * width
-            position, speed, torque, status = (base + TRACE_FIELDS.index(name) for name in
-                                               ("position", "speed", "torque", "status"))
+        columns = [tuple(1 + i * width + TRACE_FIELDS.index(name)
+                         for name in ("position", "speed", "torque", "status"))
+                   for i in range(len(self.ids))]
+        final = [0.0] * len(self.ids)
+        speed = [0.0] * len(self.ids)
+        torque = [0.0] * len(self.ids)
+        alarms = [0] * len(self.ids)
+        arrivals: list[list[str]] = [[] for _ in self.ids]
+        before = [True] * len(self.ids)  # in position at the start is no arrival
+        alarm_bits, in_position = int(ALARM_BITS), int(Ux.IN_POSITION)
+        for row in self.recorder.rows(TRACE_STEP):
+            for i, (p, v, t, st) in enumerate(columns):
+                final[i] = row[p]
+                speed[i] = max(speed[i], abs(row[v]))
+                torque[i] = max(torque[i], abs(row[t]))
+                status = int(row[st])
+                alarms[i] |= status & alarm_bits
+                now = bool(status & in_position)
+                if now and not before[i]:
+                    arrivals[i].append(f"{row[0]:.6f}")
+                before[i] = now
+        out: dict[str, object] = {}
+        for i, motor in enumerate(self.ids):
             prefix = f"m{motor}."
-            out[prefix + "final_position"] = rows[-1][position] if rows else 0.0
-            out[prefix + "peak_speed"] = max((abs(r[speed]) for r in rows), default=0.0)
-            out[prefix + "peak_torque"] = max((abs(r[torque]) for r in rows), default=0.0)
+            out[prefix + "final_position"] = final[i]
+            out[prefix + "peak_speed"] = speed[i]
+            out[prefix + "peak_torque"] = torque[i]
             out[prefix + "peak_temperature"] = self.peak_temperature[motor]
-            out[prefix + "in_position"] = in_position_times(
-                [(r[0], int(r[status])) for r in rows])
-            alarms = 0
-            for r in rows:
-                alarms |= int(r[status]) & int(ALARM_BITS)
-            out[prefix + "alarms"] = alarm_names(alarms)
+            out[prefix + "in_position"] = ";".join(arrivals[i])
+            out[prefix + "alarms"] = alarm_names(alarms[i])
         return out
-
-
-def in_position_times(samples: list[tuple[float, int]]) -> str:
-    """``"1.100000;3.250000"``: instants (s) at which the status gained bit 8 (Ux=8)."""
-    times: list[str] = []
-    before = True  # a motor in position at the start has not arrived anywhere
-    for t, status in samples:
-        now = bool(status & int(Ux.IN_POSITION))
-        if now and not before:
-            times.append(f"{t:.6f}")
-        before = now
-    return ";".join(times)
 
 
 def ns_to_seconds(ns: int) -> str:
