@@ -26,7 +26,7 @@ from typing import Iterator
 
 import pytest
 
-from coolmuscle.cli import main
+from coolmuscle.tools.cli import main
 
 DATA = Path(__file__).parent / "data" / "batch"
 SRC = Path(__file__).resolve().parent.parent / "src"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.cli import main
+from coolmuscle.tools.cli import main
 
 DATA = Path(__file__).parent / "data" / "batch" / "sweep"
 SCRIPT = DATA / "move.cml"

@@ -47,7 +47,7 @@ UNTIL_HELP = "After each script, run on to this virtual time (seconds)."
 
 def usage_error(message: str) -> Exception:
     """The command's exit-2 error (``coolmuscle.cli.UsageError``)."""
-    from ..cli import UsageError  # noqa: PLC0415  (cli imports this module)
+    from .cli import UsageError  # noqa: PLC0415  (cli imports this module)
     return UsageError(message)
 
 

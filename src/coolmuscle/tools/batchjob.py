@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ..errors import CoolMuscleError
-from ..machine import MachineFileError, parse_machine
-from ..script import ScriptError, parse_script, run_script
+from ..chain.machine import MachineFileError, parse_machine
+from .script import ScriptError, parse_script, run_script
 from .runfigures import FigureProbe
 
 log = logging.getLogger(__name__)

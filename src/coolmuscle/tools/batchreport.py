@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import CoolMuscleError
-from ..sim.trace import parquet_available
+from .trace import parquet_available
 from .batchjob import Job, Outcome
 from .runfigures import ns_to_seconds
 

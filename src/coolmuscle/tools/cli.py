@@ -343,7 +343,7 @@ _register_tools()  # check, upload, term (coolmuscle.tools)
 
 
 def _register_batch() -> None:
-    from .tools.batch import register
+    from .batch import register
     register(app)
 
 

@@ -19,7 +19,7 @@ from typing import Any
 
 from ..motor.status import ALARM_BITS, Ux
 from ..sim.kernel import NS_PER_S
-from ..sim.trace import FIELDS as TRACE_FIELDS
+from .trace import FIELDS as TRACE_FIELDS, record
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ class FigureProbe:
 
     def __init__(self, chain: Any) -> None:
         self.chain = chain
-        self.recorder = chain.record()
+        self.recorder = record(chain)
         self.ids: tuple[int, ...] = tuple(chain.motor_ids)
         self.peak_temperature = {m: chain.snapshot(m).temperature for m in self.ids}
         self._remove = chain.kernel.add_observer(self._observe)
