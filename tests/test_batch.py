@@ -26,6 +26,7 @@ from typing import Iterator
 
 import pytest
 
+from coolmuscle.tools.batchrun import chunks
 from coolmuscle.tools.cli import main
 
 DATA = Path(__file__).parent / "data" / "batch"
@@ -191,7 +192,8 @@ def test_the_same_batch_through_dask_gives_the_same_results(
                  "--results", str(dask_csv), "--junit", str(dask_xml))
     assert local[0] == remote[0] == 1
     assert "Dask scheduler" in remote[2] and "2 worker(s)" in remote[2]
-    assert sum(_worker_task_counts(dask_cluster)) - before == len(SCRIPTS)  # ran there
+    # the runs went to the workers: one task per part of the batch
+    assert sum(_worker_task_counts(dask_cluster)) - before == len(chunks(len(SCRIPTS), 2))
     assert dask_csv.read_bytes() == local_csv.read_bytes()   # figures too, bit for bit
     assert _without_times(dask_xml) == _without_times(local_xml)
     failure = junit_cases(dask_xml)[str(FAILING)].find("failure")
@@ -260,7 +262,12 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
     try:
-        time.sleep(2.0)
+        # once the pool's two workers exist (the runs are under way), as a user would
+        deadline = time.monotonic() + 60
+        while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.5)
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=30)
     finally:
@@ -282,9 +289,12 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
     assert suite is not None and suite.get("skipped") == str(not_run)
     # the pool's workers are gone; the forkserver and resource tracker follow their parent
     deadline = time.monotonic() + 10
-    while True:
-        left = subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True, text=True)
-        if not left.stdout.strip() or time.monotonic() > deadline:
-            break
+    while _group(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert left.stdout.strip() == "", "processes of the batch are still running"
+    assert not _group(proc.pid), "processes of the batch are still running"
+
+
+def _group(pgid: int) -> list[str]:
+    """The processes of a process group (the batch, its forkserver and workers)."""
+    found = subprocess.run(["pgrep", "-g", str(pgid)], capture_output=True, text=True)
+    return found.stdout.split()

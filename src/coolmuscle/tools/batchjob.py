@@ -153,6 +153,11 @@ def execute(job: Job) -> Outcome:
     return dataclasses.replace(outcome, wall_s=time.perf_counter() - start)
 
 
+def execute_many(jobs: list[Job]) -> list[Outcome]:
+    """:func:`execute` each job in turn (one worker task for several short runs)."""
+    return [execute(job) for job in jobs]
+
+
 def _run(job: Job, state_dir: str | None) -> Outcome:
     from ..chain import Chain
 

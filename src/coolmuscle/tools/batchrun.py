@@ -19,10 +19,11 @@ import os
 import re
 import signal
 import socket
+import time
 from typing import Any, Callable, Sequence
 
 from ..errors import CoolMuscleError
-from .batchjob import Job, Outcome, execute
+from .batchjob import Job, Outcome, execute, execute_many
 
 log = logging.getLogger(__name__)
 
@@ -30,6 +31,9 @@ OnDone = Callable[[int, Outcome], None]
 
 #: The port of ``dask scheduler`` when an address names none.
 DEFAULT_SCHEDULER_PORT = 8786
+
+#: Most runs sent to a worker as one task.
+MAX_CHUNK = 16
 
 #: Seconds to wait for a Dask scheduler to answer before giving up (exit 2).
 CONNECT_TIMEOUT = 5.0
@@ -75,12 +79,13 @@ class PoolEngine(Engine):
 
     def run(self, jobs: Sequence[Job], on_done: OnDone) -> list[Outcome | None]:
         outcomes: list[Outcome | None] = [None] * len(jobs)
-        futures = {self.pool.submit(execute, job): i for i, job in enumerate(jobs)}
+        futures = {self.pool.submit(execute_many, [jobs[i] for i in part]): part
+                   for part in chunks(len(jobs), self.jobs)}
         try:
             for future in cf.as_completed(futures):
-                index = futures[future]
-                outcomes[index] = outcome = future.result()
-                on_done(index, outcome)
+                for index, outcome in zip(futures[future], future.result()):
+                    outcomes[index] = outcome
+                    on_done(index, outcome)
         except BaseException:
             self._stop()
             raise
@@ -124,15 +129,18 @@ class DaskEngine(Engine):
         from distributed import as_completed
 
         outcomes: list[Outcome | None] = [None] * len(jobs)
-        futures = [self.client.submit(execute, job, pure=False, key=f"coolmuscle-run-{i}-"
-                                      f"{os.getpid()}-{id(jobs)}")
-                   for i, job in enumerate(jobs)]
-        index_of = {future.key: i for i, future in enumerate(futures)}
+        workers = max(len(self.client.scheduler_info().get("workers", {})), 1)
+        parts = chunks(len(jobs), workers)
+        tag = f"{os.getpid()}-{id(jobs)}-{time.monotonic_ns()}"
+        futures = [self.client.submit(execute_many, [jobs[i] for i in part], pure=False,
+                                      key=f"coolmuscle-runs-{n}-{tag}")
+                   for n, part in enumerate(parts)]
+        part_of = {future.key: part for future, part in zip(futures, parts)}
         try:
             for future in as_completed(futures, loop=self.client.loop):
-                index = index_of[future.key]
-                outcomes[index] = outcome = future.result()
-                on_done(index, outcome)
+                for index, outcome in zip(part_of[future.key], future.result()):
+                    outcomes[index] = outcome
+                    on_done(index, outcome)
         except BaseException:
             self.client.cancel(futures)
             raise
@@ -157,6 +165,13 @@ def probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
     except OSError as exc:
         raise EngineError(f"cannot reach the Dask scheduler at {address}: "
                           f"{exc.strerror or exc}") from None
+
+
+def chunks(count: int, workers: int) -> list[range]:
+    """The job indices in parts of a task each: about 8 parts per worker, at most
+    ``MAX_CHUNK`` runs a part, so short runs do not pay one task's overhead each."""
+    size = max(1, min(MAX_CHUNK, count // (workers * 8)))
+    return [range(start, min(start + size, count)) for start in range(0, count, size)]
 
 
 def _short(exc: BaseException) -> str:
