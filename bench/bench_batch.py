@@ -15,7 +15,7 @@ from start to exit:
 
 Printed side by side: the wall time, the speed-up over ``-j 1`` next to the ideal
 (the jobs, at most the CPUs this process may use), and the cost per run
-((batch of COUNT - batch of one ``?96.1``) / (COUNT - 1)) next to one ``coolmuscle run --check``
+((batch of COUNT - batch of two ``?96.1``) / (COUNT - 2)) next to one ``coolmuscle run --check``
 of a script (a fresh process each time: what a shell loop over the scripts costs) and
 next to the run itself in a warm process (``execute`` of the job, no command around
 it).  ``--figures`` adds ``--results`` (each run then also computes its figures from
@@ -124,7 +124,7 @@ def main() -> None:
                         help="also write --results (figures from each run's trace)")
     parser.add_argument("--no-dask", action="store_true", help="skip the Dask cluster")
     options = parser.parse_args()
-    count = max(options.count, 2)
+    count = max(options.count, 3)
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     with tempfile.TemporaryDirectory(prefix="bench-batch-") as tmp:
         folder = Path(tmp)
@@ -132,7 +132,8 @@ def main() -> None:
         many.mkdir()
         one.mkdir()
         paths = make_scripts(many, count)
-        (one / "query.cml").write_text("?96.1\n")  # the batch of 1: start-up cost only
+        for name in ("a", "b"):  # the batch of 2 (a pool of 2 too): start-up cost only
+            (one / f"{name}.cml").write_text("?96.1\n")
         extra = ["--results", str(folder / "r.csv")] if options.figures else []
 
         work = warm_run_cost(paths[:min(count, 61)], options.figures)
@@ -150,7 +151,7 @@ def main() -> None:
             for label, args, jobs in configs:
                 full = min(timed(["batch", str(many), *args, *extra]) for _ in range(2))
                 base = min(timed(["batch", str(one), *args, *extra]) for _ in range(2))
-                rows.append((label, jobs, full, (full - base) / (count - 1)))
+                rows.append((label, jobs, full, (full - base) / (count - 2)))
         finally:
             if cluster is not None:
                 cluster.stop()
@@ -166,8 +167,8 @@ def main() -> None:
         ideal = min(jobs, cpus or 1)
         print(f"{label:<16} {full:8.2f} {serial / full:8.2f}x {ideal:5d}x "
               f"{per_run * 1000:11.2f} {single / per_run:10.1f}x {per_run / work:11.2f}x")
-    print("speed-up: wall of -j 1 / wall; ms per run: (batch of COUNT - batch of one ?96.1) / "
-          "(COUNT - 1); vs one run: how many runs a batch makes in the time of one "
+    print("speed-up: wall of -j 1 / wall; ms per run: (batch of COUNT - batch of two ?96.1) / "
+          "(COUNT - 2); vs one run: how many runs a batch makes in the time of one "
           "`coolmuscle run`; vs the work: batch cost per run / the run's own cost")
 
 

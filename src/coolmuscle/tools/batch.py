@@ -118,9 +118,9 @@ def prepare(build: Callable[[], list[Job]]) -> list[Job]:
         raise usage_error(str(exc)) from None
 
 
-def start_engine(jobs: int | None, scheduler: str | None) -> Engine:
+def start_engine(jobs: int | None, scheduler: str | None, runs: int) -> Engine:
     try:
-        return open_engine(jobs, scheduler)
+        return open_engine(jobs, scheduler, runs)
     except EngineError as exc:
         raise usage_error(str(exc)) from None
 
@@ -266,7 +266,7 @@ def batch(
                                       figures=results is not None)
                              for path, text in texts])
     check_outputs(junit=junit, results=results)
-    engine = start_engine(jobs, scheduler)
+    engine = start_engine(jobs, scheduler, len(built))
     run = run_all(engine, built, "batch")
     write_outputs(run, junit, results, "coolmuscle.batch")
     print_summary(run)

@@ -187,8 +187,9 @@ def default_jobs() -> int:
         return os.cpu_count() or 1
 
 
-def open_engine(jobs: int | None, scheduler: str | None) -> Engine:
-    """The engine for ``--jobs`` / ``--scheduler`` (raises :class:`EngineError`)."""
+def open_engine(jobs: int | None, scheduler: str | None, runs: int | None = None) -> Engine:
+    """The engine for ``--jobs`` / ``--scheduler`` (raises :class:`EngineError`); no more
+    local processes than ``runs``, and none for a single run."""
     if scheduler is not None:
         if jobs is not None:
             raise EngineError("--jobs and --scheduler exclude each other (the cluster's "
@@ -199,4 +200,6 @@ def open_engine(jobs: int | None, scheduler: str | None) -> Engine:
     count = default_jobs() if jobs is None else jobs
     if count < 1:
         raise EngineError(f"--jobs must be at least 1, not {count}")
+    if runs is not None:
+        count = max(min(count, runs), 1)
     return Engine() if count == 1 else PoolEngine(count)

@@ -147,7 +147,7 @@ def sweep(
     check_outputs(junit=junit, results=results, plot=plot)
     if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
         raise usage_error(f"--plot {plot}: PNG, SVG or PDF by extension")
-    engine = start_engine(jobs, scheduler)
+    engine = start_engine(jobs, scheduler, len(built))
     run = run_all(engine, built, "sweep")
     write_outputs(run, junit, results, "coolmuscle.sweep")
     if plot is not None and column is not None and run.done:
