@@ -11,6 +11,7 @@ The Dask test starts a real ``dask scheduler`` and two ``dask worker`` processes
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -128,13 +129,13 @@ def _dask_bin() -> str:
     return found
 
 
-@pytest.fixture
-def dask_cluster(tmp_path: Path) -> Iterator[str]:
-    """A scheduler and two single-thread workers on 127.0.0.1; stopped afterwards."""
+@contextlib.contextmanager
+def cluster(tmp_path: Path, workers: int) -> Iterator[str]:
+    """A scheduler and ``workers`` single-thread workers on 127.0.0.1, always stopped."""
     dask = _dask_bin()
-    env = dict(os.environ, PYTHONPATH=str(SRC), DASK_DISTRIBUTED__WORKER__DAEMON="False")
+    env = dict(os.environ, PYTHONPATH=str(SRC))
     scheduler_file = tmp_path / "scheduler.json"
-    logs = [(tmp_path / f"{name}.log").open("w") for name in ("scheduler", "w1", "w2")]
+    logs = [(tmp_path / f"dask-{n}.log").open("w") for n in range(workers + 1)]
     procs: list[subprocess.Popen[bytes]] = []
     try:
         procs.append(subprocess.Popen(
@@ -143,7 +144,7 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
             env=env, stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True))
         deadline = time.monotonic() + 30
         while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            assert procs[0].poll() is None, (tmp_path / "scheduler.log").read_text()
+            assert procs[0].poll() is None, (tmp_path / "dask-0.log").read_text()
             assert time.monotonic() < deadline, "the scheduler did not start"
             time.sleep(0.05)
         address = json.loads(scheduler_file.read_text())["address"]
@@ -153,9 +154,10 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
                 [dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
                  "--no-nanny", "--no-dashboard"],
                 env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True))
-        from distributed import Client
-        with Client(address, timeout=30) as client:
-            client.wait_for_workers(2, timeout=60)
+        if workers:
+            from distributed import Client
+            with Client(address, timeout=30) as client:
+                client.wait_for_workers(workers, timeout=60)
         yield address
     finally:  # workers first: a worker whose scheduler is gone waits to reconnect
         for proc in reversed(procs):
@@ -168,6 +170,13 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
                 proc.wait()
         for log in logs:
             log.close()
+
+
+@pytest.fixture
+def dask_cluster(tmp_path: Path) -> Iterator[str]:
+    """A scheduler and two workers on 127.0.0.1 (ports chosen by the OS)."""
+    with cluster(tmp_path, 2) as address:
+        yield address
 
 
 def _worker_task_counts(address: str) -> list[int]:
@@ -234,6 +243,18 @@ def test_unreachable_scheduler_is_one_line_exit_2_at_once(
     assert err == f"coolmuscle: error: cannot reach the Dask scheduler at {address}: " \
                   "Connection refused\n"
     assert time.monotonic() - start < 5
+
+
+def test_a_scheduler_without_workers_is_one_line_exit_2(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from coolmuscle.tools import batchrun
+    monkeypatch.setattr(batchrun, "CONNECT_TIMEOUT", 0.5)
+    with cluster(tmp_path, 0) as address:
+        code, out, err = cli(capsys, "batch", str(DATA), "--scheduler", address)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert err.startswith(f"coolmuscle: error: the Dask scheduler at {address} has no "
+                          "workers")
 
 
 def test_a_bad_script_in_the_batch_stops_it_before_it_runs(

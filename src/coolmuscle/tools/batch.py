@@ -60,6 +60,7 @@ class BatchRun:
     interrupted: bool
     wall_s: float
     engine: str
+    stopped: str = ""  # why the engine stopped before the end (a worker died), if it did
 
     @property
     def done(self) -> list[Outcome]:
@@ -72,7 +73,7 @@ class BatchRun:
     def exit_code(self) -> int:
         if self.interrupted:
             return EXIT_INTERRUPTED
-        return EXIT_FAILED if self.failed else 0
+        return EXIT_FAILED if self.failed or self.stopped else 0
 
 
 def script_paths(scripts: Sequence[Path]) -> list[Path]:
@@ -141,6 +142,7 @@ def run_all(engine: Engine, jobs: list[Job], label: str = "runs") -> BatchRun:
     counts = {"failed": 0}
     start = time.perf_counter()
     interrupted = False
+    stopped = ""
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                         MofNCompleteColumn(), TextColumn("{task.fields[failed]} failed"),
                         TimeElapsedColumn(), console=err, transient=False)
@@ -157,13 +159,16 @@ def run_all(engine: Engine, jobs: list[Job], label: str = "runs") -> BatchRun:
             engine.run(jobs, done)
         except KeyboardInterrupt:
             interrupted = True
+        except Exception as exc:  # the engine broke (a worker died): report what finished
+            log.debug("the engine failed", exc_info=True)
+            stopped = f"the runs stopped: {type(exc).__name__}: {exc}"
         finally:
             try:
                 engine.close()
             except KeyboardInterrupt:
                 interrupted = True
     return BatchRun(jobs, outcomes, interrupted, time.perf_counter() - start,
-                    engine.description)
+                    engine.description, stopped)
 
 
 def _result_text(outcome: Outcome | None) -> str:
@@ -207,10 +212,12 @@ def print_summary(run: BatchRun, value_names: Sequence[str] = (),
     failed = len(done) - passed - errors
     text = (f"coolmuscle: {len(run.jobs)} run(s): {passed} passed, {failed} failed, "
             f"{errors} error(s) in {run.wall_s:.2f} s on {run.engine}")
-    if run.interrupted:
-        text += (f"; interrupted: {len(done)} finished, {len(run.jobs) - len(done)} "
-                 "not run")
+    if run.interrupted or run.stopped:
+        text += (f"; {'interrupted' if run.interrupted else 'stopped'}: {len(done)} "
+                 f"finished, {len(run.jobs) - len(done)} not run")
     err.print(text, markup=False)
+    if run.stopped:
+        err.print(f"coolmuscle: error: {run.stopped}", markup=False)
 
 
 def _short_number(value: object) -> str:

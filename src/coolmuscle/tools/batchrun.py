@@ -122,6 +122,12 @@ class DaskEngine(Engine):
         except (OSError, TimeoutError, ValueError) as exc:
             raise EngineError(f"cannot reach the Dask scheduler at {address}: "
                               f"{_short(exc)}") from None
+        try:
+            self.client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+        except (OSError, TimeoutError) as exc:
+            self.client.close()
+            raise EngineError(f"the Dask scheduler at {address} has no workers (start "
+                              f"'dask worker {address}'): {_short(exc)}") from None
         workers = len(self.client.scheduler_info().get("workers", {}))
         self.description = f"Dask scheduler {address} ({workers} worker(s) now)"
 
