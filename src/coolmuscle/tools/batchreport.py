@@ -120,8 +120,8 @@ def _write_parquet(path: Path, header: list[str], rows: list[list[object]]) -> P
         if present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
             columns[name] = pa.array([None if v == "" else v for v in values], pa.int64())
         elif present and all(isinstance(v, (int, float)) for v in present):
-            columns[name] = pa.array([None if v == "" else float(v) for v in values],
-                                     pa.float64())
+            columns[name] = pa.array([v if isinstance(v, (int, float)) else None
+                                      for v in values], pa.float64())
         else:
             columns[name] = pa.array([str(v) for v in values], pa.string())
     pq.write_table(pa.table(columns), str(path))

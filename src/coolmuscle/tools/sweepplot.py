@@ -47,8 +47,10 @@ def plot_sweep(path: Path, jobs: Sequence[Job], outcomes: Sequence[Outcome | Non
         value = dict(job.values)[first]
         if value not in x_values:
             x_values.append(value)
-    numeric = all(_number(v) is not None for v in x_values)
-    position = {v: (_number(v) if numeric else float(i)) for i, v in enumerate(x_values)}
+    numbers = [_number(v) for v in x_values]
+    numeric = all(n is not None for n in numbers)
+    position = {v: (n if numeric and n is not None else float(i))
+                for i, (v, n) in enumerate(zip(x_values, numbers))}
     lines: dict[str, list[tuple[float, float, bool]]] = {}
     for job, outcome in zip(jobs, outcomes):
         if outcome is None:
