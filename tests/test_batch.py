@@ -218,7 +218,7 @@ def _free_port() -> int:
 
 @pytest.mark.parametrize("args, message", [
     (["batch", str(DATA / "2.1-operation.cml"), "missing.cml"], "missing.cml: no such script"),
-    (["batch", str(DATA), "--jobs", "0"], "--jobs must be at least 1"),
+    (["batch", str(DATA), "--jobs", "0"], "--jobs must be 1..256, not 0"),
     (["batch", str(DATA), "--jobs", "2", "--scheduler", "tcp://127.0.0.1:8786"],
      "--jobs and --scheduler exclude each other"),
     (["batch", str(DATA), "--results", "/nonexistent-dir/r.csv"], "does not exist"),

@@ -117,7 +117,10 @@ def _write_parquet(path: Path, header: list[str], rows: list[list[object]]) -> P
     for index, name in enumerate(header):
         values = [row[index] for row in rows]
         present = [v for v in values if v != ""]
-        if present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+        if name == "duration_s":  # seconds to the ns as text in CSV; a number here
+            columns[name] = pa.array([float(str(v)) if v != "" else None for v in values],
+                                     pa.float64())
+        elif present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
             columns[name] = pa.array([None if v == "" else v for v in values], pa.int64())
         elif present and all(isinstance(v, (int, float)) for v in present):
             columns[name] = pa.array([v if isinstance(v, (int, float)) else None

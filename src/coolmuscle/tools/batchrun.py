@@ -32,6 +32,9 @@ OnDone = Callable[[int, Outcome], None]
 #: The port of ``dask scheduler`` when an address names none.
 DEFAULT_SCHEDULER_PORT = 8786
 
+#: Most local processes (``--jobs``).
+MAX_JOBS = 256
+
 #: Most runs sent to a worker as one task.
 MAX_CHUNK = 16
 
@@ -204,8 +207,8 @@ def open_engine(jobs: int | None, scheduler: str | None, runs: int | None = None
             raise EngineError("--scheduler needs an address, e.g. tcp://127.0.0.1:8786")
         return DaskEngine(scheduler.strip())
     count = default_jobs() if jobs is None else jobs
-    if count < 1:
-        raise EngineError(f"--jobs must be at least 1, not {count}")
+    if not 1 <= count <= MAX_JOBS:
+        raise EngineError(f"--jobs must be 1..{MAX_JOBS}, not {count}")
     if runs is not None:
         count = max(min(count, runs), 1)
     return Engine() if count == 1 else PoolEngine(count)

@@ -6,9 +6,11 @@ Per motor ``m<ID>.``: ``final_position`` (pulses), ``peak_speed`` (|pulses/s|),
 in-position bit 8, 6.6 ?99) and ``alarms`` (the Ux alarm bits seen, ch. 3 K56/K57).
 
 Position, speed, torque and status come from the chain's trace recorder
-(:class:`coolmuscle.sim.trace.TraceRecorder`) sampled exactly as ``coolmuscle run
+(:class:`coolmuscle.tools.trace.TraceRecorder`) sampled exactly as ``coolmuscle run
 --trace`` samples it (a 1 ms grid plus every change), so a figure equals what that
-trace file shows.  The temperature is read through the device API
+trace file shows; a run longer than 200 virtual seconds is sampled on a grid of
+1/200,000 of its length (plus every change) instead, so its figures stay bounded in
+time and memory.  The temperature is read through the device API
 (``Device.snapshot``) after every kernel event.
 """
 
@@ -26,12 +28,21 @@ log = logging.getLogger(__name__)
 #: Trace grid of the figures: the same step as ``coolmuscle run --trace``.
 TRACE_STEP = 0.001
 
+#: Most grid samples of one run's figures: a run longer than MAX_GRID ms of virtual
+#: time is sampled on a coarser grid (every change is still a sample).
+MAX_GRID = 200_000
+
 #: Figure names per motor, in column order.
 FIGURES = ("final_position", "peak_speed", "peak_torque", "peak_temperature",
            "in_position", "alarms")
 
 _ALARM_NAMES = tuple((int(flag), flag.name.lower()) for flag in Ux
                      if flag.value and flag.value & int(ALARM_BITS) and flag.name)
+
+
+def grid_step(duration_ns: int) -> float:
+    """``TRACE_STEP`` (1 ms), or ``duration / MAX_GRID`` for a run over 200 s."""
+    return max(TRACE_STEP, duration_ns / NS_PER_S / MAX_GRID)
 
 
 def alarm_names(bits: int) -> str:
@@ -71,7 +82,7 @@ class FigureProbe:
         arrivals: list[list[str]] = [[] for _ in self.ids]
         before = [True] * len(self.ids)  # in position at the start is no arrival
         alarm_bits, in_position = int(ALARM_BITS), int(Ux.IN_POSITION)
-        for row in self.recorder.rows(TRACE_STEP):
+        for row in self.recorder.rows(grid_step(self.chain.kernel.now - self.recorder.start)):
             for i, (p, v, t, st) in enumerate(columns):
                 final[i] = row[p]
                 speed[i] = max(speed[i], abs(row[v]))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import re
 import sys
 from pathlib import Path
@@ -33,6 +34,9 @@ _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 #: Figures ``--figure`` can plot (numbers); the others (in_position, alarms) are text.
 NUMERIC = ("final_position", "peak_speed", "peak_torque", "peak_temperature")
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
+
+#: Most runs one sweep makes (a bigger grid is an error, before anything runs).
+MAX_RUNS = 100_000
 
 
 def parse_vary(items: list[str]) -> list[tuple[str, list[str]]]:
@@ -95,6 +99,9 @@ def build_jobs(script: Path, text: str, machine: tuple[str, str] | None,
         if name not in used:
             raise usage_error(f"--vary {name}: {{{name}}} appears neither in {script}"
                               + (f" nor in {machine[0]}" if machine else ""))
+    total = math.prod(len(values) for _, values in vary)
+    if total > MAX_RUNS:
+        raise usage_error(f"--vary: {total} combinations, more than {MAX_RUNS} runs")
     jobs: list[Job] = []
     for combination in itertools.product(*(values for _, values in vary)):
         values = dict(zip(names, combination))
