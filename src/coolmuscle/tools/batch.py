@@ -29,6 +29,7 @@ from .batchjob import FIRMWARES, Job, JobError, Outcome, make_job
 from .batchreport import ReportError, check_output, write_junit, write_results
 from .batchrun import Engine, EngineError, open_engine
 from .runfigures import ns_to_seconds
+from .usage import UsageError
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +47,7 @@ UNTIL_HELP = "After each script, run on to this virtual time (seconds)."
 
 
 def usage_error(message: str) -> Exception:
-    """The command's exit-2 error (``coolmuscle.cli.UsageError``)."""
-    from .cli import UsageError  # noqa: PLC0415  (cli imports this module)
+    """The command's exit-2 error (:class:`coolmuscle.tools.usage.UsageError`)."""
     return UsageError(message)
 
 
@@ -280,11 +280,3 @@ def batch(
     sys.stdout.flush()
     if run.exit_code():
         raise typer.Exit(run.exit_code())
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``batch`` and ``sweep`` to the ``coolmuscle`` command."""
-    from .sweep import sweep  # noqa: PLC0415
-
-    app.command()(batch)
-    app.command()(sweep)

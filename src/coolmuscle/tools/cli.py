@@ -340,11 +340,11 @@ _register_tools()  # check, upload, term (coolmuscle.tools)
 
 
 def _register_batch() -> None:
-    from .batch import register
+    from .batchcommands import register
     register(app)
 
 
-_register_batch()  # batch, sweep (coolmuscle.tools.batch, docs/batch.md)
+_register_batch()  # batch, sweep (coolmuscle.tools.batchcommands, docs/batch.md)
 
 
 @app.command()
