@@ -319,3 +319,25 @@ def _group(pgid: int) -> list[str]:
     """The processes of a process group (the batch, its forkserver and workers)."""
     found = subprocess.run(["pgrep", "-g", str(pgid)], capture_output=True, text=True)
     return found.stdout.split()
+
+
+def test_the_chain_header_chooses_motors_firmware_and_a_state_directory(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """'# chain: motors=2 state=1' (as tests/transcripts use it): ID2 answers (1.1 daisy
+    chain), '$' saves into a state directory of the run's own (2.1.2)."""
+    script = tmp_path / "two.cml"
+    script.write_text("# chain: motors=2 state=1\n?96.2\n<< ?96.2\\r\\n\n<< Px.2=0\\r\\n\n"
+                      "$.1\n@wait 0.1\n")
+    code, _, err = cli(capsys, "batch", str(script), "--results", str(tmp_path / "r.csv"))
+    assert code == 1  # '$.1' answers something the transcript does not expect ...
+    assert "after the last expectation the motor sent" in err
+    header = tmp_path / "bad.cml"
+    header.write_text("# chain: motorz=2\n?96.1\n")
+    code, _, err = cli(capsys, "batch", str(header))
+    assert code == 2 and "unknown '# chain:' key 'motorz'" in err
+    script.write_text("# chain: motors=2 state=1\n?96.2\n<< ?96.2\\r\\n\n<< Px.2=0\\r\\n\n")
+    code, _, err = cli(capsys, "batch", str(script))
+    assert code == 0, err
+    import csv
+    rows = list(csv.DictReader((tmp_path / "r.csv").open()))
+    assert rows[0]["m2.final_position"] == "0"  # the figures of motor 2 are there
