@@ -1,0 +1,73 @@
+"""The bridge application: the four Cool Muscles behind the slave (manual 1.4, 6.3).
+
+:class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
+object dictionary built from the table, the SII image, and the 1 ms cycle
+(:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
+the device API's snapshots into the input image.  Part 1 (the device on the wire)
+fills the csp TxPDO's position actual value (6064h + 0x800 n, 6.3.2) from
+``Device.snapshot``; the CiA402 state machine and the modes (part 2) attach here
+through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` /
+:meth:`cycle`, without touching the ESC.
+
+Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
+:meth:`safe_outputs` and the dictionary hooks run in the frame thread and must
+not call the model; :meth:`cycle` runs in the model's thread.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from . import esm
+from . import identity as ident
+from .dictionary import Dictionary
+from .objects import Table, build_table
+from .sii import build_sii
+from .slave import SlaveStack
+
+log = logging.getLogger(__name__)
+
+AXIS_OFFSET = 0x800
+INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+
+
+class BridgeApp:
+    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4)."""
+
+    def __init__(self, device: Any, bridge: str = ident.DEFAULT_VARIANT) -> None:
+        self.device = device
+        self.table: Table = build_table(bridge)
+        self.variant = self.table.variant
+        self.dictionary = Dictionary(self.table)
+        self.sii = build_sii(self.table)
+        self.stack = SlaveStack(self, self.sii)
+        ids = tuple(getattr(device, "motor_ids", lambda: ())()) if device is not None else ()
+        self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
+        self.operational = False
+
+    # -- frame thread ---------------------------------------------------------
+    def state_change(self, current: int, requested: int) -> int:
+        """Every valid transition is accepted (the CiA402 checks come with part 2)."""
+        if requested == esm.OP:
+            self.operational = True
+        elif current == esm.OP:
+            self.operational = False
+        return 0
+
+    def outputs(self, image: bytes) -> None:
+        """An output image in OP: already in the dictionary (6040h/607Ah per axis)."""
+
+    def safe_outputs(self) -> None:
+        """OP left: the commands of the output image are no longer valid (6.3)."""
+        self.operational = False
+
+    # -- model thread ---------------------------------------------------------------
+    def cycle(self) -> None:
+        """One bridge cycle: read each motor through the device API, publish the inputs."""
+        od = self.dictionary
+        for axis in self.axes:
+            snap = self.device.snapshot(axis)
+            position = max(INT32_MIN, min(INT32_MAX, int(snap.position)))
+            od.set(0x6064 + AXIS_OFFSET * (axis - 1), 0, position)
+        self.stack.set_inputs(od.pack_inputs())

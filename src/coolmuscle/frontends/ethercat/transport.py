@@ -1,0 +1,189 @@
+"""Raw-socket transport: EtherCAT frames (EtherType 0x88A4) on an AF_PACKET socket.
+
+:class:`FrameThread` answers every frame in its own thread (like an ESC answers in
+hardware), so the motor model never delays an answer; the model side exchanges
+process data through the slave stack's buffers.  :class:`EthercatTransport` is the
+:class:`~coolmuscle.transports.base.Transport` that ``coolmuscle sim --ethercat``
+starts in the service loop: it owns the frame thread and the bridge's 1 ms cycle
+task (manual 6.3) that runs in the model's thread.
+
+Needs root or CAP_NET_RAW.  The loopback interface is refused: a frame sent on
+``lo`` comes back to the sender unchanged, so a master there would read its own
+frames as answers (and the slave its own answers as requests).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+import sys
+import threading
+import time
+from collections import deque
+from typing import Any
+
+from ...errors import TransportError
+from ...transports.base import Port, Transport
+from .esc import ETHERTYPE_ECAT
+
+log = logging.getLogger(__name__)
+
+PACKET_OUTGOING = 4
+#: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
+SWITCH_INTERVAL = 0.0002
+
+
+def check_interface(iface: str) -> None:
+    """Refuse a name that cannot carry the bridge (loopback, missing interface)."""
+    if not iface:
+        raise TransportError("--ethercat needs an interface name (there is no default)")
+    if iface == "lo" or iface.startswith("lo:"):
+        raise TransportError("refusing the loopback interface 'lo': it reflects every frame "
+                             "to its sender, so a master would read its own frames; use a "
+                             "veth pair (coolmuscle ethercat lab up) or a real NIC")
+    try:
+        socket.if_nametoindex(iface)
+    except OSError:
+        raise TransportError(f"no network interface {iface!r}") from None
+
+
+def open_socket(iface: str) -> socket.socket:
+    """An AF_PACKET socket bound to ``iface`` for EtherType 0x88A4."""
+    try:
+        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETHERTYPE_ECAT))
+    except PermissionError:
+        raise TransportError("raw sockets need root or CAP_NET_RAW "
+                             "(sudo setcap cap_net_raw+ep on the python binary)") from None
+    except OSError as exc:
+        raise TransportError(f"cannot open an AF_PACKET socket: {exc}") from None
+    try:
+        sock.bind((iface, ETHERTYPE_ECAT))
+    except OSError as exc:
+        sock.close()
+        raise TransportError(f"cannot bind to {iface!r}: {exc.strerror or exc}") from None
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    return sock
+
+
+class FrameThread:
+    """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
+
+    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000) -> None:
+        self.esc = esc
+        self.iface = iface
+        self.sock = open_socket(iface)
+        self.sock.settimeout(0.001)
+        self.turnaround_ns: deque[int] = deque(maxlen=keep)
+        self.errors = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"ethercat-{iface}", daemon=True)
+        self._old_switch = sys.getswitchinterval()
+
+    def start(self) -> None:
+        sys.setswitchinterval(min(self._old_switch, SWITCH_INTERVAL))
+        self._thread.start()
+
+    def _run(self) -> None:
+        sock, esc = self.sock, self.esc
+        buf = bytearray(2048)
+        view = memoryview(buf)
+        clock = time.monotonic_ns
+        while not self._stop.is_set():
+            try:
+                n, addr = sock.recvfrom_into(buf)
+            except socket.timeout:
+                esc.tick(clock())
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    break
+                self.errors += 1
+                continue
+            if addr[2] == PACKET_OUTGOING:
+                continue
+            t0 = clock()
+            try:
+                out = esc.process(view[:n], t0)
+            except Exception:      # a bug must not stop the slave: the frame is lost
+                self.errors += 1
+                log.exception("ESC failed on a frame")
+                continue
+            if out is None:
+                continue
+            try:
+                sock.send(out)
+            except OSError:
+                self.errors += 1
+            self.turnaround_ns.append(clock() - t0)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self.sock.close()
+        sys.setswitchinterval(self._old_switch)
+
+
+class EthercatTransport(Transport):
+    """``sim --ethercat IFACE``: the bridge as an EtherCAT slave on a raw interface."""
+
+    name = "ethercat"
+
+    def __init__(self, where: str = "", bridge: str = "EB02", cycle_s: float = 0.001) -> None:
+        super().__init__()
+        check_interface(where)
+        self.iface = where
+        self.bridge = bridge
+        self.cycle_s = cycle_s
+        self.app: Any = None
+        self.frames: FrameThread | None = None
+        self._task: asyncio.Task[None] | None = None
+        self.late_cycles = 0
+        self.cycles = 0
+
+    async def start(self, port: Port) -> None:
+        from .app import BridgeApp
+        self.port = port
+        self.app = BridgeApp(port.device, self.bridge)
+        self.frames = FrameThread(self.app.stack.esc, self.iface)
+        self.frames.start()
+        self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
+
+    async def _cycle(self) -> None:
+        """The bridge's 1 ms cycle in the model's thread (6.3), paced to the wall clock."""
+        assert self.port is not None
+        loop = asyncio.get_running_loop()
+        period = self.cycle_s
+        due = loop.time()
+        while True:
+            due += period
+            delay = due - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            elif delay < -period:
+                self.late_cycles += 1
+                due = loop.time()
+            try:
+                self.port.call(self.app.cycle)
+            except Exception:
+                log.exception("bridge cycle failed")
+            self.cycles += 1
+
+    def describe(self) -> str:
+        return f"ethercat: {self.iface} ({self.bridge}, EtherCAT slave, EtherType 0x88A4)"
+
+    def info(self) -> dict[str, Any]:
+        return {"iface": self.iface, "bridge": self.bridge}
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            try:
+                await self._task
+            except asyncio.CancelledError:
+                pass
+            self._task = None
+        if self.frames is not None:
+            self.frames.close()
+            self.frames = None
