@@ -24,7 +24,7 @@ from collections import deque
 from typing import Any
 
 from ...errors import TransportError
-from ...transports.base import Port, Transport
+from ..transports.base import Port, Transport
 from .esc import ETHERTYPE_ECAT
 
 log = logging.getLogger(__name__)
