@@ -42,7 +42,7 @@ class BridgeApp:
         self.dictionary = Dictionary(self.table)
         self.sii = build_sii(self.table)
         self.stack = SlaveStack(self, self.sii)
-        ids = tuple(getattr(device, "motor_ids", lambda: ())()) if device is not None else ()
+        ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
         self.operational = False
 

@@ -15,7 +15,9 @@ frames as answers (and the slave its own answers as requests).
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
+import os
 import socket
 import sys
 import threading
@@ -69,8 +71,11 @@ def open_socket(iface: str) -> socket.socket:
 class FrameThread:
     """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
 
-    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000) -> None:
+    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000,
+                 priority: int = 40) -> None:
         self.esc = esc
+        self.priority = priority
+        self.realtime = False
         self.iface = iface
         self.sock = open_socket(iface)
         self.sock.settimeout(0.001)
@@ -84,7 +89,19 @@ class FrameThread:
         sys.setswitchinterval(min(self._old_switch, SWITCH_INTERVAL))
         self._thread.start()
 
+    def _realtime(self) -> None:
+        """Run this thread under SCHED_FIFO when allowed (root): a real ESC never waits."""
+        if self.priority <= 0 or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
+                                  os.sched_param(self.priority))
+            self.realtime = True
+        except (OSError, PermissionError):
+            log.info("frame thread stays at normal priority (no CAP_SYS_NICE)")
+
     def _run(self) -> None:
+        self._realtime()
         sock, esc = self.sock, self.esc
         buf = bytearray(2048)
         view = memoryview(buf)
@@ -147,6 +164,7 @@ class EthercatTransport(Transport):
         self.port = port
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)
+        gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
         self.frames.start()
         self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
 
