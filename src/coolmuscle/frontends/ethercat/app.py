@@ -22,6 +22,7 @@ from typing import Any
 from . import esm
 from . import identity as ident
 from .dictionary import Dictionary
+from .drive import Drive
 from .objects import Table, build_table
 from .sii import build_sii
 from .slave import SlaveStack
@@ -44,6 +45,7 @@ class BridgeApp:
         self.stack = SlaveStack(self, self.sii)
         ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
+        self.drives = {n: Drive(device, n) for n in self.axes}
         self.operational = False
 
     # -- frame thread ---------------------------------------------------------
@@ -64,10 +66,15 @@ class BridgeApp:
 
     # -- model thread ---------------------------------------------------------------
     def cycle(self) -> None:
-        """One bridge cycle: read each motor through the device API, publish the inputs."""
+        """One bridge cycle: each axis's drive steps (6.1, 6.3), then the inputs go out."""
         od = self.dictionary
+        operational = self.operational
         for axis in self.axes:
+            d = AXIS_OFFSET * (axis - 1)
             snap = self.device.snapshot(axis)
-            position = max(INT32_MIN, min(INT32_MAX, int(snap.position)))
-            od.set(0x6064 + AXIS_OFFSET * (axis - 1), 0, position)
+            word = self.drives[axis].step(int(od.get(0x6040 + d)), int(od.get(0x607A + d)),
+                                          int(od.get(0x6060 + d)), snap, operational)
+            od.set(0x6041 + d, 0, word)
+            od.set(0x6064 + d, 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
+            od.set(0x6061 + d, 0, od.get(0x6060 + d))
         self.stack.set_inputs(od.pack_inputs())
