@@ -6,7 +6,11 @@ the statuswords of 6.1.3, and csp following 607Ah through ``Device.target_stream
 
 from __future__ import annotations
 
-from ethercat_support import link, needs_net_admin, run_master
+import json
+import subprocess
+import sys
+
+from ethercat_support import MASTERS, link, needs_net_admin, run_master
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat import cia402
@@ -30,9 +34,12 @@ def test_cia402_table_6_1_1_transitions():
     assert s is State.FAULT_REACTION
     s = cia402.next_state(s, 0x0F, 0x0F, True)
     assert s is State.FAULT
-    assert cia402.next_state(s, 0x80, 0x00, True) is State.FAULT           # alarm still on
-    assert cia402.next_state(s, 0x80, 0x80, False) is State.FAULT          # no rising edge
-    assert cia402.next_state(s, 0x80, 0x00, False) is State.SWITCH_ON_DISABLED
+    assert cia402.next_state(s, 0x80, 0x80, True) is State.FAULT           # no rising edge
+    s = cia402.next_state(s, 0x80, 0x00, True)                             # 15: reset
+    assert s is State.SWITCH_ON_DISABLED
+    s = cia402.next_state(s, 0x06, 0x80, True)           # State A: the latched alarm waits
+    assert s is State.READY
+    assert cia402.next_state(s, 0x07, 0x06, True) is State.SWITCHED_ON
 
 
 def test_statusword_6_1_3():
@@ -62,3 +69,29 @@ def test_soem_enables_all_axes_and_a_2s_csp_ramp_ends_on_target_6_3():
     assert r["max_lag"] < 100, r["max_lag"]       # 2 pulses/ms: a few cycles of lag at most
     assert all(w & 0x6F == 0x21 and w & 0x8000 for w in r["after_shutdown"]), \
         r["after_shutdown"]
+
+
+@needs_net_admin
+def test_a_motor_alarm_is_a_fault_and_fault_reset_clears_it_6_1_1():
+    with link("c2") as lab:
+        with ServiceThread(lambda: Chain(None, 4, firmware="cm2"),
+                           lambda: [EthercatTransport(lab.slave_if, "EB02")]) as st:
+            master = subprocess.Popen(
+                ["ip", "netns", "exec", lab.namespace, sys.executable,
+                 str(MASTERS / "soem_master.py"), lab.master_if, "fault"],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            try:
+                assert master.stdout.readline().strip() == "READY"
+                st.call(lambda: st.chain.inject_fault(2, "over_current"))
+                out, err = master.communicate("go\n", timeout=60)
+            finally:
+                if master.poll() is None:
+                    master.kill()
+    r = json.loads(out.strip().splitlines()[-1])
+    assert all(w & 0x6F == 0x27 for w in r["enabled"]), r["enabled"]
+    faulted = r["faulted"]
+    assert faulted[1] & 0x4F == 0x08 and faulted[1] & 0x4000, hex(faulted[1])   # ID2: Fault
+    assert all(w & 0x6F == 0x27 for i, w in enumerate(faulted) if i != 1)
+    assert r["after_0x80"][1] & 0x4F == 0x40                   # fault reset: switch on disabled
+    assert r["after_0x0f"][1] & 0x6F == 0x27 and not r["after_0x0f"][1] & 0x4000, \
+        [hex(w) for w in r["after_0x0f"]]

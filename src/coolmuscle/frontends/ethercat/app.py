@@ -3,11 +3,10 @@
 :class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
 object dictionary built from the table, the SII image, and the 1 ms cycle
 (:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
-the device API's snapshots into the input image.  Part 1 (the device on the wire)
-fills the csp TxPDO's position actual value (6064h + 0x800 n, 6.3.2) from
-``Device.snapshot``; the CiA402 state machine and the modes (part 2) attach here
-through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` /
-:meth:`cycle`, without touching the ESC.
+the output image into each axis's :class:`~.drive.Drive` (CiA402 6.1, csp 6.3) and
+the device API's snapshots into the input image (6041h, 6064h + 0x800 n).  Further
+modes attach here through :class:`~.dictionary.Dictionary` hooks and
+:meth:`outputs` / :meth:`cycle`, without touching the ESC.
 
 Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
 :meth:`safe_outputs` and the dictionary hooks run in the frame thread and must

@@ -2,7 +2,10 @@
 
 No I/O, no clock: :func:`next_state` takes the state, the controlword (6040h, 6.1.2),
 the previous controlword (fault reset acts on the rising edge of bit 7) and whether
-the motor has an alarm, and returns the next state; :func:`statusword` gives 6041h
+the motor has an alarm, and returns the next state.  An alarm while the motor is
+enabled (Switched on, Operation enabled) is a fault; the latched alarm of a motor
+in State A is cleared by the enable of the next Switched on (6.1.1 State C note 1),
+so a fault reset needs no cleared alarm; :func:`statusword` gives 6041h
 (6.1.3).  The Cool Muscle side of each state (6.1.1: State A motor free, B motor
 enable, C ready for operation) is :func:`motor_state`.  Quick stop is not supported
 (6.1.1 State C note 2): a quick stop command is ignored.
@@ -59,14 +62,14 @@ def next_state(state: State, cw: int, previous_cw: int, alarm: bool) -> State:
     """One step of the 6.1.1 diagram (transitions 1-15)."""
     if state is State.NOT_READY:
         return State.SWITCH_ON_DISABLED                                   # 1
-    if alarm and state not in (State.FAULT, State.FAULT_REACTION):
-        return State.FAULT_REACTION                                       # 13
+    if alarm and state in (State.SWITCHED_ON, State.OPERATION_ENABLED):
+        return State.FAULT_REACTION    # 13: an alarm of the motor while enabled (B, C)
     if state is State.FAULT_REACTION:
         return State.FAULT                                                # 14
     if state is State.FAULT:
-        if cw & 0x80 and not previous_cw & 0x80 and not alarm:
+        if cw & 0x80 and not previous_cw & 0x80:
             return State.SWITCH_ON_DISABLED                               # 15
-        return State.FAULT
+        return State.FAULT             # the alarm stays latched until Switched on (6.1.1)
     if cw & 0x80:
         return state                   # fault reset outside Fault: nothing (6.1.2)
     cmd = command(cw)
