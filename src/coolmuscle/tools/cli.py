@@ -169,12 +169,13 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
 
 
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
-                 state: Path | None, scale: float) -> None:
+                 state: Path | None, scale: float, label: str | None = None) -> None:
     from ..frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
     await service.start()
-    err.print(f"coolmuscle: virtual {firmware.value.upper()} {_ids(motors)} ready", markup=False)
+    err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} ready",
+              markup=False)
     where = "   ".join(t.describe() for t in chosen)
     shown = _show_path(state) if state is not None else "none, not saved"
     err.print(f"{where}   (state: {shown})", markup=False)
@@ -249,7 +250,8 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
-    if ethercat is not None:
+    fw = ""
+    if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
         chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
                                                   stdio, (modbus_rtu, modbus_tcp, com1))
         chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
@@ -257,7 +259,8 @@ def sim(
         chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
         chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
-        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
+        label = fw.upper().replace(",", "/") if ethercat is not None else None
+        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
     finally:
         chain.close()
     err.print("coolmuscle: stopped", markup=False)
