@@ -376,3 +376,12 @@ def test_a_master_that_never_reads_answers_finds_the_receive_mailbox_full(app):
 
 def test_a_download_announcing_gigabytes_is_refused_out_of_memory(server):
     assert abort_code(sdo(server, 0x21, 0xF581, 0, struct.pack("<I", 1 << 30))) == 0x05040005
+
+
+def test_an_unavailable_mode_of_operation_is_set_to_csp_6_2_2_note_3():
+    app = BridgeApp(None)
+    server = app.stack.coe
+    assert sdo(server, 0x2F, 0x6860, 0, b"\x03\0\0\0")[2] == 0x60     # pv (3): N/A
+    assert app.dictionary.get(0x6860, 0) == 8
+    assert sdo(server, 0x2F, 0x6860, 0, b"\x06\0\0\0")[2] == 0x60     # hm
+    assert app.dictionary.get(0x6860, 0) == 6
