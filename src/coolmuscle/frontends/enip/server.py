@@ -24,7 +24,7 @@ import time
 from typing import Any
 
 from ...errors import TransportError
-from ...transports.base import Port, Transport
+from ..transports.base import Port, Transport
 from .adapter import Cm1Module
 from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
 from .encapsulation import INVALID_LENGTH, Frame
