@@ -7,6 +7,7 @@ cm1-ethernetip-interface-manual.txt 3.1-3.3 and ch. 4; CIP general status codes
 from __future__ import annotations
 
 import logging
+import socket
 import struct
 import time
 
@@ -175,6 +176,34 @@ def test_eds_pie_parses_the_generated_eds(caplog, service):
 
 
 # -- Class 1: the ethernetip package as originator, against `coolmuscle sim` ---------------
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)     # Linux: SCM_TIMESTAMPNS
+
+
+class KernelStamps:
+    """Stands in for the originator's UDP socket: its ``recvfrom`` goes through
+    ``recvmsg`` and keeps the kernel's receive time of every T->O packet, so the
+    intervals measured are the adapter's, not the receiving thread's scheduling."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.times: list[float] = []
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def recvfrom(self, size: int):
+        data, ancillary, _flags, addr = self.sock.recvmsg(size, 64)
+        for level, kind, raw in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+                sec, nsec = struct.unpack_from("qq", raw)
+                self.times.append(sec + nsec / 1e9)
+        return data, addr
+
+
 class _Scanner:
     """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our ports."""
 
@@ -182,20 +211,14 @@ class _Scanner:
         import ethernetip.ethernetip as E
         monkeypatch.setattr(E, "ENIP_TCP_PORT", tcp_port)
         monkeypatch.setattr(E, "ENIP_UDP_PORT", io_port)
-        self.times: list[float] = []
-        times, base = self.times, E.UdpRecvDataPacket
-
-        class Stamped(base):                      # when the originator got each T->O packet
-            def unpack(self, buf):
-                times.append(time.monotonic())
-                super().unpack(buf)
-        monkeypatch.setattr(E, "UdpRecvDataPacket", Stamped)
-        self.E = E
         self.enip = E.EtherNetIP("127.0.0.1")
         self.conn = self.enip.explicit_conn("127.0.0.1")
         self.inp = self.enip.registerAssembly(E.EtherNetIP.ENIP_IO_TYPE_INPUT, 8, 101, self.conn)
         self.out = self.enip.registerAssembly(E.EtherNetIP.ENIP_IO_TYPE_OUTPUT, 14, 102, self.conn)
         self.enip.startIO(udp_port=0)
+        self.stamps = KernelStamps(self.enip.udpsock)
+        self.enip.udpsock = self.stamps
+        self.times = self.stamps.times
         assert self.conn.registerSession() == 0
 
     def forward_open(self, rpi_ms: int = 10, multiplier: int = 2):

@@ -24,7 +24,7 @@ from __future__ import annotations
 import ipaddress
 import logging
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 from . import cip, connmgr
@@ -63,7 +63,6 @@ class Connection:
     last_reply: tuple[int, bytes] | None = None
     packets_in: int = 0
     packets_out: int = 0
-    sent_at: list[int] = field(default_factory=list)
 
     @property
     def io(self) -> bool:
@@ -115,7 +114,8 @@ class ConnectionTable:
         self._next_id = 0x5A00_0000 ^ (id(self) & 0x00FF_FFF0)
         self.timeouts = 0
         self.dropped = 0
-        self.record_sends = False
+        #: The input image productions send; refreshed by the loop (:meth:`refresh`).
+        self.image = bytes(8)
 
     # -- opening and closing ------------------------------------------------------------
     def _new_id(self) -> int:
@@ -143,6 +143,7 @@ class ConnectionTable:
         conn = Connection(req, self._new_id(), req.to_id, peer_ip, 0, header)
         extra = self._route_to(conn, items)
         conn.next_due = now
+        self.refresh()
         body = self._register(conn, now)
         self.module.io_state = "run"
         return body, extra
@@ -238,16 +239,23 @@ class ConnectionTable:
         self.module.io_state = "run" if run else "idle"
         self.call(self.module.write_output, body, run)
 
+    def refresh(self) -> None:
+        """Read the input image from the module (the model's thread only)."""
+        self.image = bytes(self.call(self.module.input_image))  # type: ignore[arg-type]
+
+    def next_production(self) -> int | None:
+        """The earliest T->O production instant (ns), ``None`` without class 1."""
+        times = [c.next_due for c in self.by_triad.values() if c.io]
+        return min(times) if times else None
+
     def due(self, now: int) -> list[tuple[bytes, tuple[str, int]]]:
-        """The T->O packets due at ``now``; moves each schedule on."""
+        """The T->O packets due at ``now`` with the last refreshed image; moves each
+        schedule on.  Touches no model object, so a producer thread may call it."""
         out = []
         for conn in list(self.by_triad.values()):
             if not conn.io or conn.to_addr is None or now < conn.next_due:
                 continue
-            data = bytes(self.call(self.module.input_image))  # type: ignore[arg-type]
-            out.append((self._packet(conn, data), conn.to_addr))
-            if self.record_sends:
-                conn.sent_at.append(now)
+            out.append((self._packet(conn, self.image), conn.to_addr))
             rpi = conn.to_rpi_ns
             conn.next_due += rpi
             if conn.next_due <= now:                 # more than one RPI late: no burst
@@ -271,10 +279,9 @@ class ConnectionTable:
             self._drop(conn)
         return gone
 
-    def next_event(self) -> int | None:
-        """The earliest production or watchdog instant (ns), ``None`` when idle."""
-        times = [c.next_due for c in self.by_triad.values() if c.io]
-        times += [c.last_rx + c.timeout_ns + 1 for c in self.by_triad.values()]
+    def next_watchdog(self) -> int | None:
+        """The earliest watchdog instant (ns), ``None`` without connections."""
+        times = [c.last_rx + c.timeout_ns + 1 for c in self.by_triad.values()]
         return min(times) if times else None
 
     # -- class 3 -----------------------------------------------------------------------------

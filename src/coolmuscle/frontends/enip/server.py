@@ -8,8 +8,9 @@ happens in the thread that drives the kernel, at the wall-clock instant now
 * TCP: one :class:`~.encapsulation.Connection` per client; a frame longer than the
   encapsulation limit is answered 0x0065 and the connection closed;
 * UDP on the TCP port number: ListIdentity / ListServices / ListInterfaces;
-* UDP I/O port (2222): O->T packets in, T->O packets out, produced by one timer
-  that wakes at the next production or watchdog instant of the connection table.
+* UDP I/O port (2222): O->T packets in; T->O packets out, sent on time by the
+  :class:`~.producer.Producer` thread; a loop timer runs the watchdogs.  The
+  connection table is shared under one lock.
 
 ``port=0`` / ``io_port=0`` pick free ports (tests); the UDP list port then takes the
 TCP port's number.  Binds 127.0.0.1 unless told otherwise.
@@ -20,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import threading
 import time
 from typing import Any
 
@@ -30,6 +32,7 @@ from .encapsulation import Connection, FrameReader, FramingError, Sessions, answ
 from .encapsulation import INVALID_LENGTH, Frame
 from .io import DEFAULT_IO_PORT, ConnectionTable
 from .objects import ObjectModel
+from .producer import Producer
 from .router import Router
 
 log = logging.getLogger(__name__)
@@ -78,6 +81,9 @@ class EnipTransport(Transport):
         self._handle: asyncio.TimerHandle | asyncio.Handle | None = None
         self._closed = True
         self._writers: set[asyncio.StreamWriter] = set()
+        self.lock = threading.Lock()
+        self.producer: Producer | None = None
+        self._io_sock: socket.socket | None = None
 
     # -- life cycle -------------------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -100,6 +106,11 @@ class EnipTransport(Transport):
         self.router = Router(objects, self.table, self.bound[1] if self.bound else 0,
                              call=port.call)
         self._closed = False
+        assert self._io_sock is not None
+        loop = asyncio.get_running_loop()
+        self.producer = Producer(self.table, self._io_sock, self.lock,
+                                 lambda: self._threadsafe(loop, self._refresh))
+        self.producer.start()
         self._schedule()
 
     async def _listen(self) -> None:
@@ -114,6 +125,7 @@ class EnipTransport(Transport):
         io, _ = await loop.create_datagram_endpoint(lambda: _Datagrams(self._io_datagram),
                                                     sock=io_sock)
         self._io = io
+        self._io_sock = io_sock
         self.io_port = io_sock.getsockname()[1]
 
     def _io_socket(self) -> socket.socket:
@@ -145,8 +157,12 @@ class EnipTransport(Transport):
         if self._handle is not None:
             self._handle.cancel()
             self._handle = None
+        if self.producer is not None:
+            await asyncio.get_running_loop().run_in_executor(None, self.producer.stop)
+            self.producer = None
         if self.table is not None:
-            self.table.close_all()
+            with self.lock:
+                self.table.close_all()
         if self._server is not None:
             self._server.close()
         for writer in list(self._writers):
@@ -186,7 +202,8 @@ class EnipTransport(Transport):
         except Exception:  # one client's trouble never escapes as a task error
             log.exception("enip: client %s failed", peer)
         finally:
-            conn.close()
+            with self.lock:
+                conn.close()
             self._writers.discard(writer)
             if not writer.transport.is_closing():
                 writer.transport.close()
@@ -203,11 +220,14 @@ class EnipTransport(Transport):
                 return False
             if frame is None:
                 return True
-            before = len(self.table.by_triad) if self.table is not None else 0
-            reply = conn.handle(frame)
+            assert self.table is not None
+            with self.lock:
+                before = len(self.table.by_triad)
+                reply = conn.handle(frame)
+                changed = len(self.table.by_triad) != before
             if reply is not None:
                 writer.write(reply)
-            if self.table is not None and len(self.table.by_triad) != before:
+            if changed:
                 self.wake()
         return False
 
@@ -220,7 +240,8 @@ class EnipTransport(Transport):
 
     def _io_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         assert self.table is not None
-        self.table.consume(data, addr[0], time.monotonic_ns())
+        with self.lock:
+            self.table.consume(data, addr[0], time.monotonic_ns())
 
     def _tick(self) -> None:
         """Send what is due, time out the silent, then sleep until the next instant."""
@@ -228,32 +249,42 @@ class EnipTransport(Transport):
         if self.table is None or self._closed:
             return
         try:
-            now = time.monotonic_ns()
-            self.table.expire(now)
-            for packet, addr in self.table.due(now):
-                self._send(packet, addr)
-        except Exception:  # production must go on whatever one packet did
-            log.exception("enip: I/O production failed")
+            with self.lock:
+                gone = self.table.expire(time.monotonic_ns())
+            if gone and self.producer is not None:
+                self.producer.wake()
+        except Exception:  # the watchdogs must go on whatever one connection did
+            log.exception("enip: I/O watchdog failed")
         self._schedule()
 
     def _schedule(self) -> None:
         assert self.table is not None
         loop = asyncio.get_running_loop()
-        nxt = self.table.next_event()
+        nxt = self.table.next_watchdog()
         when = loop.time() + IDLE_TICK if nxt is None else min(nxt / 1e9,
                                                                 loop.time() + IDLE_TICK)
         self._handle = loop.call_at(when, self._tick)
 
     def wake(self) -> None:
-        """Re-plan the timer now (a connection was opened or closed)."""
+        """Re-plan the timer and the producer now (a connection was opened or closed)."""
         if self._handle is not None:
             self._handle.cancel()
         self._handle = asyncio.get_running_loop().call_soon(self._tick)
+        if self.producer is not None:
+            self.producer.wake()
 
-    def _send(self, packet: bytes, addr: tuple[str, int]) -> None:
-        if self._io is None:
+    def _refresh(self) -> None:
+        """Read the input image for the next T->O packets (loop thread)."""
+        if self.table is None or self._closed:
             return
         try:
-            self._io.sendto(packet, addr)
-        except OSError as exc:
-            log.debug("enip: T->O to %s failed: %s", addr, exc)
+            self.table.refresh()
+        except Exception:
+            log.exception("enip: reading the input image failed")
+
+    @staticmethod
+    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Any) -> None:
+        try:
+            loop.call_soon_threadsafe(fn)
+        except RuntimeError:     # the loop is closing
+            pass
