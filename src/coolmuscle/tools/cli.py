@@ -153,13 +153,14 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
     return chosen
 
 
-def _enip_transports(value: str | None, io_port: int, firmware: Firmware) -> list[Transport]:
+def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
+                     priority: int | None = None) -> list[Transport]:
     """``--enip`` (docs/enip.md)."""
     if value is None:
         return []
     from ..frontends.enip.cli import transports as enip_transports
     try:
-        return enip_transports(value, io_port, firmware.value)
+        return enip_transports(value, io_port, firmware.value, priority)
     except TransportError as exc:
         raise UsageError(str(exc)) from None
 
@@ -235,6 +236,9 @@ def sim(
              "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
     enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
                                      max=65535, help="UDP port of Class 1 I/O."),
+    enip_priority: Optional[int] = typer.Option(
+        None, "--enip-rt-priority", metavar="N", min=1, max=99,
+        help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -247,7 +251,7 @@ def sim(
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
     chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
                          enip=enip is not None)
-    chosen += _enip_transports(enip, enip_io_port, firmware)
+    chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
     chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))

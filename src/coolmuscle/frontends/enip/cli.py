@@ -63,7 +63,8 @@ def parse_enip(value: str) -> tuple[str, int]:
     return (host or DEFAULT_HOST).strip("[]"), port
 
 
-def transports(value: str | None, io_port: int, firmware: str) -> list[Any]:
+def transports(value: str | None, io_port: int, firmware: str,
+               priority: int | None = None) -> list[Any]:
     """The EtherNet/IP transport for ``--enip`` (the CM1 module only)."""
     if value is None:
         return []
@@ -71,4 +72,4 @@ def transports(value: str | None, io_port: int, firmware: str) -> list[Any]:
         raise TransportError("--enip is the CM1 EtherNet/IP module: use --firmware cm1")
     from .server import EnipTransport
     host, port = parse_enip(value)
-    return [EnipTransport(host=host, port=port, io_port=io_port)]
+    return [EnipTransport(host=host, port=port, io_port=io_port, priority=priority)]

@@ -11,6 +11,7 @@ table is shared under one lock with the loop thread.
 from __future__ import annotations
 
 import logging
+import os
 import socket
 import threading
 import time
@@ -27,7 +28,7 @@ class Producer(threading.Thread):
     """Send every T->O packet of ``table`` when it is due, through ``sock``."""
 
     def __init__(self, table: ConnectionTable, sock: socket.socket, lock: threading.Lock,
-                 refresh: Callable[[], None]) -> None:
+                 refresh: Callable[[], None], priority: int | None = None) -> None:
         super().__init__(name="enip-producer", daemon=True)
         self.table = table
         self.sock = sock
@@ -37,6 +38,8 @@ class Producer(threading.Thread):
         self._stop = False
         self.sent = 0
         self.send_errors = 0
+        self.priority = priority
+        self.priority_error: str | None = None
 
     def wake(self) -> None:
         """Re-plan now (a connection was opened or closed)."""
@@ -48,7 +51,18 @@ class Producer(threading.Thread):
         if self.is_alive():
             self.join(2.0)
 
+    def _set_priority(self) -> None:
+        """SCHED_FIFO for this thread only (Linux: pid 0 is the calling thread)."""
+        if self.priority is None:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
+        except (OSError, AttributeError, ValueError) as exc:
+            self.priority_error = str(exc)
+            log.warning("enip: real-time priority %s refused: %s", self.priority, exc)
+
     def run(self) -> None:
+        self._set_priority()
         while not self._stop:
             with self.lock:
                 nxt = self.table.next_production()

@@ -63,8 +63,10 @@ class EnipTransport(Transport):
     name = "enip"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-                 io_port: int = DEFAULT_IO_PORT, *, motor: int = 1) -> None:
+                 io_port: int = DEFAULT_IO_PORT, *, motor: int = 1,
+                 priority: int | None = None) -> None:
         super().__init__()
+        self.priority = priority
         self.host = host
         self.requested_port = port
         self.requested_io_port = io_port
@@ -109,7 +111,8 @@ class EnipTransport(Transport):
         assert self._io_sock is not None
         loop = asyncio.get_running_loop()
         self.producer = Producer(self.table, self._io_sock, self.lock,
-                                 lambda: self._threadsafe(loop, self._refresh))
+                                 lambda: self._threadsafe(loop, self._refresh),
+                                 self.priority)
         self.producer.start()
         self._schedule()
 
