@@ -88,14 +88,14 @@ def get_request(cls: int, inst: int, attr: int) -> bytes:
 
 
 def forward_open(rpi: int = 10_000, ot_size: int = 20, to_size: int = 10, serial: int = 1,
-                 key: bytes = b"", to_type: int = 2, transport: int = 0x01,
+                 key: bytes = b"", to_type: int = 2, transport: int = 0x01, multiplier: int = 2,
                  path: bytes = bytes.fromhex("20 04 24 80 2C 66 2C 65")) -> bytes:
     """A Forward_Open request (service 0x54 to 06/01) as a scanner sends it."""
     conn_path = key + path
     ot = ot_size | (2 << 13)
     to = to_size | (to_type << 13)
     body = struct.pack("<BBIIHHIB3xIHIHBB", 0x0A, 0xF0, 0, 0x1234_0000 + serial, serial,
-                       0x00FE, 0xDEAD0000, 2, rpi, ot, rpi, to, transport,
+                       0x00FE, 0xDEAD0000, multiplier, rpi, ot, rpi, to, transport,
                        len(conn_path) // 2) + conn_path
     return bytes((0x54, 2, 0x20, 0x06, 0x24, 0x01)) + body
 

@@ -294,3 +294,48 @@ def test_ch4_ethernetip_class1_io_moves_motor_and_times_out(monkeypatch):
             assert len(scanner.times) <= count + 1 and not _owned(tcp_port)
         finally:
             scanner.close()
+
+
+def test_pycomm3_unconnected_send_is_unwrapped(service):
+    """pycomm3 with ``unconnected_send=True`` wraps the request in Unconnected_Send (0x52)."""
+    with driver(service) as d:
+        tag = d.generic_message(service=0x0E, class_code=4, instance=0x65, attribute=3,
+                                connected=False, unconnected_send=True, route_path=True)
+    assert tag.error is None and len(tag.value) == 8
+
+
+def test_multicast_t_o_reaches_a_joined_member():
+    """A hand-written originator (ours, not a peer): Forward_Open with T->O multicast; the
+    reply's T->O sockaddr item names the group (CIP Vol 2 3-5.3); packets arrive there."""
+    from coolmuscle.frontends.enip import encapsulation as enc
+    from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
+    with enip_service() as st:
+        tcp_port, io_port = ports(st)
+        with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp:
+            tcp.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+            handle = decode(tcp.recv(1024)).session
+            request = forward_open(rpi=10_000, to_type=1, multiplier=7)    # x512: 5 s
+            tcp.sendall(frame(enc.SEND_RR_DATA, rr_data(request), handle).encode())
+            items = enc.parse_cpf(decode(tcp.recv(1024)).data[6:])
+            reply = items[1].data
+            assert reply[2] == 0, reply.hex()
+            ot_id = struct.unpack_from("<I", reply, 4)[0]
+            to_item = next(i for i in items if i.type_id == enc.ITEM_SOCKADDR_TO)
+            port, group = enc.parse_sockaddr(to_item.data)
+            group_ip = socket.inet_ntoa(struct.pack(">I", group))
+            assert (group_ip, port) == ("239.192.1.0", io_port)
+            member = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            member.bind((group_ip, port))
+            member.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                              socket.inet_aton(group_ip) + socket.inet_aton("127.0.0.1"))
+            member.settimeout(2)
+            out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            out.sendto(o_t(ot_id, 1, 1, struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 0)),
+                       ("127.0.0.1", io_port))
+            got = [member.recv(100) for _ in range(5)]
+            member.close()
+            out.close()
+        for packet in got:
+            address, data = enc.parse_cpf(packet)
+            assert address.type_id == enc.ITEM_SEQUENCED_ADDRESS and len(data.data) == 10
+        assert struct.unpack_from("<HH", got[-1], 20)[1] == 8      # motor status: in position

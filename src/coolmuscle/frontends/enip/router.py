@@ -1,8 +1,9 @@
 """The Message Router: one CIP request in, one reply out (CIP Vol 1 2-4, 5A-3).
 
 It implements :class:`.encapsulation.Target`: ListIdentity's identity item,
-unconnected requests (SendRRData) and class 3 requests (SendUnitData).  Requests
-to the Connection Manager (class 6 instance 1) go to the connection table of
+unconnected requests (SendRRData) and class 3 requests (SendUnitData).  An
+Unconnected_Send (0x52) is unwrapped once (its route ignored: the module is the end
+node).  Requests to the Connection Manager (class 6 instance 1) go to the table of
 :mod:`.io`; every other service goes to :class:`.objects.ObjectModel`.  Each
 ``CipError`` is encoded here, once; any other exception is logged and answered
 general status 0x02 (resource unavailable), so no traceback reaches a client.
@@ -55,10 +56,14 @@ class Router:
                               ident.product_code, *ident.revision, status, ident.serial)
                 + cip.short_string(ident.product_name) + b"\x03")
 
-    def unconnected(self, request: bytes, peer: Peer) -> tuple[bytes, list[Item]]:
+    def unconnected(self, request: bytes, peer: Peer,
+                    nested: bool = False) -> tuple[bytes, list[Item]]:
         service = request[0] if request else 0
         try:
             req = cip.parse_request(request)
+            if (req.path.class_id == CONNECTION_MANAGER_CLASS
+                    and req.service == cip.UNCONNECTED_SEND and not nested):
+                return self.unconnected(_embedded(req.data), peer, nested=True)
             if req.path.class_id == CONNECTION_MANAGER_CLASS and req.service in (
                     cip.FORWARD_OPEN, cip.LARGE_FORWARD_OPEN, cip.FORWARD_CLOSE):
                 return self._connection_manager(req, peer)
@@ -116,3 +121,14 @@ class Router:
         self.failures += 1
         log.exception("enip: request %s failed inside", request[:32].hex(" "))
         return cip.encode_reply(service & 0x7F, cip.RESOURCE_UNAVAILABLE)
+
+
+def _embedded(data: bytes) -> bytes:
+    """The request inside an Unconnected_Send (CIP Vol 1 3-5.5.2); its route is ignored:
+    this module is the end node."""
+    if len(data) < 4:
+        raise CipError(cip.NOT_ENOUGH_DATA)
+    size = struct.unpack_from("<H", data, 2)[0]
+    if len(data) < 4 + size:
+        raise CipError(cip.NOT_ENOUGH_DATA)
+    return data[4:4 + size]
