@@ -10,7 +10,7 @@ against what the module offers (:data:`~.objects.EXCLUSIVE_OWNER`); a refusal is
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from . import cip
 from .cip import CipError
@@ -119,9 +119,7 @@ def parse_open(data: bytes, large: bool) -> OpenRequest:
         path = cip.parse_path(raw)
     except CipError:
         raise partial.failure(BAD_SEGMENT) from None
-    return OpenRequest(*(getattr(partial, f) for f in (
-        "ot_id", "to_id", "serial", "vendor", "originator", "multiplier", "ot_rpi", "ot",
-        "to_rpi", "to", "transport")), path, large)
+    return replace(partial, path=path)
 
 
 def parse_close(data: bytes) -> tuple[tuple[int, int, int], cip.Path]:

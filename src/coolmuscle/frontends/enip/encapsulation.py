@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 import struct
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ SERVICE_CAPABILITIES = 0x0120
 class FramingError(Exception):
     """The stream cannot be framed any more (length beyond :data:`MAX_LENGTH`)."""
 
-    def __init__(self, header: tuple[int, ...]) -> None:
+    def __init__(self, header: tuple[Any, ...]) -> None:
         super().__init__("encapsulation length out of range")
         self.header = header
 

@@ -25,7 +25,7 @@ import ipaddress
 import logging
 import struct
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable, Protocol
 
 from . import cip, connmgr
 from .cip import CipError
@@ -77,10 +77,10 @@ class Connection:
         return self.req.to_rpi * NS_PER_US
 
 
-class Module:
+class Module(Protocol):
     """What the table drives in the module (:class:`.adapter.Cm1Module`)."""
 
-    io_state: str
+    io_state: Any
 
     def input_image(self) -> bytes: ...
 
@@ -104,7 +104,7 @@ class ConnectionTable:
     """Open, close, consume, produce and time out connections."""
 
     def __init__(self, module: Module, host: str, io_port: int,
-                 call: Callable[..., object] = lambda fn, *a: fn(*a)) -> None:
+                 call: Callable[..., Any] = lambda fn, *a: fn(*a)) -> None:
         self.module = module
         self.host = host
         self.io_port = io_port
@@ -241,7 +241,7 @@ class ConnectionTable:
 
     def refresh(self) -> None:
         """Read the input image from the module (the model's thread only)."""
-        self.image = bytes(self.call(self.module.input_image))  # type: ignore[arg-type]
+        self.image = bytes(self.call(self.module.input_image))
 
     def next_production(self) -> int | None:
         """The earliest T->O production instant (ns), ``None`` without class 1."""
