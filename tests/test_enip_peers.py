@@ -339,3 +339,15 @@ def test_multicast_t_o_reaches_a_joined_member():
             address, data = enc.parse_cpf(packet)
             assert address.type_id == enc.ITEM_SEQUENCED_ADDRESS and len(data.data) == 10
         assert struct.unpack_from("<HH", got[-1], 20)[1] == 8      # motor status: in position
+
+
+def test_ethernetip_list_identity_over_udp(monkeypatch):
+    """ListIdentity over UDP 44818 (CIP Vol 2 2-4.2), as the ethernetip package sends it."""
+    import ethernetip.ethernetip as E
+    with enip_service() as st:
+        monkeypatch.setattr(E, "ENIP_TCP_PORT", ports(st)[0])
+        reply = E.EtherNetIP("127.0.0.1").listIDUDP("127.0.0.1", timeout=3)
+    assert reply is not None
+    assert reply.product_name == objects.IDENTITY.product_name.encode()
+    assert (reply.vendor_id, reply.product_code) == (objects.IDENTITY.vendor_id,
+                                                     objects.IDENTITY.product_code)
