@@ -396,3 +396,19 @@ def test_fuzz_live_server_other_client_untouched():
                                        connected=False, route_path=False)
             assert tag.error is None and len(tag.value) == 8
         assert service.transports[0].router.failures == 0     # nothing failed inside
+
+
+def test_identity_reset_closes_connections_and_clears_outputs(rig):
+    """CIP Vol 1 5A-2.3 Reset type 0: the module restarts; the motor is not reset."""
+    opened(rig)
+    rig.module.write_output(struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 1), True)
+    rig.router.objects.reset = lambda: (rig.table.close_all(), rig.module.reset_outputs())
+    conn = rig.connection()
+    handle = register(conn)
+    path = cip.encode_path(1, 1)
+    reset = bytes((0x05, len(path) // 2)) + path
+    reply = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(reset + b"\x00"), handle)))
+    assert reply[:4] == b"\x85\x00\x00\x00"
+    assert rig.table.owner is None and rig.module.output_image() == bytes(14)
+    bad = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(reset + b"\x05"), handle)))
+    assert bad[2] == cip.INVALID_PARAMETER

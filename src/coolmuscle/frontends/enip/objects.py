@@ -11,7 +11,7 @@
 
 Refusals (CIP Vol 1 appendix B; docs/fidelity.md "EtherNet/IP"): an unknown class or
 instance is 0x05 (path destination unknown, as ODVA's OpENer answers), a service the
-object lacks 0x08, an attribute it lacks 0x14, a read-only attribute 0x0E, short
+object lacks 0x08 (Identity also has Reset), an attribute it lacks 0x14, a read-only attribute 0x0E, short
 and long data 0x13 and 0x15, a write to the output assembly while an I/O connection
 owns it 0x10.  The Get services ignore request data after the path (as OpENer
 does; pycomm3 sends its route path there by default).
@@ -133,10 +133,12 @@ class ObjectModel:
     """Instances and attributes of every object, and the three attribute services."""
 
     def __init__(self, module: Images, *, host: str = "127.0.0.1",
-                 output_owned: Callable[[], bool] = lambda: False) -> None:
+                 output_owned: Callable[[], bool] = lambda: False,
+                 reset: Callable[[], None] = lambda: None) -> None:
         self.module = module
         self.host = host
         self.output_owned = output_owned
+        self.reset = reset
         self.table: dict[int, dict[int, dict[int, Attribute]]] = {}
         self._build()
 
@@ -220,9 +222,23 @@ class ObjectModel:
                 raise CipError(cip.ATTRIBUTE_NOT_SETTABLE)
             attr.setter(request.data)
             return b""
+        if service == cip.RESET and request.path.class_id == IDENTITY_CLASS and request.path.instance:
+            return self._reset(request.data)
         if service == cip.GET_ATTRIBUTES_ALL and self._has_get_all(request):
             return b"".join(attrs[n].getter() for n in sorted(attrs) if attrs[n].in_all)
         raise CipError(cip.SERVICE_NOT_SUPPORTED)
+
+    def _reset(self, data: bytes) -> bytes:
+        """Identity Reset (CIP Vol 1 5A-2.3): type 0 or 1 restarts the module (its
+        connections close, its outputs return to the power-up image); the motor, a
+        separate device behind the serial line, is not reset."""
+        kind = data[0] if data else 0
+        if len(data) > 1:
+            raise CipError(cip.TOO_MUCH_DATA)
+        if kind not in (0, 1):
+            raise CipError(cip.INVALID_PARAMETER)
+        self.reset()
+        return b""
 
     @staticmethod
     def _attribute(attrs: dict[int, Attribute], request: cip.Request) -> Attribute:

@@ -97,7 +97,7 @@ class EnipTransport(Transport):
         self.table = ConnectionTable(self.module, self.host, 0, port.call)
         objects = ObjectModel(self.module, host=self.host,
                               output_owned=lambda: self.table is not None
-                              and self.table.owner is not None)
+                              and self.table.owner is not None, reset=self._reset)
         try:
             await self._listen()
         except OSError as exc:
@@ -275,6 +275,13 @@ class EnipTransport(Transport):
         self._handle = asyncio.get_running_loop().call_soon(self._tick)
         if self.producer is not None:
             self.producer.wake()
+
+    def _reset(self) -> None:
+        """Identity Reset: the module restarts (called under the lock, loop thread)."""
+        assert self.table is not None and self.module is not None
+        self.table.close_all()
+        self.module.reset_outputs()
+        self.wake()
 
     def _refresh(self) -> None:
         """Read the input image for the next T->O packets (loop thread)."""
