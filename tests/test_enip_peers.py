@@ -351,3 +351,16 @@ def test_ethernetip_list_identity_over_udp(monkeypatch):
     assert reply.product_name == objects.IDENTITY.product_name.encode()
     assert (reply.vendor_id, reply.product_code) == (objects.IDENTITY.vendor_id,
                                                      objects.IDENTITY.product_code)
+
+
+def test_pycomm3_default_route_path_set_is_accepted(service):
+    """pycomm3's defaults append its empty route path (00 00) after the data; an exact
+    14-byte image followed by exactly that is accepted, other extra bytes are not."""
+    idle = struct.pack("<HiiHBB", 0, 0, 100, 10, 0, 0)
+    with driver(service) as d:
+        tag = d.generic_message(service=0x10, class_code=4, instance=0x66, attribute=3,
+                                request_data=idle, connected=False)
+        assert tag.error is None
+        assert get(d, 4, 0x66, 3).value == idle
+        assert generic_status(d, service=0x10, class_code=4, instance=0x66, attribute=3,
+                              request_data=idle + b"\x01\x00") == 0x15

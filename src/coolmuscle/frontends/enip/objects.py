@@ -14,7 +14,8 @@ instance is 0x05 (path destination unknown, as ODVA's OpENer answers), a service
 object lacks 0x08 (Identity also has Reset), an attribute it lacks 0x14, a read-only attribute 0x0E, short
 and long data 0x13 and 0x15, a write to the output assembly while an I/O connection
 owns it 0x10.  The Get services ignore request data after the path (as OpENer
-does; pycomm3 sends its route path there by default).
+does; pycomm3 sends its route path there by default); a Set of an assembly accepts
+its exact size, or its size followed by exactly that empty route path (``00 00``).
 """
 
 from __future__ import annotations
@@ -178,6 +179,7 @@ class ObjectModel:
         return {3: data, 4: Attribute(_u16(info.size))}
 
     def _set_output(self, data: bytes) -> None:
+        data = _without_route(data, ASSEMBLIES[OUTPUT_INSTANCE].size)
         _check_size(data, ASSEMBLIES[OUTPUT_INSTANCE].size)
         if self.output_owned():
             raise CipError(cip.DEVICE_STATE_CONFLICT)
@@ -185,7 +187,7 @@ class ObjectModel:
 
     @staticmethod
     def _set_config(data: bytes) -> None:
-        _check_size(data, 0)
+        _check_size(_without_route(data, 0), 0)
 
     def _tcpip(self) -> dict[int, Attribute]:
         try:
@@ -252,6 +254,18 @@ class ObjectModel:
         """Get_Attributes_All where the object defines it (not the Assembly, CM, vendor)."""
         return request.path.class_id in (IDENTITY_CLASS, ROUTER_CLASS, TCPIP_CLASS,
                                          ETHERNET_LINK_CLASS)
+
+
+#: The empty route path (size 0, pad) pycomm3 puts after the data of an unconnected
+#: request unless told ``route_path=False``.
+EMPTY_ROUTE = b"\x00\x00"
+
+
+def _without_route(data: bytes, size: int) -> bytes:
+    """``data`` without a trailing empty route path when exactly that follows ``size`` bytes."""
+    if len(data) == size + len(EMPTY_ROUTE) and data[size:] == EMPTY_ROUTE:
+        return data[:size]
+    return data
 
 
 def _check_size(data: bytes, size: int) -> None:
