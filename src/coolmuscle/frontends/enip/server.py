@@ -41,6 +41,7 @@ DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 44818
 READ_SIZE = 65536
 IDLE_TICK = 0.1          # seconds between watchdog checks when nothing is due
+PORT_ATTEMPTS = 5        # port 0: tries for a TCP port whose UDP twin is free
 
 
 class _Datagrams(asyncio.DatagramProtocol):
@@ -102,8 +103,9 @@ class EnipTransport(Transport):
             await self._listen()
         except OSError as exc:
             await self.close()
-            raise TransportError(f"enip: cannot listen on {self.host}:"
-                                 f"{self.requested_port}: {exc.strerror or exc}") from exc
+            raise TransportError(f"enip: cannot listen on {self.host} (TCP/UDP "
+                                 f"{self.requested_port}, I/O UDP {self.requested_io_port}): "
+                                 f"{exc.strerror or exc}") from exc
         self.table.io_port = self.io_port
         self.router = Router(objects, self.table, self.bound[1] if self.bound else 0,
                              call=port.call)
@@ -117,19 +119,36 @@ class EnipTransport(Transport):
         self._schedule()
 
     async def _listen(self) -> None:
+        for attempt in range(PORT_ATTEMPTS):
+            try:
+                await self._listen_tcp_udp()
+                break
+            except OSError:
+                # a free TCP port whose UDP twin is taken: with port 0, try another
+                if self.requested_port != 0 or attempt == PORT_ATTEMPTS - 1:
+                    raise
         loop = asyncio.get_running_loop()
-        self._server = await asyncio.start_server(self._serve, self.host, self.requested_port)
-        sockname = self._server.sockets[0].getsockname()
-        self.bound = (sockname[0], sockname[1])
-        udp, _ = await loop.create_datagram_endpoint(
-            lambda: _Datagrams(self._list_datagram), local_addr=(self.host, self.bound[1]))
-        self._udp.append(udp)
         io_sock = self._io_socket()
         io, _ = await loop.create_datagram_endpoint(lambda: _Datagrams(self._io_datagram),
                                                     sock=io_sock)
         self._io = io
         self._io_sock = io_sock
         self.io_port = io_sock.getsockname()[1]
+
+    async def _listen_tcp_udp(self) -> None:
+        """TCP and UDP on the same port number (44818)."""
+        loop = asyncio.get_running_loop()
+        server = await asyncio.start_server(self._serve, self.host, self.requested_port)
+        sockname = server.sockets[0].getsockname()
+        try:
+            udp, _ = await loop.create_datagram_endpoint(
+                lambda: _Datagrams(self._list_datagram), local_addr=(self.host, sockname[1]))
+        except OSError:
+            server.close()
+            await server.wait_closed()
+            raise
+        self._server, self.bound = server, (sockname[0], sockname[1])
+        self._udp.append(udp)
 
     def _io_socket(self) -> socket.socket:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
