@@ -155,8 +155,19 @@ def test_cpppo_client_reads_the_same_attributes(service):
     assert ident.vendor_id == objects.IDENTITY.vendor_id
 
 
-def test_eds_pie_parses_the_generated_eds(caplog, service):
+def _import_eds_pie():
+    """eds-pie calls ``logging.basicConfig(level=DEBUG)`` when imported: undo that for the
+    rest of the suite."""
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
     from eds_pie.eds_pie import CIP_EDS
+    root.setLevel(level)
+    root.handlers[:] = handlers
+    return CIP_EDS
+
+
+def test_eds_pie_parses_the_generated_eds(caplog, service):
+    CIP_EDS = _import_eds_pie()
     with caplog.at_level(logging.WARNING):
         eds = CIP_EDS(generate())
     errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
