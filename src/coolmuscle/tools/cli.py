@@ -109,13 +109,13 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                ) -> list[Transport]:
+                enip: bool = False) -> list[Transport]:
     from ..frontends import transports
     from ..frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
         try:
@@ -148,6 +148,18 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
     if com1 is not None:
         chosen.append(transports.create("com1", where=com1))
     return chosen
+
+
+def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
+                     priority: int | None = None) -> list[Transport]:
+    """``--enip`` (docs/enip.md)."""
+    if value is None:
+        return []
+    from ..frontends.enip.cli import transports as enip_transports
+    try:
+        return enip_transports(value, io_port, firmware.value, priority)
+    except TransportError as exc:
+        raise UsageError(str(exc)) from None
 
 
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
@@ -215,6 +227,15 @@ def sim(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    enip: Optional[str] = typer.Option(
+        None, "--enip", metavar="[HOST[:PORT]]",
+        help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
+             "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
+    enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
+                                     max=65535, help="UDP port of Class 1 I/O."),
+    enip_priority: Optional[int] = typer.Option(
+        None, "--enip-rt-priority", metavar="N", min=1, max=99,
+        help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -225,7 +246,9 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
-    chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
+    chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
+                         enip=enip is not None)
+    chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
     chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
@@ -332,8 +355,10 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
 
 
 def _register_tools() -> None:
+    from ..frontends.enip.cli import register as register_enip
     from .commands import register
     register(app)
+    register_enip(app)   # coolmuscle enip eds
 
 
 _register_tools()  # check, upload, term (coolmuscle.tools)
@@ -347,8 +372,9 @@ def version() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    from ..frontends.enip.cli import optional_value_argv
     try:
-        app(args=argv, prog_name="coolmuscle")
+        app(args=optional_value_argv(argv), prog_name="coolmuscle")
     except SystemExit:
         raise
     except KeyboardInterrupt:
