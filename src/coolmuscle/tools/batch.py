@@ -189,7 +189,8 @@ def print_summary(run: BatchRun, value_names: Sequence[str] = (),
     for name in value_names:
         table.add_column(name, overflow="fold")
     if not value_names:
-        table.add_column("script", overflow="fold")
+        longest = max((len(job.name) for job in run.jobs), default=6)
+        table.add_column("script", overflow="fold", min_width=min(longest, 40))
     table.add_column("result", no_wrap=True)
     table.add_column("virtual s", justify="right", no_wrap=True)
     for figure in figures:
