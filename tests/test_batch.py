@@ -249,7 +249,7 @@ def test_a_scheduler_without_workers_is_one_line_exit_2(
         capsys: pytest.CaptureFixture[str], tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
     from coolmuscle.tools import batchrun
-    monkeypatch.setattr(batchrun, "CONNECT_TIMEOUT", 0.5)
+    monkeypatch.setattr(batchrun, "WORKER_TIMEOUT", 0.5)
     with cluster(tmp_path, 0) as address:
         code, out, err = cli(capsys, "batch", str(DATA), "--scheduler", address)
     assert code == 2 and out == "" and err.count("\n") == 1

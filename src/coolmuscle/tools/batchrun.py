@@ -41,6 +41,9 @@ MAX_CHUNK = 16
 #: Seconds to wait for a Dask scheduler to answer before giving up (exit 2).
 CONNECT_TIMEOUT = 5.0
 
+#: Seconds to wait for a scheduler's first worker before giving up (exit 2).
+WORKER_TIMEOUT = 5.0
+
 
 class EngineError(CoolMuscleError, ValueError):
     """The runs cannot start: bad ``--jobs``, no dask, an unreachable scheduler."""
@@ -126,7 +129,7 @@ class DaskEngine(Engine):
             raise EngineError(f"cannot reach the Dask scheduler at {address}: "
                               f"{_short(exc)}") from None
         try:
-            self.client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            self.client.wait_for_workers(1, timeout=WORKER_TIMEOUT)
         except (OSError, TimeoutError) as exc:
             self.client.close()
             raise EngineError(f"the Dask scheduler at {address} has no workers (start "
