@@ -14,7 +14,8 @@ from start to exit:
   (started before the timing, stopped after), ``--scheduler``.
 
 Printed side by side: the wall time, the speed-up over ``-j 1`` next to the ideal
-(the jobs, at most the CPUs this process may use), and the cost per run
+(the jobs, at most the CPUs this process may use), the same for the cost per run
+(start-up left out), and the cost per run
 ((batch of COUNT - batch of two ``?96.1``) / (COUNT - 2)) next to one ``coolmuscle run --check``
 of a script (a fresh process each time: what a shell loop over the scripts costs) and
 next to the run itself in a warm process (``execute`` of the job, no command around
@@ -172,15 +173,17 @@ def main() -> None:
     print(f"one `coolmuscle run --check` (fresh process): {single * 1000:8.1f} ms; "
           f"the run itself, warm: {work * 1000:6.2f} ms")
     print(f"{'engine':<16} {'wall s':>8} {'speed-up':>9} {'ideal':>6} "
-          f"{'ms per run':>11} {'vs one run':>11} {'vs the work':>12}")
-    serial = rows[0][2]
+          f"{'ms per run':>11} {'per-run x':>10} {'vs one run':>11} {'vs the work':>12}")
+    serial, serial_run = rows[0][2], rows[0][3]
     for label, jobs, full, per_run in rows:
         ideal = min(jobs, cpus or 1)
         print(f"{label:<16} {full:8.2f} {serial / full:8.2f}x {ideal:5d}x "
-              f"{per_run * 1000:11.2f} {single / per_run:10.1f}x {per_run / work:11.2f}x")
+              f"{per_run * 1000:11.2f} {serial_run / per_run:9.2f}x "
+              f"{single / per_run:10.1f}x {per_run / work:11.2f}x")
     print("speed-up: wall of -j 1 / wall; ms per run: (batch of COUNT - batch of two ?96.1) / "
-          "(COUNT - 2); vs one run: how many runs a batch makes in the time of one "
-          "`coolmuscle run`; vs the work: batch cost per run / the run's own cost")
+          "(COUNT - 2), per-run x: -j 1's / this one's (the speed-up less the start-up); "
+          "vs one run: how many runs a batch makes in the time of one `coolmuscle run`; "
+          "vs the work: batch cost per run / the run's own cost")
 
 
 if __name__ == "__main__":
