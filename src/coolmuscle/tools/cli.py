@@ -399,6 +399,14 @@ def _register_tools() -> None:
 _register_tools()  # check, upload, term (coolmuscle.tools)
 
 
+def _register_batch() -> None:
+    from .batchcommands import register
+    register(app)
+
+
+_register_batch()  # batch, sweep (coolmuscle.tools.batchcommands, docs/batch.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version."""
