@@ -15,7 +15,8 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
-from .context import Context, MotorBus
+from .context import Context
+from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from .state import units
