@@ -48,10 +48,9 @@ log = logging.getLogger(__name__)
 _IN_POSITION = int(Ux.IN_POSITION)
 
 
-
-
 #: The K20 table (ch. 3 K20) as the confirmation message writes the rate.
 _K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
+
 
 class Motor(Supervision):
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
@@ -519,7 +518,7 @@ class Motor(Supervision):
 
     def answer_baud(self, yes: bool) -> None:
         """The host answered the K20 prompt: ``Y`` applies the new rate, ``N`` keeps the
-        old one (docs/fidelity.md "Parameters")."""
+        old one (docs/fidelity.md "Issue 17: fidelity decisions")."""
         value, self.pending_baud = self.pending_baud, None
         if yes and value is not None:
             self.params.set(20, value)
