@@ -1,0 +1,265 @@
+"""The dashboard's web server: a :class:`Transport` in the simulator's own asyncio loop.
+
+Routes (aiohttp):
+
+* ``GET /`` the page, ``GET /static/...`` its assets (package data, uPlot bundled:
+  nothing is fetched from the network at run time);
+* ``GET /api/info`` what the page needs before it connects (is a token required);
+* ``GET /ws`` the WebSocket: the live feed (:mod:`.hub`) out, requests (:mod:`.actions`) in;
+* ``GET /api/trace.csv``, ``/api/trace.parquet``, ``/api/plot.png`` the trace recorded
+  since the dashboard started (the chain's :class:`~coolmuscle.sim.trace.TraceRecorder`).
+
+The page is one more client of the device API (origin ``web``).  Access rules are in
+:mod:`.access`; a WebSocket message larger than ``MAX_MESSAGE`` closes that socket
+with status 1009 (message too big) and nothing else; malformed JSON is answered with
+an error frame.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from ...errors import TransportError
+from ...transports.base import Port, Transport
+from .access import DEFAULT_HOST, DEFAULT_PORT, Access
+from .actions import FAULTS, Actions
+from .hub import SNAP_FIELDS, Client, Hub
+
+log = logging.getLogger(__name__)
+
+STATIC = Path(__file__).with_name("static")
+#: Largest WebSocket message a page may send (a bank upload is at most 48 KiB of text).
+MAX_MESSAGE = 64 * 1024
+#: Most rows of a downloaded trace (the sampling step grows for long recordings).
+MAX_TRACE_ROWS = 200_000
+
+
+class WebTransport(Transport):
+    """Serve the dashboard on ``host:port`` (127.0.0.1:8080 by default)."""
+
+    name = "web"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 token: str | None = None, title: str = "") -> None:
+        super().__init__()
+        self.host = host
+        self.requested_port = port
+        self.access = Access(host, token)
+        self.title = title
+        self.bound: tuple[str, int] | None = None
+        self.hub: Hub | None = None
+        self.actions: Actions | None = None
+        self._runner: web.AppRunner | None = None
+        self._sockets: set[web.WebSocketResponse] = set()
+        self._recorder: Any = None
+
+    # -- life cycle ---------------------------------------------------------------
+    async def start(self, port: Port) -> None:
+        if port.device is None:
+            raise TransportError("web: needs the chain behind the host line (Port.device)")
+        self.port = port
+        device = port.device
+        self.hub = Hub(device, port.call)
+        self.actions = Actions(device, port.call, self.hub.add_log)
+        recorder = getattr(device, "record", None)
+        self._recorder = port.call(recorder) if callable(recorder) else None
+        self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.host, self.requested_port, shutdown_timeout=1.0)
+        try:
+            await site.start()
+        except OSError as exc:
+            await self._runner.cleanup()
+            raise TransportError(f"web: cannot listen on {self.host}:{self.requested_port}: "
+                                 f"{exc.strerror or exc}") from exc
+        server = site._server
+        sockname = server.sockets[0].getsockname() if server and server.sockets else (
+            self.host, self.requested_port)
+        self.bound = (sockname[0], sockname[1])
+        self.hub.start()
+
+    def describe(self) -> str:
+        text = f"web: {self.url}"
+        if self.access.token is not None:
+            text += f" (token: {self.access.token})"
+        return text
+
+    @property
+    def url(self) -> str:
+        host, port = self.bound or (self.host, self.requested_port)
+        shown = f"[{host}]" if ":" in host else host
+        return f"http://{shown}:{port}/"
+
+    def info(self) -> dict[str, Any]:
+        host, port = self.bound or (self.host, self.requested_port)
+        return {"host": host, "port": port, "url": self.url, "token": self.access.token}
+
+    async def close(self) -> None:
+        for ws in list(self._sockets):
+            await ws.close(code=1001, message=b"simulator stopping")
+        if self.hub is not None:
+            await self.hub.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+
+    # -- the application -------------------------------------------------------
+    def _app(self) -> web.Application:
+        app = web.Application(middlewares=[self._guard], client_max_size=MAX_MESSAGE)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/api/info", self._info)
+        app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/api/trace.{fmt:csv|parquet}", self._trace)
+        app.router.add_get("/api/plot.png", self._plot)
+        app.router.add_static("/static", STATIC, follow_symlinks=False)
+        return app
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        """Host check everywhere; the token everywhere but the page and its assets."""
+        if not self.access.host_ok(request.headers.get("Host")):
+            return _error(421, "this dashboard answers on its loopback address only")
+        public = request.path == "/" or request.path.startswith("/static/") \
+            or request.path == "/api/info"
+        if not public and not self.access.token_ok(_token(request)):
+            return _error(401, "the dashboard needs the token printed when the simulator "
+                               "started")
+        try:
+            response: web.StreamResponse = await handler(request)
+        except web.HTTPException as exc:
+            return _error(exc.status, exc.reason or "error")
+        except Exception:
+            log.exception("dashboard request %s failed", request.path)
+            return _error(500, "internal error (logged by the simulator)")
+        response.headers.setdefault("X-Content-Type-Options", "nosniff")
+        return response
+
+    async def _index(self, _request: web.Request) -> web.StreamResponse:
+        response = web.FileResponse(STATIC / "index.html")
+        response.headers["Cache-Control"] = "no-cache"
+        response.headers["Content-Security-Policy"] = (
+            "default-src 'self'; connect-src 'self'; img-src 'self' data: blob:; "
+            "style-src 'self'; script-src 'self'; frame-ancestors 'none'")
+        return response
+
+    async def _info(self, _request: web.Request) -> web.StreamResponse:
+        return web.json_response({"token_required": self.access.token_required,
+                                  "title": self.title})
+
+    def _hello(self) -> dict[str, Any]:
+        assert self.port is not None and self.hub is not None
+        device = self.port.device
+        firmware = getattr(getattr(device, "firmware", None), "name", "")
+        counts = self.port.call(_io_counts, device)
+        return {"t": "hello", "motors": list(device.motor_ids), "firmware": firmware,
+                "title": self.title, "time": device.kernel.now, "fields": SNAP_FIELDS,
+                "io": counts, "faults": FAULTS, "log": list(self.hub.history),
+                "snap": json.loads(self.hub.snapshot_frame()),
+                "recording": self._recorder is not None}
+
+    async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        if not self.access.origin_ok(request.headers.get("Origin"), request.headers.get("Host")):
+            return _error(403, "WebSocket from another site refused")
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
+                                   compress=False)
+        await ws.prepare(request)
+        assert self.hub is not None and self.actions is not None
+        self._sockets.add(ws)
+        client = Client(ws.send_str)
+        try:
+            await ws.send_str(json.dumps(self._hello(), separators=(",", ":")))
+            self.hub.add(client)
+            await self._receive(ws, client)
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            self.hub.remove(client)
+            self._sockets.discard(ws)
+        return ws
+
+    async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
+        assert self.actions is not None and self.hub is not None
+        async for msg in ws:
+            if msg.type == WSMsgType.TEXT:
+                answer = self.actions.handle(_loads(msg.data))
+                client.queue_direct(json.dumps(answer, separators=(",", ":")))
+                self.hub.changed()
+            elif msg.type == WSMsgType.BINARY:
+                client.queue_direct(json.dumps({"t": "result", "ok": False,
+                                                "error": "send JSON text frames"}))
+            elif msg.type == WSMsgType.ERROR:
+                log.info("dashboard WebSocket closed: %s", ws.exception())
+                break
+
+    # -- downloads --------------------------------------------------------------
+    async def _trace(self, request: web.Request) -> web.StreamResponse:
+        fmt = request.match_info["fmt"]
+        if self._recorder is None:
+            return _error(409, "this chain has no trace recorder")
+        if fmt == "parquet":
+            from ...sim.trace import parquet_available
+            if not parquet_available():
+                return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
+        return await self._download(f"trace.{fmt}", self._write_trace)
+
+    def _write_trace(self, path: Path) -> None:
+        assert self.port is not None
+        recorder = self._recorder
+        end = self.port.device.kernel.now
+        span = max(end - getattr(recorder, "start", 0), 0) / 1e9
+        step = max(0.001, span / MAX_TRACE_ROWS)
+        recorder.write(path, step=step)
+
+    async def _plot(self, _request: web.Request) -> web.StreamResponse:
+        if self._recorder is None:
+            return _error(409, "this chain has no trace recorder")
+        assert self.port is not None
+        device = self.port.device
+        return await self._download("plot.png", lambda path: device.plot(path,
+                                                                          title=self.title))
+
+    async def _download(self, name: str, write: Any) -> web.StreamResponse:
+        assert self.port is not None
+        with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
+            path = Path(tmp) / name
+            self.port.call(write, path)
+            body = path.read_bytes()
+        kind = {"csv": "text/csv", "parquet": "application/octet-stream",
+                "png": "image/png"}[name.rsplit(".", 1)[1]]
+        return web.Response(body=body, content_type=kind, headers={
+            "Content-Disposition": f'attachment; filename="coolmuscle-{name}"'})
+
+
+def _io_counts(device: Any) -> dict[str, int]:
+    firmware = getattr(device, "firmware", None)
+    return {"inputs": int(getattr(firmware, "inputs", 6)),
+            "outputs": int(getattr(firmware, "outputs", 4))}
+
+
+def _token(request: web.Request) -> str | None:
+    header = request.headers.get("Authorization", "")
+    if header.startswith("Bearer "):
+        return header[7:].strip()
+    return request.query.get("token")
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number here")
+
+
+def _loads(text: str) -> Any:
+    try:
+        return json.loads(text, parse_constant=_reject_constant)
+    except (ValueError, RecursionError) as exc:
+        return {"t": "invalid", "error": f"not a JSON request: {exc}"[:200]}
+
+
+def _error(status: int, message: str) -> web.Response:
+    return web.json_response({"error": message}, status=status)
