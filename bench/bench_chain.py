@@ -25,7 +25,7 @@ from __future__ import annotations
 import sys
 import time
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
 
 SIZES = (1, 4, 15)

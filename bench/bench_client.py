@@ -26,9 +26,9 @@ import time
 from typing import Any, Callable
 
 from coolmuscle import connect, connect_async
-from coolmuscle.chain import Chain
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 
 QUERY = b"?96.1\r"
 

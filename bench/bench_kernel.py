@@ -8,7 +8,7 @@ yet, so the host drives the loop through the device API: when ``Ux.1=8`` arrives
 writes the next P0 (``set_register``) and executes ``^.1`` on the next whole
 millisecond (a host that scans every millisecond, like a PLC).
 
-* **closed form**: the real model (:class:`~coolmuscle.chain.Chain`) in fast virtual
+* **closed form**: the real model (:class:`~coolmuscle.chain.daisy.Chain`) in fast virtual
   time; the kernel jumps from event to event (a move is a handful of events).
 * **naive 1 ms tick**: the same moves simulated by a fixed-step loop that, every
   millisecond, evaluates everything the motor shows (command, position, error, speed,
@@ -37,15 +37,16 @@ from dataclasses import dataclass
 
 from typing import Any
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
-from coolmuscle.motor.analog_output import output_volts
-from coolmuscle.motor.axis import Axis
-from coolmuscle.motor.dynamics import clear_solutions, solution_reuse
-from coolmuscle.motor.planner import Waypoint, limits_from_data, plan_moves
-from coolmuscle.motor.profile import Profile, hold
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
+from coolmuscle.motor.signals.analog_output import output_volts
+from coolmuscle.motor.motion.axis import Axis
+from coolmuscle.motor.motion.dynamics import clear_solutions, solution_reuse
+from coolmuscle.motor.motion.planner import Waypoint, limits_from_data, plan_moves
+from coolmuscle.motor.motion.profile import Profile, hold
 from coolmuscle.motor.status import status_line
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S
+from coolmuscle.tools.trace import record as record_trace
 
 TARGETS = (20000, 0)
 S_VALUE, A_VALUE = 100, 100
@@ -66,7 +67,7 @@ class ClosedForm:
 
     def __init__(self, record: bool) -> None:
         self.chain = Chain()
-        self.recorder = self.chain.record() if record else None
+        self.recorder = record_trace(self.chain) if record else None
         self.moves = 0
         self.reports: list[tuple[int, str]] = []
         self.chain.execute(f"S.1={S_VALUE}, A.1={A_VALUE}")
@@ -90,7 +91,7 @@ class ClosedForm:
 
 class Afresh(ClosedForm):
     """The closed form with every move solved afresh: the solved-motion cache
-    (coolmuscle.motor.dynamics.clear_solutions) is emptied before each move, as if no two
+    (coolmuscle.motor.motion.dynamics.clear_solutions) is emptied before each move, as if no two
     moves of the machine were alike."""
 
     def _go(self) -> None:
@@ -124,8 +125,8 @@ class BankLoop:
 # -- naive: a fixed 1 ms tick loop over the same moves -----------------------------------------
 def solve(axis: Axis, profile: Profile, now: int, previous: Any) -> Any:
     """The load model's shaft solution for ``profile`` from ``now``, built as the axis
-    builds it (coolmuscle.motor.dynamics.Motion)."""
-    from coolmuscle.motor.dynamics import Motion
+    builds it (coolmuscle.motor.motion.dynamics.Motion)."""
+    from coolmuscle.motor.motion.dynamics import Motion
     p, v = (previous.position_at(now), previous.velocity_at(now)) if previous else (0, 0)
     return Motion(profile, now, p, v, axis._current_drive())
 

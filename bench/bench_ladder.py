@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 import time
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
 
 SETUP = ("K63.1=1", "V1.1=0", "V2.1=1", "V3.1=100000", "V4.1=0", 'V5.1="Px"',

@@ -16,8 +16,8 @@ import random
 import time
 from typing import Callable
 
-from coolmuscle.motor.planner import Limits, Waypoint, limits_from_data, plan_moves
-from coolmuscle.motor.profile import Profile
+from coolmuscle.motor.motion.planner import Limits, Waypoint, limits_from_data, plan_moves
+from coolmuscle.motor.motion.profile import Profile
 
 NS = 1_000_000_000
 STEP_NS = 1_000_000

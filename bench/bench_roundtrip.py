@@ -21,9 +21,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from coolmuscle.chain import Chain
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 
 QUERY = b"?96.1\r"
 BAUDS = (38400, 230400)
@@ -92,7 +92,7 @@ def main() -> None:
 
     make: Callable[[], Any] = lambda: Chain()  # noqa: E731
     paced: Callable[[], Any] = lambda: Chain(pacing=True)  # noqa: E731
-    label = "coolmuscle.chain.Chain"
+    label = "coolmuscle.chain.daisy.Chain"
     if not _answers(make):
         make, paced = _fake_factory(False), _fake_factory(True)
         label = "tests/fakes.FakeChain (the Chain placeholder does not answer ?96.1 yet)"

@@ -15,8 +15,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from coolmuscle.chain import Chain
-from coolmuscle.script import run_script
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.tools.script import run_script
+from coolmuscle.tools.trace import record
+from coolmuscle.tools.plot import plot as plot_chain
 
 HERE = Path(__file__).parent
 OUTPUTS = "K34.1=16\nK73.1=30\n"
@@ -99,12 +101,12 @@ def plot(name: str, out: Path) -> Path:
     """Run one example bank and draw its trace."""
     title, script, machine = EXAMPLES[name]
     chain = Chain(machine=HERE / machine if machine else None)
-    chain.record()
+    record(chain)
     try:
         result = run_script(OUTPUTS + script, chain)
         if not result.ok:
             raise RuntimeError(f"{name}: {result.summary()}")
-        return chain.plot(out / f"{name}.png", title=title)
+        return plot_chain(chain, out / f"{name}.png", title=title)
     finally:
         chain.close()
 

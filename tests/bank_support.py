@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
 
 

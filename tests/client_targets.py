@@ -19,11 +19,11 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.client import CoolMuscle, connect
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 
 TARGETS = ("inproc", "tcp", "pty")
 

@@ -3,7 +3,7 @@
 ``FakeChain`` has the final ``Chain`` constructor and attributes (``kernel``,
 ``host_line``, ``motor_ids``, ``close()``) and a tiny line callback, so transports,
 pacing and the script runner are exercised with the real echo / delimiter / pacing
-behaviour of :class:`coolmuscle.hostline.HostLine` until the motor model lands:
+behaviour of :class:`coolmuscle.device.hostline.HostLine` until the motor model lands:
 
 * ``?96.n``   -> ``Px.n=<counter>`` (counter starts at 1, one per reply, all motors);
 * ``^.n``     -> ``Ux.n=8`` after ``move_time`` seconds of virtual time (kernel event);
@@ -23,8 +23,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from coolmuscle.hostline import BAUD_RATES, HostLine, LineSettings
-from coolmuscle.script import parse_script
+from coolmuscle.device.hostline import BAUD_RATES, HostLine, LineSettings
+from coolmuscle.tools.script import parse_script
 from coolmuscle.sim.kernel import Kernel, seconds
 
 _QUERY = re.compile(r"\?96\.(\d+)")

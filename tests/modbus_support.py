@@ -16,8 +16,8 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, ms
 
 needs_socat = pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed")

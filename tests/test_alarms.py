@@ -13,8 +13,8 @@ import math
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 
 

@@ -12,17 +12,18 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.motor.analog import (Constant, Ramp, Sine, Table, TorqueSensor, adc,
-                                     source_from_config)
-from coolmuscle.motor.analog_control import SAMPLE_NS, TICK_NS, friction_nm
-from coolmuscle.motor.analog_output import output_volts, volts_to_register
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.signals.analog import (Constant, Ramp, Sine, Table, TorqueSensor,
+                                             adc, source_from_config)
+from coolmuscle.motor.signals.analog_control import SAMPLE_NS, TICK_NS, friction_nm
+from coolmuscle.motor.signals.analog_output import output_volts, volts_to_register
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 
 def _chain(firmware: str = "cm2") -> Chain:
     chain = Chain(firmware=firmware)
-    chain.record()
+    record(chain)
     return chain
 
 
@@ -342,7 +343,7 @@ def test_ch3_k35_analog_output_of_a_motor_and_its_register_value() -> None:
     chain.kernel.run(until=seconds(2))
     assert motor.analog_output_volts() == pytest.approx(3.335, abs=1e-3)
     assert motor.analog_output() == volts_to_register(3.335) == 683
-    samples = chain.record().sample(1, seconds(2))
+    samples = record(chain).sample(1, seconds(2))
     assert samples.analog_out == pytest.approx(3.335, abs=1e-3)
 
 
@@ -374,7 +375,7 @@ def test_constant_source_and_set_analog_agree() -> None:
 def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> None:
     """The machine file loader sets ``analog_config`` / ``encoder_config`` on the motor
     (docs/machine-file.md); that drives the input and connects the encoder at once."""
-    from coolmuscle.motor.encoder import gearing_from_config
+    from coolmuscle.motor.signals.encoder import gearing_from_config
     chain = _chain()
     motor = chain.motors[1]
     motor.analog_config = source_from_config({"kind": "constant", "value": 512,
@@ -393,7 +394,7 @@ def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> 
 def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
     """K78+54 "Analog Output" (5.6.7 FC03 table) reads the K35 output: 683 for the
     current position 512 (3.335 V), as the device snapshot publishes it."""
-    from coolmuscle.modbus.registers import MotorMap, long_of
+    from coolmuscle.chain.modbus.registers import MotorMap, long_of
     chain = _chain()
     chain.set_param(1, 35, 2)
     chain.execute("S.1=10, A.1=100, P.1=512")

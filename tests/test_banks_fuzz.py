@@ -12,10 +12,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cml_support import lines as cml_lines
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.cml.formatter import format_line
 from coolmuscle.cml.parser import parse
-from coolmuscle.motor.bankcheck import check_line
+from coolmuscle.motor.programs.bankcheck import check_line
 from coolmuscle.sim.kernel import seconds
 
 _garbage = st.text(st.sampled_from(list("PSAVTXIJC[]{}<>*;,:=+-/!&|^$?#.0123456789 \"")),

@@ -12,6 +12,7 @@ import pytest
 from bank_support import Rig
 from bank_support import rig as _rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.tools.trace import record
 
 MS = NS_PER_MS
 
@@ -32,7 +33,7 @@ def rig(*lines: str, **options: object) -> Rig:
 def test_2_2_a_line_waits_for_in_position_then_the_timer() -> None:
     r = rig("S1.1=100", "A1.1=100", "P1.1=10000", "P2.1=0", "T1.1=1000",
             "B1.1", "S1.1, A1.1, P1.1", "T1.1", "P2.1", "END")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[1.1")
     r.until(4)
     arrivals = r.times("Ux.1=8")
@@ -45,7 +46,7 @@ def test_2_2_a_line_waits_for_in_position_then_the_timer() -> None:
 def test_4_1_2_merge_motion_passes_points_without_stopping() -> None:
     r = rig("S1.1=100", "S2.1=50", "A1.1=100", "P1.1=10000", "P2.1=20000",
             "B2.1", "S1.1, A1.1, P1.1, S2.1, P2.1", "END")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[2.1")
     r.until(5)
     assert len(r.times("Ux.1=8")) == 1
@@ -58,7 +59,7 @@ def test_4_1_2_merge_motion_passes_points_without_stopping() -> None:
 def test_4_1_3_second_a_is_the_deceleration() -> None:
     r = rig("S1.1=100", "A1.1=20", "A2.1=400", "P1.1=5000", "P2.1=20000",
             "B3.1", "S1.1, A1.1, P1.1, A2.1, P2.1", "END")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[3.1")
     r.until(3)
     # acceleration 20 kpps²: 10000 pps after 0.5 s; deceleration 400 kpps²: 25 ms
@@ -185,7 +186,7 @@ def test_pause_and_resume_keep_the_remaining_waypoints() -> None:
     """] after passing P1 of a merge line: [ goes on to P2, not back to P1 (2.1.2 "[")."""
     r = rig("S1.1=100", "A1.1=100", "P1.1=5000", "P2.1=10000",
             "B1.1", "S1.1, A1.1, P1.1, P2.1", "END")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[1.1")
     r.until(0.7)                 # past P1 (at about 0.55 s)
     r.type("]")

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from bank_support import rig
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 
 
 def test_2_2_2_lines_of_a_bank_are_stored_not_executed() -> None:

@@ -14,11 +14,11 @@ import asyncio
 import re
 import time
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 
 MOTORS = 15
 QUERIES = 200

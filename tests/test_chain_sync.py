@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from bank_support import Rig, rig
+from coolmuscle.tools.trace import record
 
 DATA = ("P1.1=2500", "S1.1=200", "A1.1=100", "P1.2=1000", "S1.2=100", "A1.2=50",
         "P2.1=1000", "P2.2=2000", "P3.1=3000")
@@ -39,7 +40,7 @@ def check_exact_and_within_s(r: Rig, recorder: Any, motor_id: int, s_pps: float)
 
 def test_4_3_1_each_line_starts_when_both_motors_are_in_position() -> None:
     r = rig(*DATA, motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("B1.1", "A1.1, S1.1, P1.1, A1.2, S1.2, P1.2", "P2.1, P2.2", "P3.1", "END", "[1.1")
     r.until(3)
     m1, m2 = motions(r, 1), motions(r, 2)
@@ -59,7 +60,7 @@ def test_4_3_1_each_line_starts_when_both_motors_are_in_position() -> None:
 
 def test_4_3_2_y_lets_the_next_line_start_at_once() -> None:
     r = rig(*DATA[:-2], "P2.2=20000", "P3.1=3000", motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("B2.1", "A1.1, S1.1, P1.1, A1.2, S1.2, P1.2", "P2.1, Y2.2", "P3.1", "END", "[2.1")
     r.until(4)
     m1, m2 = motions(r, 1), motions(r, 2)
@@ -74,7 +75,7 @@ def test_4_3_2_y_lets_the_next_line_start_at_once() -> None:
 def test_4_3_2_a_series_of_y_completes_each_motion_but_the_last() -> None:
     r = rig("S1.2=100", "A1.2=100", "P1.2=5000", "P2.2=0", "S1.1=100", "A1.1=100",
             "P1.1=1000", motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("B1.1", "S1.2, A1.2, Y1.2", "Y2.2", "S1.1, A1.1, P1.1", "END", "[1.1")
     r.until(3)
     m1, m2 = motions(r, 1), motions(r, 2)

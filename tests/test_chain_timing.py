@@ -12,9 +12,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from coolmuscle.chain import Chain
-from coolmuscle.hostline import byte_time_ns
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 BT_38400 = byte_time_ns(38400)     # 260,416 ns a byte at the default K20 and K65
 
@@ -88,7 +89,7 @@ def _bank_start_lags(k65: int) -> tuple[int, int]:
     chain.execute("B1.1")
     chain.execute("S1.1, A1.1, P1.1, S1.2, A1.2, P1.2, S1.3, A1.3, P1.3")
     chain.execute("END")
-    chain.record()
+    record(chain)
     chain.execute("[1.1")
     chain.kernel.run(until=seconds(1))
     starts = [next(t for t, p, *_ in chain.motors[m].axis.history
@@ -117,7 +118,7 @@ def _path_error(k65: int) -> float:
                  "S1.2=100", "P1.2=0", "P2.2=1000", "R1.2=2000", "B1.1",
                  "S1.1,A1.1,R1.1,R1.2,@2.2+,@2.1+", "END"):
         chain.execute(line)
-    recorder = chain.record()
+    recorder = record(chain)
     chain.execute("[1.1")
     chain.kernel.run(until=seconds(2))
     x_origin = [p.origin_ns for _, p, *_ in chain.motors[1].axis.history if p.segments][0]
@@ -147,7 +148,7 @@ def test_direct_mode_pair_starts_the_y_axis_when_the_line_reaches_it() -> None:
     chain = Chain(motors=2, pacing=True)
     for line in ("S.1=100", "A.1=100", "P.1=1000", "P.2=1000", "R.1=0", "R.2=0"):
         chain.execute(line)
-    chain.record()
+    record(chain)
     type_line(chain, "@.1+, @.2+")
     chain.kernel.run(until=seconds(2))
     x = [p.origin_ns for _, p, *_ in chain.motors[1].axis.history if p.segments][0]
@@ -171,7 +172,7 @@ def test_pause_of_a_paced_path_keeps_each_axis_on_its_own_time_line() -> None:
     for line in ("A1.1=100", "S1.1=100", "P2.1=1000", "R1.1=2000", "P2.2=1000", "R1.2=2000",
                  "B1.1", "S1.1,A1.1,R1.1,R1.2,@2.2+,@2.1+", "END"):
         chain.execute(line)
-    recorder = chain.record()
+    recorder = record(chain)
     chain.execute("[1.1")
     chain.kernel.run(until=seconds(0.6))
     now = chain.kernel.now
@@ -195,8 +196,9 @@ def test_the_chain_model_reads_no_clock_and_opens_no_threads_or_sockets() -> Non
 
     import coolmuscle
     root = Path(coolmuscle.__file__).parent
-    files = [root / "chain.py", root / "links.py", root / "hostline.py",
-             *sorted((root / "motor").glob("*.py"))]
+    files = [*sorted((root / "chain").rglob("*.py")), *sorted((root / "device").rglob("*.py")),
+             *sorted((root / "motor").rglob("*.py"))]
+    assert len(files) > 45
     for path in files:
         for node in pyast.walk(pyast.parse(path.read_text())):
             names = ([a.name for a in node.names] if isinstance(node, pyast.Import)

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import pytest
 
-from coolmuscle import cli
+from coolmuscle.tools import cli
 from coolmuscle.client.program import parse_program
 from coolmuscle.tools.check import RULES, check_program
 from coolmuscle.tools.check_output import format_human, to_json

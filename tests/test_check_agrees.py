@@ -2,7 +2,7 @@
 
 For each line of tests/data/cml_manual_corpus.txt (and a few more that break the bank
 rules), stored in a program bank and in a ladder bank, on CM2 and on RT3: the motor's
-own bank rules (:func:`coolmuscle.motor.bankcheck.check_line`) refuse it with error NN
+own bank rules (:func:`coolmuscle.motor.programs.bankcheck.check_line`) refuse it with error NN
 exactly when ``check`` reports an error with that number on it.  Rules that need more
 than one line (missing banks), the file's comments and value ranges are left out.
 """
@@ -17,8 +17,8 @@ from coolmuscle.cml import ast
 from coolmuscle.cml.parser import parse
 from coolmuscle.client.program import parse_program
 from coolmuscle.errors import CmlSyntaxError, MotorError
-from coolmuscle.motor.bankcheck import check_line, fill_motor
-from coolmuscle.motor.firmware import get_firmware
+from coolmuscle.motor.programs.bankcheck import check_line, fill_motor
+from coolmuscle.motor.state.firmware import get_firmware
 from coolmuscle.tools.check import check_program
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,7 +69,7 @@ def test_check_reports_the_error_the_motor_gives(firmware: str, ladder: bool) ->
 def test_step_and_command_counts_match_the_motor_s() -> None:
     """Every bank of examples/: the counts ``check`` prints are the bank model's."""
     from coolmuscle.client.program import load_program
-    from coolmuscle.motor.bankcheck import line_commands, line_steps
+    from coolmuscle.motor.programs.bankcheck import line_commands, line_steps
     for path in sorted((ROOT / "examples").glob("*.cml")):
         program = load_program(path)
         report = check_program(program)

@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 
 from client_targets import Tcp
-from coolmuscle import cli, connect, connect_async
+from coolmuscle.tools import cli
+from coolmuscle import connect, connect_async
 from coolmuscle.client import UploadError, parse_program
 from coolmuscle.errors import NotAllowedInBankError
 

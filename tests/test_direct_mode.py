@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
 
 

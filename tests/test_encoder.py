@@ -10,14 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain import Chain
-from coolmuscle.motor.encoder import Gearing, gearing_from_config
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.signals.encoder import Gearing, gearing_from_config
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 
 def _chain(gearing: Gearing | None = None, firmware: str = "cm2") -> Chain:
     chain = Chain(firmware=firmware)
-    chain.record()
+    record(chain)
     if gearing is not None:
         chain.motors[1].encoder.set_gearing(gearing)
     return chain
@@ -46,7 +47,7 @@ def test_5_4_1_index_operation_runs_until_the_count_reaches_p_and_does_not_retur
     _run(chain, "K71.1=1", "P.1=10000", "S.1=10", "A.1=100", "^.1")
     stop = _index_stop(chain)
     assert motor.encoder.count(stop - 1) == 9999 and motor.encoder.count(stop) == 10000
-    lag = chain.record().sample(1, stop)
+    lag = record(chain).sample(1, stop)
     overrun = 5 + (lag.command - lag.position)
     assert chain.execute("?76.1") == [f"Ecnt.1={10000 + int(overrun)}"] == ["Ecnt.1=10008"]
     assert chain.execute("?96.1") == ["Px.1=10008"]
@@ -162,7 +163,7 @@ def test_2_2_1_v_states_ct_and_ecnt_and_rt3_cx_fx() -> None:
 def test_the_trace_carries_the_encoder_count() -> None:
     chain = _chain(Gearing(ppr=1000))
     _run(chain, "K71.1=5", "S.1=10", "A.1=100", "P.1=2000", "^.1", until=3)
-    rec = chain.record()
+    rec = record(chain)
     assert rec.sample(1, seconds(1.0)).encoder == int(rec.sample(1, seconds(1.0)).position)
     assert rec.sample(1, seconds(3)).encoder == 2000
     assert "m1.encoder" in rec.header()
@@ -233,8 +234,8 @@ def test_signal_modules_import_no_clock_sockets_or_threads() -> None:
 
     import coolmuscle.motor
     package = Path(coolmuscle.motor.__file__).parent
-    for name in ("trajectory", "pulses", "manual", "analog", "analog_control",
-                 "analog_output", "encoder"):
+    for name in ("motion/trajectory", "signals/pulses", "signals/manual", "signals/analog",
+                 "signals/analog_control", "signals/analog_output", "signals/encoder"):
         tree = ast.parse((package / f"{name}.py").read_text())
         for node in ast.walk(tree):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.client.program import load_program
-from coolmuscle.script import run_script
+from coolmuscle.tools.script import run_script
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.cml"))

@@ -1,7 +1,7 @@
 """Roots of polynomial-plus-exponential functions (motor/expoly.py), against dense sampling.
 
 The servo and load model (docs/fidelity.md "Servo, load and alarms") finds every switching
-instant with :func:`coolmuscle.motor.expoly.roots` / ``first_true``; here they are checked
+instant with :func:`coolmuscle.motor.motion.expoly.roots` / ``first_true``; here they are checked
 against a brute-force scan of the same functions.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.motor import expoly as xp
+from coolmuscle.motor.motion import expoly as xp
 
 coef = st.floats(-1e3, 1e3, allow_nan=False).map(lambda x: 0.0 if abs(x) < 1e-3 else x)
 

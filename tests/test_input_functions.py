@@ -11,8 +11,9 @@ from pathlib import Path
 import pytest
 
 from bank_support import Rig, rig
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.tools.trace import record
 
 MS = NS_PER_MS
 
@@ -61,7 +62,7 @@ def test_k26_inverted_input_and_in_reports() -> None:
 @pytest.mark.parametrize(("function", "sign"), [(3, 1), (4, -1)])
 def test_k27_manual_feed_while_the_input_is_on(function: int, sign: int) -> None:
     r = with_functions(f"K27.1={function}", "K49.1=20", "K43.1=100")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.chain.set_input(1, 1, True)
     r.wait(1)
     assert trace.sample(1, r.kernel.now).speed == pytest.approx(sign * 2000, abs=1)

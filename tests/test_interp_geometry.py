@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.motor.interp import (Arc, Leg, Line, PathError, SpiralArc, SubPath,
-                                     arc_from_center, follow_path, plan_path,
-                                     arc_from_radius, plan_interpolation)
-from coolmuscle.motor.planner import limits_from_data, plan_stop
+from coolmuscle.motor.motion.interp import (Arc, Leg, Line, PathError, SpiralArc, SubPath,
+                                            arc_from_center, follow_path, plan_path,
+                                            arc_from_radius, plan_interpolation)
+from coolmuscle.motor.motion.planner import limits_from_data, plan_stop
 
 S100_A100 = limits_from_data(100, 100, k37=3, k44=100, k51=0, k69=0)   # 10000 pps path speed
 

@@ -17,6 +17,7 @@ import pytest
 
 from bank_support import Rig, rig
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 S_PPS = 100 * 100       # S1 = 100 at the default K37 (100 pps a unit): 10,000 pps
 DATA_4_4_1 = ("A1.1=100", "S1.1=100", "P1.1=0", "P2.1=1000", "R1.1=2000",
@@ -47,7 +48,7 @@ CENTRE_4_4_1 = radius_centres((0, 0), (1000, 1000), 2000)[0]
 def run_bank(data: tuple[str, ...], *lines: str, motors: int = 2, firmware: str = "cm2",
              until: float = 4.0) -> tuple[Rig, Any]:
     r = rig(*data, motors=motors, firmware=firmware)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("B1.1", *lines, "END", "[1.1")
     r.until(until)
     return r, recorder
@@ -265,7 +266,7 @@ def test_several_pairs_on_one_line_run_together() -> None:
 
 def test_pause_stops_along_the_arc_and_resume_finishes_it() -> None:
     r = rig(*DATA_4_4_1, motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("B1.1", START_LINE, "R1.1,R1.2,@2.2+,@2.1+", "END", "[1.1")
     r.until(0.4)
     r.type("]")
@@ -284,7 +285,7 @@ def test_pause_stops_along_the_arc_and_resume_finishes_it() -> None:
 def test_2_1_2_direct_mode_at_with_r0_and_n0() -> None:
     """``@.1+, @.2+`` toward P0 with R0 (2.1.2 example), then with N0 (written last)."""
     r = rig("S.1=100", "A.1=100", "P.1=1000", "P.2=1000", "R.1=2000", "R.2=2000", motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("@.1+, @.2+")
     r.wait(2)
     check_on_circle(recorder, 0, r.kernel.now, CENTRE_4_4_1, 2000)
@@ -367,7 +368,7 @@ def test_6_5_at_in_a_ladder_bank_pairs_within_the_scan() -> None:
     the direct data (R0 = 0: a line); later scans leave the running path alone."""
     r = rig("K63.1=10", "S.1=100", "A.1=100", "P.1=1000", "P.2=500", "R.1=0", "R.2=0",
             motors=2)
-    recorder = r.chain.record()
+    recorder = record(r.chain)
     r.type("L1.1", "@.1+, @.2+", "END", "[L1.1")
     r.wait(1)
     r.type("]L.1", "]L.1")

@@ -10,8 +10,9 @@ import math
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 index = st.integers(0, 3)
 modifier = st.sampled_from(["", "+", "-"])
@@ -61,7 +62,7 @@ def test_interpolation_lines_never_crash(data: st.DataObject, motors: int, where
         min_size=1, max_size=3))
     base = data.draw(st.lists(st.integers(-5000, 5000), min_size=12, max_size=12))
     chain = Chain(motors=motors, pacing=pacing)
-    chain.record()
+    record(chain)
     for motor in range(1, motors + 1):
         chain.execute(", ".join(f"S{i}.{motor}=100" for i in range(4)) + f", K63.{motor}=20")
         chain.execute(", ".join(f"{kind}{i}.{motor}={base[(k * 4 + i + motor) % 12]}"

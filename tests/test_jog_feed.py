@@ -8,16 +8,17 @@ from __future__ import annotations
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.device import Event
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
 
 
 def _chain() -> tuple[Chain, list[Event]]:
     chain = Chain()
     events: list[Event] = []
     chain.subscribe(events.append)
-    chain.record()
+    record(chain)
     return chain, events
 
 
@@ -89,7 +90,7 @@ def test_5_1_feed_runs_at_k49_with_k43_while_the_signal_is_on() -> None:
     chain.set_param(1, 43, 50)            # 50 kpps²: 40 ms to full speed
     chain.set_param(1, 44, 200)           # stop at 100 kpps²: 20 ms
     motor.feed(1)
-    rec = chain.record()
+    rec = record(chain)
     assert rec.sample(1, seconds(0.02)).command == pytest.approx(10.0)    # ½·a·t²
     chain.kernel.run(until=seconds(1))
     assert chain.execute("?97.1") == ["Sx.1=20"]

@@ -14,8 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bank_support import Rig, rig
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.tools.trace import record
 
 MS = NS_PER_MS
 STEP = 250_000
@@ -228,7 +229,7 @@ def test_rt3_3_6_logic_motion_bank_follows_its_dx_curve() -> None:
     # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised
     r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10", "L1", "V1=V1+V2;",
                "V3=U2(V1);", "END", firmware="rt3")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[LM1")
     r.until(1.2)
     motor = r.motor()
@@ -271,7 +272,7 @@ def test_the_ladder_runs_beside_a_program_bank(firmware: str) -> None:
 def test_2_2_3_s0_is_live_while_a_go_motion_runs() -> None:
     """The 2.2.3 operation example changes S.1 from a ladder bank during a ^ move."""
     r = ladder("S.1=10", "A.1=100", "P.1=10000")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("^.1")
     r.until(1)
     r.type("S.1=50")

@@ -1,7 +1,7 @@
 """Compiled ladder statements mean what the interpreter means (property tests).
 
-The ladder scanner runs closures from :mod:`coolmuscle.motor.compiled`; program banks and
-direct mode use :mod:`coolmuscle.motor.evaluate` / :mod:`coolmuscle.motor.direct`.  Random
+The ladder scanner runs closures from :mod:`coolmuscle.motor.programs.compiled`; program banks and
+direct mode use :mod:`coolmuscle.motor.programs.evaluate` / :mod:`coolmuscle.motor.programs.direct`.  Random
 trees (tests/cml_support.py strategies) on a two-motor chain with data in its registers
 must give the same value, the same stored data and the same printed lines both ways.
 """
@@ -14,12 +14,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cml_support import expressions
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.cml import ast
-from coolmuscle.motor.compiled import compile_expr, compile_statement
-from coolmuscle.motor.direct import MotorEval
-from coolmuscle.motor.evaluate import evaluate
-from coolmuscle.motor.ladder import _assigned
+from coolmuscle.motor.programs.compiled import compile_expr, compile_statement
+from coolmuscle.motor.programs.direct import MotorEval
+from coolmuscle.motor.programs.evaluate import evaluate
+from coolmuscle.motor.programs.ladder import _assigned
 
 SETUP = ("K23.1=17", "V1.1=7", "V2.1=-3", 'V3.1="ab"', 'V4.1="Px"', 'V5.1="ST"', "P1.1=1000",
          "S2.1=-40", "V6.1=-2000000000", "V7.1=1000000000",

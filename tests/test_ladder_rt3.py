@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from bank_support import Rig, rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.tools.trace import record
 
 MS = NS_PER_MS
 
@@ -23,7 +24,7 @@ def test_rt3_7_3_2_bidirectional_torque_limit_reverses() -> None:
             "s=0", "a=100", "L1", "v1>v2,s0=s1:^:t1,CL2", "END", "L2",
             "v1<v3,s0=s2:^:t1,t0", "END", firmware="rt3")
     r.clear()
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[L1", "S.1=20", "^.1")
     r.until(1)
     assert r.texts() == [] and min(speeds(r, trace, 0.1, 1)) > 1999
@@ -54,7 +55,7 @@ def _speed_control(*extra: str) -> Rig:
 def test_rt3_7_3_3_bidirectional_torque_speed_control_stops_under_load() -> None:
     r = _speed_control("M0=V2+V5;")
     r.clear()
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[L1", "^")
     r.until(1)
     assert r.chain.get_register(1, "M", 0) == 25
@@ -73,7 +74,7 @@ def test_rt3_7_3_3_bidirectional_torque_speed_control_stops_under_load() -> None
 def test_rt3_7_3_4_unidirectional_torque_speed_control() -> None:
     r = _speed_control()
     r.clear()
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("K87=1", "M0=100", "[L1", "^")
     r.until(1)
     r.motor().plant.coulomb_friction = 0.1
@@ -92,7 +93,7 @@ def test_rt3_7_1_described_edges_and_levels() -> None:
             "V3==v13,CL3,CL2", "v13=v3;", "end.1", "L2.1", "V3==v1,S0=v4:^.1,].1", "End.1",
             "L3.1", "V3==v1,S0=S0+v5,T0", "End.1", firmware="rt3")
     r.clear()
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[L1.1")
     r.until(0.25)
     r.chain.set_input(1, 3, True)
@@ -108,7 +109,7 @@ def test_rt3_7_1_described_edges_and_levels() -> None:
 def test_rt3_7_2_analog_input_controls_the_speed() -> None:
     r = rig("K37=3", "K87=1", 'V1="AIN4"', "V2=4", "S0.1=0", "A0.1=50", "P0.1=1000000000",
             "L1.1", "S0.1=V1.1/V2.1;", "^.1", "END.1", firmware="rt3")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[L1.1")
     for counts, pps in ((512, 12800), (100, 2500), (1023, 25500)):
         r.chain.set_analog(1, counts)

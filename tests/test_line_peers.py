@@ -22,12 +22,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import coolmuscle  # noqa: F401  (registers the coolmuscle:// URL handler)
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.cml.parser import parse
 from coolmuscle.errors import CmlSyntaxError
-from coolmuscle.transports.pty import PtyTransport
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.frontends.transports.pty import PtyTransport
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 from fakes import play_over_serial
 
 TRANSCRIPT = (Path(__file__).parent / "transcripts" / "2.1-operation-example.cml").read_text()

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle import cli
-from coolmuscle.chain import Chain
-from coolmuscle.machine import MachineFileError, parse_machine
+from coolmuscle.tools import cli
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.chain.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))
@@ -61,7 +61,7 @@ def test_install_mistakes(text: str, message: str) -> None:
 def test_reserved_tables_go_to_their_modules_or_say_so() -> None:
     text = "[[axis]]\n[axis.encoder]\nratio = 2\n"
     try:
-        import coolmuscle.motor.encoder as encoder  # noqa: F401
+        import coolmuscle.motor.signals.encoder as encoder  # noqa: F401
     except ImportError:
         with pytest.raises(MachineFileError, match="gearing_from_config"):
             Chain(machine=parse_machine(text))

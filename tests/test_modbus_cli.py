@@ -13,7 +13,7 @@ import pexpect
 import pytest
 import serial
 
-from coolmuscle import cli
+from coolmuscle.tools import cli
 
 from modbus_support import crc, frame
 

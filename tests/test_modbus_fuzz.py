@@ -19,11 +19,11 @@ from typing import Callable, Iterator
 import pytest
 import serial
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import ms
-from coolmuscle.transports.modbus_tcp import ModbusTcpTransport
-from coolmuscle.transports.serial_line import ModbusRtuTransport
-from coolmuscle.transports.service import ServiceThread
+from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
+from coolmuscle.frontends.transports.serial_line import ModbusRtuTransport
+from coolmuscle.frontends.transports.service import ServiceThread
 
 from modbus_support import Wire, crc
 

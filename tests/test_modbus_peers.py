@@ -19,10 +19,10 @@ import pytest
 import serial
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
-from coolmuscle.chain import Chain
-from coolmuscle.transports.modbus_tcp import ModbusTcpTransport
-from coolmuscle.transports.serial_line import Com1Transport, ModbusRtuTransport
-from coolmuscle.transports.service import ServiceThread
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
+from coolmuscle.frontends.transports.serial_line import Com1Transport, ModbusRtuTransport
+from coolmuscle.frontends.transports.service import ServiceThread
 
 from modbus_support import needs_mbpoll, needs_socat, socat_pty_pair, wait_for
 

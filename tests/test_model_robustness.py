@@ -11,7 +11,7 @@ from __future__ import annotations
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain import Chain
+from coolmuscle.chain.daisy import Chain
 
 EDGE = st.sampled_from([0, 1, -1, 2, 100, -100, 32767, -32768, 1000000000, -1000000000,
                         2147483647, 999999999, 5])

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.machine import parse_machine
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.chain.machine import parse_machine
 from coolmuscle.sim.kernel import seconds
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from bank_support import Rig, rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.tools.trace import record
 
 MS = NS_PER_MS
 
@@ -78,7 +79,7 @@ def test_k34_6_merge_pulses_of_k73_at_passing_points_only() -> None:
     starting and end points"; the pulse lasts K73 ms."""
     r = rig("K34.1=0006", "K73.1=20", "S1.1=100", "A1.1=100", "P1.1=2000", "P2.1=4000",
             "P3.1=6000", "B1.1", "S1.1, A1.1, P1.1, P2.1, P3.1", "END")
-    trace = r.chain.record()
+    trace = record(r.chain)
     r.type("[1.1")
     r.until(2)
     changes = []

@@ -8,10 +8,12 @@ from typing import Any
 
 import pytest
 
-from coolmuscle import cli
-from coolmuscle.chain import Chain
-from coolmuscle.plot import interpolated_pairs
+from coolmuscle.tools import cli
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.tools.plot import interpolated_pairs
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.trace import record
+from coolmuscle.tools.plot import plot as plot_chain
 
 TRANSCRIPTS = Path(__file__).parent / "transcripts"
 
@@ -24,7 +26,7 @@ def png_size(path: Path) -> tuple[int, int]:
 
 def arc_chain() -> Chain:
     chain = Chain(motors=3)
-    chain.record()
+    record(chain)
     for line in ("S.1=100", "A.1=100", "P.1=1000", "P.2=1000", "R.1=2000", "R.2=2000",
                  "P.3=500", "S.3=100", "A.3=100", "^.3", "@.1+, @.2+"):
         chain.execute(line)
@@ -34,21 +36,21 @@ def arc_chain() -> Chain:
 
 def test_pairs_that_interpolated_get_an_xy_panel(tmp_path: Path) -> None:
     chain = arc_chain()
-    assert interpolated_pairs(chain.record()) == [(1, 2)]
-    with_xy = png_size(chain.plot(tmp_path / "xy.png"))
-    without = png_size(chain.plot(tmp_path / "plain.png", xy=[]))
+    assert interpolated_pairs(record(chain)) == [(1, 2)]
+    with_xy = png_size(plot_chain(chain, tmp_path / "xy.png"))
+    without = png_size(plot_chain(chain, tmp_path / "plain.png", xy=[]))
     assert with_xy[0] > without[0] * 1.4 and with_xy[1] == without[1]
 
 
 def test_a_chain_without_interpolation_has_no_xy_panel(tmp_path: Path) -> None:
     chain = Chain(motors=2)
-    chain.record()
+    record(chain)
     chain.execute("S.1=100, A.1=100, P.1=1000, ^.1")
     chain.kernel.run(until=seconds(1))
-    assert interpolated_pairs(chain.record()) == []
-    assert png_size(chain.plot(tmp_path / "p.png")) == png_size(
-        chain.plot(tmp_path / "q.png", xy=[]))
-    assert png_size(chain.plot(tmp_path / "r.png", xy=[(1, 2)]))[0] > png_size(
+    assert interpolated_pairs(record(chain)) == []
+    assert png_size(plot_chain(chain, tmp_path / "p.png")) == png_size(
+        plot_chain(chain, tmp_path / "q.png", xy=[]))
+    assert png_size(plot_chain(chain, tmp_path / "r.png", xy=[(1, 2)]))[0] > png_size(
         tmp_path / "p.png")[0]
 
 

@@ -1,4 +1,4 @@
-"""Unit tests of closed-form profiles (coolmuscle.motor.profile) with hand numbers."""
+"""Unit tests of closed-form profiles (coolmuscle.motor.motion.profile) with hand numbers."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import random
 
 import pytest
 
-from coolmuscle.motor.profile import Profile, Segment, hold
+from coolmuscle.motor.motion.profile import Profile, Segment, hold
 
 NS = 1_000_000_000
 T0 = 3 * NS  # a non-zero origin everywhere, to catch origin mistakes

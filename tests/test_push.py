@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.machine import parse_machine
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.chain.machine import parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.tools.trace import record
 
 OBJECT_AT = "[[axis]]\n[axis.stoppers]\ncw = 5000\n"
 
@@ -139,7 +140,7 @@ def test_rt3_push_as_cm2() -> None:
 
 def test_4_1_4_trace_torque_clamped_at_k60_status_32_then_40() -> None:
     chain, _ = _chain()
-    recorder = chain.record()
+    recorder = record(chain)
     chain.execute("K60.1=40, K61.1=300")
     chain.execute("Q1.1")
     chain.kernel.run(until=seconds(4))

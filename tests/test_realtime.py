@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from coolmuscle.hostline import byte_time_ns
+from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, Kernel, ms, seconds
 from coolmuscle.sim.realtime import FastClock, RealtimeClock, RealtimeDriver, make_clock
 from fakes import FakeChain

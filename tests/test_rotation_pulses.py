@@ -13,9 +13,10 @@ from bisect import bisect_right
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain import Chain
-from coolmuscle.motor.trajectory import Schmitt
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.motion.trajectory import Schmitt
 from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.tools.trace import record
 
 
 def _chain(k34: int, *, k24: int = 1000, k37: int = 3) -> Chain:
@@ -23,7 +24,7 @@ def _chain(k34: int, *, k24: int = 1000, k37: int = 3) -> Chain:
     chain.set_param(1, 37, k37)
     chain.set_param(1, 24, k24)
     chain.set_param(1, 34, k34)
-    chain.record()
+    record(chain)
     return chain
 
 
@@ -77,8 +78,8 @@ def test_5_2_edges_sit_exactly_on_boundary_plus_hysteresis() -> None:
     h = motor.pulses.hysteresis()
     assert h == 10.0
     for t in motor.pulses.edge_times(0, chain.kernel.now):
-        x = chain.record().sample(1, t).position
-        before = chain.record().sample(1, t - 1).position
+        x = record(chain).sample(1, t).position
+        before = record(chain).sample(1, t - 1).position
         going_up = x > before
         boundary = x - h if going_up else x + h
         assert abs(boundary / 250 - round(boundary / 250)) < 1e-6, (t, x)
@@ -210,7 +211,7 @@ def test_ch3_k73_merge_pulse_is_on_for_k73_ms_from_each_passing_point() -> None:
     chain = Chain()
     chain.set_param(1, 34, 6)
     chain.set_param(1, 73, 30)
-    rec = chain.record()
+    rec = record(chain)
     motor = chain.motors[1]
     lim = motor.limits(100, 100)
     motor.move_to([(2000.0, lim), (5000.0, lim), (9000.0, lim)])

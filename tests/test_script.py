@@ -9,9 +9,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from coolmuscle.hostline import byte_time_ns
-from coolmuscle.script import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry, escape,
-                               load_script, parse_script, run_script, split_lines, unescape)
+from coolmuscle.device.hostline import byte_time_ns
+from coolmuscle.tools.script import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry,
+                                     escape, load_script, parse_script, run_script,
+                                     split_lines, unescape)
 from coolmuscle.sim.kernel import seconds
 from fakes import ROUNDTRIP, FakeChain
 
@@ -225,22 +226,27 @@ def test_record_gives_a_golden_transcript_that_passes() -> None:
     assert again.ok, again.summary()
 
 
-def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path) -> None:
+def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(ScriptError, match="no trace recorder"):
         run_script("?96.1\n", FakeChain(), trace=tmp_path / "t.csv")
 
-    class Tracing(FakeChain):
-        def trace(self, path: Path) -> Any:
-            self.traced = path
-            outer = self
+    class Handle:
+        closed = False
 
-            class Handle:
-                def close(self) -> None:
-                    outer.trace_closed = True
-            return Handle()
-    chain = Tracing()
+        def close(self) -> None:
+            Handle.closed = True
+
+    traced: list[Path] = []
+
+    def fake_trace(chain: Any, path: Path) -> Handle:
+        traced.append(path)
+        return Handle()
+
+    monkeypatch.setattr("coolmuscle.tools.trace.trace", fake_trace)
+    chain = FakeChain()
     run_script("?96.1\n", chain, trace=tmp_path / "t.csv")
-    assert chain.traced == tmp_path / "t.csv" and chain.trace_closed
+    assert traced == [tmp_path / "t.csv"] and Handle.closed
 
 
 

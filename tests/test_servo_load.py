@@ -15,9 +15,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain import Chain
-from coolmuscle.motor import expoly as xp
-from coolmuscle.motor.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.motion import expoly as xp
+from coolmuscle.motor.motion.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
 from coolmuscle.motor.motor import Motor
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 
@@ -249,7 +249,7 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
     (same drive, same command relative to where it starts); the reused motion is the
     one a fresh solve gives, to the last bit, and the same move elsewhere differs only
     by where it is."""
-    from coolmuscle.motor.dynamics import clear_solutions, solution_reuse
+    from coolmuscle.motor.motion.dynamics import clear_solutions, solution_reuse
 
     chain, motor = _chain(load_inertia=2e-4)
     chain.execute("S.1=50, A.1=30, M.1=40, P.1=3000")
@@ -270,7 +270,7 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
     t = again.origin_ns + seconds(0.2)
     assert again.settled(5.0, t) == fresh.settled(5.0, t) is not None
     # the same move 1,000,000 pulses further on: the same errors, speeds and torques
-    from coolmuscle.motor.axis import _to_raw
+    from coolmuscle.motor.motion.axis import _to_raw
     far = Motion(_to_raw(axis.profile, 1_000_000.0, 1), args[1], args[2] + 1_000_000,
                  args[3], args[4])
     assert len(far.pieces) == len(fresh.pieces)

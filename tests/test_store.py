@@ -11,16 +11,11 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.errors import StoreError
-from coolmuscle.motor.firmware import CM2
-from coolmuscle.motor.memory import Memory
-from coolmuscle.motor.params import ParamTable
-from coolmuscle.motor.store import (
-    APPLICATION_ID,
-    DEFAULT_FILENAME,
-    SCHEMA_VERSION,
-    Store,
-    default_state_dir,
-)
+from coolmuscle.motor.state.firmware import CM2
+from coolmuscle.motor.state.memory import Memory
+from coolmuscle.motor.state.params import ParamTable
+from coolmuscle.motor.state.store import (APPLICATION_ID, DEFAULT_FILENAME, SCHEMA_VERSION,
+                                          Store, default_state_dir)
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.motor.store import Store
+from coolmuscle.motor.state.store import Store
 
 ROUNDS = 100
 
@@ -49,7 +49,7 @@ def checksum_ok(snapshot):
     return hashlib.sha256(text.encode()).hexdigest() == snapshot["checksum"]
 
 if __name__ == "__main__":
-    from coolmuscle.motor.store import Store
+    from coolmuscle.motor.state.store import Store
     store = Store(sys.argv[1])
     generation = int(sys.argv[2])
     print("ready", flush=True)

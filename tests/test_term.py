@@ -21,9 +21,9 @@ from typing import Iterator
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 
 pytestmark = pytest.mark.peer
 

@@ -15,13 +15,15 @@ from typing import Any
 import matplotlib.image
 import pytest
 
-from coolmuscle import cli
-from coolmuscle.chain import Chain
-from coolmuscle.motor.encoder import Gearing
-from coolmuscle.plot import status_class
-from coolmuscle.sim import trace as trace_module
+from coolmuscle.tools import cli
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.signals.encoder import Gearing
+from coolmuscle.tools.plot import status_class
+from coolmuscle.tools import trace as trace_module
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.sim.trace import FIELDS, TraceFormatError
+from coolmuscle.tools.trace import FIELDS, TraceFormatError
+from coolmuscle.tools.trace import record, trace as start_trace
+from coolmuscle.tools.plot import plot as plot_chain
 
 SCRIPT = """\
 K34.1=77
@@ -44,7 +46,7 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
 
 def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) -> None:
     chain = Chain()
-    handle = chain.trace(tmp_path / "run.csv", step=0.01)
+    handle = start_trace(chain, tmp_path / "run.csv", step=0.01)
     chain.set_param(1, 34, 77)
     chain.set_param(1, 24, 2000)
     chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
@@ -74,7 +76,7 @@ def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) 
 
 def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
     chain = Chain()
-    rec = chain.record()
+    rec = record(chain)
     chain.set_param(1, 35, 2)                    # current position, ±1024 pulses
     chain.execute("S.1=10, A.1=100, P.1=512")
     chain.execute("^.1")
@@ -87,7 +89,7 @@ def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any) -> None:
     monkeypatch.setattr(trace_module, "parquet_available", lambda: False)
     with pytest.raises(TraceFormatError, match="pyarrow"):
-        Chain().trace(tmp_path / "run.parquet")
+        start_trace(Chain(), tmp_path / "run.parquet")
     script = tmp_path / "s.cml"
     script.write_text("?96.1\n")
     with pytest.raises(SystemExit) as info:
@@ -121,7 +123,7 @@ def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", pq)
     monkeypatch.setattr(trace_module, "parquet_available", lambda: True)
     chain = Chain()
-    handle = chain.trace(tmp_path / "run.parquet", step=0.1)
+    handle = start_trace(chain, tmp_path / "run.parquet", step=0.1)
     chain.execute("S.1=100, A.1=100, P.1=1000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(1))
@@ -151,13 +153,13 @@ def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
     heights = []
     for motors in (1, 15):
         chain = Chain(motors=motors)
-        chain.record()
+        record(chain)
         for mid in chain.motor_ids:
             chain.set_param(mid, 34, 1)
             chain.execute(f"S.{mid}={10 * mid}, A.{mid}=100, P.{mid}={500 * mid}")
             chain.execute(f"^.{mid}")
         chain.kernel.run(until=seconds(1.5))
-        path = chain.plot(tmp_path / f"m{motors}.png", title=f"{motors} motors")
+        path = plot_chain(chain, tmp_path / f"m{motors}.png", title=f"{motors} motors")
         heights.append(matplotlib.image.imread(path).shape[0])
     assert heights[1] > heights[0] * 1.5
 

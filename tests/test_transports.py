@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle import transports
+from coolmuscle.frontends import transports
 from coolmuscle.errors import TransportError
-from coolmuscle.transports.base import Port, split_after_line_ends
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.stdio import StdioTransport
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.frontends.transports.base import Port, split_after_line_ends
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.stdio import StdioTransport
+from coolmuscle.frontends.transports.tcp import TcpTransport
 from fakes import FakeChain, fake_factory
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -30,8 +30,8 @@ def test_builtin_names_and_lazy_loading() -> None:
 
 
 def test_registry_imports_nothing_until_a_transport_is_chosen() -> None:
-    code = ("import sys, coolmuscle.transports as t; t.names(); "
-            "print(any(m.startswith('coolmuscle.transports.') for m in sys.modules))")
+    code = ("import sys, coolmuscle.frontends.transports as t; t.names(); "
+            "print(any(m.startswith('coolmuscle.frontends.transports.') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env={**os.environ, "PYTHONPATH": SRC}, timeout=30)
     assert out.stdout.strip() == "False", out.stderr
@@ -55,7 +55,7 @@ def test_a_broken_back_end_names_its_module_and_cause(tmp_path: Path,
 
 
 def test_a_missing_attribute_is_reported(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(transports.BUILTIN, "nothing", "coolmuscle.transports.tcp:Nope")
+    monkeypatch.setitem(transports.BUILTIN, "nothing", "coolmuscle.frontends.transports.tcp:Nope")
     with pytest.raises(TransportError, match="has no attribute 'Nope'"):
         transports.load("nothing")
 
@@ -166,8 +166,8 @@ def test_stdio_as_a_child_process_is_driven_by_pipes(tmp_path: Path) -> None:
         import asyncio, sys
         sys.path[:0] = [sys.argv[1], sys.argv[2]]
         from fakes import FakeChain
-        from coolmuscle.transports.service import Service
-        from coolmuscle.transports.stdio import StdioTransport
+        from coolmuscle.frontends.transports.service import Service
+        from coolmuscle.frontends.transports.stdio import StdioTransport
         async def main():
             service = Service(FakeChain(), [StdioTransport()])
             await service.start()

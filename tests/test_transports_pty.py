@@ -13,9 +13,9 @@ import pytest
 import serial
 
 from coolmuscle.errors import TransportError
-from coolmuscle.transports.pty import PtyTransport
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport
+from coolmuscle.frontends.transports.pty import PtyTransport
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport
 from fakes import ROUNDTRIP, fake_factory, play_over_serial
 
 Starter = Callable[..., ServiceThread]

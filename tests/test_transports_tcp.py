@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.errors import TransportError
-from coolmuscle.transports.service import ServiceThread
-from coolmuscle.transports.tcp import TcpTransport, parse_address
+from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.frontends.transports.tcp import TcpTransport, parse_address
 from fakes import ROUNDTRIP, fake_factory, play_over_serial
 
 Starter = Callable[..., ServiceThread]

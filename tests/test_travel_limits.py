@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from coolmuscle.chain import Chain
-from coolmuscle.machine import parse_machine
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.chain.machine import parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 
 LIMITS = """

@@ -13,7 +13,7 @@ from serial.serialutil import PortNotOpenError, SerialException
 
 import coolmuscle  # noqa: F401  (registers the handler)
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.urlhandler import protocol_coolmuscle as handler
+from coolmuscle.frontends.urlhandler import protocol_coolmuscle as handler
 from fakes import ROUNDTRIP, FakeChain, fake_factory, play_over_serial
 
 
@@ -31,9 +31,9 @@ def fake(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[dict[str, Any]]]:
 
 
 def test_import_coolmuscle_registers_the_handler() -> None:
-    assert "coolmuscle.urlhandler" in serial.protocol_handler_packages
-    coolmuscle.urlhandler.register()
-    assert serial.protocol_handler_packages.count("coolmuscle.urlhandler") == 1
+    assert "coolmuscle.frontends.urlhandler" in serial.protocol_handler_packages
+    coolmuscle.frontends.urlhandler.register()
+    assert serial.protocol_handler_packages.count("coolmuscle.frontends.urlhandler") == 1
 
 
 def test_default_chain_answers_with_the_real_host_line() -> None:

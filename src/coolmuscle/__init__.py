@@ -18,6 +18,6 @@ def __getattr__(name: str) -> object:
         return getattr(client, name)
     raise AttributeError(f"module 'coolmuscle' has no attribute {name!r}")
 
-from .urlhandler import register as _register_url_handler  # noqa: E402
+from .frontends.urlhandler import register as _register_url_handler  # noqa: E402
 
 _register_url_handler()  # serial.serial_for_url("coolmuscle://...")

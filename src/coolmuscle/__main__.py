@@ -1,8 +1,8 @@
-"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.cli)."""
+"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.tools.cli)."""
 
 from __future__ import annotations
 
-from .cli import main
+from .tools.cli import main
 
 if __name__ == "__main__":
     main()

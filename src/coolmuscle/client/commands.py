@@ -1,8 +1,8 @@
 """Typed commands: validated against the firmware tables, sent, confirmed (sans-IO).
 
 Values are checked before anything is sent, with the same tables the virtual motor
-uses (:mod:`coolmuscle.motor.firmware` for K parameters, table 6.1;
-:class:`coolmuscle.motor.memory.Memory` for data ranges, 6.2), so a bad value raises
+uses (:mod:`coolmuscle.motor.state.firmware` for K parameters, table 6.1;
+:class:`coolmuscle.motor.state.memory.Memory` for data ranges, 6.2), so a bad value raises
 :class:`~coolmuscle.errors.OutOfRangeError` on the host instead of being silently
 refused by a motor whose K23 does not include 16.  Writes are then read back: a value
 the motor did not take raises too, whatever K23 says.
@@ -15,11 +15,11 @@ Motion (2.1.1, 2.1.2): ``S.n``/``A.n``/``M.n``/``P.n`` then ``^.n``, followed by
 from __future__ import annotations
 
 from ..errors import OutOfRangeError
-from ..motor.firmware import Firmware, get_firmware
-from ..motor.memory import Memory, NoSuchRegisterError
-from ..motor.queries import format_value
+from ..motor.state.firmware import Firmware, get_firmware
+from ..motor.state.memory import Memory, NoSuchRegisterError
+from ..motor.programs.queries import format_value
 from ..motor.status import Ux
-from ..motor.units import resolution
+from ..motor.state.units import resolution
 from .ops import Op, Session, exchange, fenced, param, query
 from .replies import Received, parse_int_reply, parse_version
 

@@ -16,29 +16,29 @@ from typing import TYPE_CHECKING, Callable, Iterable, Protocol, Sequence
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
-from . import units
-from .analog import AnalogInput, AnalogSource
-from .analog_control import AnalogControl
-from .analog_output import output_volts, volts_to_register
-from .axis import Axis
-from .encoder import ExternalEncoder, Gearing
-from .evaluate import pack_string
-from .firmware import Firmware
-from .io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
-                 OUT_ORIGIN_DONE, OUT_PUSH, OUT_ROTATION_PULSE, DigitalIO)
-from .manual import ManualMotion
-from .memory import Memory, VNumber, VState, VString
-from .params import ParamTable
-from .planner import ESTOP_DECEL, Limits, limits_from_data
-from .plant import DEFAULT_KP, STEPPER_KP, Plant
-from .profile import Profile
-from .pulses import RotationPulses
+from .state import units
+from .signals.analog import AnalogInput, AnalogSource
+from .signals.analog_control import AnalogControl
+from .signals.analog_output import output_volts, volts_to_register
+from .motion.axis import Axis
+from .signals.encoder import ExternalEncoder, Gearing
+from .programs.evaluate import pack_string
+from .state.firmware import Firmware
+from .signals.io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
+                         OUT_ORIGIN_DONE, OUT_PUSH, OUT_ROTATION_PULSE, DigitalIO)
+from .signals.manual import ManualMotion
+from .state.memory import Memory, VNumber, VState, VString
+from .state.params import ParamTable
+from .motion.planner import ESTOP_DECEL, Limits, limits_from_data
+from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
+from .motion.profile import Profile
+from .signals.pulses import RotationPulses
 from .status import Report, Ux, io_word_hex, status_line
-from .supervision import Supervision
-from .trajectory import Timeline
+from .supervision.mixin import Supervision
+from .motion.trajectory import Timeline
 
 if TYPE_CHECKING:
-    from .coordinated import PairMotion
+    from .motion.coordinated import PairMotion
 
 log = logging.getLogger(__name__)
 
@@ -119,10 +119,10 @@ class Motor(Supervision):
         self.manual = ManualMotion(self)
         # -- banks, ladder, input functions (issue 4).  Imported here: the executors
         # use .direct, which imports this module.
-        from .banks import BankStore
-        from .inputs import InputFunctions
-        from .ladder import LadderRunner
-        from .program import ProgramExecutor
+        from .programs.banks import BankStore
+        from .signals.inputs import InputFunctions
+        from .programs.ladder import LadderRunner
+        from .programs.program import ProgramExecutor
         self.banks = BankStore(firmware)
         self.program = ProgramExecutor(self)
         self.ladder = LadderRunner(self)

@@ -7,7 +7,7 @@ the wall clock; every delay goes through :meth:`Kernel.schedule`.
 The event queue is a heap of ``(time, priority, counter, timer)``: the counter
 makes the order of events at the same instant and priority deterministic (the
 order they were scheduled in).  Motion is closed-form (see
-:mod:`coolmuscle.motor.profile`), so the kernel jumps from event to event and
+:mod:`coolmuscle.motor.motion.profile`), so the kernel jumps from event to event and
 never ticks when nothing is scheduled.
 
 Real-time pacing is a thin layer on top (:mod:`coolmuscle.sim.realtime`).

@@ -52,8 +52,8 @@ from typing import Final, Literal
 from ..cml import ast
 from ..cml.scanner import scan
 from ..errors import CmlSyntaxError, OutOfRangeError
-from ..motor.firmware import Firmware, get_firmware
-from ..motor.memory import Memory
+from ..motor.state.firmware import Firmware, get_firmware
+from ..motor.state.memory import Memory
 from ..client.program import BankBlock, ProgramFile, SourceLine
 from . import check_tree as tree
 from .check_tree import RegKey

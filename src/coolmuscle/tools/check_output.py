@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..motor.firmware import get_firmware
+from ..motor.state.firmware import get_firmware
 from .check import CheckReport
 
 __all__ = ["to_json", "format_human", "SCHEMA_VERSION"]

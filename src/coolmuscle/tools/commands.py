@@ -1,6 +1,6 @@
 """The ``check``, ``upload`` and ``term`` subcommands of ``coolmuscle`` (typer).
 
-Registered on the main app by :func:`register` (``coolmuscle.cli``).  Exit status as
+Registered on the main app by :func:`register` (``coolmuscle.tools.cli``).  Exit status as
 the rest of the command: 0 success, 1 errors found or a failed upload/connection,
 2 bad usage (a missing file, bad options).
 """
@@ -42,7 +42,7 @@ def check(
 ) -> None:
     """Lint CML files: syntax, limits, banks, calls, loops, registers."""
     from ..client.program import load_program
-    from ..cli import UsageError
+    from .cli import UsageError
     from .check import check_program
     from .check_output import format_human, to_json
 
@@ -79,7 +79,7 @@ def upload(
                                                       help="Skip reading ?85."),
 ) -> None:
     """Send a .cml file to a real or virtual motor and verify it by readback."""
-    from ..cli import UsageError
+    from .cli import UsageError
     from .upload import upload_file
 
     if not file.is_file():

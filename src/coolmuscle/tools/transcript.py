@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from ..script import escape
+from .script import escape
 
 __all__ = ["TranscriptRecorder"]
 

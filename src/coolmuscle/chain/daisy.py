@@ -1,0 +1,490 @@
+"""The daisy chain of motors behind one host line; implements the device API.
+
+The host line enters at ID1 and every statement goes to the motor its ``.n`` names
+(cml-users-guide.txt 1.1 "up to 15 motors can be controlled on a single network").
+A statement without an ID goes to ID1 in direct mode.  A statement for an ID that is
+not on the chain goes around the chain unanswered (docs/fidelity.md "Daisy chain"),
+unless it is for "final ID + 1" while COM1 is a Modbus host (5.6.6, :mod:`.modbus`).
+
+This module is the :class:`coolmuscle.device.api.Device` every front end uses.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterable
+
+from ..cml import ast
+from ..cml.parser import parse
+from ..device.api import Event, EventListener, MotorSnapshot, TargetStream
+from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
+                      NoSuchMotorError, OutOfRangeError)
+from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+from ..motor.programs.banks import BankUploads
+from .links import ChainLinks
+from ..motor.motion.coordinated import LINE_PAIRS, end_of_line, pair_line
+from ..motor.programs.direct import MotorEval, inner_motor, run_statement
+from ..motor.programs.evaluate import evaluate
+from ..motor.state.firmware import get_firmware
+from ..motor.state.memory import VNumber, VState
+from ..motor.motor import Context, Motor
+from ..motor.status import Report
+from ..motor.state.store import Store
+from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
+
+if TYPE_CHECKING:
+    from .machine import Machine
+
+log = logging.getLogger(__name__)
+
+_NO_ECHO = int(Report.NO_ECHO)
+
+#: Origins whose replies are printed on the host line (docs/device-api.md).
+HOST_LINE_ORIGINS = frozenset({"host", "bank", "ladder", "motor"})
+
+
+#: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a host
+#: or PLC sends the same few lines over and over.  Bounded; errors are not kept.
+_PARSED: dict[str, tuple[ast.Line, ...]] = {}
+_PARSED_MAX = 256
+
+
+def _parse(text: str) -> list[ast.Line]:
+    """:func:`parse`, remembering recent lines."""
+    found = _PARSED.get(text)
+    if found is None:
+        found = tuple(parse(text))
+        if len(_PARSED) >= _PARSED_MAX:
+            _PARSED.clear()
+        _PARSED[text] = found
+    return list(found)
+
+
+class _Stream:
+    """Cyclic position mode for one motor (device API ``target_stream``)."""
+
+    def __init__(self, motor: Motor) -> None:
+        self._motor = motor
+        self.closed = False
+
+    def push(self, target: int) -> None:
+        if not self.closed:
+            self._motor.follow(float(target))
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class Chain:
+    """Motors 1..N behind one host line; the device API."""
+
+    def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
+                 firmware: str = "cm2", state_dir: Path | str | None = None,
+                 pacing: bool = False, machine: "Path | str | Machine | None" = None) -> None:
+        if not 1 <= motors <= 15:
+            raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
+        self.kernel = kernel or Kernel()
+        self.firmware = get_firmware(firmware)
+        self.state_dir = Path(state_dir) if state_dir else None
+        self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
+        self._listeners: list[EventListener] = []
+        self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
+        self._observers: list[Callable[[], None]] = []
+        self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
+        self.motors: dict[int, Motor] = {}
+        for motor_id in range(1, motors + 1):
+            self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
+        self.uploads = BankUploads(self.motors)
+        self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
+                                  pacing=pacing)
+        self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
+        self.motors[1].params.on_change(
+            lambda k, _old, new: self._k65_written(new) if k == 65 else None)
+        self._attach_modbus()
+        self._restore()
+        if machine is not None:           # wired before power-up (K46 odd searches then)
+            self.load_machine(machine)
+        for motor in self.motors.values():
+            motor.power_on()
+
+    def load_machine(self, machine: "Path | str | Machine") -> None:
+        """Install a machine file (docs/machine-file.md) on the motors it names."""
+        from .machine import Machine, apply_machine, load_machine
+        apply_machine(machine if isinstance(machine, Machine) else load_machine(machine), self)
+        self._changed()
+
+    # -- device API: identity ---------------------------------------------
+    @property
+    def motor_ids(self) -> tuple[int, ...]:
+        return tuple(self.motors)
+
+    def motor(self, motor_id: int) -> Motor | None:
+        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
+        return self.motors.get(motor_id)
+
+    def _require(self, motor_id: int) -> Motor:
+        motor = self.motors.get(motor_id)
+        if motor is None:
+            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
+                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
+        return motor
+
+    # -- the host line ----------------------------------------------------
+    def _line_settings(self) -> LineSettings:
+        first = self.motors[1]
+        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
+        found = self._settings_cache.get(key)    # read at every line sent: no new object
+        if found is None:
+            found = self._settings_cache[key] = LineSettings(
+                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
+                baud=BAUD_RATES.get(key[2], 38400))
+        return found
+
+    def _on_host_line(self, text: str) -> None:
+        self._execute_text(text, Context(origin="host"))
+        self._changed()
+
+    def observe(self, observer: Callable[[], None]) -> Callable[[], None]:
+        """Call ``observer()`` whenever state may have changed outside a kernel event
+        (a host line, an API call; trace recorders); returns a remover.  Kernel events
+        are observed with ``kernel.add_observer``."""
+        self._observers.append(observer)
+        return lambda: self._observers.remove(observer) if observer in self._observers else None
+
+    def _changed(self) -> None:
+        """State may have changed outside a kernel event: let the observers look."""
+        for observer in self._observers:
+            observer()
+
+    def execute(self, line: str, *, origin: str = "api", motor: int | None = None) -> list[str]:
+        """Run a CML line as ``origin``; return the replies it produced at once.
+
+        ``motor`` is the ID statements without ``.n`` go to (default ID1).
+        """
+        ctx = Context(origin=origin, replies=[],
+                      default_motor=1 if motor is None else self._require(motor).id)
+        self._execute_text(line, ctx)
+        self._changed()
+        return ctx.replies or []
+
+    def _execute_text(self, text: str, ctx: Context) -> None:
+        if self.uploads.consume(text, ctx):   # a bank definition is being typed
+            return
+        try:
+            lines = _parse(text)
+        except CmlSyntaxError as error:
+            self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
+            return
+        if self.uploads.begins(lines, ctx):    # B#.n / L#.n (2.2.2, 2.2.3)
+            return
+        routed = [[(stmt, inner_motor(stmt) or ctx.default_motor) for stmt in line.statements]
+                  for line in lines]
+        arrivals = (self._arrivals(routed, len(text) + 1)
+                    if ctx.origin == "host" and self.paced else {})
+        for line in routed:
+            pairs = pair_line(line, self.motors.__contains__, arrivals)  # "@" pairs (4.4)
+            line_ctx = replace(ctx, extra={**ctx.extra, LINE_PAIRS: pairs}) if pairs else ctx
+            if arrivals:
+                self._relay_line(line, line_ctx, arrivals)
+            else:
+                self._run_statements([stmt for stmt, _ in line], line_ctx)
+        self.poke()
+
+    def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
+        for stmt in statements:
+            motor_id = inner_motor(stmt) or ctx.default_motor
+            motor = self.motors.get(motor_id)
+            if motor is not None:
+                run_statement(motor, stmt, ctx)
+            else:
+                self.beyond_chain(motor_id, stmt, ctx)
+        end_of_line(ctx)          # an "@" of a branch left without its partner (4.4)
+
+    # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
+    @property
+    def paced(self) -> bool:
+        """Wire-time pacing is on: bytes take their time on the host line and the links."""
+        return self.host_line.pacing
+
+    def relay(self, src: int, dst: int, nbytes: int) -> int:
+        """When ``nbytes`` ID ``src`` sends now reach ID ``dst`` (now without pacing)."""
+        now = self.kernel.now
+        return self.links.arrival(src, dst, nbytes, now) if self.paced else now
+
+    def _arrivals(self, routed: list[list[tuple[ast.Statement, int]]],
+                  nbytes: int) -> dict[int, int]:
+        """When the host line's text reaches each motor it addresses (and those between)."""
+        last = max((min(mid, len(self.motors)) for line in routed for _, mid in line),
+                   default=1)
+        arrivals = {1: self.kernel.now}
+        for motor_id in range(2, last + 1):
+            arrivals[motor_id] = self.links.arrival(motor_id - 1, motor_id, nbytes,
+                                                    arrivals[motor_id - 1])
+        return arrivals
+
+    def _relay_line(self, line: list[tuple[ast.Statement, int]], ctx: Context,
+                    arrivals: dict[int, int]) -> None:
+        """Each motor runs its statements of the line when the line reaches it."""
+        groups: dict[int, list[ast.Statement]] = {}
+        for stmt, motor_id in line:
+            groups.setdefault(min(motor_id, len(self.motors)), []).append(stmt)
+        now = self.kernel.now
+        for hop_id in sorted(groups):
+            statements = groups[hop_id]
+            at = arrivals.get(hop_id, now)
+            if at <= now:
+                self._run_statements(statements, ctx)
+            else:
+                self.kernel.schedule_at(at, lambda st=statements: self._relayed(st, ctx),
+                                        priority=PRIO_IO, name="chain-relay")
+
+    def _relayed(self, statements: list[ast.Statement], ctx: Context) -> None:
+        self._run_statements(statements, ctx)
+        self.poke()
+        self._changed()
+
+    def _k65_written(self, value: int) -> None:
+        """K65 written on ID1 is written on every motor (ch. 3 K65)."""
+        for motor in self.motors.values():
+            if motor.id != 1:
+                motor.params.set(65, value)
+
+    # -- bank waits (W#, program lines): re-checked on events, never polled -------
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every :meth:`poke` until the returned remover is called;
+        with ``motors``, only at pokes about one of them (or about nothing in particular):
+        a bank line waiting for motions is not woken by the other motors' milestones."""
+        entry = (callback, None if motors is None else frozenset(motors))
+        self._watchers.append(entry)
+
+        def remove() -> None:
+            if entry in self._watchers:
+                self._watchers.remove(entry)
+        return remove
+
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (a line, an input, a motion, a ladder scan): look again.
+        ``motor``: only the motion of that motor changed."""
+        if self._watchers:
+            for callback, motors in list(self._watchers):
+                if motors is None or motor is None or motor in motors:
+                    callback()
+
+    # -- events -------------------------------------------------------------
+    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+             origin: str = "motor") -> None:
+        """Report a line: on the host line (per origin) and to every subscriber."""
+        if origin in HOST_LINE_ORIGINS:
+            hop_from = min(motor, len(self.motors))
+            if self.paced and hop_from > 1:     # back up the chain to ID1 (ch. 3 K65)
+                size = len(text) + len(self._line_settings().delimiter)
+                at = self.links.arrival(hop_from, 1, size, self.kernel.now)
+                self.kernel.schedule_at(at, lambda: self.host_line.send_line(text),
+                                        priority=PRIO_REPORT, name="chain-reply")
+            else:
+                self.host_line.send_line(text)
+        event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
+        for listener in list(self._listeners):
+            try:
+                listener(event)
+            except Exception:
+                log.exception("event listener failed")
+
+    def subscribe(self, listener: EventListener) -> Callable[[], None]:
+        self._listeners.append(listener)
+
+        def remove() -> None:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+        return remove
+
+    # -- chain-wide commands and banks (cml-users-guide.txt 2.1.2) ------------
+    def chain_command(self, motor: Motor, stmt: ast.Exec, ctx: Context) -> None:
+        """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``, ``<``."""
+        op = stmt.op
+        if op == "pause":          # 2.1.2 "]": stop all motors, pause the banks
+            for each in self.motors.values():
+                each.program.pause()
+            for each in self.motors.values():
+                each.stop()
+        elif op == "pause_motor":
+            motor.stop()
+        elif op == "estop":
+            for each in self.motors.values():
+                each.emergency_stop()
+                each.program.emergency()
+        elif op == "estop_release":
+            for each in self.motors.values():
+                each.emergency_release()
+            for each in self.motors.values():
+                if not each.estopped:
+                    each.program.emergency_released()
+        elif op == "stop_after_line":
+            motor.program.stop_after_line()
+        elif op == "next_line":
+            motor.program.next_line(ctx)
+        elif op == "prev_line":
+            motor.program.prev_line(ctx)
+
+    def bank_command(self, motor: Motor, stmt: ast.Statement, ctx: Context) -> None:
+        """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
+        if isinstance(stmt, ast.StartBank):
+            if stmt.kind == "B":
+                if stmt.index is None:
+                    motor.program.resume()
+                else:
+                    motor.program.start(stmt.index, ctx)
+                return
+            runner = motor.logic_motion if stmt.kind == "LM" else motor.ladder
+            if stmt.index is None:
+                runner.resume()
+            else:
+                runner.start(stmt.index, ctx)
+        elif isinstance(stmt, ast.StopBank):
+            (motor.logic_motion if stmt.kind == "LM" else motor.ladder).pause()
+        elif isinstance(stmt, ast.ClearBanks):
+            if stmt.ladder:
+                motor.ladder.stop()
+                motor.logic_motion.stop()
+            else:
+                motor.program.terminate()
+            motor.banks.clear(stmt.ladder)
+        # C J CL JL X X- W END typed outside a bank mean nothing in direct mode
+
+    def bank_query(self, motor: Motor, query: ast.Query) -> list[str] | None:
+        """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6); error05/06 for a missing bank."""
+        if query.number is None:
+            return None
+        if query.letter is None and query.number == 1000:
+            return motor.banks.all_listing(motor.id)
+        ladder = query.letter == "L"
+        if not 1 <= query.number <= motor.banks.count(ladder):
+            return None
+        lines = motor.banks.listing(ladder, query.number)
+        if lines is None:
+            raise NoLadderBankError() if ladder else NoProgramBankError()
+        return lines
+
+    # -- saving ---------------------------------------------------------------
+    def save(self, motor: Motor) -> None:
+        """``$``: store parameters, data and banks of ``motor`` (2.1.2)."""
+        if self.store is not None:
+            self.store.save_snapshot(motor.id, motor.to_snapshot())
+
+    def _restore(self) -> None:
+        for motor in self.motors.values():
+            if self.store is not None:
+                saved = self.store.load(motor.id)
+                if saved:
+                    motor.load_snapshot(saved)
+                store = self.store
+                motor.params.on_change(
+                    lambda k, old, new, m=motor.id: store.save_param(m, k, new))
+
+    def close(self) -> None:
+        """Close the store (unsaved data is lost, as at power off)."""
+        if self.store is not None:
+            self.store.close()
+
+    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.chain.modbus ----------
+    def _attach_modbus(self) -> None:
+        from .modbus import Com1Port, ModbusSlave, RtuSlaveLine
+        self.modbus = ModbusSlave(self)
+        self.modbus_line = RtuSlaveLine(self, self.modbus)
+        self.host_line.mode = self.modbus_line
+        self.motors[1].params.on_change(
+            lambda k, _old, _new: self.modbus_line.k81_written() if k == 81 else None)
+        self.com1 = Com1Port(self, self.emit)
+
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
+        """A statement for an ID not on the chain (also from banks): the COM1 Modbus
+        slave takes it when it is "final ID + 1" (5.6.6); else it goes unanswered."""
+        if not self.com1.serves(motor_id):
+            return False
+        self._com1_statement(stmt, ctx)
+        return True
+
+    def _com1_statement(self, stmt: ast.Statement, ctx: Context) -> None:
+        """A statement for the COM1 Modbus slave, "final ID + 1" (5.6.6, 5.6.7)."""
+        origin, io = ctx.origin, self.com1.io_id
+        if isinstance(stmt, ast.Query) and stmt.letter is None and stmt.number in (50, 70):
+            if stmt.number == 50:
+                self.com1.read_outputs(origin)
+            else:
+                self.com1.read_inputs(origin)
+        elif isinstance(stmt, ast.Output):
+            if 1 <= stmt.index <= 16:
+                self.com1.write_output(stmt.index, stmt.on, origin)
+            else:
+                self._com1_error(io, ctx)
+        elif isinstance(stmt, ast.OutputWord):
+            word = evaluate(stmt.value, MotorEval(self.motors[self.com1.final_motor]))
+            if 0 <= word <= 0xFFFF:
+                self.com1.write_outputs(word, origin)
+            else:
+                self._com1_error(io, ctx)
+
+    def _com1_error(self, io: int, ctx: Context) -> None:
+        final = self.motors[self.com1.final_motor]
+        if final.reports(Report.MESSAGES):
+            text = OutOfRangeError().motor_line(io)
+            if ctx.replies is not None:
+                ctx.replies.append(text)
+            self.emit(io, "message", text, origin=ctx.origin)
+
+    # -- device API: data -------------------------------------------------------
+    def get_param(self, motor: int, k: int) -> int:
+        return self._require(motor).k(k)
+
+    def set_param(self, motor: int, k: int, value: int) -> None:
+        self._require(motor).params.set(k, value)
+
+    def get_register(self, motor: int, kind: str, index: int) -> int | str:
+        from ..motor.programs.queries import format_value
+        value = self._require(motor).memory.get(kind, index)
+        if isinstance(value, VNumber):
+            return value.value
+        return int(value) if isinstance(value, int) else format_value(value)
+
+    def register_value(self, motor: int, kind: str, index: int) -> int:
+        """The number the motor computes with: V strings packed, V states read live."""
+        m = self._require(motor)
+        return m.register_number(ast.Reg(kind.upper(), index, None))
+
+    def set_register(self, motor: int, kind: str, index: int, value: int | str) -> None:
+        self._require(motor).write_register(kind, index, value)
+
+    def snapshot(self, motor: int) -> MotorSnapshot:
+        m = self._require(motor)
+        target = m.axis.target()
+        return MotorSnapshot(
+            motor=m.id, time=self.kernel.now, position=m.position(),
+            target=round(target) if abs(target) != float("inf") else 0,
+            position_error=round(m.axis.position_error()), speed=m.speed_units(),
+            speed_pps=m.axis.velocity(), torque=m.torque(), status=m.status,
+            inputs=m.io.input_word(), outputs=m.io.output_word(),
+            temperature=m.temperature, voltage=m.voltage, analog=m.analog,
+            encoder_count=m.encoder_count, enabled=m.axis.enabled,
+            extra={"analog_output": m.analog_output()})   # K35 (Modbus K78+54)
+
+    def set_input(self, motor: int, number: int, on: bool) -> None:
+        self._require(motor).set_input_level(number, on)
+        self._changed()
+
+    def set_analog(self, motor: int, counts: int) -> None:
+        if not 0 <= counts <= 1023:
+            raise OutOfRangeError("analog input is 0..1023 (6.6 ?74)")
+        self._require(motor).analog = counts
+
+    def target_stream(self, motor: int) -> TargetStream:
+        return _Stream(self._require(motor))
+
+    def inject_fault(self, motor: int, fault: str, **params: object) -> None:
+        self._require(motor).inject_fault(fault, **params)
+        self._changed()
+
+
+__all__ = ["Chain", "VState", "MotorError"]

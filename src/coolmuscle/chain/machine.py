@@ -1,0 +1,341 @@
+"""Machine files (TOML): what each motor drives — load, stoppers, sensors, scheduled
+inputs and faults (docs/machine-file.md has the full schema and examples/*.toml).
+
+:func:`parse_machine` / :func:`load_machine` read and check a file into a
+:class:`Machine` (every mistake is a :class:`MachineFileError` naming the key);
+:func:`apply_machine` installs it on a chain: plant and thermal data, the shaft's start
+position, stoppers, position sensors wired to inputs (their edges are solved from the
+actual position, :mod:`coolmuscle.motor.supervision.sensors`), K parameters, and kernel events for
+the input and fault schedules.  The ``[axis.analog]`` and ``[axis.encoder]`` tables are
+handed to ``coolmuscle.motor.signals.analog.source_from_config`` and
+``coolmuscle.motor.signals.encoder.gearing_from_config`` (imported when used).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from ..errors import CoolMuscleError
+from ..motor.signals.analog import source_from_config
+from ..motor.signals.encoder import gearing_from_config
+from ..motor.supervision.sensors import PositionSensor
+from ..sim.kernel import Kernel, seconds
+
+if TYPE_CHECKING:
+    from ..motor.motor import Motor
+
+
+class MachineHost(Protocol):
+    """What installing a machine needs of the chain (implemented by ``Chain``)."""
+
+    kernel: Kernel
+
+    def motor(self, motor_id: int) -> "Motor | None": ...
+
+    def set_input(self, motor: int, number: int, on: bool) -> None: ...
+
+    def inject_fault(self, motor: int, fault: str, **params: float) -> None: ...
+
+
+class MachineFileError(CoolMuscleError, ValueError):
+    """A machine file that cannot be read or does not fit the schema."""
+
+
+_LOAD = {"inertia": "load_inertia", "friction": "coulomb_friction", "torque": "load_torque"}
+_MOTOR = {"rotor_inertia": "rotor_inertia", "rated_torque": "rated_torque",
+          "peak_torque": "peak_torque", "max_speed": "max_speed", "kp": "kp"}
+_THERMAL = {"idle": "idle", "rise": "rise_at_rated", "time_constant": "time_constant",
+            "alarm": "alarm"}
+_NAMED_SENSORS = ("origin_sensor", "cw_limit", "ccw_limit")
+_AXIS_KEYS = frozenset({"motor", "ppr", "start", "params", "load", "drive", "thermal",
+                        "stoppers", "sensor", "input", "fault", "analog", "encoder",
+                        *_NAMED_SENSORS})
+#: Lasting faults an ``until`` can clear, and the parameters their clearing needs.
+_CLEARABLE = {"overload": (), "supply_voltage": (), "stuck_input": ("input",),
+              "broken_cable": ("cable",)}
+
+
+@dataclass
+class SensorSpec:
+    name: str
+    input: int
+    lo: float
+    hi: float
+    normally_closed: bool = False
+
+
+@dataclass
+class ScheduledInput:
+    at: float
+    input: int
+    on: bool
+
+
+@dataclass
+class ScheduledFault:
+    at: float
+    fault: str
+    params: dict[str, object]
+    until: float | None = None
+
+
+@dataclass
+class AxisSpec:
+    """One ``[[axis]]`` table."""
+
+    motor: int
+    ppr: int = 1000
+    start: float = 0.0
+    params: dict[int, int] = field(default_factory=dict)
+    load: dict[str, float] = field(default_factory=dict)
+    motor_data: dict[str, float] = field(default_factory=dict)
+    z_phase: float | None = None
+    thermal: dict[str, float] = field(default_factory=dict)
+    stoppers: tuple[float, float] = (-math.inf, math.inf)
+    sensors: list[SensorSpec] = field(default_factory=list)
+    inputs: list[ScheduledInput] = field(default_factory=list)
+    faults: list[ScheduledFault] = field(default_factory=list)
+    analog: dict[str, Any] | None = None
+    encoder: dict[str, Any] | None = None
+
+
+@dataclass
+class Machine:
+    axes: list[AxisSpec]
+    source: str = "<machine>"
+
+
+# -- reading ------------------------------------------------------------------------
+def load_machine(path: str | Path) -> Machine:
+    """Read and check a machine file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MachineFileError(f"cannot read machine file {path}: {exc.strerror or exc}") \
+            from None
+    return parse_machine(text, str(path))
+
+
+def parse_machine(text: str, source: str = "<machine>") -> Machine:
+    """Check machine-file text (TOML) against the schema (docs/machine-file.md)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MachineFileError(f"{source}: not valid TOML: {exc}") from None
+    unknown = set(data) - {"axis", "name", "description"}
+    if unknown:
+        raise MachineFileError(f"{source}: unknown top-level key {sorted(unknown)[0]!r}")
+    tables = data.get("axis", [])
+    if isinstance(tables, dict):
+        tables = [tables]
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise MachineFileError(f"{source}: 'axis' must be [[axis]] tables")
+    axes = [_axis(t, i, source) for i, t in enumerate(tables)]
+    ids = [a.motor for a in axes]
+    if len(set(ids)) != len(ids):
+        raise MachineFileError(f"{source}: two [[axis]] tables for the same motor")
+    return Machine(axes, source)
+
+
+def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
+    where = f"{source}: axis {index + 1}"
+    unknown = set(t) - _AXIS_KEYS
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+    spec = AxisSpec(motor=_int(t.get("motor", index + 1), f"{where}.motor", 1, 15))
+    where = f"{source}: axis motor={spec.motor}"
+    spec.ppr = _int(t.get("ppr", 1000), f"{where}.ppr", 1, 10_000_000)
+    spec.start = _num(t.get("start", 0.0), f"{where}.start")
+    spec.params = _params(t.get("params", {}), f"{where}.params")
+    spec.load = _table(t.get("load", {}), _LOAD, f"{where}.load")
+    drive = t.get("drive", {})
+    if not isinstance(drive, dict):
+        raise MachineFileError(f"{where}.drive: must be a table")
+    drive = dict(drive)
+    if "z_phase" in drive:
+        spec.z_phase = _num(drive.pop("z_phase"), f"{where}.drive.z_phase")
+    spec.motor_data = _table(drive, _MOTOR, f"{where}.drive")
+    spec.thermal = _table(t.get("thermal", {}), _THERMAL, f"{where}.thermal")
+    spec.stoppers = _stoppers(t.get("stoppers", {}), f"{where}.stoppers")
+    for name in _NAMED_SENSORS:
+        if name in t:
+            spec.sensors.append(_sensor(t[name], name, f"{where}.{name}"))
+    for i, s in enumerate(_list(t.get("sensor", []), f"{where}.sensor")):
+        spec.sensors.append(_sensor(s, str(s.get("name", f"sensor {i + 1}")),
+                                    f"{where}.sensor[{i + 1}]"))
+    spec.inputs = [_scheduled_input(s, f"{where}.input[{i + 1}]")
+                   for i, s in enumerate(_list(t.get("input", []), f"{where}.input"))]
+    spec.faults = [_scheduled_fault(s, f"{where}.fault[{i + 1}]")
+                   for i, s in enumerate(_list(t.get("fault", []), f"{where}.fault"))]
+    for key in ("analog", "encoder"):
+        if key in t:
+            if not isinstance(t[key], dict):
+                raise MachineFileError(f"{where}.{key}: must be a table")
+            setattr(spec, key, dict(t[key]))
+    return spec
+
+
+def _num(value: object, where: str, lo: float = -math.inf, hi: float = math.inf) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+        raise MachineFileError(f"{where}: expected a number, got {value!r}")
+    if not lo <= value <= hi:
+        raise MachineFileError(f"{where}: {value!r} is outside {lo:g}..{hi:g}")
+    return float(value)
+
+
+def _int(value: object, where: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise MachineFileError(f"{where}: expected an integer, got {value!r}")
+    if not lo <= value <= hi:
+        raise MachineFileError(f"{where}: {value} is outside {lo}..{hi}")
+    return value
+
+
+def _list(value: object, where: str) -> list[dict[str, Any]]:
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise MachineFileError(f"{where}: expected [[...]] tables")
+    return value
+
+
+def _table(value: object, keys: dict[str, str], where: str) -> dict[str, float]:
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{where}: must be a table")
+    unknown = set(value) - set(keys)
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r} "
+                               f"(known: {', '.join(keys)})")
+    return {keys[k]: _num(v, f"{where}.{k}", 0.0 if k != "torque" else -math.inf)
+            for k, v in value.items()}
+
+
+def _params(value: object, where: str) -> dict[int, int]:
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{where}: must be a table like {{ K27 = 62 }}")
+    out: dict[int, int] = {}
+    for key, v in value.items():
+        name = str(key).upper()
+        if not (name.startswith("K") and name[1:].isdigit()):
+            raise MachineFileError(f"{where}: {key!r} is not a K parameter")
+        out[int(name[1:])] = _int(v, f"{where}.{key}", -1_000_000_000, 1_000_000_000)
+    return out
+
+
+def _stoppers(value: object, where: str) -> tuple[float, float]:
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{where}: must be a table")
+    unknown = set(value) - {"ccw", "cw"}
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r} (ccw, cw)")
+    lo = _num(value.get("ccw", -math.inf), f"{where}.ccw")
+    hi = _num(value.get("cw", math.inf), f"{where}.cw")
+    if not lo < hi:
+        raise MachineFileError(f"{where}: ccw must be below cw")
+    return lo, hi
+
+
+def _sensor(value: object, name: str, where: str) -> SensorSpec:
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{where}: must be a table")
+    unknown = set(value) - {"input", "on", "normally_closed", "name"}
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+    rng = value.get("on")
+    if not isinstance(rng, list) or len(rng) != 2:
+        raise MachineFileError(f"{where}.on: expected [from, to] (machine pulses)")
+    lo, hi = (_num(x, f"{where}.on") for x in rng)
+    if lo > hi:
+        raise MachineFileError(f"{where}.on: from must not exceed to")
+    return SensorSpec(name, _int(value.get("input"), f"{where}.input", 1, 6), lo, hi,
+                      bool(value.get("normally_closed", False)))
+
+
+def _scheduled_input(value: dict[str, Any], where: str) -> ScheduledInput:
+    unknown = set(value) - {"at", "input", "on"}
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+    on = value.get("on")
+    if not isinstance(on, bool):
+        raise MachineFileError(f"{where}.on: expected true or false")
+    return ScheduledInput(_num(value.get("at"), f"{where}.at", 0.0),
+                          _int(value.get("input"), f"{where}.input", 1, 6), on)
+
+
+def _scheduled_fault(value: dict[str, Any], where: str) -> ScheduledFault:
+    params = {k: v for k, v in value.items() if k not in ("at", "fault", "until")}
+    fault = value.get("fault")
+    if not isinstance(fault, str):
+        raise MachineFileError(f"{where}.fault: expected a fault name")
+    until = value.get("until")
+    at = _num(value.get("at"), f"{where}.at", 0.0)
+    if until is not None:
+        until = _num(until, f"{where}.until", at)
+        if fault not in _CLEARABLE:
+            raise MachineFileError(f"{where}.until: {fault!r} is not a lasting fault")
+    return ScheduledFault(at, fault, params, until)
+
+
+# -- installing -----------------------------------------------------------------------
+def apply_machine(machine: Machine, chain: "MachineHost") -> None:
+    """Install ``machine`` on ``chain`` now (MachineFileError if it does not fit)."""
+    for spec in machine.axes:
+        motor = chain.motor(spec.motor)
+        if motor is None:
+            raise MachineFileError(f"{machine.source}: no motor ID{spec.motor} on the chain")
+        try:
+            _install(spec, motor, chain)
+        except (ValueError, LookupError) as exc:
+            if isinstance(exc, MachineFileError):
+                raise
+            raise MachineFileError(f"{machine.source}: motor {spec.motor}: {exc}") from None
+
+
+def _install(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
+    for k, value in spec.params.items():
+        motor.params.set(k, value)
+    for attr, value in {**spec.load, **spec.motor_data}.items():
+        setattr(motor.plant, attr, value)
+    for attr, value in spec.thermal.items():
+        setattr(motor.thermal, attr, value)
+    motor.thermal.reset(None, chain.kernel.now)
+    geo = motor.geometry
+    geo.ppr = spec.ppr
+    geo.stopper_ccw, geo.stopper_cw = spec.stoppers
+    if spec.z_phase is not None:
+        geo.z_phase = spec.z_phase
+    motor.axis.place(spec.start * motor.resolution.pulses_per_rev / spec.ppr)
+    for s in spec.sensors:
+        if s.input > motor.io.input_count:
+            raise MachineFileError(f"sensor {s.name!r}: input {s.input} "
+                                   f"(this firmware has 1..{motor.io.input_count})")
+        sensor = PositionSensor(s.name, s.input, s.lo, s.hi, spec.ppr, s.normally_closed)
+        geo.sensors.append(sensor)
+        sensor.attach(motor)
+    _schedule(spec, motor, chain)
+    if spec.analog is not None:        # [axis.analog] / [axis.encoder]: their owners parse them
+        motor.analog_config = source_from_config(spec.analog)
+    if spec.encoder is not None:
+        motor.encoder_config = gearing_from_config(spec.encoder)
+
+
+def _schedule(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
+    kernel, now, mid = chain.kernel, chain.kernel.now, motor.id
+    for item in spec.inputs:
+        kernel.schedule_at(now + seconds(item.at),
+                           lambda i=item: chain.set_input(mid, i.input, i.on),
+                           name="machine input")
+    for f in spec.faults:
+        motor.faults.check(f.fault, f.params)
+        kernel.schedule_at(now + seconds(f.at),
+                           lambda f=f: chain.inject_fault(mid, f.fault, **f.params),
+                           name="machine fault")
+        if f.until is not None:
+            keep = {k: f.params[k] for k in _CLEARABLE[f.fault] if k in f.params}
+            kernel.schedule_at(now + seconds(f.until),
+                               lambda f=f, keep=keep: chain.inject_fault(
+                                   mid, f.fault, clear=True, **keep),
+                               name="machine fault cleared")

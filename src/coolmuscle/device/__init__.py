@@ -1,0 +1,10 @@
+"""The device API (:mod:`.api`) and the host line every text front end feeds (:mod:`.hostline`).
+
+``from coolmuscle.device import Device, Event, MotorSnapshot`` is the stable import.
+"""
+
+from .api import (Device, Event, EventKind, EventListener, MotorSnapshot, Origin,
+                  TargetStream)
+
+__all__ = ["Device", "Event", "EventKind", "EventListener", "MotorSnapshot", "Origin",
+           "TargetStream"]

@@ -1,0 +1,192 @@
+"""The host line (COM0 in RS-232 mode) as the motor sees it, byte by byte.
+
+This is motor behaviour, so it lives in the model, not in a transport:
+
+* local echo of every received byte unless K23 includes 8 (ch. 3 K23);
+* a line ends at CR (``\\r``) or LF (``\\n``); an LF right after a CR is the
+  second half of a CRLF and ends nothing (docs/fidelity.md "line endings");
+* every reply line ends with the delimiter of K70 (0: CR, 1: CRLF);
+* optional wire-time pacing: bytes leave at the K20 baud rate, 10 bits a byte
+  (start, 8 data, stop; 5.6.1), scheduled in virtual time.
+
+Transports (TCP, pty, stdio, pyserial URL) only shuttle bytes: they call
+:meth:`HostLine.feed` with what the host sent and subscribe to the bytes the
+motor sends with :meth:`HostLine.add_listener`.
+
+COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
+:attr:`HostLine.mode` then takes the received bytes instead of the text line,
+and text replies are not sent while it is active.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+from ..sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
+
+log = logging.getLogger(__name__)
+
+#: K20 / K65 value -> bits per second (ch. 3 K20).
+BAUD_RATES: dict[int, int] = {0: 38400, 1: 9600, 2: 19200, 3: 57600, 4: 115200, 5: 230400}
+
+#: Longest line the motor buffers; longer input is discarded up to the next CR.
+MAX_LINE = 512
+
+ByteListener = Callable[[bytes], None]
+
+
+@dataclass(frozen=True)
+class LineSettings:
+    """What the host line needs from the motor's parameters, read live."""
+
+    echo: bool = True           # K23 without 8
+    delimiter: bytes = b"\r\n"  # K70: 0 -> CR, 1 -> CRLF
+    baud: int = 38400           # K20
+
+
+class LineMode(Protocol):
+    """Another protocol on COM0 (Modbus RTU, 5.6): takes the bytes while active."""
+
+    def active(self) -> bool:
+        """Whether received bytes go to this mode (and text output is muted)."""
+
+    def receive(self, data: bytes) -> None:
+        """Bytes from the host, arrived at ``kernel.now``."""
+
+
+def byte_time_ns(baud: int) -> int:
+    """Wire time of one byte (10 bits) at ``baud``."""
+    return (10 * NS_PER_S) // baud
+
+
+class HostLine:
+    """Byte-level host line: echo, line assembly, delimiter, optional pacing.
+
+    ``on_line`` is called with each complete line (without its terminator) at
+    the virtual time its last byte arrived.  ``settings`` returns the live
+    :class:`LineSettings` (from motor ID1's K20/K23/K70).
+    """
+
+    def __init__(self, kernel: Kernel, on_line: Callable[[str], None],
+                 settings: Callable[[], LineSettings], *, pacing: bool = False) -> None:
+        self.kernel = kernel
+        self._on_line = on_line
+        self._settings = settings
+        self.pacing = pacing
+        self._buf = bytearray()
+        self._overflow = False
+        self._last_was_cr = False
+        self._listeners: list[ByteListener] = []
+        self._tx_free_at = 0  # virtual time the transmitter is free again (pacing)
+        self._rx_free_at = 0
+        self.bytes_in = 0
+        self.bytes_out = 0
+        #: COM0 in another protocol's mode (Modbus RTU); ``None``: always text.
+        self.mode: LineMode | None = None
+
+    # -- output ---------------------------------------------------------
+    def add_listener(self, listener: ByteListener) -> Callable[[], None]:
+        """Receive every byte the motor sends; returns an unsubscribe function."""
+        self._listeners.append(listener)
+
+        def remove() -> None:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+        return remove
+
+    def write(self, data: bytes) -> None:
+        """Send raw bytes to the host (paced when pacing is on)."""
+        if not data:
+            return
+        if not self.pacing:
+            self._deliver(data)
+            return
+        settings = self._settings()
+        start = max(self.kernel.now, self._tx_free_at)
+        self._tx_free_at = start + len(data) * byte_time_ns(settings.baud)
+        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data),
+                                priority=PRIO_REPORT, name="hostline-tx")
+
+    def send_line(self, text: str) -> None:
+        """Send one reply line followed by the K70 delimiter (not in Modbus mode)."""
+        if self.mode is not None and self.mode.active():
+            return
+        self.write(text.encode("latin-1", "replace") + self._settings().delimiter)
+
+    def _deliver(self, data: bytes) -> None:
+        self.bytes_out += len(data)
+        for listener in list(self._listeners):
+            try:
+                listener(data)
+            except Exception:  # a broken client must not stop the motor
+                log.exception("host line listener failed")
+
+    # -- input ----------------------------------------------------------
+    def feed(self, data: bytes) -> None:
+        """Bytes from the host; with pacing they arrive at the K20 rate."""
+        if not data:
+            return
+        if not self.pacing:
+            self._receive(data)
+            return
+        bt = byte_time_ns(self._settings().baud)
+        start = max(self.kernel.now, self._rx_free_at)
+        self._rx_free_at = start + len(data) * bt
+        self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data),
+                                priority=PRIO_IO, name="hostline-rx")
+
+    def _receive(self, data: bytes) -> None:
+        self.bytes_in += len(data)
+        if self.mode is not None and self.mode.active():
+            self.mode.receive(data)
+            return
+        self.receive_text(data)
+
+    def receive_text(self, data: bytes) -> None:
+        """Bytes for the RS-232 text line (also what follows a Modbus escape, 5.6.9)."""
+        settings = self._settings()
+        echo = bytearray()
+        failure: Exception | None = None
+        for byte in data:
+            if byte == 0x0A and self._last_was_cr:
+                self._last_was_cr = False
+                continue
+            self._last_was_cr = byte == 0x0D
+            if byte in (0x0D, 0x0A):
+                if settings.echo:
+                    echo += settings.delimiter
+                    self.write(bytes(echo))
+                    echo.clear()
+                try:
+                    self._end_line()
+                except Exception as exc:  # isolate the line; report after the chunk
+                    failure = failure or exc
+                settings = self._settings()  # the line may have changed K23/K70
+                continue
+            if settings.echo:
+                echo.append(byte)
+            if len(self._buf) >= MAX_LINE:
+                self._overflow = True
+            else:
+                self._buf.append(byte)
+        if echo:
+            self.write(bytes(echo))
+        if failure is not None:
+            raise failure
+
+    def discard_partial(self) -> None:
+        """Forget a partly received line (its sender went away mid-line)."""
+        self._buf.clear()
+        self._overflow = False
+        self._last_was_cr = False
+
+    def _end_line(self) -> None:
+        raw = bytes(self._buf)
+        self._buf.clear()
+        if self._overflow:
+            self._overflow = False
+            log.debug("discarded over-long line (%d+ bytes)", MAX_LINE)
+            return
+        self._on_line(raw.decode("latin-1"))

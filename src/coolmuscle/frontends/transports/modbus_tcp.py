@@ -1,0 +1,158 @@
+"""Modbus TCP front end: the motor's Modbus map behind MBAP framing (docs/modbus.md).
+
+The motor itself speaks Modbus RTU (cml-users-guide.txt 5.6.1); PLCs, HMIs and
+scripts also expect Modbus TCP, so this server serves the same slave
+(:class:`coolmuscle.chain.modbus.slave.ModbusSlave`) with the same addresses, map,
+exceptions and broadcast rule.  It owns only the framing and the sockets:
+
+* an ADU is the 7-byte MBAP header (transaction id, protocol id 0, length, unit id)
+  and the PDU; the reply carries the request's transaction id and unit id;
+* a request that gets no reply on RTU (broadcast, other address, broken PDU) gets
+  none here either; an ADU with a protocol id other than 0 is ignored;
+* a length field outside 2..254 (a PDU holds 1..253 bytes) leaves the stream
+  without framing: the connection is closed;
+* the unit id is the Modbus address as on COM0 (K81, |K84|); unit 255 and, while
+  K81 is 0, unit 1 also reach ID1, so the door works with COM0 in text mode.
+
+Requests of one connection are answered in order; several clients may connect.
+Each request runs in the loop's thread at the wall-clock instant it arrived
+(``Port.call``).  Binds 127.0.0.1 unless told otherwise.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from typing import Any
+
+from ...errors import TransportError
+from .base import DEFAULT_MAX_BUFFER, Port, Transport
+
+log = logging.getLogger(__name__)
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 1502
+READ_SIZE = 65536
+HEADER = 7            # transaction (2), protocol (2), length (2), unit (1)
+MAX_LENGTH = 254      # unit id + the largest PDU (253 bytes)
+
+
+class ModbusTcpTransport(Transport):
+    """Serve the chain's Modbus map over TCP (see module docstring)."""
+
+    name = "modbus-tcp"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 max_buffer: int = DEFAULT_MAX_BUFFER) -> None:
+        super().__init__()
+        self.host = host
+        self.requested_port = port
+        self.max_buffer = max_buffer
+        self.bound: tuple[str, int] | None = None
+        self._server: asyncio.base_events.Server | None = None
+        self._writers: set[asyncio.StreamWriter] = set()
+        self._slave: Any = None
+        self.requests = 0
+        self.closed_connections = 0
+
+    async def start(self, port: Port) -> None:
+        from ...chain.modbus.slave import ModbusSlave, firmware_name, supports_modbus
+
+        self.port = port
+        device = port.device
+        if device is None:
+            raise TransportError("modbus-tcp: no device behind this port")
+        if not supports_modbus(device):
+            raise TransportError(f"modbus-tcp: firmware {firmware_name(device)} has no "
+                                 "Modbus (K78-K85 are other parameters there)")
+        self._slave = getattr(device, "modbus", None) or ModbusSlave(device)
+        try:
+            self._server = await asyncio.start_server(self._serve, self.host,
+                                                      self.requested_port)
+        except OSError as exc:
+            raise TransportError(f"modbus-tcp: cannot listen on {self.host}:"
+                                 f"{self.requested_port}: {exc.strerror or exc}") from exc
+        sockname = self._server.sockets[0].getsockname()
+        self.bound = (sockname[0], sockname[1])
+
+    def describe(self) -> str:
+        host, port = self.bound or (self.host, self.requested_port)
+        return f"modbus-tcp: [{host}]:{port}" if ":" in host else f"modbus-tcp: {host}:{port}"
+
+    def info(self) -> dict[str, Any]:
+        host, port = self.bound or (self.host, self.requested_port)
+        return {"host": host, "port": port}
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        for writer in list(self._writers):
+            writer.transport.abort()
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+        self.finished.set()
+
+    # -- one connection ---------------------------------------------------------------
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        self._writers.add(writer)
+        peer = writer.get_extra_info("peername")
+        buf = bytearray()
+        try:
+            while True:
+                data = await reader.read(READ_SIZE)
+                if not data:
+                    break
+                buf += data
+                out, ok = self._take_adus(buf)
+                if out:
+                    writer.write(bytes(out))
+                    if writer.transport.get_write_buffer_size() > self.max_buffer:
+                        await writer.drain()
+                if not ok:
+                    self.closed_connections += 1
+                    log.info("modbus-tcp: %s sent a frame without valid length; closed", peer)
+                    break
+        except (ConnectionError, OSError) as exc:
+            log.info("modbus-tcp: client %s: %s", peer, exc)
+        except asyncio.CancelledError:
+            pass
+        except Exception:  # one client's trouble never escapes as a task error
+            log.exception("modbus-tcp: client %s failed", peer)
+        finally:
+            self._writers.discard(writer)
+            if not writer.transport.is_closing():
+                writer.transport.close()
+
+    def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool]:
+        """Answer every complete ADU at the start of ``buf`` (consumed); ``ok`` is
+        ``False`` when the stream lost its framing."""
+        out = bytearray()
+        while len(buf) >= HEADER:
+            length = (buf[4] << 8) | buf[5]
+            if not 2 <= length <= MAX_LENGTH:
+                return out, False
+            total = 6 + length
+            if len(buf) < total:
+                break
+            adu = bytes(buf[:total])
+            del buf[:total]
+            if adu[2:4] != b"\x00\x00":
+                continue   # not Modbus (protocol id 0)
+            self.requests += 1
+            reply = self._answer(adu[6], adu[7:])
+            if reply:
+                out += adu[0:4] + (len(reply) + 1).to_bytes(2, "big") + adu[6:7] + reply
+        return out, True
+
+    def _answer(self, unit: int, pdu: bytes) -> bytes | None:
+        assert self.port is not None
+        try:
+            return self.port.call(self._handle, unit, pdu)
+        except Exception:
+            self.port.errors += 1
+            log.exception("modbus-tcp: the model failed on %s", pdu[:16].hex(" "))
+            return None
+
+    def _handle(self, unit: int, pdu: bytes) -> bytes | None:
+        return self._slave.handle(unit, pdu, tcp=True)

@@ -1,0 +1,181 @@
+"""Pseudo-terminal transport: a serial port that serial programs open by path.
+
+Owns one ``os.openpty()`` pair.  The slave side (``/dev/pts/N``) is put in raw mode
+(no tty echo, no CR/LF translation; the motor does its own echo) and kept open by
+us, so the port stays usable across client opens and closes.  Programs open it like
+a serial port: ``serial.Serial("/dev/pts/N")``, minicom, screen, cutecom.  An
+optional ``link`` gives it a stable path (a symlink replaced on start, removed on
+close; an existing non-symlink file is never overwritten).
+
+The baud rate a client sets on the pty has no effect (a pty has no wire); use the
+simulator's ``--pace`` option for wire timing at the K20 rate.
+
+Output the client does not read piles up in the pty's kernel buffer and then in a
+bounded buffer here; beyond ``max_buffer`` bytes new output is discarded, like
+bytes on a wire nobody listens to.  Bytes sent while no program has the port open
+wait in the pty buffer and are read by the next program that opens it (call
+``reset_input_buffer()`` after opening if that matters).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import logging
+import os
+import termios
+import tty
+from pathlib import Path
+from typing import Any
+
+from ...errors import TransportError
+from .base import DEFAULT_MAX_BUFFER, Port, Transport
+
+log = logging.getLogger(__name__)
+
+READ_SIZE = 4096
+
+
+class PtyTransport(Transport):
+    """Serve the host line on a pseudo-terminal (see module docstring)."""
+
+    name = "pty"
+
+    def __init__(self, link: str | os.PathLike[str] | None = None, *,
+                 max_buffer: int = DEFAULT_MAX_BUFFER) -> None:
+        super().__init__()
+        self.link = Path(link).expanduser() if link is not None else None
+        self.max_buffer = max_buffer
+        self.path: str | None = None
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._pending = bytearray()
+        self._writer_armed = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._unsubscribe: Any = None
+        self._link_made = False
+        self.bytes_discarded = 0
+
+    # -- life cycle -----------------------------------------------------
+    async def start(self, port: Port) -> None:
+        self.port = port
+        self._loop = asyncio.get_running_loop()
+        try:
+            master, slave = os.openpty()
+        except OSError as exc:
+            raise TransportError(f"pty: cannot open a pseudo-terminal: {exc}") from exc
+        self._master, self._slave = master, slave
+        try:
+            tty.setraw(slave, termios.TCSANOW)
+            os.set_blocking(master, False)
+            self.path = os.ttyname(slave)
+            if self.link is not None:
+                self._make_link(self.path)
+        except (OSError, termios.error, TransportError) as exc:
+            self._close_fds()
+            if isinstance(exc, TransportError):
+                raise
+            raise TransportError(f"pty: cannot set up the pseudo-terminal: {exc}") from exc
+        self._loop.add_reader(master, self._on_readable)
+        self._unsubscribe = port.add_listener(self._send)
+
+    def _make_link(self, target: str) -> None:
+        assert self.link is not None
+        link = self.link
+        if link.exists() or link.is_symlink():
+            if not link.is_symlink():
+                raise TransportError(f"pty: {link} exists and is not a symlink; not replacing it")
+        tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
+        try:
+            if tmp.is_symlink():
+                tmp.unlink()
+            os.symlink(target, tmp)
+            os.replace(tmp, link)
+        except OSError as exc:
+            raise TransportError(f"pty: cannot create link {link}: {exc}") from exc
+        self._link_made = True
+
+    def describe(self) -> str:
+        where = self.path or "(not open)"
+        if self.link is not None and self._link_made:
+            return f"pty: {self.link} -> {where}"
+        return f"pty: {where}"
+
+    def info(self) -> dict[str, Any]:
+        return {"path": self.path, "link": str(self.link) if self._link_made else None}
+
+    async def close(self) -> None:
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+        if self._link_made and self.link is not None:
+            try:
+                if self.link.is_symlink() and os.readlink(self.link) == self.path:
+                    self.link.unlink()
+            except OSError:
+                pass
+            self._link_made = False
+        self._close_fds()
+        self.finished.set()
+
+    def _close_fds(self) -> None:
+        if self._loop is not None and self._master is not None:
+            self._loop.remove_reader(self._master)
+            if self._writer_armed:
+                self._loop.remove_writer(self._master)
+                self._writer_armed = False
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+
+    # -- bytes ----------------------------------------------------------
+    def _on_readable(self) -> None:
+        if self._master is None:
+            return
+        try:
+            data = os.read(self._master, READ_SIZE)
+        except BlockingIOError:
+            return
+        except OSError as exc:
+            if exc.errno == errno.EIO:  # no slave open; cannot happen while we hold it
+                return
+            log.warning("pty: read failed: %s", exc)
+            return
+        if data and self.port is not None:
+            self.port.feed(data)
+
+    def _send(self, data: bytes) -> None:
+        room = self.max_buffer - len(self._pending)
+        if room < len(data):
+            if room <= 0 and not self.bytes_discarded:
+                log.warning("pty: nobody reads %s; discarding output beyond %d bytes",
+                            self.path, self.max_buffer)
+            self.bytes_discarded += len(data) - max(room, 0)
+            data = data[:max(room, 0)]
+        self._pending += data
+        self._write_some()
+
+    def _write_some(self) -> None:
+        if self._master is None:
+            self._pending.clear()
+            return
+        while self._pending:
+            try:
+                written = os.write(self._master, self._pending)
+            except BlockingIOError:
+                break
+            except OSError as exc:
+                log.warning("pty: write failed: %s", exc)
+                self._pending.clear()
+                break
+            del self._pending[:written]
+        if self._pending and not self._writer_armed and self._loop is not None:
+            self._loop.add_writer(self._master, self._write_some)
+            self._writer_armed = True
+        elif not self._pending and self._writer_armed and self._loop is not None:
+            self._loop.remove_writer(self._master)
+            self._writer_armed = False

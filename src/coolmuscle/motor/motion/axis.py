@@ -1,0 +1,380 @@
+"""The servo axis: the commanded trajectory, the actual shaft motion, and motion milestones.
+
+The command is a closed-form :class:`~coolmuscle.motor.motion.profile.Profile`; the shaft
+follows it through :class:`~coolmuscle.motor.motion.dynamics.Motion` (tracking error, torque
+limit, load, stoppers, servo off).  Whenever the command or the drive changes the axis
+re-solves the motion from the current actual state and schedules one kernel event per
+milestone: in-position, merge passing points, and whatever its *watchers* ask for
+(alarms, sensor edges, push and origin-search detection; see :class:`Watcher`).  A
+move costs a handful of events, not a tick per millisecond.
+
+Coordinates: the axis works in raw encoder pulses (the machine file's coordinates,
+docs/machine-file.md); the user coordinate is ``sign * (raw - zero)``: ``|2`` moves
+``zero`` (2.1.2), reverse coordinates (K45 first digit 2/3, ch. 3 K45) flip ``sign``.
+
+In-position (ch. 3 K55, Ux=8) is declared when the command has reached its target and
+the tracking error is within K55 (docs/fidelity.md "Motion").
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Callable, Protocol, Sequence
+
+from ...sim.kernel import PRIO_MOTION, Kernel, Timer
+from . import planner
+from .dynamics import LOST, Drive, Motion
+from .planner import Limits, Waypoint
+from .profile import Profile, Segment, hold
+
+log = logging.getLogger(__name__)
+
+
+class Watcher(Protocol):
+    """Something that wants a kernel event when the motion reaches a condition."""
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never)."""
+
+    def fire(self, axis: "Axis") -> None:
+        """The instant has come (it may change the command or the drive)."""
+
+
+def _default_drive() -> Drive:
+    return Drive(kp=300.0, a_limit=1e12, a_friction=0.0, a_load=0.0, v_max=1e12)
+
+
+class Axis:
+    """One motor shaft under position control."""
+
+    def __init__(self, kernel: Kernel, *, drive: Callable[[], Drive] = _default_drive,
+                 in_position_window: Callable[[], int] = lambda: 5,
+                 on_in_position: Callable[[], None] = lambda: None,
+                 on_passing_point: Callable[[int], None] = lambda index: None) -> None:
+        self.kernel = kernel
+        self._drive = drive
+        self._window = in_position_window
+        self._on_in_position = on_in_position
+        self._on_passing_point = on_passing_point
+        self.zero = 0.0
+        self.sign = 1
+        self._enabled = True
+        self.profile: Profile = hold(0.0, kernel.now)
+        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive())
+        self.target_raw = 0.0
+        self.moving = False
+        self.generation = 0
+        self.watchers: list[Watcher] = []
+        #: Called with (the motion ending, now) before each re-solve (thermal model).
+        self.before_resolve: list[Callable[[Motion, int], None]] = []
+        self._timers: list[Timer] = []
+        self._watch_timers: dict[int, Timer] = {}
+        #: (time_ns, profile, motion, zero, sign) kept while a trace records.
+        self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
+        #: Called after every trajectory change (rotation pulses, external encoder:
+        #: :class:`coolmuscle.motor.motion.trajectory.Timeline`).
+        self.trajectory_listeners: list[Callable[[], None]] = []
+
+    @property
+    def tracking(self) -> Motion:
+        """The shaft motion (kept under its former name for trace code)."""
+        return self.motion
+
+    # -- coordinates ------------------------------------------------------
+    def to_raw(self, user: float) -> float:
+        """User pulses -> raw pulses."""
+        return self.zero + self.sign * user
+
+    def to_user(self, raw: float) -> float:
+        """Raw pulses -> user pulses."""
+        return self.sign * (raw - self.zero)
+
+    # -- live values (closed form at kernel.now) --------------------------
+    def raw_command(self) -> float:
+        return self.motion.command_at(self.kernel.now)
+
+    def raw_actual(self) -> float:
+        return self.motion.position_at(self.kernel.now)
+
+    def raw_velocity(self) -> float:
+        return self.motion.velocity_at(self.kernel.now)
+
+    def position(self) -> float:
+        """Actual position, user pulses (?96)."""
+        return self.to_user(self.raw_actual())
+
+    def command_position(self) -> float:
+        """Commanded position now, user pulses."""
+        return self.to_user(self.raw_command())
+
+    def target(self) -> float:
+        """Target position PT, user pulses."""
+        return self.to_user(self.target_raw)
+
+    def position_error(self) -> float:
+        """Pe, pulses (?95), in the user direction."""
+        return self.sign * self.motion.error_at(self.kernel.now)
+
+    def velocity(self) -> float:
+        """Actual speed, user pulses/s (?97 before unit conversion)."""
+        return self.sign * self.raw_velocity()
+
+    def torque_percent(self) -> float:
+        """Motor torque, % of rated, in the user direction (?98)."""
+        return self.sign * self.motion.torque_percent_at(self.kernel.now)
+
+    def command_velocity(self) -> float:
+        return self.sign * self.profile.velocity_at(self.kernel.now)
+
+    def command_acceleration(self) -> float:
+        return self.sign * self.profile.acceleration_at(self.kernel.now)
+
+    def mode(self) -> str:
+        """The dynamics mode now (``track``, ``sat``, ``contact``, ...)."""
+        return self.motion.mode_at(self.kernel.now)
+
+    def _raw_state(self) -> tuple[float, float, float]:
+        now = self.kernel.now
+        if not self._enabled or self.motion.mode_at(now) == LOST:
+            return self.raw_actual(), self.raw_velocity(), 0.0
+        return self.profile.state_at(now)
+
+    # -- servo on / off and the drive --------------------------------------
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    @enabled.setter
+    def enabled(self, on: bool) -> None:
+        if bool(on) != self._enabled:
+            self._enabled = bool(on)
+            self.hold_here()
+
+    def refresh(self) -> None:
+        """The drive changed (torque limit, load, stoppers): re-solve from now."""
+        self._resolve()
+
+    # -- commands -----------------------------------------------------------
+    def move(self, waypoints: Sequence[tuple[float, Limits]], *,
+             start_ns: int | None = None) -> None:
+        """Move through user-coordinate waypoints (merge when more than one).
+
+        ``start_ns``: the move starts then (a command still travelling down the chain);
+        only an axis at rest, or holding for a start not yet reached, can wait for it.
+        """
+        raw = [Waypoint(self.to_raw(t), lim) for t, lim in waypoints]
+        now = self.kernel.now
+        start = now
+        if start_ns is not None and start_ns > now and (
+                not self.moving or self.profile.origin_ns > now):
+            start = start_ns
+        state = self.profile.state_at(start) if start > now else self._raw_state()
+        profile = planner.plan_moves(state, raw, start)
+        self.target_raw = raw[-1].target
+        self._start(profile)
+
+    def run_profile(self, profile: Profile) -> None:
+        """Follow a precomputed closed-form profile in user coordinates (an axis of an
+        interpolation, 4.4) with the same tracking, in-position and passing points as
+        :meth:`move`.  Its origin may lie ahead (a command still on its way down the
+        chain): the axis holds its position until then."""
+        raw = _to_raw(profile, self.zero, self.sign)
+        self.target_raw = raw.final_position
+        self._start(raw)
+
+    def run(self, velocity: float, limits: Limits) -> None:
+        """Continuous rotation at a signed user velocity (pps)."""
+        profile = planner.plan_velocity(self._raw_state(), self.sign * velocity, limits,
+                                        self.kernel.now)
+        self.target_raw = float("inf") if self.sign * velocity > 0 else float("-inf")
+        if velocity == 0:
+            self.target_raw = profile.final_position
+        self._start(profile)
+
+    def stop(self, decel: float, scurve: int = 0, *, creep: float = 0.0,
+             speed: float | None = None) -> None:
+        """Decelerate to a stop; the stop point becomes the target (ch. 3 K55).
+
+        ``creep`` and ``speed`` (of the motion being stopped) give the K51 end jump and
+        the K69 jerk, as for a planned stop.
+        """
+        if not self.moving:
+            return
+        profile = planner.plan_stop(self._raw_state(), decel, self.kernel.now, scurve,
+                                    creep=creep, speed=speed)
+        self.target_raw = profile.final_position
+        self._start(profile)
+
+    def hold_here(self) -> None:
+        """Command := the actual position, at rest (enable, free, alarm reset)."""
+        here = self.raw_actual()
+        self.profile = hold(here, self.kernel.now)
+        self.target_raw = here
+        self.moving = False
+        self._resolve()
+
+    def follow(self, user_target: float) -> None:
+        """Step the command to a new target; the servo follows with its lag (csp, Dx)."""
+        raw = self.to_raw(user_target)
+        self.target_raw = raw
+        self._start(hold(raw, self.kernel.now))
+
+    def nudge(self, user_target: float, window: float) -> bool:
+        """Shift the target of a motor at rest by no more than the in-position window,
+        silently: it stays in position (analog position control, ch. 3 K38=1).
+        Returns False (nothing done) when moving or when the step is larger."""
+        if self.moving:
+            return False
+        now = self.kernel.now
+        raw = self.to_raw(user_target)
+        e0 = self.motion.error_at(now) + (raw - self.profile.position_at(now))
+        if abs(e0) > window:
+            return False
+        self.profile = hold(raw, now)
+        self.target_raw = raw
+        self._resolve()
+        return True
+
+    def drive(self, profile: Profile) -> None:
+        """Follow a profile built outside the planner (analog speed/torque control)."""
+        self.target_raw = profile.final_position
+        self._start(profile)
+
+    def set_user_position(self, user: float) -> None:
+        """Declare the current actual position to be ``user`` (``|2``, counter reset)."""
+        self.zero = self.raw_actual() - self.sign * user
+        if not self.moving:
+            self.hold_here()
+        else:
+            self._remember()
+
+    def place(self, raw: float) -> None:
+        """Put the shaft at raw position ``raw``, at rest, counting it as user 0."""
+        self._cancel()
+        self.zero = float(raw)
+        self.profile = hold(raw, self.kernel.now)
+        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self._drive())
+        self.target_raw = float(raw)
+        self.moving = False
+        self._resolve()
+
+    # -- watchers -------------------------------------------------------------
+    def add_watcher(self, watcher: Watcher) -> None:
+        self.watchers.append(watcher)
+        self._arm(watcher, self.kernel.now)
+
+    def remove_watcher(self, watcher: Watcher) -> None:
+        if watcher in self.watchers:
+            self.watchers.remove(watcher)
+        timer = self._watch_timers.pop(id(watcher), None)
+        if timer is not None:
+            timer.cancel()
+
+    def rearm(self, watcher: Watcher) -> None:
+        """Ask ``watcher`` again for its next instant (its own state changed)."""
+        if watcher in self.watchers:
+            self._arm(watcher, self.kernel.now)
+
+    def _arm(self, watcher: Watcher, after_ns: int) -> None:
+        old = self._watch_timers.pop(id(watcher), None)
+        if old is not None:
+            old.cancel()
+        at = watcher.next_time(self, after_ns)
+        if at is not None:
+            self._watch_timers[id(watcher)] = self.kernel.schedule_at(
+                at, lambda w=watcher: self._fire(w), priority=PRIO_MOTION,
+                name=type(watcher).__name__)
+
+    def _fire(self, watcher: Watcher) -> None:
+        self._watch_timers.pop(id(watcher), None)
+        generation = self.generation
+        watcher.fire(self)
+        if generation == self.generation and watcher in self.watchers:
+            self._arm(watcher, self.kernel.now + 1)
+
+    # -- history (trace) ------------------------------------------------------
+    def record_history(self, on: bool = True) -> None:
+        """Keep every trajectory from now on so a trace can be sampled afterwards."""
+        self.history = [] if on else None
+        self._remember()
+
+    def _remember(self) -> None:
+        if self.history is not None:
+            self.history.append((self.kernel.now, self.profile, self.motion,
+                                 self.zero, self.sign))
+        for listener in tuple(self.trajectory_listeners):
+            listener()
+
+    # -- internals ----------------------------------------------------------
+    def _cancel(self) -> None:
+        for timer in self._timers:
+            timer.cancel()
+        self._timers.clear()
+        for timer in self._watch_timers.values():
+            timer.cancel()
+        self._watch_timers.clear()
+
+    def _resolve(self) -> None:
+        """Re-solve the shaft motion from the actual state now and re-arm everything."""
+        now = self.kernel.now
+        p, v = self.raw_actual(), self.raw_velocity()
+        for hook in self.before_resolve:
+            hook(self.motion, now)
+        self._cancel()
+        self.generation += 1
+        self.motion = Motion(self.profile, now, p, v, self._current_drive())
+        if len(self.motion.pieces) >= 2000:
+            log.warning("axis: motion solver hit its piece limit at %d ns", now)
+        self._remember()
+        if self.moving:
+            self._schedule_milestones()
+        for watcher in list(self.watchers):
+            self._arm(watcher, now)
+
+    def _current_drive(self) -> Drive:
+        drive = self._drive()
+        if drive.enabled != self._enabled:
+            from dataclasses import replace
+            drive = replace(drive, enabled=self._enabled)
+        return drive
+
+    def _start(self, profile: Profile) -> None:
+        self.profile = profile
+        self.moving = True
+        self._resolve()
+
+    def _schedule_milestones(self) -> None:
+        now = self.kernel.now
+        for t_ns, index in self.profile.passing_times_ns():
+            if t_ns >= now:
+                self._timers.append(self.kernel.schedule_at(
+                    t_ns, lambda i=index: self._on_passing_point(i),
+                    priority=PRIO_MOTION, name="passing-point"))
+        done = self.in_position_time(now)
+        if done is not None:
+            self._timers.append(self.kernel.schedule_at(done, self._arrived,
+                                                        priority=PRIO_MOTION,
+                                                        name="in-position"))
+
+    def in_position_time(self, after_ns: int) -> int | None:
+        """When the command has ended and |Pe| <= K55 (``None``: not in this motion)."""
+        end = self.profile.end_ns
+        if end is None:
+            return None
+        return self.motion.settled(float(self._window()), max(after_ns, end))
+
+    def _arrived(self) -> None:
+        self.moving = False
+        self._on_in_position()
+
+
+def _to_raw(profile: Profile, zero: float, sign: int) -> Profile:
+    """``profile`` (user pulses) in raw pulses: ``raw = zero + sign * user``."""
+    if zero == 0.0 and sign == 1:
+        return profile
+    p, v, a = profile.start_state
+    segments = [Segment(s.start, s.duration, zero + sign * s.p, sign * s.v, sign * s.a,
+                        sign * s.j) for s in profile.segments]
+    return Profile(profile.origin_ns, segments, start_state=(zero + sign * p, sign * v, sign * a),
+                   final_position=zero + sign * profile.final_position,
+                   passing_times=profile.passing_times)

@@ -1,0 +1,683 @@
+"""The servo and load model: the actual shaft motion under a command, in closed form.
+
+A :class:`Motion` is the shaft's trajectory from one instant on, for one commanded
+:class:`~coolmuscle.motor.motion.profile.Profile` and one set of :class:`Drive` parameters
+(torque limit, load, stoppers, servo on or off).  It is a chain of :class:`Piece` s,
+each in one mode, each closed form (:mod:`.expoly`); the switching instants are
+solved, never polled.  The axis builds a new Motion whenever the command or the drive
+changes (cml-users-guide.txt 2.1.1 "M": "Soon after setting M data, the motor torque
+should be limited by M data").
+
+Modes (docs/fidelity.md "Servo, load and alarms"):
+
+* ``track``: the position loop follows the command, ``e' = v_cmd - kp·e`` (actual speed
+  ``kp·e``, Pe = e); the torque is what the inertia, friction and load need (Coulomb
+  friction drops out once the shaft creeps slower than V_STILL onto a standing command).  A stepper
+  (``kp = inf``, CM1) follows the command exactly.
+* ``sat``: the needed torque exceeds the limit; the motor gives the limit, so the shaft
+  accelerates at a constant rate (a quadratic) and lags until it meets the speed the
+  loop asks for.
+* ``brake``: after a lag, the shaft brakes at the limit torque so as to land on the
+  command's speed where the loop would have it (the braking curve u² = 2·a·ε of the
+  speed and position differences), instead of overshooting.
+* ``vsat``: the loop asks for more than the maximum speed (K40); the shaft runs at it
+  (a load the torque limit cannot hold drags it beyond: over speed).
+* ``stall``: the torque limit cannot overcome the friction and load.
+* ``contact``: the shaft is held by a hard stopper; Pe grows, the torque is the limit.
+* ``free``: servo off (or a stepper that lost its steps, ``lost``): only friction and
+  load act, the shaft coasts to rest.
+
+Units: positions in pulses (raw axis coordinates), time in seconds from the motion's
+origin, torques as accelerations of the total inertia (pulses/s²).
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import Callable, Sequence
+
+from ...sim.kernel import NS_PER_S
+from . import expoly as xp
+from .expoly import F
+from .profile import Profile
+
+TRACK, SAT, BRAKE, VSAT, STALL, CONTACT, FREE, LOST = (
+    "track", "sat", "brake", "vsat", "stall", "contact", "free", "lost")
+
+#: Searches for a mode's end start this long after the mode began (s): no Zeno chains.
+TAU_MIN = 1e-9
+#: Settling slower than this (pulses/s) on a standing command needs no friction torque.
+V_STILL = 0.5
+#: A speed mismatch the torque limit would close within this time (s) is closed at once.
+SNAP_TIME = 1e-6
+#: After this many pieces shorter than 0.1 µs in a row the solver tracks through
+#: (the torque limit is exceeded by a hair for at most SLIDE seconds): no chattering.
+CHATTER = 8
+SLIDE = 1e-4
+#: Relative margin by which a mode's end condition must hold (float noise at a switch).
+REL_TOL = 1e-9
+#: Pieces one motion may hold before the model gives up saturating (a safety net).
+MAX_PIECES = 2000
+
+Conditions = Callable[["Piece"], Sequence[F] | None]
+
+
+@dataclass(frozen=True, slots=True)
+class Drive:
+    """What the dynamics need from the motor, the load and the machine."""
+
+    kp: float                       # position-loop gain, 1/s (inf: stepper)
+    a_limit: float                  # torque limit as an acceleration, pulses/s²
+    a_friction: float               # Coulomb friction as an acceleration
+    a_load: float                   # constant load torque as an acceleration (signed)
+    v_max: float                    # maximum speed, pulses/s
+    enabled: bool = True
+    wall_lo: float = -math.inf      # hard stoppers, raw pulses
+    wall_hi: float = math.inf
+    percent_per_accel: float = 0.0  # Ix % per pulses/s² of torque
+
+    @property
+    def stepper(self) -> bool:
+        return math.isinf(self.kp)
+
+
+class Piece:
+    """One stretch of motion in one mode; τ is local (0 at ``start``).
+
+    Immutable in meaning once :class:`Motion` has set its ``end`` and ``exit``.  Its
+    derived functions (speed, error) and their bounds are computed once, on first use,
+    and kept: watchers and evaluations ask for them many times per motion (the
+    arithmetic is the same as computing them afresh)."""
+
+    __slots__ = ("start", "end", "mode", "pos", "cmd", "torque", "k", "s", "exit",
+                 "_vel", "_err", "_bounds")
+
+    def __init__(self, start: float, end: float, mode: str, pos: F, cmd: F, torque: F,
+                 k: float, s: int = 0, exit: str = "") -> None:
+        self.start = start
+        self.end = end
+        self.mode = mode
+        self.pos = pos
+        self.cmd = cmd
+        self.torque = torque
+        self.k = k
+        self.s = s
+        self.exit = exit
+        self._vel: F | None = None
+        self._err: F | None = None
+        self._bounds: tuple[float, float, float] | None = None
+
+    def __repr__(self) -> str:
+        return (f"Piece(start={self.start!r}, end={self.end!r}, mode={self.mode!r}, "
+                f"pos={self.pos!r}, cmd={self.cmd!r}, torque={self.torque!r}, "
+                f"k={self.k!r}, s={self.s!r}, exit={self.exit!r})")
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+    def placed(self, p0: float, cmd: F) -> "Piece":
+        """This piece (solved relative to where its command started) where it is: the
+        shaft from ``p0``, under the absolute command ``cmd``.  The error is computed
+        afresh against the command, so Pe = command - position holds in absolute terms
+        and a command ends exactly on its target.  Speed and torque do not depend on
+        where the axis is: they are shared."""
+        out = Piece(self.start, self.end, self.mode, (p0,) + self.pos[1:], cmd,
+                    self.torque, self.k, self.s, self.exit)
+        out._vel = self.vel()
+        return out
+
+    def vel(self) -> F:
+        """The actual speed (d pos / dτ)."""
+        found = self._vel
+        if found is None:
+            found = self._vel = xp.deriv(self.pos, self.k)
+        return found
+
+    def err(self) -> F:
+        """Pe = command - actual."""
+        found = self._err
+        if found is None:
+            found = self._err = xp.sub(self.cmd, self.pos)
+        return found
+
+    def reach(self, what: str) -> float:
+        """A bound of |err|, |vel| or |torque| (``what``) over the piece."""
+        bounds = self._bounds
+        if bounds is None:
+            dur = self.end - self.start
+            bounds = self._bounds = (xp.abs_bound(self.err(), dur),
+                                     xp.abs_bound(self.vel(), dur),
+                                     xp.abs_bound(self.torque, dur))
+        return bounds[_REACH[what]]
+
+
+_REACH = {"err": 0, "vel": 1, "torque": 2}
+
+
+def _sign(x: float) -> int:
+    return (x > 0.0) - (x < 0.0)
+
+
+def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
+    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless."""
+    off = (origin_ns - profile.origin_ns) / NS_PER_S
+    out: list[tuple[float, float, F]] = []
+    if profile.end_ns is not None and origin_ns >= profile.end_ns:
+        return [(0.0, math.inf, xp.const(profile.final_position))]
+    if off < 0.0:
+        out.append((0.0, -off, xp.const(profile.start_state[0])))
+    for seg in profile.segments:
+        s0, s1 = seg.start - off, seg.end - off
+        if s1 <= 0.0:
+            continue
+        p, v, a = seg.state(max(0.0, -s0))
+        out.append((max(s0, 0.0), s1, (p, v, a / 2.0, seg.j / 6.0, 0.0)))
+    if profile.end_ns is not None:
+        last = out[-1][1] if out else 0.0
+        out.append((last, math.inf, xp.const(profile.final_position)))
+    return out
+
+
+class Motion:
+    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
+
+    def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
+                 drive: Drive) -> None:
+        self.profile = profile
+        self.origin_ns = int(origin_ns)
+        self.drive = drive
+        self.kp = drive.kp
+        #: The pieces, in order (shared with other motions that are the same move at the
+        #: same place: read only).
+        self.pieces: Sequence[Piece]
+        self._cmd = command_pieces(profile, self.origin_ns)
+        self.pieces, self._starts, self._peaks, self._memo = _placed(
+            drive, float(position), float(velocity), tuple(self._cmd))
+
+    # -- evaluation -----------------------------------------------------------
+    def _rel(self, t_ns: int) -> float:
+        return (t_ns - self.origin_ns) / NS_PER_S
+
+    def _locate(self, t_ns: int) -> tuple[Piece, float]:
+        rel = (t_ns - self.origin_ns) / NS_PER_S
+        if rel < 0.0:
+            rel = 0.0
+        i = bisect_right(self._starts, rel) - 1
+        piece = self.pieces[i if i > 0 else 0]
+        return piece, rel - piece.start
+
+    def position_at(self, t_ns: int) -> float:
+        """Actual shaft position (raw pulses)."""
+        piece, tau = self._locate(t_ns)
+        return xp.value(piece.pos, piece.k, tau)
+
+    def velocity_at(self, t_ns: int) -> float:
+        """Actual speed (raw pulses/s)."""
+        piece, tau = self._locate(t_ns)
+        return xp.value(piece.vel(), piece.k, tau)
+
+    def command_at(self, t_ns: int) -> float:
+        """The command; with the servo off the command follows the shaft."""
+        if not self.drive.enabled:
+            return self.position_at(t_ns)
+        piece, tau = self._locate(t_ns)
+        return xp.value(piece.cmd, piece.k, tau)
+
+    def error_at(self, t_ns: int) -> float:
+        """Pe = command - actual (raw pulses); 0 with the servo off."""
+        if not self.drive.enabled:
+            return 0.0
+        piece, tau = self._locate(t_ns)
+        return xp.value(piece.err(), piece.k, tau)
+
+    def actual_velocity_at(self, t_ns: int) -> float:
+        return self.velocity_at(t_ns)
+
+    def torque_at(self, t_ns: int) -> float:
+        """Motor torque as an acceleration (pulses/s², signed raw)."""
+        piece, tau = self._locate(t_ns)
+        return xp.value(piece.torque, piece.k, tau)
+
+    def torque_percent_at(self, t_ns: int) -> float:
+        """Motor torque, % of rated (signed, raw direction)."""
+        return self.torque_at(t_ns) * self.drive.percent_per_accel
+
+    def mode_at(self, t_ns: int) -> str:
+        return self._locate(t_ns)[0].mode
+
+    # -- solved instants --------------------------------------------------------
+    def to_ns(self, piece: Piece, tau: float) -> int:
+        return self.origin_ns + round((piece.start + tau) * NS_PER_S)
+
+    def reach(self, piece: Piece, what: str) -> float:
+        """A bound of |err|, |vel| or |torque| (``what``) over a piece (cached)."""
+        return piece.reach(what)
+
+    def peak(self, what: str) -> float:
+        """The largest :meth:`reach` of any piece: a bound over the whole motion.
+
+        A watcher whose threshold is at or above it skips every piece, so it can
+        answer "never" without walking them."""
+        return self._peaks[what]
+
+    def settled(self, window: float, after_ns: int) -> int | None:
+        """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
+        this motion).  Remembered with the solution: a repeated move asks it again."""
+        key = (window, after_ns - self.origin_ns)
+        found = self._memo.get(key, self)
+        if found is self:
+            def inside(piece: Piece) -> list[F]:
+                e = piece.err()
+                return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
+            at = self.first(after_ns, inside)
+            found = self._memo[key] = None if at is None else at - self.origin_ns
+        return None if found is None else self.origin_ns + found
+
+    def span(self, piece: Piece) -> tuple[float, float]:
+        """Bounds (lowest, highest) of the actual position over a piece."""
+        spread = xp.spread(piece.pos, piece.duration)
+        return piece.pos[0] - spread, piece.pos[0] + spread
+
+    def first(self, after_ns: int, *alternatives: Conditions,
+              horizon_ns: int | None = None,
+              skip: Callable[[Piece], bool] | None = None) -> int | None:
+        """First kernel time >= ``after_ns`` where, for one alternative, every condition
+        it gives for the piece is > 0 (``None`` from a piece: not there).  Pieces for
+        which ``skip`` is true are known not to qualify.  The instant is rounded up to
+        the next nanosecond, so the condition already holds then."""
+        rel = max(0.0, self._rel(after_ns))
+        i = max(0, bisect_right(self._starts, rel) - 1)
+        for piece in self.pieces[i:]:
+            if horizon_ns is not None and self.to_ns(piece, 0.0) > horizon_ns:
+                return None
+            if skip is not None and skip(piece):
+                continue
+            a = max(0.0, rel - piece.start)
+            best: float | None = None
+            for alt in alternatives:
+                conds = alt(piece)
+                if conds is None:
+                    continue
+                tau = xp.first_true(conds, piece.k, a, piece.duration)
+                if tau is not None and (best is None or tau < best):
+                    best = tau
+            if best is not None:
+                at = self.origin_ns + math.ceil((piece.start + best) * NS_PER_S)
+                return max(after_ns, at)
+        return None
+
+
+@lru_cache(maxsize=1024)
+def _solved(drive: Drive, position: float, velocity: float,
+            cmd: tuple[tuple[float, float, F], ...]) -> tuple[Piece, ...]:
+    """The pieces of a motion relative to the command's position at its origin.  The solution depends on nothing else, so a
+    machine that repeats a cycle solves each of its moves once (docs/performance.md);
+    a hit and a miss give the same numbers."""
+    solver = _Solver(drive, list(cmd))
+    solver._build(position, velocity)
+    return tuple(solver.pieces)
+
+
+@lru_cache(maxsize=1024)
+def _placed(drive: Drive, position: float, velocity: float,
+            cmd: tuple[tuple[float, float, F], ...]
+            ) -> tuple[tuple[Piece, ...], list[float], dict[str, float], dict]:
+    """The pieces of a motion where it is: :func:`_solved` moved to the command's
+    position at the motion's origin (cached too: a cycle repeats its moves in place)."""
+    ref = cmd[0][2][0]
+    rel_drive = drive
+    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+        rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+    rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
+    solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
+    pieces: list[Piece] = []
+    ci = 0
+    for piece in solved:
+        t = piece.start
+        while ci < len(cmd) - 1 and cmd[ci][1] <= t:     # the command piece it began in
+            ci += 1
+        c_start, _, c_poly = cmd[ci]
+        p0 = piece.pos[0]
+        if p0 == rel_drive.wall_hi:                      # at a stopper: exactly there
+            p0 = drive.wall_hi
+        elif p0 == rel_drive.wall_lo:
+            p0 = drive.wall_lo
+        else:
+            p0 += ref
+        if piece.exit == "" and piece.mode == STALL:     # the safety net's hold
+            shown = cmd[-1][2]
+        else:
+            shown = xp.shift(c_poly, 0.0, t - c_start)
+        if piece.mode == FREE and not drive.enabled:     # servo off: the command follows
+            shown = (p0,) + piece.cmd[1:]
+        elif piece.pos is piece.cmd:                     # a stepper on its command
+            p0 = shown[0]
+        pieces.append(piece.placed(p0, shown))
+    peaks = {what: max(piece.reach(what) for piece in pieces) for what in _REACH}
+    return tuple(pieces), [p.start for p in pieces], peaks, {}
+
+
+def clear_solutions() -> None:
+    """Forget every solved motion (benchmarks: to time every move solved afresh)."""
+    _placed.cache_clear()
+    _solved.cache_clear()
+
+
+def solution_reuse() -> tuple[int, int]:
+    """(motions that reused a solution, motions solved) since the last clear."""
+    placed, solved = _placed.cache_info(), _solved.cache_info()
+    return placed.hits + solved.hits, solved.misses
+
+
+class _Solver:
+    """Builds the pieces of one motion, in coordinates relative to the command's
+    position at the motion's origin (so a repeated move is solved once: :func:`_solved`)."""
+
+    def __init__(self, drive: Drive, cmd: list[tuple[float, float, F]]) -> None:
+        self.drive = drive
+        self.pieces: list[Piece] = []
+        self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
+        self._is_stepper = drive.stepper
+        self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
+        self._cmd = cmd
+
+    # -- building ---------------------------------------------------------------
+    def _build(self, p: float, v: float) -> None:
+        t, ci = 0.0, 0
+        kind_prev, mode_prev, s_prev, tiny = "", "", 0, 0
+        while len(self.pieces) < MAX_PIECES:
+            while self._cmd[ci][1] <= t:
+                ci += 1
+            c_start, c_end, c_poly = self._cmd[ci]
+            cmd = xp.shift(c_poly, 0.0, t - c_start)
+            end, kind = c_end - t, "command"
+            if tiny >= CHATTER and self.drive.enabled and not self.drive.stepper:
+                # a sliding edge between tracking and the limit: track through it
+                piece, exits = self._track(t, p, cmd, end)
+                exits = [x for x in exits if x[0] != "limit"]
+                end, kind, tiny = min(end, SLIDE), "slide", 0
+            elif kind_prev == "brake" or (kind_prev == "vzero" and mode_prev == BRAKE):
+                # braking onto the command's speed goes on through zero speed (only the
+                # friction turns round): the command may be running the other way
+                piece, exits = self._brake(t, p, v, cmd, s_prev)
+            else:
+                piece, exits = self._choose(t, p, v, cmd, c_end - t)
+            for name, conds in exits:
+                if isinstance(conds, float):
+                    tau: float | None = max(conds, min(TAU_MIN, end / 2.0))
+                else:
+                    conds = [_strict(c) for c in conds]
+                    tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
+                if tau is not None and tau < end:
+                    end, kind = tau, name
+            piece.end, piece.exit = t + end, kind     # a fresh piece: finished in place
+            self._append(piece)
+            if math.isinf(end):
+                return
+            tiny = tiny + 1 if end < 1e-7 else 0
+            p, v = self._after(piece, end, kind)
+            t = piece.end
+            kind_prev, mode_prev, s_prev = kind, piece.mode, piece.s
+        self._append(_rest_piece(t, p, self._cmd[-1][2], self.drive))
+
+    def _append(self, piece: Piece) -> None:
+        self.pieces.append(piece)
+
+    def _after(self, piece: Piece, tau: float, kind: str) -> tuple[float, float]:
+        """The state where a piece ends, with the exit's exact values."""
+        if kind == "wall_hi":
+            return self.drive.wall_hi, 0.0
+        if kind == "wall_lo":
+            return self.drive.wall_lo, 0.0
+        p = xp.value(piece.pos, piece.k, tau)
+        if kind == "vzero":
+            return p, 0.0
+        return p, xp.value(piece.vel(), piece.k, tau)
+
+    # -- choosing a mode ------------------------------------------------------------
+    def _choose(self, t: float, p: float, v: float, cmd: F,
+                dur: float = math.inf) -> tuple[Piece, list]:
+        d = self.drive
+        if not d.enabled:
+            return self._free(t, p, v, cmd, FREE, 0)
+        wall = _wall_side(p, d) if self._walled else 0
+        if wall:
+            e_probe = xp.value(cmd, 0.0, TAU_MIN) - (p + v * TAU_MIN)
+            if wall * e_probe > 0.0 and wall * v >= 0.0:
+                return self._contact(t, wall, cmd)
+        if self._is_stepper:
+            return self._stepper(t, p, v, cmd, dur)
+        e0 = cmd[0] - p
+        vref = max(-d.v_max, min(d.v_max, d.kp * e0))
+        if abs(v - vref) <= max(1e-6 * abs(v), SNAP_TIME * d.a_limit, 1e-9):
+            track = self._track(t, p, cmd, dur)
+            piece = track[0]
+            # err() and the values at TAU_MIN written out (xp.sub, xp.value: same arithmetic)
+            pos, x = piece.pos, self._exp_tau_min
+            c0, c1, c2, c3, cd = piece._err = (cmd[0] - pos[0], cmd[1] - pos[1], cmd[2] - pos[2],
+                                               cmd[3] - pos[3], cmd[4] - pos[4])
+            e_t = c0 + TAU_MIN * (c1 + TAU_MIN * (c2 + TAU_MIN * c3))
+            if cd:
+                e_t = e_t + cd * x
+            if d.kp * abs(e_t) > d.v_max:
+                return self._vsat(t, p, cmd, _sign(e_t))
+            c0, c1, c2, c3, cd = piece.torque
+            torque = c0 + TAU_MIN * (c1 + TAU_MIN * (c2 + TAU_MIN * c3))
+            if cd:
+                torque = torque + cd * x
+            if abs(torque) <= d.a_limit:
+                return track
+            return self._sat(t, p, v, cmd, _sign(torque))
+        return self._sat(t, p, v, cmd, _sign(vref - v))
+
+    def _walls(self, pos: F) -> list:
+        d = self.drive
+        out = []
+        if math.isfinite(d.wall_hi):
+            out.append(("wall_hi", [xp.sub(pos, xp.const(d.wall_hi))]))
+        if math.isfinite(d.wall_lo):
+            out.append(("wall_lo", [xp.sub(xp.const(d.wall_lo), pos)]))
+        return out
+
+    def _track(self, t: float, p: float, cmd: F, dur: float) -> tuple[Piece, list]:
+        """First-order tracking of the command from error cmd(0) - p.
+
+        The hot path of every motion: the expoly operations (sub, deriv, plus) are
+        written out on the 5-tuples, with the same arithmetic."""
+        d, k = self.drive, self.drive.kp
+        q0, q1, q2, q3, q4 = cmd
+        c2 = 3.0 * q3 / k
+        c1 = (2.0 * q2 - 2.0 * c2) / k
+        c0 = (q1 - c1) / k
+        ed = (q0 - p) - c0
+        e: F = (c0, c1, c2, 0.0, ed)
+        pos: F = (q0 - c0, q1 - c1, q2 - c2, q3 - 0.0, q4 - ed)            # cmd - e
+        # _stretch_sign(e, k, dur) written out (the value at the probe as xp.value)
+        lo = min(TAU_MIN, dur / 2.0)
+        found = xp.roots(e, k, lo, dur)
+        if found:
+            turn: float | None = found[0]
+            probe = (lo + found[0]) / 2.0
+        else:
+            turn = None
+            probe = (lo + (dur if dur != math.inf else lo + 2.0)) / 2.0
+        ep = c0 + probe * (c1 + probe * (c2 + probe * 0.0))
+        if ed:
+            ep = ep + ed * math.exp(-k * probe)
+        sgn = (ep > 0.0) - (ep < 0.0)
+        still: list = []
+        if sgn and q1 == q2 == q3 == 0.0:
+            # settling on a standing command: once creeping, static friction holds
+            if abs(k * ed) <= V_STILL:
+                sgn, turn = 0, None
+            else:
+                still = [("still", [xp.plus(xp.scale(e, -sgn * k), V_STILL)])]
+        vel: F = (pos[1], 2.0 * pos[2], 3.0 * pos[3], 0.0, -k * pos[4])   # pos'
+        load = sgn * d.a_friction + d.a_load
+        torque: F = (vel[1] + load, 2.0 * vel[2], 3.0 * vel[3], 0.0, -k * vel[4])  # pos'' + load
+        exits = self._walls(pos) if self._walled else []
+        if xp.abs_bound(torque, dur) > d.a_limit:              # _beyond("limit", ...)
+            exits += _beyond("limit", torque, dur, d.a_limit)
+        kev = (c0 * k, c1 * k, c2 * k, 0.0 * k, ed * k)
+        if xp.abs_bound(kev, dur) > d.v_max:                    # _beyond("vmax", ...)
+            exits += _beyond("vmax", kev, dur, d.v_max)
+        if still:
+            exits += still
+        if turn is not None:
+            exits.append(("vzero", turn))
+        piece = Piece(t, math.inf, TRACK, pos, cmd, torque, k)
+        piece._vel = vel
+        return piece, exits
+
+    def _sat(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
+        """The torque limit in direction ``s``: constant acceleration, the shaft lags."""
+        d = self.drive
+        drive_force = s * d.a_limit - d.a_load
+        if v == 0.0 and abs(drive_force) <= d.a_friction:
+            return self._held(t, p, cmd, STALL, s)
+        sgn = _sign(v) or _sign(drive_force)
+        acc = drive_force - sgn * d.a_friction
+        pos: F = (p, v, acc / 2.0, 0.0, 0.0)
+        vel = xp.deriv(pos, 0.0)
+        e = xp.sub(cmd, pos)
+        exits = self._walls(pos) + [
+            ("track", [xp.scale(xp.sub(vel, xp.scale(e, d.kp)), float(s))]),
+            ("vzero", [xp.scale(vel, -float(sgn))]),
+        ] + self._brake_exit(pos, cmd, s)
+        if abs(s * d.a_friction + d.a_load) <= d.a_limit:     # it can hold the top speed
+            exits.append(("vmax", [xp.sub(xp.scale(vel, float(s)), xp.const(d.v_max))]))
+        return Piece(t, math.inf, SAT, pos, cmd, xp.const(s * d.a_limit), 0.0, s), exits
+
+    def _braking(self, s: int) -> float:
+        """Relative deceleration available when braking a catch-up in direction ``s``."""
+        d = self.drive
+        return d.a_limit + d.a_friction + s * d.a_load
+
+    def _brake_exit(self, pos: F, cmd: F, s: int) -> list:
+        """Where braking at the limit lands exactly on the loop's steady lag."""
+        a_b = self._braking(s)
+        if a_b <= 0.0:
+            return []
+        v_cmd = xp.deriv(cmd, 0.0)
+        u = xp.sub(xp.deriv(pos, 0.0), v_cmd)
+        eps = xp.sub(xp.sub(cmd, pos), xp.scale(v_cmd, 1.0 / self.drive.kp))
+        curve = xp.sub(xp.mul(u, u), xp.scale(eps, 2.0 * a_b * s))
+        return [("brake", [xp.scale(u, float(s)), curve])]
+
+    def _brake(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
+        """Braking at the limit torque (against ``s``) onto the command's speed."""
+        d = self.drive
+        sgn = _sign(v)
+        if not sgn:
+            pull = -s * d.a_limit - d.a_load
+            if abs(pull) <= d.a_friction:               # the limit cannot move it: held
+                return self._choose(t, p, v, cmd)
+            sgn = _sign(pull)
+        acc = -s * d.a_limit - sgn * d.a_friction - d.a_load
+        pos: F = (p, v, acc / 2.0, 0.0, 0.0)
+        vel = xp.deriv(pos, 0.0)
+        u = xp.sub(vel, xp.deriv(cmd, 0.0))
+        exits = self._walls(pos) + [("landed", [xp.scale(u, -float(s))]),
+                                    ("vzero", [xp.scale(vel, -float(sgn))])]
+        return Piece(t, math.inf, BRAKE, pos, cmd, xp.const(-s * d.a_limit), 0.0, s), exits
+
+    def _vsat(self, t: float, p: float, cmd: F, s: int) -> tuple[Piece, list]:
+        d = self.drive
+        pos: F = (p, s * d.v_max, 0.0, 0.0, 0.0)
+        e = xp.sub(cmd, pos)
+        torque = xp.const(s * d.a_friction + d.a_load)
+        exits = self._walls(pos) + [
+            ("track", [xp.sub(xp.const(d.v_max), xp.scale(e, s * d.kp))])
+        ] + self._brake_exit(pos, cmd, s)
+        return Piece(t, math.inf, VSAT, pos, cmd, torque, 0.0, s), exits
+
+    def _held(self, t: float, p: float, cmd: F, mode: str, s: int) -> tuple[Piece, list]:
+        """Standing still at the limit torque (stall, contact) until Pe turns round."""
+        pos = xp.const(p)
+        exits = [("release", [xp.scale(xp.sub(cmd, pos), -float(s))])]
+        torque = xp.const(s * self.drive.a_limit)
+        return Piece(t, math.inf, mode, pos, cmd, torque, 0.0, s), exits
+
+    def _contact(self, t: float, side: int, cmd: F) -> tuple[Piece, list]:
+        d = self.drive
+        return self._held(t, d.wall_hi if side > 0 else d.wall_lo, cmd, CONTACT, side)
+
+    def _free(self, t: float, p: float, v: float, cmd: F, mode: str,
+              s: int) -> tuple[Piece, list]:
+        """No motor torque: friction and load only (servo off, lost steps)."""
+        d = self.drive
+        if v == 0.0 and abs(d.a_load) <= d.a_friction:
+            acc, sgn = 0.0, 0
+        else:
+            sgn = _sign(v) or -_sign(d.a_load)
+            acc = -d.a_load - sgn * d.a_friction
+        pos: F = (p, v, acc / 2.0, 0.0, 0.0)
+        vel = xp.deriv(pos, 0.0)
+        exits = self._walls(pos)
+        if sgn:
+            exits.append(("vzero", [xp.scale(vel, -float(sgn))]))
+        if mode == LOST:
+            e = xp.sub(cmd, pos)
+            exits.append(("relock", [xp.scale(e, -float(s))]))
+        shown = xp.const(s * d.a_limit) if mode == LOST else xp.ZERO
+        if not d.enabled:
+            cmd = pos
+        return Piece(t, math.inf, mode, pos, cmd, shown, 0.0, s), exits
+
+    def _stepper(self, t: float, p: float, v: float, cmd: F,
+                 dur: float) -> tuple[Piece, list]:
+        """CM1: exactly on the command within the torque limit, else steps are lost."""
+        d = self.drive
+        e0 = cmd[0] - p
+        if abs(e0) > 1e-6 * max(1.0, abs(p)):
+            return self._free(t, p, v, cmd, LOST, _sign(e0))
+        vel = xp.deriv(cmd, 0.0)
+        sgn, turn = _stretch_sign(vel, 0.0, dur)
+        torque = xp.plus(xp.deriv(vel, 0.0), sgn * d.a_friction + d.a_load)
+        if abs(xp.value(torque, 0.0, TAU_MIN)) > d.a_limit:
+            return self._free(t, cmd[0], v, cmd, LOST, _sign(xp.value(vel, 0.0, TAU_MIN)))
+        exits = self._walls(cmd) + _beyond("limit", torque, dur, d.a_limit)
+        if turn is not None:
+            exits.append(("vzero", turn))
+        return Piece(t, math.inf, TRACK, cmd, cmd, torque, 0.0), exits
+
+
+def _strict(f: F) -> F:
+    """``f - tol``: a mode ends only when its condition holds beyond float noise."""
+    return xp.plus(f, -REL_TOL * max(1.0, max(f), -min(f)))
+
+
+def _wall_side(p: float, d: Drive) -> int:
+    tol = 1e-9 * max(1.0, abs(p))
+    if math.isfinite(d.wall_hi) and p >= d.wall_hi - tol:
+        return 1
+    if math.isfinite(d.wall_lo) and p <= d.wall_lo + tol:
+        return -1
+    return 0
+
+
+def _stretch_sign(f: F, k: float, dur: float) -> tuple[int, float | None]:
+    """Sign of ``f`` on its first stretch after TAU_MIN, and where it ends (within
+    ``dur``); a sign change closer to the start than TAU_MIN is float noise."""
+    lo = min(TAU_MIN, dur / 2.0)
+    found = xp.roots(f, k, lo, dur)
+    if found:
+        return _sign(xp.value(f, k, (lo + found[0]) / 2.0)), found[0]
+    end = dur if dur != math.inf else lo + 2.0
+    return _sign(xp.value(f, k, (lo + end) / 2.0)), None
+
+
+def _beyond(name: str, f: F, dur: float, limit: float) -> list:
+    """Exits for ``|f| > limit`` within ``dur``, only when a bound says it may happen."""
+    if xp.abs_bound(f, dur) <= limit:
+        return []
+    return [(name, [xp.plus(f, -limit)]), (name, [xp.plus(xp.scale(f, -1.0), -limit)])]
+
+
+def _rest_piece(t: float, p: float, cmd: F, d: Drive) -> Piece:
+    """Safety net after MAX_PIECES: hold still (logged by the axis)."""
+    return Piece(t, math.inf, STALL, xp.const(p), cmd, xp.const(d.a_load), 0.0)

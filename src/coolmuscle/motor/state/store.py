@@ -1,0 +1,296 @@
+"""The persistent store: what survives a power cycle (CML 2.1.2 ``$``, ch. 3).
+
+Two things persist, per motor ID:
+
+* the **snapshot** written by ``$`` ("saves Parameters, Data Commands, Program
+  Banks and Ladder Logic Banks", 2.1.2): one JSON document, replaced whole in
+  one transaction by :meth:`Store.save_snapshot`;
+* **K values** written on their own by every accepted K change (ch. 3: "The
+  changed value is saved automatically"), :meth:`Store.save_param`.  They are
+  an overlay on the snapshot; the next ``$`` folds them in and clears them.
+
+:meth:`Store.load` returns what a power cycle restores: the snapshot with the
+overlay applied.
+
+The file is SQLite in WAL mode with ``synchronous=FULL`` and every write is one
+``BEGIN IMMEDIATE`` transaction, so a crash at any instant (kill -9, power loss
+on a disk that honours fsync) leaves the previous or the new state, never a
+mixture; a committed ``$`` is durable before ``saved.`` is printed.
+
+Concurrency: one writer process (the simulator); callers serialise access from
+several threads themselves (the coolmuscle:// port holds a lock).  Other processes may read.
+
+Snapshot shape (the motor decides the content; the store only requires JSON
+data with string keys, except ``params`` whose keys may be ints)::
+
+    {"firmware": "cm2", "params": {20: 0, ...}, "memory": Memory.to_dict(),
+     "banks": {"1": ["S1.1, A1.1, P1.1", ...]}, "ladders": {"1": [...]}}
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+from ...errors import StoreError
+
+#: ``PRAGMA application_id`` of a coolmuscle store ("CMST").
+APPLICATION_ID = 0x434D5354
+#: ``PRAGMA user_version``: schema version this code writes and reads.
+SCHEMA_VERSION = 1
+#: File name inside :func:`default_state_dir`.
+DEFAULT_FILENAME = "coolmuscle.sqlite3"
+#: How long to wait for another connection's lock (seconds, SQLite's own timer).
+BUSY_TIMEOUT_S = 5.0
+
+_SCHEMA = (
+    "CREATE TABLE IF NOT EXISTS snapshot (motor_id INTEGER PRIMARY KEY,"
+    " generation INTEGER NOT NULL, data TEXT NOT NULL)",
+    "CREATE TABLE IF NOT EXISTS param (motor_id INTEGER NOT NULL, k INTEGER NOT NULL,"
+    " value INTEGER NOT NULL, PRIMARY KEY (motor_id, k))",
+)
+
+
+def default_state_dir() -> Path:
+    """``$XDG_DATA_HOME/coolmuscle``, or ``~/.local/share/coolmuscle``.
+
+    A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says.
+    """
+    xdg = os.environ.get("XDG_DATA_HOME", "")
+    base = Path(xdg) if xdg and os.path.isabs(xdg) else Path.home() / ".local" / "share"
+    return base / "coolmuscle"
+
+
+class Store:
+    """SQLite store at ``path`` (default: :func:`default_state_dir` /
+    ``coolmuscle.sqlite3``).  Opening a file that is not a coolmuscle store,
+    or is damaged, raises :class:`StoreError`; so does every failed operation.
+    """
+
+    def __init__(self, path: str | os.PathLike[str] | None = None) -> None:
+        if path is None:
+            try:
+                path = default_state_dir() / DEFAULT_FILENAME
+            except RuntimeError as exc:  # no home directory
+                raise StoreError(f"no state directory: {exc}") from exc
+        self._path = str(path)
+        self._conn: sqlite3.Connection | None = _open(self._path)
+
+    @property
+    def path(self) -> str:
+        """The database file."""
+        return self._path
+
+    # -- writes ----------------------------------------------------------------
+
+    def save_snapshot(self, motor_id: int, snapshot: Mapping[str, Any]) -> int:
+        """Replace the snapshot of ``motor_id`` atomically (``$``).
+
+        Clears the K overlay (the snapshot carries the current K values).
+        Returns the store's save count for this motor (1 for the first save).
+        ``ValueError`` if ``snapshot`` is not JSON data that loads back equal.
+        """
+        motor_id = _motor(motor_id)
+        text = _encode(snapshot)
+        with self._write() as conn:
+            row = conn.execute("SELECT generation FROM snapshot WHERE motor_id = ?",
+                               (motor_id,)).fetchone()
+            generation = (row[0] if row else 0) + 1
+            conn.execute("INSERT OR REPLACE INTO snapshot (motor_id, generation, data)"
+                         " VALUES (?, ?, ?)", (motor_id, generation, text))
+            conn.execute("DELETE FROM param WHERE motor_id = ?", (motor_id,))
+        return generation
+
+    def save_param(self, motor_id: int, k: int, value: int) -> None:
+        """Persist one accepted K change (ch. 3, automatic saving)."""
+        motor_id = _motor(motor_id)
+        if not (_is_int(k) and _is_int(value)):
+            raise ValueError(f"K{k}={value!r}: K number and value must be integers")
+        with self._write() as conn:
+            conn.execute("INSERT OR REPLACE INTO param (motor_id, k, value) VALUES (?, ?, ?)",
+                         (motor_id, k, value))
+
+    def delete(self, motor_id: int) -> None:
+        """Forget everything saved for ``motor_id`` (factory state at power-up)."""
+        motor_id = _motor(motor_id)
+        with self._write() as conn:
+            conn.execute("DELETE FROM snapshot WHERE motor_id = ?", (motor_id,))
+            conn.execute("DELETE FROM param WHERE motor_id = ?", (motor_id,))
+
+    # -- reads -----------------------------------------------------------------
+
+    def load(self, motor_id: int) -> dict[str, Any] | None:
+        """What a power cycle restores, or ``None`` if nothing was ever saved.
+
+        The saved snapshot with the automatically persisted K values applied to
+        its ``params`` (int keys).  Only K values saved, no ``$``: a dict with
+        just ``params``.
+        """
+        motor_id = _motor(motor_id)
+        with self._read() as conn:
+            row = conn.execute("SELECT data FROM snapshot WHERE motor_id = ?",
+                               (motor_id,)).fetchone()
+            overlay = conn.execute("SELECT k, value FROM param WHERE motor_id = ?"
+                                   " ORDER BY k", (motor_id,)).fetchall()
+        if row is None and not overlay:
+            return None
+        snapshot = _decode(row[0], motor_id) if row is not None else {}
+        if overlay:
+            params = snapshot.setdefault("params", {})
+            params.update((int(k), int(v)) for k, v in overlay)
+        return snapshot
+
+    def motors(self) -> list[int]:
+        """Motor IDs with anything saved."""
+        with self._read() as conn:
+            rows = conn.execute("SELECT motor_id FROM snapshot UNION"
+                                " SELECT motor_id FROM param ORDER BY 1").fetchall()
+        return [int(r[0]) for r in rows]
+
+    def integrity_check(self) -> str:
+        """SQLite ``PRAGMA integrity_check``: ``"ok"`` or the problems found."""
+        try:
+            rows = self._connection().execute("PRAGMA integrity_check").fetchall()
+        except sqlite3.Error as exc:
+            raise StoreError(f"{self._path}: integrity check failed: {exc}") from exc
+        return "\n".join(str(r[0]) for r in rows)
+
+    # -- lifetime --------------------------------------------------------------
+
+    def close(self) -> None:
+        """Close the file (idempotent)."""
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- transactions ----------------------------------------------------------
+
+    def _connection(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise StoreError(f"{self._path}: store is closed")
+        return self._conn
+
+    @contextmanager
+    def _write(self) -> Iterator[sqlite3.Connection]:
+        with self._transaction("BEGIN IMMEDIATE") as conn:
+            yield conn
+
+    @contextmanager
+    def _read(self) -> Iterator[sqlite3.Connection]:
+        with self._transaction("BEGIN") as conn:
+            yield conn
+
+    @contextmanager
+    def _transaction(self, begin: str) -> Iterator[sqlite3.Connection]:
+        conn = self._connection()
+        try:
+            conn.execute(begin)
+            try:
+                yield conn
+                conn.execute("COMMIT")
+            except BaseException:
+                if conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                raise
+        except sqlite3.Error as exc:
+            raise StoreError(f"{self._path}: {exc}") from exc
+
+
+# -- opening -----------------------------------------------------------------------
+
+def _open(path: str) -> sqlite3.Connection:
+    if path != ":memory:":
+        try:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"cannot create the state directory for {path}: {exc}") from exc
+    try:
+        conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
+                               check_same_thread=False)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot open store {path}: {exc}") from exc
+    try:
+        _prepare(conn, path)
+    except StoreError:
+        conn.close()
+        raise
+    except sqlite3.Error as exc:
+        conn.close()
+        raise StoreError(f"{path} is not a usable coolmuscle store: {exc}") from exc
+    return conn
+
+
+def _prepare(conn: sqlite3.Connection, path: str) -> None:
+    """Check the file is ours (or new), set WAL + FULL, create the schema."""
+    app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+    version = conn.execute("PRAGMA user_version").fetchone()[0]
+    objects = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+    fresh = app_id == 0 and version == 0 and objects == 0
+    if not fresh and app_id != APPLICATION_ID:
+        raise StoreError(f"{path} is an SQLite file but not a coolmuscle store")
+    if not fresh and not 1 <= version <= SCHEMA_VERSION:
+        raise StoreError(f"{path}: store schema {version} is not supported "
+                         f"(this version reads 1..{SCHEMA_VERSION})")
+    mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+    if str(mode).lower() != "wal" and path != ":memory:":
+        raise StoreError(f"{path}: cannot use write-ahead logging (journal mode {mode})")
+    conn.execute("PRAGMA synchronous=FULL")
+    if fresh:
+        conn.execute("BEGIN IMMEDIATE")
+        for statement in _SCHEMA:
+            conn.execute(statement)
+        conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        conn.execute("COMMIT")
+    check = conn.execute("PRAGMA quick_check").fetchone()[0]
+    if check != "ok":
+        raise StoreError(f"{path} is damaged: {check}")
+
+
+# -- encoding ----------------------------------------------------------------------
+
+def _encode(snapshot: Mapping[str, Any]) -> str:
+    if not isinstance(snapshot, Mapping):
+        raise ValueError("a snapshot is a mapping")
+    data = dict(snapshot)
+    if "params" in data:
+        data["params"] = {str(int(k)): v for k, v in dict(data["params"]).items()}
+    try:
+        text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"snapshot is not JSON data: {exc}") from exc
+    if json.loads(text) != data:
+        raise ValueError("snapshot would not load back equal (tuples or non-string keys?)")
+    return text
+
+
+def _decode(text: str, motor_id: int) -> dict[str, Any]:
+    try:
+        data = json.loads(text)
+        if not isinstance(data, dict):
+            raise TypeError("not an object")
+        if "params" in data:
+            data["params"] = {int(k): v for k, v in dict(data["params"]).items()}
+    except (ValueError, TypeError) as exc:
+        raise StoreError(f"saved snapshot of motor {motor_id} is unreadable: {exc}") from exc
+    return data
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _motor(motor_id: int) -> int:
+    if not _is_int(motor_id) or not 1 <= motor_id <= 15:
+        raise ValueError(f"motor ID {motor_id!r} is not 1..15")
+    return motor_id

@@ -1,0 +1,159 @@
+"""Alarms out of the servo and load model: when each condition is reached, solved in advance.
+
+Each alarm is a :class:`~coolmuscle.motor.motion.axis.Watcher` that asks the current
+:class:`~coolmuscle.motor.motion.dynamics.Motion` for the first instant its condition holds
+and raises the alarm then (cml-users-guide.txt ch. 3 K56, K57; 6.6 ?99):
+
+* position error overflow (Ux=1): |Pe| beyond K56 × 100 pulses (CM1: K56 kpulses);
+  not while pushing (4.1.4 sets the target behind the object) nor during a stopper
+  origin search;
+* over speed (Ux=2): |speed| beyond 1.2 × K40 (the motor's maximum speed, ch. 3 K40);
+* overload (Ux=4): |torque| beyond the rated torque (Ix > 100) for more than K57 ms;
+* temperature (Ux=128): the I²t model (:mod:`.thermal`) beyond its alarm level.
+
+Power-module over current (64) and regeneration (2) come only from fault injection
+(:mod:`.faults`).  What happens when an alarm latches (report, alarm output, motor free)
+and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
+(docs/fidelity.md "Servo, load and alarms").
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..motion import expoly as xp
+from ..motion.dynamics import Piece
+from ..status import Ux
+
+if TYPE_CHECKING:
+    from ..motion.axis import Axis
+    from ..motor import Motor
+
+#: Over speed threshold as a multiple of K40 (docs/fidelity.md).
+OVER_SPEED_FACTOR = 1.2
+
+
+def _beyond(f: xp.F, limit: float) -> tuple:
+    """Alternatives for ``|f| > limit``."""
+    return (lambda p: [xp.plus(f(p), -limit)],
+            lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
+
+
+class _AlarmWatch:
+    """Base: watches only while the servo is on and this alarm is not latched."""
+
+    bit = Ux(0)
+
+    def __init__(self, motor: "Motor") -> None:
+        self.motor = motor
+
+    def active(self, axis: "Axis") -> bool:
+        return axis.enabled and not self.motor.alarm & self.bit.value   # int & int: no enum
+
+    def fire(self, axis: "Axis") -> None:
+        del axis
+        self.motor.raise_alarm(int(self.bit))
+
+
+class PositionErrorWatch(_AlarmWatch):
+    """Ux=1: |Pe| > K56 × 100 pulses (ch. 3 K56)."""
+
+    bit = Ux.POSITION_ERROR_OVERFLOW
+
+    def limit(self) -> float:
+        unit = 1000 if self.motor.firmware.name == "cm1" else 100
+        return float(self.motor.k(56) * unit)
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        if not self.active(axis) or self.motor.position_error_exempt():
+            return None
+        limit, motion = self.limit(), axis.motion
+        if motion.peak("err") <= limit:       # every piece would be skipped
+            return None
+        return motion.first(after_ns, *_beyond(Piece.err, limit),
+                            skip=lambda p: motion.reach(p, "err") <= limit)
+
+
+class OverSpeedWatch(_AlarmWatch):
+    """Ux=2: |speed| > 1.2 × K40 min⁻¹."""
+
+    bit = Ux.OVER_SPEED
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        if not self.active(axis):
+            return None
+        ppr = self.motor.resolution.pulses_per_rev
+        limit = OVER_SPEED_FACTOR * self.motor.k(40) * ppr / 60.0
+        motion = axis.motion
+        if motion.peak("vel") <= limit:       # every piece would be skipped
+            return None
+        return motion.first(after_ns, *_beyond(Piece.vel, limit),
+                            skip=lambda p: motion.reach(p, "vel") <= limit)
+
+
+class OverloadWatch(_AlarmWatch):
+    """Ux=4: the torque beyond rated (Ix > 100) for more than K57 ms (ch. 3 K57)."""
+
+    bit = Ux.OVERLOAD
+
+    def __init__(self, motor: "Motor") -> None:
+        super().__init__(motor)
+        self.since: int | None = None
+        self._action = ""
+
+    def _rated(self, axis: "Axis") -> float:
+        per = axis.motion.drive.percent_per_accel
+        return 100.0 / per if per > 0.0 else float("inf")
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        if not self.active(axis):
+            self.since = None
+            return None
+        rated = self._rated(axis)
+        motion = axis.motion
+        if self.since is None:
+            self._action = "enter"
+            if motion.peak("torque") <= rated:    # every piece would be skipped
+                return None
+            return motion.first(after_ns, *_beyond(lambda p: p.torque, rated),
+                                skip=lambda p: motion.reach(p, "torque") <= rated)
+        deadline = self.since + self.motor.k(57) * 1_000_000 + 1
+        back = motion.first(after_ns, lambda p: [xp.plus(p.torque, rated),
+                                                 xp.plus(xp.scale(p.torque, -1.0), rated)],
+                            horizon_ns=deadline)
+        if back is not None and back <= deadline:
+            self._action = "leave"
+            return back
+        self._action = "alarm"
+        return max(deadline, after_ns)
+
+    def fire(self, axis: "Axis") -> None:
+        now = self.motor.kernel.now
+        if self._action == "enter":
+            self.since = now
+        elif self._action == "leave":
+            self.since = None
+        else:
+            self.since = None
+            super().fire(axis)
+
+
+class TemperatureWatch(_AlarmWatch):
+    """Ux=128: the driver temperature above its alarm level (6.6 ?71, ?99)."""
+
+    bit = Ux.TEMPERATURE
+
+    def active(self, axis: "Axis") -> bool:
+        return not self.motor.alarm & self.bit.value
+
+    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+        if not self.active(axis):
+            return None
+        thermal = self.motor.thermal
+        return thermal.first_above(axis.motion, after_ns, thermal.alarm)
+
+
+def alarm_watchers(motor: "Motor") -> list[_AlarmWatch]:
+    """The alarm watchers of one motor, in the order they are checked."""
+    return [PositionErrorWatch(motor), OverSpeedWatch(motor), OverloadWatch(motor),
+            TemperatureWatch(motor)]
