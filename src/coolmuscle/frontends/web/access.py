@@ -45,6 +45,21 @@ def looks_like_address(text: str) -> bool:
     return bool(_ADDRESS.match(text.strip()))
 
 
+DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
+
+
+def expand_web_flag(argv: list[str]) -> list[str]:
+    """Give a bare ``--web`` (last, or before another option or a file) its default."""
+    out: list[str] = []
+    for i, word in enumerate(argv):
+        out.append(word)
+        if word == "--web":
+            following = argv[i + 1] if i + 1 < len(argv) else None
+            if following is None or not looks_like_address(following):
+                out.append(DEFAULT_ADDRESS)
+    return out
+
+
 def is_loopback(host: str) -> bool:
     """True for 127.0.0.0/8, ::1 and ``localhost``."""
     if host.lower() in _LOOPBACK_NAMES:

@@ -27,7 +27,7 @@ from typing import Any
 from aiohttp import WSMsgType, web
 
 from ...errors import TransportError
-from ...transports.base import Port, Transport
+from ..transports.base import Port, Transport
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
 from .hub import SNAP_FIELDS, Client, Hub
@@ -47,8 +47,9 @@ class WebTransport(Transport):
     name = "web"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 token: str | None = None, title: str = "") -> None:
+                 token: str | None = None, title: str = "", record: bool = True) -> None:
         super().__init__()
+        self.record = record
         self.host = host
         self.requested_port = port
         self.access = Access(host, token)
@@ -68,8 +69,7 @@ class WebTransport(Transport):
         device = port.device
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log)
-        recorder = getattr(device, "record", None)
-        self._recorder = port.call(recorder) if callable(recorder) else None
+        self._recorder = port.call(_start_recording, device) if self.record else None
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.requested_port, shutdown_timeout=1.0)
@@ -204,7 +204,7 @@ class WebTransport(Transport):
         if self._recorder is None:
             return _error(409, "this chain has no trace recorder")
         if fmt == "parquet":
-            from ...sim.trace import parquet_available
+            from ...tools.trace import parquet_available
             if not parquet_available():
                 return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
         return await self._download(f"trace.{fmt}", self._write_trace)
@@ -222,8 +222,9 @@ class WebTransport(Transport):
             return _error(409, "this chain has no trace recorder")
         assert self.port is not None
         device = self.port.device
-        return await self._download("plot.png", lambda path: device.plot(path,
-                                                                          title=self.title))
+        from ...tools.plot import plot as plot_chain
+        return await self._download("plot.png", lambda path: plot_chain(device, path,
+                                                                         title=self.title))
 
     async def _download(self, name: str, write: Any) -> web.StreamResponse:
         assert self.port is not None
@@ -235,6 +236,15 @@ class WebTransport(Transport):
                 "png": "image/png"}[name.rsplit(".", 1)[1]]
         return web.Response(body=body, content_type=kind, headers={
             "Content-Disposition": f'attachment; filename="coolmuscle-{name}"'})
+
+
+def _start_recording(device: Any) -> Any:
+    """The chain's trace recorder from now on, or None for a chain that has none."""
+    from ...tools.trace import NoTraceRecorderError, record
+    try:
+        return record(device)
+    except NoTraceRecorderError:
+        return None
 
 
 def _io_counts(device: Any) -> dict[str, int]:
