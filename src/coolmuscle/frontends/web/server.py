@@ -70,9 +70,10 @@ class WebTransport(Transport):
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log)
         self._recorder = port.call(_start_recording, device) if self.record else None
-        self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False)
+        self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
+                                     shutdown_timeout=1.0)
         await self._runner.setup()
-        site = web.TCPSite(self._runner, self.host, self.requested_port, shutdown_timeout=1.0)
+        site = web.TCPSite(self._runner, self.host, self.requested_port)
         try:
             await site.start()
         except OSError as exc:

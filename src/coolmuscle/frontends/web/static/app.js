@@ -149,7 +149,7 @@
     if (msg.t === "hello") onHello(msg);
     else if (msg.t === "snap") onSnap(msg);
     else if (msg.t === "log") onLog(msg.lines, msg.dropped);
-    else if (msg.t === "tick") setTime(msg.time);
+    else if (msg.t === "tick") { setTime(msg.time); state.dirty = true; }
     else if (msg.t === "result") {
       const p = state.pending.get(msg.id);
       if (p) { clearTimeout(p.timer); state.pending.delete(msg.id); p.resolve(msg); }
@@ -338,7 +338,10 @@
   function chartOpts(width, height, series, label) {
     const axes = [{ stroke: "#57606a", grid: { stroke: "#eaeef2" } },
       { stroke: "#57606a", grid: { stroke: "#eaeef2" }, size: 60, label, labelSize: 14 }];
-    const scales = { x: { time: false } };
+    const scales = { x: { time: false, range: () => {
+      const now = state.lastTime / 1e9, span = Number($("window").value);
+      return [Math.max(0, now - span), Math.max(now, span)];
+    } } };
     if (series.some((s) => s.scale === "%")) {
       axes.push({ side: 1, scale: "%", stroke: "#cf222e", grid: { show: false }, size: 44 });
       scales["%"] = { auto: true };

@@ -1,0 +1,284 @@
+"""The dashboard server over its own protocol (aiohttp WebSocket client), no browser.
+
+What the page may do and what it may not: every request is checked against the motor's
+own answers on its TCP host line (cml-users-guide.txt 6.6 queries), bad input gets a
+clear message or the motor's own error, and access is guarded (token off loopback,
+Host and Origin checks).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+
+import aiohttp
+import pytest
+
+from coolmuscle.frontends.web.access import Access, expand_web_flag, parse_web_address
+from coolmuscle.errors import TransportError
+
+from web_support import HostLine, ask, serve, ws_frames
+
+
+@pytest.fixture(scope="module")
+def served():
+    st = serve(motors=2)
+    yield st
+    st.stop()
+
+
+def _url(st) -> str:
+    return st.transports[1].url
+
+
+def _run(coro):
+    return asyncio.run(coro)
+
+
+async def _with_ws(url: str, body, **kw):
+    async with aiohttp.ClientSession() as session:
+        async with session.ws_connect(url + "ws", **kw) as ws:
+            hello = await ws_frames(ws, lambda f: f["t"] == "hello")
+            return await body(ws, hello)
+
+
+def test_hello_describes_the_chain(served):
+    async def body(ws, hello):
+        return hello
+    hello = _run(_with_ws(_url(served), body))
+    assert hello["motors"] == [1, 2]
+    assert hello["io"] == {"inputs": 6, "outputs": 4}
+    assert set(hello["faults"]) >= {"overload", "encoder", "stuck_input", "broken_cable"}
+    assert [row[0] for row in hello["snap"]["m"]] == [1, 2]
+
+
+def test_6_6_query_from_the_page_answers_as_the_host_line(served):
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        async def body(ws, hello):
+            return await ask(ws, {"t": "cml", "line": "?96.2"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["replies"] == [host.query("?96.2", r"Px\.2=-?\d+")]
+    finally:
+        host.close()
+
+
+def test_malformed_cml_gets_a_clear_note_and_the_motor_stays_silent_k23(served):
+    async def body(ws, hello):
+        return await ask(ws, {"t": "cml", "line": "P.1=((("})
+    result = _run(_with_ws(_url(served), body))
+    assert result["ok"] and result["replies"] == []
+    assert "not CML" in result["note"] and "K23.1 lacks 16" in result["note"]
+
+
+def test_out_of_range_with_k23_messages_gets_the_motors_error_line(served):
+    """ch. 3 K23 function 16: error messages are printed; P out of range is error00/02."""
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        host.query("K23.1=17", r"K23\.1=17")
+        async def body(ws, hello):
+            return await ask(ws, {"t": "cml", "line": "P.1=999999999"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["replies"] == [host.query("P.1=999999999",
+                                                                  r"error\d\d\.1.*")]
+        assert result["replies"][0].startswith("error00.1")
+    finally:
+        host.query("K23.1=1", r"K23\.1=1")
+        host.close()
+
+
+@pytest.mark.parametrize("request_, words", [
+    ({"t": "analog", "counts": 2000}, "0..1023"),
+    ({"t": "analog", "counts": 10, "motor": 9}, "no motor ID9"),
+    ({"t": "input", "n": "x", "on": True}, "input"),
+    ({"t": "fault", "fault": "gremlins"}, "unknown fault"),
+    ({"t": "fault", "fault": "overload", "params": {"torque": "x" * 100}}, "parameters"),
+    ({"t": "fault", "fault": "stuck_input", "params": {"input": 99}}, "1..6"),
+    ({"t": "cml", "line": "P.1=1\rP.1=2"}, "one line"),
+    ({"t": "cml", "line": "?" * 600}, "too long"),
+    ({"t": "warp"}, "unknown request"),
+])
+def test_bad_requests_get_a_clear_message(served, request_, words):
+    async def body(ws, hello):
+        return await ask(ws, request_)
+    result = _run(_with_ws(_url(served), body))
+    assert result["ok"] is False and words in result["error"]
+    assert "Traceback" not in result["error"]
+
+
+def test_malformed_json_and_nan_are_refused_and_the_socket_lives_on(served):
+    async def body(ws, hello):
+        await ws.send_str("{not json")
+        first = await ws_frames(ws, lambda f: f["t"] == "result")
+        await ws.send_str('{"t": "analog", "id": 3, "counts": NaN}')
+        second = await ws_frames(ws, lambda f: f["t"] == "result")
+        third = await ask(ws, {"t": "cml", "line": "?99.1"}, rid=4)
+        return first, second, third
+    first, second, third = _run(_with_ws(_url(served), body))
+    assert not first["ok"] and "not a JSON request" in first["error"]
+    assert not second["ok"]
+    assert third["ok"] and third["replies"][0].startswith("Ux.1=")
+
+
+def test_huge_websocket_message_closes_that_socket_1009_only(served):
+    async def body(ws, hello):
+        await ws.send_str(json.dumps({"t": "cml", "line": "x" * 200_000}))
+        msg = await ws.receive(timeout=5)
+        return msg.type, ws.close_code
+    kind, code = _run(_with_ws(_url(served), body))
+    assert kind in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING)
+    assert code == 1009
+
+    async def again(ws, hello):
+        return await ask(ws, {"t": "cml", "line": "?99.1"})
+    assert _run(_with_ws(_url(served), again))["ok"]
+
+
+def test_bank_with_checker_errors_is_not_sent_and_names_its_line(served):
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        async def body(ws, hello):
+            return await ask(ws, {"t": "bank_upload", "motor": 2,
+                                  "text": "B3.2\nS.2=100\nP.2=(((\nEND"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["uploaded"] is False
+        errors = [d for d in result["diagnostics"] if d["severity"] == "error"]
+        assert errors and errors[0]["line"] == 3
+        host.query("K23.2=17", r"K23\.2=17")
+        assert host.query("?3.2", r"error\d\d\.2.*").startswith("error")   # 6.6: no bank 3
+    finally:
+        host.query("K23.2=1", r"K23\.2=1")
+        host.close()
+
+
+def test_page_closed_mid_upload_leaves_the_banks_and_the_server_alone(served):
+    """A request cut off in the middle (a fragmented WS message never finished) is never
+    applied; the server and the other pages go on."""
+    url = _url(served)
+
+    async def cut_off() -> None:
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(url + "ws") as ws:
+                await ws_frames(ws, lambda f: f["t"] == "hello")
+                text = json.dumps({"t": "bank_upload", "id": 1,
+                                   "text": "B7.1\nS.1=100\nEND"}).encode()
+                transport = ws._response.connection.transport
+                header = bytes([0x01, 0x80 | 20]) + b"\0\0\0\0"   # TEXT, no FIN, mask 0
+                transport.write(header + text[:20])
+                await asyncio.sleep(0.1)
+                transport.abort()             # the tab closes
+    _run(cut_off())
+
+    async def body(ws, hello):
+        return await ask(ws, {"t": "banks", "motor": 1})
+    listing = _run(_with_ws(url, body))
+    assert listing["ok"]
+    assert "B7.1" not in [b["label"] for b in listing["banks"]["banks"]]
+
+
+def test_token_required_off_loopback_and_checked():
+    access = Access("0.0.0.0", token="s3cret")
+    assert access.token_required and access.token_ok("s3cret")
+    assert not access.token_ok("nope") and not access.token_ok(None)
+    assert not Access("127.0.0.1").token_required and Access("127.0.0.1").token_ok(None)
+    assert Access("192.168.1.5").token          # a fresh random token when none is given
+
+
+def test_non_loopback_bind_refuses_websocket_without_token():
+    from coolmuscle.frontends.transports.service import ServiceThread
+    from coolmuscle.chain import Chain
+    from coolmuscle.frontends.web.server import WebTransport
+    with ServiceThread(lambda: Chain(), lambda: [WebTransport("0.0.0.0", 0)]) as st:
+        web = st.transports[0]
+        token, port = web.access.token, web.info()["port"]
+        assert token and token in web.describe()
+
+        async def probe():
+            async with aiohttp.ClientSession() as session:
+                base = f"http://127.0.0.1:{port}"
+                async with session.get(base + "/") as page:
+                    page_status = page.status
+                async with session.get(base + "/api/info") as info:
+                    needs = (await info.json())["token_required"]
+                with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                    await session.ws_connect(base + "/ws")
+                async with session.get(base + "/api/trace.csv") as trace:
+                    trace_status = trace.status
+                async with session.ws_connect(base + "/ws?token=" + token) as ws:
+                    hello = await ws_frames(ws, lambda f: f["t"] == "hello")
+                return page_status, needs, refused.value.status, trace_status, hello
+        page_status, needs, ws_status, trace_status, hello = _run(probe())
+        assert (page_status, needs, ws_status, trace_status) == (200, True, 401, 401)
+        assert hello["motors"] == [1]
+
+
+def test_loopback_refuses_foreign_origin_and_host(served):
+    url = _url(served)
+
+    async def probe():
+        async with aiohttp.ClientSession() as session:
+            with pytest.raises(aiohttp.WSServerHandshakeError) as foreign:
+                await session.ws_connect(url + "ws", headers={"Origin": "http://evil.example"})
+            async with session.get(url, headers={"Host": "evil.example:8080"}) as rebound:
+                rebound_status = rebound.status
+            return foreign.value.status, rebound_status
+    assert _run(probe()) == (403, 421)
+
+
+def test_trace_and_plot_download(served):
+    url = _url(served)
+
+    async def fetch():
+        async with aiohttp.ClientSession() as session:
+            async with session.get(url + "api/trace.csv") as r:
+                csv = (r.status, await r.text())
+            async with session.get(url + "api/plot.png") as r:
+                png = (r.status, await r.read())
+            return csv, png
+    (csv_status, csv), (png_status, png) = _run(fetch())
+    assert csv_status == 200 and csv.startswith("time_s,m1.")
+    assert png_status == 200 and png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_web_address_forms():
+    assert parse_web_address(None) == ("127.0.0.1", 8080)
+    assert parse_web_address("9000") == ("127.0.0.1", 9000)
+    assert parse_web_address("0.0.0.0:8080") == ("0.0.0.0", 8080)
+    assert parse_web_address("[::1]:81") == ("::1", 81)
+    with pytest.raises(TransportError, match="HOST:"):
+        parse_web_address("http://x")
+    assert expand_web_flag(["sim", "--web"]) == ["sim", "--web", "127.0.0.1:8080"]
+    assert expand_web_flag(["run", "a.cml", "--web", "--motors", "2"])[3] == "127.0.0.1:8080"
+    assert expand_web_flag(["sim", "--web", "9000"]) == ["sim", "--web", "9000"]
+
+
+def test_twenty_clients_on_fifteen_motors_keep_20_updates_a_second():
+    """Load: 20 WebSocket clients watch a 15-motor chain while every motor moves."""
+    st = serve(motors=15)
+    try:
+        url = st.transports[1].url
+        host = HostLine(st.transports[0].info()["port"])
+        moves = ", ".join(f"S.{m}=50, A.{m}=100, P.{m}=50000" for m in range(1, 16))
+        host.sock.sendall(moves.encode() + b"\r" + ", ".join(
+            f"^.{m}" for m in range(1, 16)).encode() + b"\r")
+
+        async def watch(session) -> int:
+            async with session.ws_connect(url + "ws") as ws:
+                await ws_frames(ws, lambda f: f["t"] == "hello")
+                end, count = time.monotonic() + 2.0, 0
+                while time.monotonic() < end:
+                    frame = await ws_frames(ws, lambda f: f["t"] == "snap")
+                    assert len(frame["m"]) == 15
+                    count += 1
+                return count
+
+        async def crowd():
+            async with aiohttp.ClientSession() as session:
+                return await asyncio.gather(*(watch(session) for _ in range(20)))
+        counts = _run(crowd())
+        print("updates in 2 s per client:", counts)
+        assert min(counts) / 2.0 >= 20, counts
+        host.close()
+    finally:
+        st.stop()
