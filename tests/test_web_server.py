@@ -123,7 +123,7 @@ def test_malformed_json_and_nan_are_refused_and_the_socket_lives_on(served):
 
 def test_huge_websocket_message_closes_that_socket_1009_only(served):
     async def body(ws, hello):
-        await ws.send_str(json.dumps({"t": "cml", "line": "x" * 200_000}))
+        await ws.send_str(json.dumps({"t": "cml", "line": "x" * 400_000}))
         msg = await ws.receive(timeout=5)
         return msg.type, ws.close_code
     kind, code = _run(_with_ws(_url(served), body))

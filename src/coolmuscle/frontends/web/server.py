@@ -35,8 +35,9 @@ from .hub import SNAP_FIELDS, Client, Hub
 log = logging.getLogger(__name__)
 
 STATIC = Path(__file__).with_name("static")
-#: Largest WebSocket message a page may send (a bank upload is at most 48 KiB of text).
-MAX_MESSAGE = 64 * 1024
+#: Largest WebSocket message a page may send (a bank upload is at most 48 Ki characters,
+#: up to three bytes each in UTF-8, plus JSON escapes).
+MAX_MESSAGE = 256 * 1024
 #: Most rows of a downloaded trace (the sampling step grows for long recordings).
 MAX_TRACE_ROWS = 200_000
 
