@@ -54,8 +54,11 @@ def host(served):
 class Page:
     """A page of the dashboard and the console errors it logged."""
 
-    def __init__(self, browser, url: str, width: int = 1280, height: int = 800) -> None:
-        self.context = browser.new_context(viewport={"width": width, "height": height})
+    def __init__(self, browser, url: str, width: int = 1280, height: int = 800,
+                 context=None) -> None:
+        self.own = context is None
+        self.context = context or browser.new_context(viewport={"width": width,
+                                                               "height": height})
         self.page = self.context.new_page()
         self.errors: list[str] = []
         self.page.on("console", lambda m: self.errors.append(f"{m.type}: {m.text}")
@@ -77,7 +80,10 @@ class Page:
         return int(self.by(test_id).inner_text())
 
     def close(self) -> None:
-        self.context.close()
+        if self.own:
+            self.context.close()
+        else:
+            self.page.close()
 
 
 @pytest.fixture()
@@ -219,31 +225,32 @@ def test_tab_closed_mid_upload_leaves_a_whole_bank_or_none(browser, served, host
 
 
 def test_ten_open_tabs_all_follow_a_move(browser, served, host):
-    tabs = [Page(browser, served.transports[1].url) for _ in range(10)]
+    context = browser.new_context(viewport={"width": 800, "height": 600})
+    tabs = [Page(browser, served.transports[1].url, context=context) for _ in range(10)]
     try:
         start = tabs[0].number("position-2")
-        tabs[3].type_line(f"S.2=100, A.2=100, P.2={start + 3000}, ^.2")
+        tabs[3].type_line(f"S.2=300, A.2=300, P.2={start + 3000}, ^.2")
         for tab in tabs:
             expect(tab.by("position-2")).to_have_text(str(start + 3000), timeout=10_000)
             expect(tab.by("log")).to_contain_text("Ux.2=8")
         assert host.query("?96.2", r"Px\.2=-?\d+") == f"Px.2={start + 3000}"
         assert all(tab.errors == [] for tab in tabs)
     finally:
-        for tab in tabs:
-            tab.close()
+        context.close()
 
 
 def test_screenshots_desktop_and_phone(browser, served, host):
     """1280x800 and 390x844 PNGs in the test output (looked at by a person; docs/web.md)."""
     out = output_dir()
-    host.sock.sendall(b"S.1=80, A.1=60, P.1=0, ^.1\r")
     shots = []
     for width, height, name in ((1280, 800, "web-1280x800.png"), (390, 844, "web-390x844.png")):
         p = Page(browser, served.transports[1].url, width, height)
         try:
             p.type_line("?96.1")
-            p.type_line(f"S.2=60, A.2=40, P.2={p.number('position-2') + 4000}, ^.2")
-            time.sleep(1.2)
+            p.type_line(f"S.1=20, A.1=40, P.1={p.number('position-1') + 8000}, ^.1")
+            p.type_line(f"S.2=40, A.2=40, P.2={p.number('position-2') - 3000}, ^.2")
+            time.sleep(1.6)
+            p.page.evaluate("() => { document.activeElement.blur(); window.scrollTo(0, 0); }")
             p.page.screenshot(path=str(out / name))
             shots.append(out / name)
             overflow = p.page.evaluate("() => document.documentElement.scrollWidth"

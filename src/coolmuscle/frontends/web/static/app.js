@@ -323,11 +323,11 @@
       if (!card) continue;
       const data = [[], [], [], [], []];
       const width = Math.max(200, card.chartBox.clientWidth || 300);
-      const top = new uPlot(chartOpts(width, 120, [
+      const top = new uPlot(chartOpts(width, 130, [
         { label: "position", stroke: "#1f6feb", width: 2 },
         { label: "target", stroke: "#d29922", width: 1, dash: [6, 4] },
       ], "pulses"), [data[0], data[1], data[2]], card.chartBox);
-      const bottom = new uPlot(chartOpts(width, 90, [
+      const bottom = new uPlot(chartOpts(width, 110, [
         { label: "speed", stroke: "#2da44e", width: 1.5 },
         { label: "torque %", stroke: "#cf222e", width: 1.5, scale: "%" },
       ], "speed"), [data[0], data[3], data[4]], card.chartBox);
@@ -410,8 +410,8 @@
     for (const [id, s] of state.series) {
       const card = state.cards.get(id);
       const width = Math.max(200, card.chartBox.clientWidth);
-      s.top.setSize({ width, height: 120 });
-      s.bottom.setSize({ width, height: 90 });
+      s.top.setSize({ width, height: 130 });
+      s.bottom.setSize({ width, height: 110 });
     }
   }
 
