@@ -226,18 +226,33 @@ def test_loopback_refuses_foreign_origin_and_host(served):
     assert _run(probe()) == (403, 421)
 
 
-def test_trace_and_plot_download(served):
-    url = _url(served)
+def test_trace_and_plot_download_after_record():
+    st = serve(motors=1)
+    url = st.transports[1].url
 
     async def fetch():
         async with aiohttp.ClientSession() as session:
             async with session.get(url + "api/trace.csv") as r:
+                before = (r.status, (await r.json())["error"])
+            async with session.ws_connect(url + "ws") as ws:
+                await ws_frames(ws, lambda f: f["t"] == "hello")
+                recording = await ask(ws, {"t": "record"})
+                await ask(ws, {"t": "cml", "line": "S.1=100, A.1=100, P.1=500, ^.1"}, rid=2)
+                await asyncio.sleep(0.5)
+            async with session.get(url + "api/trace.csv") as r:
                 csv = (r.status, await r.text())
             async with session.get(url + "api/plot.png") as r:
                 png = (r.status, await r.read())
-            return csv, png
-    (csv_status, csv), (png_status, png) = _run(fetch())
+            return before, recording, csv, png
+    try:
+        before, recording, (csv_status, csv), (png_status, png) = _run(fetch())
+    finally:
+        st.stop()
+    assert before[0] == 409 and "Record" in before[1]
+    assert recording["ok"] and recording["recording"]
     assert csv_status == 200 and csv.startswith("time_s,m1.")
+    positions = [float(row.split(",")[3]) for row in csv.splitlines()[1:]]
+    assert max(positions) > 0                   # the move is in the trace
     assert png_status == 200 and png[:8] == b"\x89PNG\r\n\x1a\n"
 
 

@@ -50,13 +50,16 @@ class Actions:
     """Handlers of page requests; ``call`` runs a model call at the current instant."""
 
     def __init__(self, device: Any, call: Callable[..., Any],
-                 note: Callable[[list[Any]], None]) -> None:
+                 note: Callable[[list[Any]], None],
+                 extra: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] | None = None
+                 ) -> None:
         self.device = device
         self._call = call
         self._note = note           # adds a line to every page's console log
         self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
             "cml": self.cml, "input": self.input, "analog": self.analog,
             "fault": self.fault, "banks": self.banks, "bank_upload": self.bank_upload,
+            **(extra or {}),
         }
 
     def handle(self, request: Any) -> dict[str, Any]:

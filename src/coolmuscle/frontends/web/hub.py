@@ -4,7 +4,8 @@ Owns what every open page receives, as JSON text frames:
 
 * ``log``: every :class:`coolmuscle.device.Event` (replies, ``Ux`` reports, ``IN``/
   ``OUT`` reports, messages) with its virtual time and the line exactly as the host
-  line prints it, plus the lines the pages sent (direction ``>``);
+  line prints it, plus the lines the pages sent (direction ``>``), in batches at
+  most every ``LOG_PERIOD`` seconds;
 * ``snap``: the snapshot of every motor of the chain (6.6 queries: ``?96`` ``?97``
   ``?98`` ``?99`` ``?70`` ``?50`` ``?71`` ``?74`` ...), sampled ``FAST_HZ`` times a second
   while anything changes and for a second after, ``IDLE_HZ`` times a second while
@@ -34,6 +35,9 @@ IDLE_HZ = 4.0
 FAST_HOLD = 1.0
 TICK_SECONDS = 1.0
 HISTORY = 500
+#: Seconds between two ``log`` frames: a host line busy with thousands of replies a
+#: second costs the pages 1/LOG_PERIOD frames a second, not one frame per reply.
+LOG_PERIOD = 0.05
 MAX_PENDING_LOG = 2000
 
 #: Columns of one motor's row in a ``snap`` frame (the page reads them by name).
@@ -48,19 +52,22 @@ class Client:
     def __init__(self, send: Callable[[str], Any]) -> None:
         self._send = send
         self.snap: str | None = None
-        self.logs: list[list[Any]] = []
+        self.logs: collections.deque[tuple[str, int]] = collections.deque()
+        self.log_lines = 0
         self.dropped = 0
         self.direct: collections.deque[str] = collections.deque(maxlen=256)
         self.wake = asyncio.Event()
         self.task: asyncio.Task[None] | None = None
         self.sent = 0
 
-    def queue_log(self, entries: list[list[Any]]) -> None:
-        self.logs.extend(entries)
-        if len(self.logs) > MAX_PENDING_LOG:
-            cut = len(self.logs) - MAX_PENDING_LOG
+    def queue_log(self, frame: str, lines: int) -> None:
+        """Queue an encoded ``log`` frame of ``lines`` lines; the oldest go past the bound."""
+        self.logs.append((frame, lines))
+        self.log_lines += lines
+        while self.log_lines > MAX_PENDING_LOG and len(self.logs) > 1:
+            _, cut = self.logs.popleft()
+            self.log_lines -= cut
             self.dropped += cut
-            del self.logs[:cut]
         self.wake.set()
 
     def queue_snap(self, frame: str) -> None:
@@ -83,10 +90,12 @@ class Client:
     def _take(self) -> list[str]:
         frames = list(self.direct)
         self.direct.clear()
-        if self.logs or self.dropped:
-            frames.append(json.dumps({"t": "log", "lines": self.logs,
-                                      "dropped": self.dropped}, separators=(",", ":")))
-            self.logs, self.dropped = [], 0
+        if self.dropped:
+            frames.append(json.dumps({"t": "log", "lines": [], "dropped": self.dropped}))
+            self.dropped = 0
+        frames.extend(frame for frame, _ in self.logs)
+        self.logs.clear()
+        self.log_lines = 0
         if self.snap is not None:
             frames.append(self.snap)
             self.snap = None
@@ -150,13 +159,17 @@ class Hub:
         self._batch.append(entry)
         if not self._flush_scheduled and self._loop is not None:
             self._flush_scheduled = True
-            self._loop.call_soon(self._flush)
+            self._loop.call_later(LOG_PERIOD, self._flush)
 
     def _flush(self) -> None:
+        """One ``log`` frame for every page, encoded once, at most 1/LOG_PERIOD a second."""
         self._flush_scheduled = False
         batch, self._batch = self._batch, []
+        if not batch or not self.clients:
+            return
+        frame = json.dumps({"t": "log", "lines": batch, "dropped": 0}, separators=(",", ":"))
         for client in self.clients:
-            client.queue_log(batch)
+            client.queue_log(frame, len(batch))
 
     # -- snapshots ----------------------------------------------------------------
     def changed(self) -> None:
@@ -186,12 +199,15 @@ class Hub:
                           separators=(",", ":"))
 
     async def _sampler(self) -> None:
+        """Sample on a fixed grid of deadlines, so a busy loop does not lower the rate."""
         assert self._loop is not None
         next_tick = 0.0
+        due = self._loop.time()
         while True:
             now = self._loop.time()
             fast = now < self._fast_until
-            await asyncio.sleep(1.0 / (FAST_HZ if fast else IDLE_HZ))
+            due = max(due + 1.0 / (FAST_HZ if fast else IDLE_HZ), now + 0.002)
+            await asyncio.sleep(due - now)
             if not self.clients:
                 continue
             try:

@@ -26,10 +26,10 @@ from .server import WebTransport
 
 log = logging.getLogger(__name__)
 
-def web_transport(address: str, *, title: str = "") -> WebTransport:
+def web_transport(address: str, *, title: str = "", record: bool = False) -> WebTransport:
     """The dashboard transport for ``[HOST:]PORT`` (``TransportError`` when malformed)."""
     host, port = parse_web_address(address)
-    return WebTransport(host=host, port=port, title=title)
+    return WebTransport(host=host, port=port, title=title, record=record)
 
 
 class _Lines:
@@ -113,8 +113,8 @@ def run_script_web(script: Script, chain: Any, address: str, *, until: float | N
         out.write(entry.format() + "\n")
         out.flush()
 
-    asyncio.run(_serve_run(script, chain, web_transport(address, title=title), until,
-                           show, say))
+    web = web_transport(address, title=title, record=True)
+    asyncio.run(_serve_run(script, chain, web, until, show, say))
 
 
 async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float | None,

@@ -48,7 +48,7 @@ class WebTransport(Transport):
     name = "web"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 token: str | None = None, title: str = "", record: bool = True) -> None:
+                 token: str | None = None, title: str = "", record: bool = False) -> None:
         super().__init__()
         self.record = record
         self.host = host
@@ -69,8 +69,10 @@ class WebTransport(Transport):
         self.port = port
         device = port.device
         self.hub = Hub(device, port.call)
-        self.actions = Actions(device, port.call, self.hub.add_log)
-        self._recorder = port.call(_start_recording, device) if self.record else None
+        self.actions = Actions(device, port.call, self.hub.add_log,
+                               {"record": self._record_request})
+        if self.record:
+            self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
                                      shutdown_timeout=1.0)
         await self._runner.setup()
@@ -86,6 +88,23 @@ class WebTransport(Transport):
             self.host, self.requested_port)
         self.bound = (sockname[0], sockname[1])
         self.hub.start()
+
+    def start_recording(self) -> bool:
+        """Start the chain's trace recorder (from now on); False when it has none.
+
+        Recording is off until asked (the page's "Record" button, ``record=True``):
+        the recorder looks at every motor after every kernel event."""
+        if self._recorder is None and self.port is not None:
+            self._recorder = self.port.call(_start_recording, self.port.device)
+            if self._recorder is not None and self.hub is not None:
+                self.hub.add_log([self.port.device.kernel.now, "note",
+                                  "trace recording started", 0, "web"])
+        return self._recorder is not None
+
+    def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
+        if not self.start_recording():
+            raise ValueError("this chain has no trace recorder")
+        return {"recording": True}
 
     def describe(self) -> str:
         text = f"web: {self.url}"
@@ -204,7 +223,7 @@ class WebTransport(Transport):
     async def _trace(self, request: web.Request) -> web.StreamResponse:
         fmt = request.match_info["fmt"]
         if self._recorder is None:
-            return _error(409, "this chain has no trace recorder")
+            return _error(409, "nothing recorded: press Record first")
         if fmt == "parquet":
             from ...tools.trace import parquet_available
             if not parquet_available():
@@ -221,7 +240,7 @@ class WebTransport(Transport):
 
     async def _plot(self, _request: web.Request) -> web.StreamResponse:
         if self._recorder is None:
-            return _error(409, "this chain has no trace recorder")
+            return _error(409, "nothing recorded: press Record first")
         assert self.port is not None
         device = self.port.device
         from ...tools.plot import plot as plot_chain

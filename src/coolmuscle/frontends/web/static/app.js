@@ -170,6 +170,12 @@
     $("log").textContent = "";
     onLog(msg.log, 0);
     onSnap(msg.snap);
+    showRecording(msg.recording);
+  }
+
+  function showRecording(on) {
+    $("record-state").textContent = on ? "recording (since it was started)" : "not recording";
+    $("record").disabled = !!on;
   }
 
   // -- motor cards ----------------------------------------------------------------
@@ -425,8 +431,9 @@
     if (dropped) frag.appendChild(logLine(state.lastTime, "!", "… " + dropped + " lines not shown (page too slow)", "note"));
     for (const [time, kind, text, motor, origin] of lines) {
       const sent = kind === ">";
-      const line = logLine(time, sent ? ">" : "<", text, sent ? "sent" : "k-" + kind);
-      if (!sent && origin !== "web" && origin !== "motor") {
+      const line = kind === "note" ? logLine(time, "!", text, "note")
+        : logLine(time, sent ? ">" : "<", text, sent ? "sent" : "k-" + kind);
+      if (!sent && kind !== "note" && origin !== "web" && origin !== "motor") {
         const o = document.createElement("span");
         o.className = "origin";
         o.textContent = " (" + origin + ")";
@@ -616,6 +623,11 @@
     $("dl-parquet").href = "/api/trace.parquet" + q;
     $("dl-png").href = "/api/plot.png" + q;
   }
+
+  $("record").addEventListener("click", async () => {
+    const r = await request("record", {});
+    if (r.ok) showRecording(true); else $("record-state").textContent = r.error;
+  });
 
   // -- start ------------------------------------------------------------------------------
   setupConsole();
