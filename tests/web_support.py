@@ -74,17 +74,25 @@ class HostLine:
         self.sock.close()
 
 
+_PENDING: dict[int, list[dict[str, Any]]] = {}
+
+
 async def ws_frames(ws: Any, keep: Callable[[dict[str, Any]], bool], timeout: float = 5.0
                     ) -> dict[str, Any]:
-    """The first JSON frame from ``ws`` for which ``keep`` is true."""
+    """The first JSON frame from ``ws`` for which ``keep`` is true (a message holds one
+    frame a line)."""
+    pending = _PENDING.setdefault(id(ws), [])
+
     async def wait() -> dict[str, Any]:
         while True:
+            while pending:
+                frame = pending.pop(0)
+                if keep(frame):
+                    return frame
             msg = await ws.receive()
             if msg.type.name != "TEXT":
                 raise AssertionError(f"socket ended: {msg.type.name} {msg.data!r}")
-            frame = json.loads(msg.data)
-            if keep(frame):
-                return frame
+            pending.extend(json.loads(line) for line in msg.data.split("\n"))
     return await asyncio.wait_for(wait(), timeout)
 
 

@@ -12,7 +12,8 @@ Owns what every open page receives, as JSON text frames:
   nothing does, and sent only when a value changed (no polling storm when idle);
 * ``tick``: the virtual time, once a second, so charts run on while nothing changes.
 
-Each page has a bounded queue: a snapshot replaces the unsent one, log lines beyond
+What is pending for a page goes out as one WebSocket message, one JSON frame a line
+(JSON text holds no raw newline).  Each page has a bounded queue: a snapshot replaces the unsent one, log lines beyond
 ``MAX_PENDING_LOG`` are dropped (the page is told how many), so a slow page never holds
 up the motor or the other pages.
 """
@@ -83,8 +84,9 @@ class Client:
         while True:
             await self.wake.wait()
             self.wake.clear()
-            for frame in self._take():
-                await self._send(frame)
+            frames = self._take()
+            if frames:                       # one WebSocket message, one frame a line
+                await self._send("\n".join(frames))
                 self.sent += 1
 
     def _take(self) -> list[str]:

@@ -93,7 +93,7 @@
     state.ws = ws;
     state.hello = false;
     ws.onopen = () => setConn("connected", true);
-    ws.onmessage = (ev) => onFrame(ev.data);
+    ws.onmessage = (ev) => { for (const frame of String(ev.data).split("\n")) onFrame(frame); };
     ws.onclose = (ev) => {
       if (state.ws !== ws) return;
       state.ws = null;
