@@ -80,14 +80,17 @@ class Client:
         self.wake.set()
 
     async def run(self) -> None:
-        """Send pending frames until cancelled or the socket fails."""
-        while True:
-            await self.wake.wait()
-            self.wake.clear()
-            frames = self._take()
-            if frames:                       # one WebSocket message, one frame a line
-                await self._send("\n".join(frames))
-                self.sent += 1
+        """Send pending frames until cancelled or the socket fails (the page left)."""
+        try:
+            while True:
+                await self.wake.wait()
+                self.wake.clear()
+                frames = self._take()
+                if frames:                   # one WebSocket message, one frame a line
+                    await self._send("\n".join(frames))
+                    self.sent += 1
+        except (ConnectionError, RuntimeError) as exc:
+            log.debug("dashboard page gone: %s", exc)
 
     def _take(self) -> list[str]:
         frames = list(self.direct)

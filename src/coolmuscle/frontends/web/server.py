@@ -38,6 +38,8 @@ STATIC = Path(__file__).with_name("static")
 #: Largest WebSocket message a page may send (a bank upload is at most 48 Ki characters,
 #: up to three bytes each in UTF-8, plus JSON escapes).
 MAX_MESSAGE = 256 * 1024
+#: Most pages connected at once.
+MAX_PAGES = 100
 #: Most rows of a downloaded trace (the sampling step grows for long recordings).
 MAX_TRACE_ROWS = 200_000
 
@@ -188,6 +190,8 @@ class WebTransport(Transport):
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self.access.origin_ok(request.headers.get("Origin"), request.headers.get("Host")):
             return _error(403, "WebSocket from another site refused")
+        if len(self._sockets) >= MAX_PAGES:
+            return _error(503, f"too many pages open ({MAX_PAGES}); close one")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
                                    compress=False)
         await ws.prepare(request)
