@@ -350,7 +350,7 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
 
 def _web_transport(address: str) -> Transport:
     """``--web [HOST:]PORT`` (coolmuscle.frontends.web)."""
-    from ..frontends.web.runner import web_transport
+    from .web_run import web_transport
     try:
         return web_transport(address)
     except TransportError as exc:
@@ -360,7 +360,7 @@ def _web_transport(address: str) -> Transport:
 def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
              make_chain: Callable[[], Any]) -> None:
     """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
-    from ..frontends.web.runner import run_script_web
+    from .web_run import run_script_web
     if any(o not in (None, False) for o in others):
         raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
                          "are for fast runs (the page downloads the trace and the plot)")

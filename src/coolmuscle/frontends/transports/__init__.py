@@ -32,7 +32,7 @@ BUILTIN: dict[str, str] = {
     "modbus-rtu": "coolmuscle.frontends.transports.serial_line:ModbusRtuTransport",
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
-    "web": "coolmuscle.frontends.web.server:WebTransport",
+    "web": "coolmuscle.tools.web:WebDashboard",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).

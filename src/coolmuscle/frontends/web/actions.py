@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 from ...cml.parser import parse
 from ...errors import CmlSyntaxError, CoolMuscleError
-from .bankio import list_banks, upload_banks
+from .toolbox import Toolbox
 
 log = logging.getLogger(__name__)
 
@@ -51,9 +51,10 @@ class Actions:
 
     def __init__(self, device: Any, call: Callable[..., Any],
                  note: Callable[[list[Any]], None],
-                 extra: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] | None = None
-                 ) -> None:
+                 extra: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] | None = None,
+                 toolbox: Toolbox | None = None) -> None:
         self.device = device
+        self.toolbox = toolbox
         self._call = call
         self._note = note           # adds a line to every page's console log
         self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
@@ -148,7 +149,7 @@ class Actions:
 
     def banks(self, request: dict[str, Any]) -> dict[str, Any]:
         motor = self._motor(request)
-        return {"banks": self._call(list_banks, self.device, motor)}
+        return {"banks": self._call(self._tools().list_banks, self.device, motor)}
 
     def bank_upload(self, request: dict[str, Any]) -> dict[str, Any]:
         motor, text = self._motor(request), request.get("text")
@@ -157,7 +158,12 @@ class Actions:
         if len(text) > MAX_BANK_TEXT:
             raise RequestError(f"bank text too long ({len(text)} characters, at most "
                                f"{MAX_BANK_TEXT})")
-        return self._call(upload_banks, self.device, motor, text, self._note)
+        return self._call(self._tools().upload_banks, self.device, motor, text, self._note)
+
+    def _tools(self) -> Toolbox:
+        if self.toolbox is None:
+            raise RequestError("banks need the host tools (coolmuscle.tools.web.WebDashboard)")
+        return self.toolbox
 
 
 def _is_int(value: Any) -> bool:

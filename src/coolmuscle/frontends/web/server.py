@@ -31,6 +31,7 @@ from ..transports.base import Port, Transport
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
 from .hub import SNAP_FIELDS, Client, Hub
+from .toolbox import Toolbox
 
 log = logging.getLogger(__name__)
 
@@ -50,8 +51,10 @@ class WebTransport(Transport):
     name = "web"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 token: str | None = None, title: str = "", record: bool = False) -> None:
+                 token: str | None = None, title: str = "", record: bool = False,
+                 toolbox: Toolbox | None = None) -> None:
         super().__init__()
+        self.toolbox = toolbox
         self.record = record
         self.host = host
         self.requested_port = port
@@ -72,7 +75,7 @@ class WebTransport(Transport):
         device = port.device
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
-                               {"record": self._record_request})
+                               {"record": self._record_request}, self.toolbox)
         if self.record:
             self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
@@ -96,8 +99,8 @@ class WebTransport(Transport):
 
         Recording is off until asked (the page's "Record" button, ``record=True``):
         the recorder looks at every motor after every kernel event."""
-        if self._recorder is None and self.port is not None:
-            self._recorder = self.port.call(_start_recording, self.port.device)
+        if self._recorder is None and self.port is not None and self.toolbox is not None:
+            self._recorder = self.port.call(self.toolbox.start_recording, self.port.device)
             if self._recorder is not None and self.hub is not None:
                 self.hub.add_log([self.port.device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
@@ -105,7 +108,8 @@ class WebTransport(Transport):
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
-            raise ValueError("this chain has no trace recorder")
+            raise ValueError("no trace recorder here (the host tools record: "
+                             "coolmuscle.tools.web.WebDashboard)")
         return {"recording": True}
 
     def describe(self) -> str:
@@ -229,8 +233,8 @@ class WebTransport(Transport):
         if self._recorder is None:
             return _error(409, "nothing recorded: press Record first")
         if fmt == "parquet":
-            from ...tools.trace import parquet_available
-            if not parquet_available():
+            assert self.toolbox is not None
+            if not self.toolbox.parquet_available():
                 return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
         return await self._download(f"trace.{fmt}", self._write_trace)
 
@@ -240,16 +244,17 @@ class WebTransport(Transport):
         end = self.port.device.kernel.now
         span = max(end - getattr(recorder, "start", 0), 0) / 1e9
         step = max(0.001, span / MAX_TRACE_ROWS)
-        recorder.write(path, step=step)
+        assert self.toolbox is not None
+        self.toolbox.write_trace(recorder, path, step)
 
     async def _plot(self, _request: web.Request) -> web.StreamResponse:
         if self._recorder is None:
             return _error(409, "nothing recorded: press Record first")
         assert self.port is not None
-        device = self.port.device
-        from ...tools.plot import plot as plot_chain
-        return await self._download("plot.png", lambda path: plot_chain(device, path,
-                                                                         title=self.title))
+        device, toolbox = self.port.device, self.toolbox
+        assert toolbox is not None
+        return await self._download("plot.png", lambda path: toolbox.plot(device, path,
+                                                                           self.title))
 
     async def _download(self, name: str, write: Any) -> web.StreamResponse:
         assert self.port is not None
@@ -261,15 +266,6 @@ class WebTransport(Transport):
                 "png": "image/png"}[name.rsplit(".", 1)[1]]
         return web.Response(body=body, content_type=kind, headers={
             "Content-Disposition": f'attachment; filename="coolmuscle-{name}"'})
-
-
-def _start_recording(device: Any) -> Any:
-    """The chain's trace recorder from now on, or None for a chain that has none."""
-    from ...tools.trace import NoTraceRecorderError, record
-    try:
-        return record(device)
-    except NoTraceRecorderError:
-        return None
 
 
 def _io_counts(device: Any) -> dict[str, int]:

@@ -18,18 +18,19 @@ import signal
 import sys
 from typing import Any, Callable, TextIO
 
-from ...sim.kernel import seconds
-from ...tools.script import Script, Step, TranscriptEntry
-from ..transports.service import Service
-from .access import parse_web_address
-from .server import WebTransport
+from ..frontends.transports.service import Service
+from ..frontends.web.access import parse_web_address
+from ..frontends.web.server import WebTransport
+from ..sim.kernel import seconds
+from .script import Script, Step, TranscriptEntry
+from .web import WebDashboard
 
 log = logging.getLogger(__name__)
 
 def web_transport(address: str, *, title: str = "", record: bool = False) -> WebTransport:
     """The dashboard transport for ``[HOST:]PORT`` (``TransportError`` when malformed)."""
     host, port = parse_web_address(address)
-    return WebTransport(host=host, port=port, title=title, record=record)
+    return WebDashboard(host=host, port=port, title=title, record=record)
 
 
 class _Lines:

@@ -1,4 +1,10 @@
-"""Banks from the page: list, check, upload and read back (2.2.2, 2.2.3, 6.6 ``?1000``).
+"""The dashboard's host tools: banks from the page and its traces (docs/web.md).
+
+:class:`DashboardTools` implements :class:`coolmuscle.frontends.web.toolbox.Toolbox`;
+:class:`WebDashboard` is the web transport with it (the ``web`` transport of the
+registry, ``coolmuscle sim --web``).
+
+Banks: list, check, upload and read back (2.2.2, 2.2.3, 6.6 ``?1000``).
 
 An upload is what a terminal program does on the host line, done in one step of the
 model's loop: the text is checked first by ``coolmuscle check``'s checker (a text with
@@ -12,13 +18,14 @@ banks either as they were (the request never arrived whole) or fully written.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from pathlib import Path
+from typing import Any
 
-from ...client.banks import compare_bank, parse_bank_listing
-from ...client.program import BankBlock, parse_program
-from ...tools.check import check_program
-
-Note = Callable[[list[Any]], None]
+from ..client.banks import compare_bank, parse_bank_listing
+from ..client.program import BankBlock, parse_program
+from ..frontends.web.server import WebTransport
+from ..frontends.web.toolbox import Note
+from .check import check_program
 
 
 def list_banks(device: Any, motor: int) -> dict[str, Any]:
@@ -72,3 +79,39 @@ def upload_banks(device: Any, motor: int, text: str, note: Note) -> dict[str, An
         differences += [d.format() for d in compare_bank(block, got)]
     return {"uploaded": True, "diagnostics": diagnostics, "differences": differences,
             "banks": [b.label for b in program.banks]}
+
+
+class DashboardTools:
+    """The host tools the dashboard uses (:class:`~coolmuscle.frontends.web.toolbox.Toolbox`)."""
+
+    def list_banks(self, device: Any, motor: int) -> dict[str, Any]:
+        return list_banks(device, motor)
+
+    def upload_banks(self, device: Any, motor: int, text: str, note: Note) -> dict[str, Any]:
+        return upload_banks(device, motor, text, note)
+
+    def start_recording(self, device: Any) -> Any:
+        from .trace import NoTraceRecorderError, record
+        try:
+            return record(device)
+        except NoTraceRecorderError:
+            return None
+
+    def parquet_available(self) -> bool:
+        from .trace import parquet_available
+        return parquet_available()
+
+    def write_trace(self, recorder: Any, path: Path, step: float) -> None:
+        recorder.write(path, step=step)
+
+    def plot(self, device: Any, path: Path, title: str) -> None:
+        from .plot import plot
+        plot(device, path, title=title)
+
+
+class WebDashboard(WebTransport):
+    """The web dashboard transport with the host tools (banks, traces, plots)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8080, **options: Any) -> None:
+        options.setdefault("toolbox", DashboardTools())
+        super().__init__(host, port, **options)
