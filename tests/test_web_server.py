@@ -9,7 +9,11 @@ Host and Origin checks).
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
+import os
+import socket
+import struct
 import time
 
 import aiohttp
@@ -152,27 +156,41 @@ def test_bank_with_checker_errors_is_not_sent_and_names_its_line(served):
         host.close()
 
 
+def _raw_websocket(port: int) -> socket.socket:
+    """A WebSocket opened by hand (RFC 6455 handshake), to send what no library would."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                  f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                  "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(4096)
+    assert head.startswith(b"HTTP/1.1 101"), head[:80]
+    return sock
+
+
 def test_page_closed_mid_upload_leaves_the_banks_and_the_server_alone(served):
-    """A request cut off in the middle (a fragmented WS message never finished) is never
-    applied; the server and the other pages go on."""
-    url = _url(served)
+    """A request cut off in the middle (the first fragment of a WebSocket message, then
+    the connection drops: RFC 6455 5.4) is never applied; the server and the other
+    pages go on."""
+    url, port = _url(served), served.transports[1].info()["port"]
 
-    async def cut_off() -> None:
+    async def watch_while_cut_off():
         async with aiohttp.ClientSession() as session:
-            async with session.ws_connect(url + "ws") as ws:
-                await ws_frames(ws, lambda f: f["t"] == "hello")
+            async with session.ws_connect(url + "ws") as other:
+                await ws_frames(other, lambda f: f["t"] == "hello")
+                sock = _raw_websocket(port)
                 text = json.dumps({"t": "bank_upload", "id": 1,
-                                   "text": "B7.1\nS.1=100\nEND"}).encode()
-                transport = ws._response.connection.transport
-                header = bytes([0x01, 0x80 | 20]) + b"\0\0\0\0"   # TEXT, no FIN, mask 0
-                transport.write(header + text[:20])
-                await asyncio.sleep(0.1)
-                transport.abort()             # the tab closes
-    _run(cut_off())
-
-    async def body(ws, hello):
-        return await ask(ws, {"t": "banks", "motor": 1})
-    listing = _run(_with_ws(url, body))
+                                   "text": "B7.1\nT1.1\nEND"}).encode()
+                mask = os.urandom(4)
+                piece = bytes(b ^ mask[i % 4] for i, b in enumerate(text[:20]))
+                sock.sendall(bytes([0x01, 0x80 | 20]) + mask + piece)   # TEXT, FIN clear
+                await asyncio.sleep(0.2)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                sock.close()                                           # the tab is gone
+                return await ask(other, {"t": "banks", "motor": 1}, rid=9)
+    listing = _run(watch_while_cut_off())
     assert listing["ok"]
     assert "B7.1" not in [b["label"] for b in listing["banks"]["banks"]]
 
