@@ -22,7 +22,7 @@ import pytest
 from coolmuscle.frontends.web.access import Access, expand_web_flag, parse_web_address
 from coolmuscle.errors import TransportError
 
-from web_support import HostLine, ask, serve, ws_frames
+from web_support import ROOT, HostLine, ask, serve, ws_frames
 
 
 @pytest.fixture(scope="module")
@@ -284,6 +284,10 @@ def test_web_address_forms():
     assert expand_web_flag(["sim", "--web"]) == ["sim", "--web", "127.0.0.1:8080"]
     assert expand_web_flag(["run", "a.cml", "--web", "--motors", "2"])[3] == "127.0.0.1:8080"
     assert expand_web_flag(["sim", "--web", "9000"]) == ["sim", "--web", "9000"]
+    assert expand_web_flag(["sim", "--web", "bad:x"]) == ["sim", "--web", "bad:x"]
+    script = str(ROOT / "examples" / "2.1-operation.cml")
+    assert expand_web_flag(["run", "--web", script]) == ["run", "--web", "127.0.0.1:8080",
+                                                         script]
 
 
 def test_twenty_clients_on_fifteen_motors_keep_20_updates_a_second():

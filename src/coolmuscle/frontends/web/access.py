@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hmac
 import ipaddress
+import os
 import re
 import secrets
 from urllib.parse import urlsplit
@@ -49,15 +50,24 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 
 
 def expand_web_flag(argv: list[str]) -> list[str]:
-    """Give a bare ``--web`` (last, or before another option or a file) its default."""
+    """Give a bare ``--web`` (last, or before an option or a script) its default address.
+
+    The word after ``--web`` is its value unless it is an option or a file that exists
+    (``run --web script.cml``), so a malformed address is reported as one."""
     out: list[str] = []
     for i, word in enumerate(argv):
         out.append(word)
         if word == "--web":
             following = argv[i + 1] if i + 1 < len(argv) else None
-            if following is None or not looks_like_address(following):
+            if following is None or not _web_value(following):
                 out.append(DEFAULT_ADDRESS)
     return out
+
+
+def _web_value(word: str) -> bool:
+    if looks_like_address(word):
+        return True
+    return not word.startswith("-") and not os.path.exists(word)
 
 
 def is_loopback(host: str) -> bool:

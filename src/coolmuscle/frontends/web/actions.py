@@ -133,7 +133,7 @@ class Actions:
 
     def analog(self, request: dict[str, Any]) -> dict[str, Any]:
         motor, counts = self._motor(request), request.get("counts")
-        if not _is_int(counts) or not 0 <= counts <= 1023:
+        if not (isinstance(counts, int) and _is_int(counts) and 0 <= counts <= 1023):
             raise RequestError("analog input is 0..1023 counts (6.6 ?74)")
         self._call(self.device.set_analog, motor, counts)
         return {}

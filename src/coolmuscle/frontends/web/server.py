@@ -88,10 +88,9 @@ class WebTransport(Transport):
             await self._runner.cleanup()
             raise TransportError(f"web: cannot listen on {self.host}:{self.requested_port}: "
                                  f"{exc.strerror or exc}") from exc
-        server = site._server
-        sockname = server.sockets[0].getsockname() if server and server.sockets else (
+        addresses = self._runner.addresses
+        self.bound = (addresses[0][0], addresses[0][1]) if addresses else (
             self.host, self.requested_port)
-        self.bound = (sockname[0], sockname[1])
         self.hub.start()
 
     def start_recording(self) -> bool:
