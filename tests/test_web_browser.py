@@ -106,6 +106,24 @@ def test_page_loads_without_console_errors_and_every_control_has_a_name(page):
     assert page.errors == []
 
 
+def test_keyboard_only_console_and_input_toggle(page, host):
+    """Keyboard: the first Tab reaches "skip to the console", Enter puts the caret in
+    the CML line; a focused input toggle flips with Space (6.6 ?70)."""
+    page.page.keyboard.press("Tab")
+    page.page.keyboard.press("Enter")
+    assert page.page.evaluate("() => document.activeElement.dataset.testid") == "cml-input"
+    page.page.keyboard.type("?97.1")
+    page.page.keyboard.press("Enter")
+    expect(page.by("log")).to_contain_text(re.compile(r"<\s+Sx\.1="))
+    before = int(host.query("?70.1", r"IN\.1=[0-9A-Fa-f]+").split("=")[1], 16)
+    page.by("input-1-5").focus()
+    page.page.keyboard.press("Space")
+    expect(page.by("input-1-5")).to_have_attribute("aria-pressed", "true")
+    assert int(host.query("?70.1", r"IN\.1=[0-9A-Fa-f]+").split("=")[1], 16) == before | 0x10
+    page.page.keyboard.press("Space")
+    expect(page.by("input-1-5")).to_have_attribute("aria-pressed", "false")
+
+
 def test_move_typed_in_console_shows_position_rising_and_ux8_in_log(page, host):
     """2.1 example: S, A, P then ^ (cml-users-guide.txt 2.1.1); Ux.1=8 when in position."""
     start = page.number("position-1")

@@ -279,6 +279,7 @@ def test_web_address_forms():
     assert parse_web_address("9000") == ("127.0.0.1", 9000)
     assert parse_web_address("0.0.0.0:8080") == ("0.0.0.0", 8080)
     assert parse_web_address("[::1]:81") == ("::1", 81)
+    assert parse_web_address("0.0.0.0") == ("0.0.0.0", 8080)
     with pytest.raises(TransportError, match="HOST:"):
         parse_web_address("http://x")
     assert expand_web_flag(["sim", "--web"]) == ["sim", "--web", "127.0.0.1:8080"]

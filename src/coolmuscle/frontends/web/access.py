@@ -27,9 +27,12 @@ _LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1", "[::1]"})
 
 
 def parse_web_address(text: str | None) -> tuple[str, int]:
-    """``None``/``""`` -> 127.0.0.1:8080; ``"9000"``; ``"0.0.0.0:8080"``; ``"[::1]:8080"``."""
+    """``None``/``""`` -> 127.0.0.1:8080; ``"9000"``; ``"0.0.0.0:8080"``; ``"[::1]:8080"``;
+    a host alone (``"0.0.0.0"``) takes port 8080."""
     if text is None or not text.strip():
         return DEFAULT_HOST, DEFAULT_PORT
+    if _is_ip(text.strip()) or text.strip().lower() == "localhost":   # a host alone
+        return text.strip().strip("[]"), DEFAULT_PORT
     match = _ADDRESS.match(text.strip())
     if match is None:
         raise TransportError(f"bad web address {text!r}: expected [HOST:]PORT, "
@@ -39,6 +42,14 @@ def parse_web_address(text: str | None) -> tuple[str, int]:
         raise TransportError(f"bad web port {port} (0..65535)")
     host = (match.group("host") or DEFAULT_HOST).strip("[]") or DEFAULT_HOST
     return host, port
+
+
+def _is_ip(text: str) -> bool:
+    try:
+        ipaddress.ip_address(text.strip("[]"))
+    except ValueError:
+        return False
+    return not text.isdigit()
 
 
 def looks_like_address(text: str) -> bool:

@@ -253,10 +253,11 @@
   }
 
   async function toggleInput(id, n, button) {
+    if (button.getAttribute("aria-busy") === "true") return;
     const on = button.getAttribute("aria-pressed") !== "true";
-    button.disabled = true;
+    button.setAttribute("aria-busy", "true");     // not disabled: that would drop the focus
     const r = await request("input", { motor: id, n, on });
-    button.disabled = false;
+    button.removeAttribute("aria-busy");
     if (!r.ok) { note("cml-note", r.error); return; }
     showBits(state.cards.get(id).inputs, r.inputs, "Input", id);
   }
@@ -331,7 +332,8 @@
       const width = Math.max(200, card.chartBox.clientWidth || 300);
       const top = new uPlot(chartOpts(width, 130, [
         { label: "position", stroke: "#1f6feb", width: 2 },
-        { label: "target", stroke: "#d29922", width: 1, dash: [6, 4] },
+        { label: "target", stroke: "#d29922", width: 1, dash: [6, 4],
+          paths: uPlot.paths.stepped({ align: 1 }) },
       ], "pulses"), [data[0], data[1], data[2]], card.chartBox);
       const bottom = new uPlot(chartOpts(width, 110, [
         { label: "speed", stroke: "#2da44e", width: 1.5 },
