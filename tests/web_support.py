@@ -101,3 +101,23 @@ async def ask(ws: Any, request: dict[str, Any], rid: int = 1, timeout: float = 5
     """Send a request and return its ``result``."""
     await ws.send_str(json.dumps({**request, "id": rid}))
     return await ws_frames(ws, lambda f: f.get("t") == "result" and f.get("id") == rid, timeout)
+
+
+def count_snapshots(url: str, pages: int, seconds: float, out: Any) -> None:
+    """Child process (as browsers are): ``pages`` WebSocket clients watch ``url`` for
+    ``seconds``; puts each one's count of ``snap`` frames (and the motors in them)."""
+    import aiohttp
+
+    async def page(session: Any) -> tuple[int, int]:
+        async with session.ws_connect(url + "ws", max_msg_size=0) as ws:
+            await ws_frames(ws, lambda f: f["t"] == "hello", timeout=10)
+            count, motors, end = 0, 0, time.monotonic() + seconds
+            while time.monotonic() < end:
+                frame = await ws_frames(ws, lambda f: f["t"] == "snap", timeout=5)
+                count, motors = count + 1, len(frame["m"])
+            return count, motors
+
+    async def main() -> list[tuple[int, int]]:
+        async with aiohttp.ClientSession() as session:
+            return list(await asyncio.gather(*(page(session) for _ in range(pages))))
+    out.put(asyncio.run(main()))
