@@ -242,6 +242,22 @@ def test_tab_closed_mid_upload_leaves_a_whole_bank_or_none(browser, served, host
         b.close()
 
 
+def test_record_then_download_trace_and_plot_from_the_page(page, tmp_path: Path):
+    page.by("record").click()
+    expect(page.page.locator("#record-state")).to_contain_text("recording")
+    page.type_line("S.1=100, A.1=100, P.1=-500, ^.1")
+    expect(page.by("log")).to_contain_text("trace recording started")
+    time.sleep(0.5)
+    with page.page.expect_download() as csv_download:
+        page.page.click("#dl-csv")
+    csv = Path(csv_download.value.path()).read_text()
+    assert csv.startswith("time_s,m1.") and len(csv.splitlines()) > 10
+    with page.page.expect_download() as png_download:
+        page.page.click("#dl-png")
+    assert Path(png_download.value.path()).read_bytes()[:4] == b"\x89PNG"
+    assert page.errors == []
+
+
 def test_ten_open_tabs_all_follow_a_move(browser, served, host):
     context = browser.new_context(viewport={"width": 800, "height": 600})
     tabs = [Page(browser, served.transports[1].url, context=context) for _ in range(10)]

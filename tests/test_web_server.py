@@ -315,3 +315,21 @@ def test_twenty_clients_on_fifteen_motors_keep_20_updates_a_second():
     counts = [count for count, _ in results]
     print("snapshots in 2 s per client:", counts)
     assert min(counts) / 2.0 >= 20, counts
+
+
+def test_trace_download_writes_what_run_trace_writes(tmp_path):
+    """The page's CSV is the recorder's own CSV (docs/plots.md), sampled in chunks."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.sim.kernel import seconds
+    from coolmuscle.tools.trace import record
+    from coolmuscle.tools.web import DashboardTools
+
+    chain = Chain(motors=2)
+    recorder = record(chain)
+    chain.execute("S.1=100, A.1=100, P.1=3000, ^.1, S.2=50, A.2=50, P.2=-800, ^.2")
+    chain.kernel.run(until=seconds(2))
+    tools = DashboardTools()
+    header, rows = tools.trace_rows(recorder, 0.001, chain.kernel.now)
+    tools.write_rows(tmp_path / "page.csv", header, list(rows))
+    recorder.write_csv(tmp_path / "run.csv", 0.001)
+    assert (tmp_path / "page.csv").read_text() == (tmp_path / "run.csv").read_text()

@@ -18,8 +18,12 @@ banks either as they were (the request never arrived whole) or fully written.
 
 from __future__ import annotations
 
+import csv
+import importlib
+import math
+import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from ..client.banks import compare_bank, parse_bank_listing
 from ..client.program import BankBlock, parse_program
@@ -93,20 +97,60 @@ class DashboardTools:
     def start_recording(self, device: Any) -> Any:
         from .trace import NoTraceRecorderError, record
         try:
-            return record(device)
+            recorder = record(device)
         except NoTraceRecorderError:
             return None
+        # matplotlib takes seconds to import: do it now, beside the loop, not at the
+        # first plot request (which runs in the model's thread)
+        threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.plot",),
+                         name="coolmuscle-web-plot-import", daemon=True).start()
+        return recorder
 
     def parquet_available(self) -> bool:
         from .trace import parquet_available
         return parquet_available()
 
-    def write_trace(self, recorder: Any, path: Path, step: float) -> None:
-        recorder.write(path, step=step)
+    def trace_rows(self, recorder: Any, step: float, end: int) -> tuple[list[str], Iterator[Any]]:
+        return recorder.header(), iter(recorder.rows(step, end))
+
+    def write_rows(self, path: Path, header: list[str], rows: list[list[float]]) -> None:
+        """CSV as ``coolmuscle run --trace`` writes it, or Parquet (typed columns)."""
+        if path.suffix == ".parquet":
+            _write_parquet(path, header, rows)
+            return
+        with path.open("w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(header)
+            for row in rows:
+                writer.writerow([f"{row[0]:.9f}"] + [_cell(v) for v in row[1:]])
 
     def plot(self, device: Any, path: Path, title: str) -> None:
         from .plot import plot
         plot(device, path, title=title)
+
+
+def _cell(value: float) -> str:
+    """Integers without a point, infinities as ``inf``, others to 6 decimals."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "inf" if value > 0 else "-inf"
+    if float(value).is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return f"{value:.6f}"
+
+
+def _write_parquet(path: Path, header: list[str], rows: list[list[float]]) -> None:
+    import pyarrow as pa  # type: ignore[import-not-found]  # noqa: PLC0415  (optional)
+    import pyarrow.parquet as pq  # type: ignore[import-not-found]  # noqa: PLC0415
+
+    from .trace import INTEGER_FIELDS
+    columns = list(zip(*rows)) if rows else [() for _ in header]
+    arrays = {}
+    for name, values in zip(header, columns):
+        if name.rsplit(".", 1)[-1] in INTEGER_FIELDS:
+            arrays[name] = pa.array([int(v) for v in values], type=pa.int64())
+        else:
+            arrays[name] = pa.array([float(v) for v in values], type=pa.float64())
+    pq.write_table(pa.table(arrays), str(path))
 
 
 class WebDashboard(WebTransport):

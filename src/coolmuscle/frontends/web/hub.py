@@ -221,7 +221,7 @@ class Hub:
                 log.exception("dashboard sampling failed")
             if self._loop.time() >= next_tick:
                 next_tick = self._loop.time() + TICK_SECONDS
-                self._broadcast(json.dumps({"t": "tick", "time": self.device.kernel.now}))
+                self.broadcast(json.dumps({"t": "tick", "time": self.device.kernel.now}))
 
     def _sample_once(self) -> None:
         rows = self._call(self.rows)
@@ -234,6 +234,7 @@ class Hub:
         for client in self.clients:
             client.queue_snap(frame)
 
-    def _broadcast(self, frame: str) -> None:
+    def broadcast(self, frame: str) -> None:
+        """Send ``frame`` to every page (ahead of its pending log lines and snapshot)."""
         for client in self.clients:
             client.queue_direct(frame)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,7 @@ from ...errors import TransportError
 from ..transports.base import Port, Transport
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
+from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .toolbox import Toolbox
 
@@ -39,10 +39,10 @@ STATIC = Path(__file__).with_name("static")
 #: Largest WebSocket message a page may send (a bank upload is at most 48 Ki characters,
 #: up to three bytes each in UTF-8, plus JSON escapes).
 MAX_MESSAGE = 256 * 1024
+#: Seconds a closing socket waits for the page's close frame.
+CLOSE_TIMEOUT = 1.0
 #: Most pages connected at once.
 MAX_PAGES = 100
-#: Most rows of a downloaded trace (the sampling step grows for long recordings).
-MAX_TRACE_ROWS = 200_000
 
 
 class WebTransport(Transport):
@@ -103,6 +103,7 @@ class WebTransport(Transport):
             if self._recorder is not None and self.hub is not None:
                 self.hub.add_log([self.port.device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
+                self.hub.broadcast(json.dumps({"t": "recording", "on": True}))
         return self._recorder is not None
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
@@ -128,8 +129,8 @@ class WebTransport(Transport):
         return {"host": host, "port": port, "url": self.url, "token": self.access.token}
 
     async def close(self) -> None:
-        for ws in list(self._sockets):
-            await ws.close(code=1001, message=b"simulator stopping")
+        await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
+                               for ws in list(self._sockets)), return_exceptions=True)
         if self.hub is not None:
             await self.hub.close()
         if self._runner is not None:
@@ -142,8 +143,10 @@ class WebTransport(Transport):
         app.router.add_get("/", self._index)
         app.router.add_get("/api/info", self._info)
         app.router.add_get("/ws", self._websocket)
-        app.router.add_get("/api/trace.{fmt:csv|parquet}", self._trace)
-        app.router.add_get("/api/plot.png", self._plot)
+        assert self.port is not None
+        downloads = Downloads(self.port, self.toolbox, lambda: self._recorder, self.title)
+        app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
+        app.router.add_get("/api/plot.png", downloads.plot)
         app.router.add_static("/static", STATIC, follow_symlinks=False)
         return app
 
@@ -196,7 +199,7 @@ class WebTransport(Transport):
         if len(self._sockets) >= MAX_PAGES:
             return _error(503, f"too many pages open ({MAX_PAGES}); close one")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
-                                   compress=False)
+                                   compress=False, timeout=CLOSE_TIMEOUT)
         await ws.prepare(request)
         assert self.hub is not None and self.actions is not None
         self._sockets.add(ws)
@@ -225,46 +228,6 @@ class WebTransport(Transport):
             elif msg.type == WSMsgType.ERROR:
                 log.info("dashboard WebSocket closed: %s", ws.exception())
                 break
-
-    # -- downloads --------------------------------------------------------------
-    async def _trace(self, request: web.Request) -> web.StreamResponse:
-        fmt = request.match_info["fmt"]
-        if self._recorder is None:
-            return _error(409, "nothing recorded: press Record first")
-        if fmt == "parquet":
-            assert self.toolbox is not None
-            if not self.toolbox.parquet_available():
-                return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
-        return await self._download(f"trace.{fmt}", self._write_trace)
-
-    def _write_trace(self, path: Path) -> None:
-        assert self.port is not None
-        recorder = self._recorder
-        end = self.port.device.kernel.now
-        span = max(end - getattr(recorder, "start", 0), 0) / 1e9
-        step = max(0.001, span / MAX_TRACE_ROWS)
-        assert self.toolbox is not None
-        self.toolbox.write_trace(recorder, path, step)
-
-    async def _plot(self, _request: web.Request) -> web.StreamResponse:
-        if self._recorder is None:
-            return _error(409, "nothing recorded: press Record first")
-        assert self.port is not None
-        device, toolbox = self.port.device, self.toolbox
-        assert toolbox is not None
-        return await self._download("plot.png", lambda path: toolbox.plot(device, path,
-                                                                           self.title))
-
-    async def _download(self, name: str, write: Any) -> web.StreamResponse:
-        assert self.port is not None
-        with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
-            path = Path(tmp) / name
-            self.port.call(write, path)
-            body = path.read_bytes()
-        kind = {"csv": "text/csv", "parquet": "application/octet-stream",
-                "png": "image/png"}[name.rsplit(".", 1)[1]]
-        return web.Response(body=body, content_type=kind, headers={
-            "Content-Disposition": f'attachment; filename="coolmuscle-{name}"'})
 
 
 def _io_counts(device: Any) -> dict[str, int]:

@@ -12,7 +12,7 @@ back) and traces (record, CSV/Parquet, plot) are host tools of a higher layer
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Iterator, Protocol
 
 #: Adds a line ``[time_ns, kind, text, motor, origin]`` to every page's console log.
 Note = Callable[[list[Any]], None]
@@ -33,8 +33,12 @@ class Toolbox(Protocol):
     def parquet_available(self) -> bool:
         """Whether Parquet traces can be written (pyarrow)."""
 
-    def write_trace(self, recorder: Any, path: Path, step: float) -> None:
-        """Write the recorder's trace to ``path`` (CSV, or Parquet for .parquet)."""
+    def trace_rows(self, recorder: Any, step: float, end: int) -> tuple[list[str], Iterator[Any]]:
+        """The trace's column names and its rows up to ``end`` (ns), drawn lazily: the
+        caller takes a few at a time in the model's thread."""
+
+    def write_rows(self, path: Path, header: list[str], rows: list[list[float]]) -> None:
+        """Write sampled rows to ``path`` (CSV, or Parquet for .parquet); any thread."""
 
     def plot(self, device: Any, path: Path, title: str) -> None:
         """Plot what the chain's recorder holds into ``path`` (PNG)."""

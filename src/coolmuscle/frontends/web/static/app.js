@@ -150,6 +150,7 @@
     else if (msg.t === "snap") onSnap(msg);
     else if (msg.t === "log") onLog(msg.lines, msg.dropped);
     else if (msg.t === "tick") { setTime(msg.time); state.dirty = true; }
+    else if (msg.t === "recording") showRecording(msg.on);
     else if (msg.t === "result") {
       const p = state.pending.get(msg.id);
       if (p) { clearTimeout(p.timer); state.pending.delete(msg.id); p.resolve(msg); }
