@@ -73,6 +73,7 @@ async def play(script: Script, service: Service,
 async def _step(step: Step, chain: Any, port: Any, lines: _Lines,
                 show: Callable[[TranscriptEntry], None], scale: float) -> str | None:
     if step.kind in ("send", "raw"):
+        port.call(_now)                   # the kernel caught up: the line's own instant
         show(TranscriptEntry(chain.kernel.now, ">", step.data, step.line_no))
         port.feed(step.data)
     elif step.kind == "wait":
@@ -87,6 +88,10 @@ async def _step(step: Step, chain: Any, port: Any, lines: _Lines,
             return f"line {step.line_no}: @until {step.pattern.pattern!r} timed out " \
                    f"after {step.seconds:g} s"
     return None
+
+
+def _now() -> None:
+    """Nothing: :meth:`Port.call` catches the kernel up to the wall clock first."""
 
 
 async def _until(pattern: re.Pattern[str], lines: _Lines, timeout: float) -> bool:
