@@ -60,6 +60,8 @@ class Page:
         self.context = context or browser.new_context(viewport={"width": width,
                                                                "height": height})
         self.page = self.context.new_page()
+        self.page.add_init_script("window.addEventListener('unhandledrejection',"
+                                  " (e) => console.error('unhandled rejection: ' + e.reason));")
         self.errors: list[str] = []
         self.page.on("console", lambda m: self.errors.append(f"{m.type}: {m.text}")
                      if m.type == "error" else None)
