@@ -177,6 +177,10 @@ def test_bank_uploaded_from_the_page_reads_back_with_query_1(page, host):
     expect(page.by("bank-result")).to_contain_text("read back identical", timeout=5000)
     assert host.query("?1.3", r"S1\.3.*") == "S1.3, A1.3, P1.3"
     assert host.query("?P1.3", r"P1\.3=.*").startswith("P1.3=2000,")  # the data line ran too
+    page.by("bank-start").click()                                      # [1.3 (6.5)
+    expect(page.by("log")).to_contain_text("[1.3")
+    expect(page.by("position-3")).to_have_text("2000", timeout=10_000)
+    assert host.query("?96.3", r"Px\.3=-?\d+") == "Px.3=2000"
 
 
 def test_checker_errors_are_shown_on_their_line_and_nothing_is_sent(page, host):

@@ -29,10 +29,12 @@ window.Coolmuscle.panels = function ({ state, $, request, note, localNote }) {
   }
 
   function bankHead() {
-    const first = $("bank-text").value.split("\n").map((l) => l.trim()).find((l) => l);
-    const m = /^([BL])(\d+)(?:\.(\d+))?$/i.exec(first || "");
-    if (!m) return null;
-    return { ladder: m[1].toUpperCase() === "L", number: Number(m[2]), motor: Number(m[3] || $("bank-motor").value) };
+    // the first B#.n / L#.n line (data lines may come before the bank, as in 2.2)
+    for (const raw of $("bank-text").value.split("\n")) {
+      const m = /^([BL])(\d+)(?:\.(\d+))?$/i.exec(raw.trim());
+      if (m) return { ladder: m[1].toUpperCase() === "L", number: Number(m[2]), motor: Number(m[3] || $("bank-motor").value) };
+    }
+    return null;
   }
 
   async function sendLine(line) {
