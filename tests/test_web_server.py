@@ -333,3 +333,21 @@ def test_trace_download_writes_what_run_trace_writes(tmp_path):
     tools.write_rows(tmp_path / "page.csv", header, list(rows))
     recorder.write_csv(tmp_path / "run.csv", 0.001)
     assert (tmp_path / "page.csv").read_text() == (tmp_path / "run.csv").read_text()
+
+
+def test_no_polling_storm_while_nothing_moves(served):
+    """Idle motors: no snapshot is sent while no value changes, only the 1 s tick."""
+    async def body(ws, hello):
+        await asyncio.sleep(1.5)              # the fast second after connecting passes
+        frames = []
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:
+            try:
+                frames.append(await ws_frames(ws, lambda f: True,
+                                              timeout=max(0.05, end - time.monotonic())))
+            except asyncio.TimeoutError:
+                break
+        return frames
+    frames = _run(_with_ws(_url(served), body))
+    kinds = [f["t"] for f in frames]
+    assert "snap" not in kinds and kinds.count("tick") <= 3, kinds

@@ -215,6 +215,8 @@
       analogValue: node.querySelector(".a-value"), chartBox: ref(".chart", "chart-" + id),
       last: null,
     };
+    card.chartBox.setAttribute("role", "group");
+    card.chartBox.setAttribute("aria-label", "Charts of ID" + id + ": position and target, speed and torque");
     const ins = node.querySelector(".inputs");
     ins.setAttribute("aria-label", "Inputs of ID" + id);
     for (let n = 1; n <= state.io.inputs; n++) {
