@@ -333,10 +333,10 @@
     const log = $("log");
     const stick = log.scrollTop + log.clientHeight >= log.scrollHeight - 8;
     const frag = document.createDocumentFragment();
-    if (dropped) frag.appendChild(logLine(state.lastTime, "!", "… " + dropped + " lines not shown (page too slow)", "note"));
+    if (dropped) frag.appendChild(logLine(state.lastTime, "!", "… " + dropped + " lines not shown (page too slow)", "k-note"));
     for (const [time, kind, text, motor, origin] of lines) {
       const sent = kind === ">";
-      const line = kind === "note" ? logLine(time, "!", text, "note")
+      const line = kind === "note" ? logLine(time, "!", text, "k-note")
         : logLine(time, sent ? ">" : "<", text, sent ? "sent" : "k-" + kind);
       if (!sent && kind !== "note" && origin !== "web" && origin !== "motor") {
         const o = document.createElement("span");
@@ -361,7 +361,7 @@
     return div;
   }
 
-  function localNote(text) { onLog([], 0); $("log").appendChild(logLine(state.lastTime, "!", text, "note")); $("log").scrollTop = $("log").scrollHeight; }
+  function localNote(text) { onLog([], 0); $("log").appendChild(logLine(state.lastTime, "!", text, "k-note")); $("log").scrollTop = $("log").scrollHeight; }
 
   function note(id, text) { $(id).textContent = text || ""; }
 
