@@ -33,6 +33,8 @@ BUILTIN: dict[str, str] = {
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
     "web": "coolmuscle.tools.web:WebDashboard",
+    "ethercat": "coolmuscle.frontends.ethercat.transport:EthercatTransport",
+    "enip": "coolmuscle.frontends.enip.server:EnipTransport",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).
