@@ -348,6 +348,6 @@ def test_no_polling_storm_while_nothing_moves(served):
             except asyncio.TimeoutError:
                 break
         return frames
-    frames = _run(_with_ws(_url(served), body))
+    frames = _run(_with_ws(_url(served), body))    # 3.5 s since the hello in all
     kinds = [f["t"] for f in frames]
-    assert "snap" not in kinds and kinds.count("tick") <= 3, kinds
+    assert "snap" not in kinds and kinds.count("tick") <= 5 and len(kinds) <= 5, kinds
