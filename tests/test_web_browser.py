@@ -7,6 +7,7 @@ directory (``$COOLMUSCLE_TEST_OUTPUT``, default out/test-web).
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import signal
@@ -247,7 +248,19 @@ def test_tab_closed_mid_upload_leaves_a_whole_bank_or_none(browser, served, host
         b.close()
 
 
-def test_record_then_download_trace_and_plot_from_the_page(page, tmp_path: Path):
+def test_record_then_download_trace_and_plot_from_the_page(browser, tmp_path: Path):
+    st = serve(motors=1)                          # a chain of its own: nothing recorded yet
+    page = Page(browser, st.transports[1].url)
+    try:
+        _record_and_download(page)
+    finally:
+        page.close()
+        st.stop()
+
+
+def _record_and_download(page: Page) -> None:
+    page.page.click("#dl-csv")                   # before Record: a clear message, no file
+    expect(page.page.locator("#download-note")).to_contain_text("press Record first")
     page.by("record").click()
     expect(page.page.locator("#record-state")).to_contain_text("recording")
     page.type_line("S.1=100, A.1=100, P.1=-500, ^.1")
@@ -260,7 +273,14 @@ def test_record_then_download_trace_and_plot_from_the_page(page, tmp_path: Path)
     with page.page.expect_download() as png_download:
         page.page.click("#dl-png")
     assert Path(png_download.value.path()).read_bytes()[:4] == b"\x89PNG"
-    assert page.errors == []
+    if importlib.util.find_spec("pyarrow") is None:
+        page.page.click("#dl-parquet")
+        expect(page.page.locator("#download-note")).to_contain_text("pyarrow")
+    else:
+        with page.page.expect_download() as parquet_download:
+            page.page.click("#dl-parquet")
+        assert Path(parquet_download.value.path()).read_bytes()[:4] == b"PAR1"
+    assert [e for e in page.errors if "409" not in e] == []
 
 
 def test_ten_open_tabs_all_follow_a_move(browser, served, host):

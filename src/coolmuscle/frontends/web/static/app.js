@@ -411,6 +411,32 @@
     if (r.ok) showRecording(true); else $("record-state").textContent = r.error;
   });
 
+  // a download that fails (nothing recorded, no pyarrow, busy) says why, beside the buttons
+  for (const id of ["dl-csv", "dl-parquet", "dl-png"]) {
+    $(id).addEventListener("click", async (ev) => {
+      ev.preventDefault();
+      const link = $(id);
+      $("download-note").textContent = "preparing…";
+      let r;
+      try { r = await fetch(link.href, { cache: "no-store" }); } catch (e) { r = null; }
+      if (!r || !r.ok) {
+        let why = r ? "HTTP " + r.status : "simulator not reachable";
+        try { why = (await r.json()).error || why; } catch (e) { /* not JSON */ }
+        $("download-note").textContent = why;
+        return;
+      }
+      const url = URL.createObjectURL(await r.blob());
+      const save = document.createElement("a");
+      save.href = url;
+      save.download = "coolmuscle-" + link.getAttribute("href").split("/").pop().split("?")[0];
+      document.body.appendChild(save);
+      save.click();
+      save.remove();
+      setTimeout(() => URL.revokeObjectURL(url), 30000);
+      $("download-note").textContent = "";
+    });
+  }
+
   // -- start ------------------------------------------------------------------------------
   setupConsole();
   setupBanks();
