@@ -63,8 +63,9 @@ DEFAULT_ADDRESS = f"{DEFAULT_HOST}:{DEFAULT_PORT}"
 def expand_web_flag(argv: list[str]) -> list[str]:
     """Give a bare ``--web`` (last, or before an option or a script) its default address.
 
-    The word after ``--web`` is its value unless it is an option or a file that exists
-    (``run --web script.cml``), so a malformed address is reported as one."""
+    The word after ``--web`` is its value unless it is an option, a ``.cml`` script or
+    a file that exists (``run --web script.cml``), so a malformed address is reported
+    as one."""
     out: list[str] = []
     for i, word in enumerate(argv):
         out.append(word)
@@ -78,7 +79,7 @@ def expand_web_flag(argv: list[str]) -> list[str]:
 def _web_value(word: str) -> bool:
     if looks_like_address(word):
         return True
-    return not word.startswith("-") and not os.path.exists(word)
+    return not (word.startswith("-") or word.lower().endswith(".cml") or os.path.exists(word))
 
 
 def is_loopback(host: str) -> bool:
