@@ -382,6 +382,9 @@
       const r = await request("cml", { line, motor: Number($("cml-motor").value) });
       if (!r.ok) { note("cml-note", r.error); localNote(r.error); }
       else if (r.note) { note("cml-note", r.note); localNote(r.note); }
+      // the log itself is not read aloud (it can run at dozens of lines a second);
+      // the replies to one's own line are
+      note("cml-reply", r.ok && r.replies && r.replies.length ? r.replies.join(", ") : "");
     });
     input.addEventListener("keydown", (ev) => {
       if (ev.key !== "ArrowUp" && ev.key !== "ArrowDown") return;
