@@ -110,6 +110,10 @@ def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
                          pacing=pace, **extra)
 
 
+_WEB_HELP = ("Serve the web dashboard (docs/web.md) on [HOST:]PORT, default "
+             "127.0.0.1:8080; another host than loopback needs the printed token.")
+
+
 _MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
 
 
@@ -297,6 +301,8 @@ def sim(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    web: Optional[str] = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
+                                      help=_WEB_HELP),
     ethercat: Optional[str] = typer.Option(
         None, "--ethercat", metavar="IFACE",
         help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
@@ -322,6 +328,7 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
+    dashboard = _web_transport(web) if web is not None else None   # docs/web.md
     fw = ""
     if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
         if enip is not None:
@@ -339,6 +346,8 @@ def sim(
         if reset:
             _reset_state(state_dir)
         chain = _make_chain(motors, firmware, state_dir, pace, machine)
+    if dashboard is not None:
+        chosen.append(dashboard)
     try:
         label = fw.upper().replace(",", "/") if ethercat is not None else None
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
@@ -379,11 +388,20 @@ def run(
         help="Write the script with the received bytes as expectations."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    web: Optional[str] = typer.Option(
+        None, "--web", metavar="[[HOST:]PORT]",
+        help="Play the script in real time and show it on the web dashboard "
+             "(docs/web.md); starts when a page connects."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
     script = load_script(file)
     motors, firmware, machine = _header_defaults(file, motors, firmware, machine)
+    if web is not None:
+        _run_web(script, web, until, (check, record, trace, plot),
+                 lambda: _make_chain(motors, firmware, state.expanduser() if state else None,
+                                     pace, machine))
+        return
     if check and not script.expectations:
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
@@ -492,6 +510,31 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
     return [(x, y)]
 
 
+def _web_transport(address: str) -> Transport:
+    """``--web [HOST:]PORT`` (coolmuscle.frontends.web)."""
+    from .web_run import web_transport
+    try:
+        return web_transport(address)
+    except TransportError as exc:
+        raise UsageError(f"--web: {exc}") from None
+
+
+def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
+             make_chain: Callable[[], Any]) -> None:
+    """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
+    from .web_run import run_script_web
+    if any(o not in (None, False) for o in others):
+        raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
+                         "are for fast runs (the page downloads the trace and the plot)")
+    _web_transport(address)                       # a bad address is a usage error
+    chain = make_chain()
+    try:
+        run_script_web(script, chain, address, until=until,
+                       err=lambda text: err.print(text, markup=False))
+    finally:
+        chain.close()
+
+
 def _register_tools() -> None:
     from ..frontends.enip.cli import register as register_enip
     from .commands import register
@@ -542,7 +585,9 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
     from ..frontends.enip.cli import optional_value_argv
     try:
-        app(args=optional_value_argv(argv), prog_name="coolmuscle")
+        from ..frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+        args = expand_web_flag(sys.argv[1:] if argv is None else argv)
+        app(args=optional_value_argv(args), prog_name="coolmuscle")
     except SystemExit:
         raise
     except KeyboardInterrupt:
