@@ -12,7 +12,8 @@ text tells the user to have running:
     ``coolmuscle sim ARGS`` serves while the block runs (started once per module for
     consecutive blocks with the same ARGS), on 127.0.0.1 as the text says;
 ``<!-- docs-example: servers -->``
-    each line starts a server: it must print its ready banner, then it is stopped;
+    each line starts a server: it must print its ready banner (``run --web``: its
+    address), then it is stopped;
 ``<!-- docs-example: continues -->``
     a Python block that goes on from the previous Python block of the same page;
 ``<!-- docs-example: hardware -->`` / ``interactive`` / ``setup``
@@ -154,7 +155,7 @@ class Env:
                                     env=self.env, text=True, stdout=fh, stderr=subprocess.STDOUT,
                                     stdin=subprocess.DEVNULL, start_new_session=True)
         deadline = time.monotonic() + READY_TIMEOUT
-        while "ready" not in log.read_text():
+        while not re.search(r"ready|web: http://", log.read_text()):   # sim / run --web
             if proc.poll() is not None or time.monotonic() > deadline:
                 self.stop(proc)
                 raise AssertionError(f"{line!r} did not get ready:\n{log.read_text()}")
