@@ -177,6 +177,8 @@ class Chain:
     def _execute_text(self, text: str, ctx: Context) -> None:
         if self.uploads.consume(text, ctx):   # a bank definition is being typed
             return
+        if self._baud_answer(text):
+            return
         try:
             lines = _parse(text)
         except CmlSyntaxError as error:
@@ -196,6 +198,18 @@ class Chain:
             else:
                 self._run_statements([stmt for stmt, _ in line], line_ctx)
         self.poke()
+
+    def _baud_answer(self, text: str) -> bool:
+        """The line after a K20 prompt (ch. 3 K23 16 "Change Baud Rate ?? XXX kbps
+        (Y/N)"): ``Y`` applies the new K20, ``N`` keeps the old one; both are consumed.
+        Any other line cancels the change and runs as usual (docs/fidelity.md)."""
+        asking = [m for m in self.motors.values() if m.pending_baud is not None]
+        if not asking:
+            return False
+        answer = text.strip().upper()
+        for motor in asking:
+            motor.answer_baud(answer == "Y")
+        return answer in ("Y", "N")
 
     def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
         for stmt in statements:

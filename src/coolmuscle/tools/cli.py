@@ -49,6 +49,22 @@ app = typer.Typer(name="coolmuscle", add_completion=False, no_args_is_help=True,
 err = Console(stderr=True, soft_wrap=True, highlight=False)
 
 
+def _flags_take_no_value() -> None:
+    """The help shows no ``<bool>`` after a flag such as ``--pty`` (it takes no value);
+    typer >= 0.17 prints every option's type, flags included."""
+    from typer.core import TyperOption
+
+    shown = TyperOption.display_type_rich
+
+    def display_type_rich(self: TyperOption, ctx: Any) -> str | None:
+        return None if self.is_flag and self.metavar is None else shown(self, ctx)
+
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_take_no_value()
+
+
 class Firmware(str, enum.Enum):
     cm2 = "cm2"
     rt3 = "rt3"
@@ -197,8 +213,8 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
     err.print(f"{where}   (state: {shown})", markup=False)
     station = _modbus_station(chain)
     if station:
-        err.print(f"COM0 speaks Modbus RTU, station {station} (K81.1={station}); for the text "
-                  "line send FFFFFFFFF, then K81.1=0 (5.6.9)", markup=False)
+        asked = any(t.name == "modbus-rtu" for t in chosen)
+        err.print(_modbus_notice(station, state, asked), markup=False)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -209,6 +225,38 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         await service.close()
+
+
+def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str:
+    """Why a plain ``sim`` answers no CML text: K81 (kept like every K) hands COM0 to
+    Modbus RTU (5.6.1), and how to get the text line back (5.6.9, ``--reset``)."""
+    saved = f" (saved in {_show_path(state)})" if state is not None else ""
+    if asked and state is None:
+        return (f"coolmuscle: note: K81.1={station}: COM0 speaks Modbus RTU; no state is "
+                "saved, so the next sim starts with K81.1=0 (CML text).")
+    if asked:
+        return (f"coolmuscle: note: K81.1={station}{saved}: COM0 speaks Modbus RTU; the "
+                "motor keeps K81, so later sims with this state speak Modbus on COM0 too, "
+                "until you start one with --reset or send K81.1=0 in text mode (5.6.9).")
+    return (f"coolmuscle: note: K81.1={station}{saved}: COM0 (the TCP port, the pty, "
+            f"stdio) speaks Modbus RTU as station {station}, not CML text. For CML text "
+            "again: start with --reset (forgets all saved data and K values), or send "
+            "FFFFFFFFF and then K81.1=0 (5.6.9).")
+
+
+def _reset_state(state: Path | None) -> None:
+    """``sim --reset``: forget what the state directory holds (factory state)."""
+    if state is None:
+        return
+    from ..motor.state.store import DEFAULT_FILENAME, Store
+    path = state / DEFAULT_FILENAME
+    if not path.exists():
+        return
+    with Store(path) as store:
+        for motor_id in store.motors():
+            store.delete(motor_id)
+    err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
+              markup=False)
 
 
 def _modbus_station(chain: Any) -> int:
@@ -241,6 +289,9 @@ def sim(
         None, "--state", metavar="DIR",
         help="State directory (default: ~/.local/share/coolmuscle/state)."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
+    reset: bool = typer.Option(False, "--reset",
+                               help="Forget the saved state first (factory settings, "
+                                    "K81=0: CML text on COM0)."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
     pace: bool = typer.Option(False, "--pace",
@@ -285,11 +336,15 @@ def sim(
                              "motors are not the EtherNet/IP module's CM1)")
         chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
                                                   stdio, (modbus_rtu, modbus_tcp, com1))
+        if reset:
+            _reset_state(state_dir)
         chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
     else:
         chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
                              enip=enip is not None)
         chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
+        if reset:
+            _reset_state(state_dir)
         chain = _make_chain(motors, firmware, state_dir, pace, machine)
     if dashboard is not None:
         chosen.append(dashboard)
@@ -315,8 +370,12 @@ def run(
         None, "--xy", metavar="X,Y",
         help="With --plot: draw the XY path of motors X and Y (default: pairs that "
              "interpolated; 'none' for no XY panel)."),
-    motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
-    firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
+    motors: Optional[int] = typer.Option(
+        None, "--motors", min=1, max=15,
+        help="Motors on the chain (default: the script's '# coolmuscle: motors=N', else 1)."),
+    firmware: Optional[Firmware] = typer.Option(
+        None, "--firmware",
+        help="Firmware profile (default: the script's 'firmware=', else cm2)."),
     state: Optional[Path] = typer.Option(
         None, "--state", metavar="DIR",
         help="Start from (and save to) this state (default: a fresh chain)."),
@@ -337,6 +396,7 @@ def run(
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
     script = load_script(file)
+    motors, firmware, machine = _header_defaults(file, motors, firmware, machine)
     if web is not None:
         _run_web(script, web, until, (check, record, trace, plot),
                  lambda: _make_chain(motors, firmware, state.expanduser() if state else None,
@@ -352,6 +412,12 @@ def run(
         try:
             check_trace_path(trace)
         except TraceFormatError as exc:
+            raise UsageError(str(exc)) from None
+    if plot is not None:
+        from .plot import PlotFormatError, check_plot_path
+        try:
+            check_plot_path(plot)
+        except PlotFormatError as exc:
             raise UsageError(str(exc)) from None
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
                         machine)
@@ -371,10 +437,11 @@ def run(
         sys.stdout.flush()
         if plot is not None:
             from .plot import plot as plot_chain
+            title = f"{file.name} (virtual time)"     # the script's name, not a generic one
             if xy_pairs is None:
-                plot_chain(chain, plot)
+                plot_chain(chain, plot, title=title)
             else:
-                plot_chain(chain, plot, xy=xy_pairs)
+                plot_chain(chain, plot, title=title, xy=xy_pairs)
     finally:
         chain.close()
     if record is not None:
@@ -389,6 +456,42 @@ def run(
         sys.stdout.write(f"coolmuscle: {result.summary()}\n")
     elif script.expectations:
         err.print(f"coolmuscle: {result.summary()}", markup=False)
+
+
+def _header_defaults(file: Path, motors: int | None, firmware: Firmware | None,
+                     machine: Path | None) -> tuple[int, Firmware, Path | None]:
+    """``# coolmuscle: motors=2 firmware=rt3 machine=axis.toml`` in a script gives the
+    defaults (``machine`` relative to the script); an option given on the command line
+    wins, with a note when it differs from the header (docs/scripts.md)."""
+    header: dict[str, str] = {}
+    try:
+        with file.open(encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.lower().startswith("# coolmuscle:"):
+                    for item in line.split(":", 1)[1].split():
+                        key, _, value = item.partition("=")
+                        header[key.lower()] = value
+    except OSError:
+        pass                               # load_script has reported a missing file
+    given_motors = header.get("motors")
+    if given_motors is not None and not (given_motors.isdigit() and 1 <= int(given_motors) <= 15):
+        raise UsageError(f"{file}: '# coolmuscle: motors={given_motors}' is not 1..15")
+    given_fw = header.get("firmware")
+    if given_fw is not None and given_fw.lower() not in Firmware.__members__:
+        raise UsageError(f"{file}: '# coolmuscle: firmware={given_fw}' is not cm2, rt3 or cm1")
+    for option, value, key in (("--motors", motors, "motors"),
+                               ("--firmware", firmware.value if firmware else None,
+                                "firmware")):
+        if value is not None and header.get(key) not in (None, str(value)):
+            err.print(f"coolmuscle: note: {option} {value} overrides the script's "
+                      f"{key}={header[key]}", markup=False)
+    if motors is None:
+        motors = int(given_motors) if given_motors else 1
+    if firmware is None:
+        firmware = Firmware(given_fw.lower()) if given_fw else Firmware.cm2
+    if machine is None and header.get("machine"):
+        machine = file.parent / header["machine"]
+    return motors, firmware, machine
 
 
 def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
@@ -454,6 +557,20 @@ _register_batch()  # batch, sweep (coolmuscle.tools.batchcommands, docs/batch.md
 def version() -> None:
     """Print the version."""
     sys.stdout.write(f"coolmuscle {__version__}\n")
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        sys.stdout.write(f"coolmuscle {__version__}\n")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main_options(
+    show_version: bool = typer.Option(False, "--version", callback=_print_version,
+                                      is_eager=True, help="Print the version and exit."),
+) -> None:
+    """A virtual Cool Muscle integrated servo motor and host tools."""
 
 
 def _register_subapps() -> None:

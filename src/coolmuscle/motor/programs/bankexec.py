@@ -318,6 +318,8 @@ def program_units(bank: Bank) -> list[Unit]:
     return units
 
 
-def ladder_units(bank: Bank) -> list[Unit]:
-    """Ladder bank: every line on its own; ``;`` only silences its results (RT3 1.1)."""
-    return [Unit(line.statements, line.joined, index) for index, line in merged_lines(bank)]
+def ladder_units(bank: Bank, displays: bool = True) -> list[Unit]:
+    """Ladder bank: every line on its own; ``;`` only silences its results (RT3 1.1).
+    ``displays=False`` (CM2): assignments never display (docs/fidelity.md)."""
+    return [Unit(line.statements, line.joined or not displays, index)
+            for index, line in merged_lines(bank)]

@@ -28,7 +28,7 @@ from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
 from ..state.memory import LIMIT_1E9, VNumber, VState
 from ..state.memory import WRITABLE_STATES
-from .queries import register_reply
+from .queries import display_reply
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -248,7 +248,7 @@ def _ref(stmt: ast.Ref, motor: "MotorCore", ctx: "Context", last: bool) -> Compi
             ns = max(read(), 0) * 1_000_000
             return Sleep(ns) if ns else None
         return wait
-    return lambda: motor.say(ctx, register_reply(motor, reg))
+    return lambda: motor.say(ctx, display_reply(motor, reg))
 
 
 def _actions(stmts: tuple[ast.Statement, ...], motor: "MotorCore", ctx: "Context", quiet: bool,

@@ -19,6 +19,7 @@ from .evaluate import EvalHost, condition, evaluate
 from ..state.memory import VState
 from ..state.memory import WRITABLE_STATES
 from .queries import query_lines, register_reply
+from ..status import Report
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -70,7 +71,13 @@ def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | 
         motor.write_register("V", reg.number, stmt.value.text)
         return None
     value = evaluate(stmt.value, host)
+    if reg.kind == "K" and reg.number == 20 and stmt.op == "=" and \
+            motor.reports(Report.MESSAGES):
+        motor.propose_baud(ctx, value)    # ch. 3 K23 16: "Change Baud Rate ?? XXX kbps (Y/N)"
+        return value
     if stmt.op != "=":
+        if reg.kind == "P" and not motor.resolution.incremental_allowed:
+            raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
         if reg.kind == "P" and reg.number == 0 and not ctx.program and not ctx.ladder:
             base = motor.position()          # 6.2: direct P0 is relative to the current position
         else:

@@ -32,7 +32,7 @@ from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, Watch, ho
                        ladder_units, run_plain, target_motor, timer_ns, wait_branch)
 from .direct import assign_value
 from ..state.memory import VState
-from .queries import format_value, register_name, register_reply
+from .queries import display_reply, format_value, register_name
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -142,7 +142,13 @@ class LadderRunner:
         period = self._period
         if period is None:
             return None
-        return max(self.scan_start + period, self.clock, self.kernel.now)
+        return max(self.scan_start + period, self._scan_end(), self.kernel.now)
+
+    def _scan_end(self) -> int:
+        """When this scan's steps are done: 250 µs a step for a ladder bank (RT3 3.4);
+        a logic motion bank is on its 1 ms grid whatever its steps (RT3 3.6: the 6-step
+        example's "timing is less than 1ms"; docs/fidelity.md)."""
+        return self.scan_start if self.motion else self.clock
 
     def _schedule(self, at: int | None) -> None:
         self._cancel()
@@ -176,7 +182,8 @@ class LadderRunner:
             period = self._period
             if self.state == RUNNING and period is not None and self._timer is None:
                 now = self.kernel.now
-                at = max(self.scan_start + period, self.clock, now, self._last_scan + STEP_NS)
+                at = max(self.scan_start + period, self._scan_end(), now,
+                         self._last_scan + STEP_NS)
                 self._timer = self.kernel.schedule_at(at, self._scan, priority=PRIO_LOGIC,
                                                       name="ladder-scan")
             elif self.state == RUNNING:
@@ -232,7 +239,8 @@ class LadderRunner:
             code = self._code_cache[number] = [
                 (stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
                                          _assigned), unit.quiet)
-                for unit in ladder_units(bank) for stmt in unit.statements]
+                for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
+                for stmt in unit.statements]
         return code
 
     def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,
@@ -329,7 +337,7 @@ class LadderRunner:
         target = target_motor(self.motor, stmt)
         if target is not None:
             try:
-                target.say(self.ctx, register_reply(target, reg))
+                target.say(self.ctx, display_reply(target, reg))
             except (MotorError, LookupError):
                 target.report_error(self.ctx, OutOfRangeError())
 

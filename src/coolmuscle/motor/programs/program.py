@@ -33,7 +33,7 @@ from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
                           report_leftovers, request)
 from ..motion.planner import Limits
 from ..motion.profile import Profile
-from .queries import register_reply
+from .queries import display_reply
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -426,7 +426,7 @@ class ProgramExecutor:
             _guard(target, lambda: setattr(target, "torque_limit",
                                            int(target.memory.get("M", reg.number))))
         elif reg.kind in ("V", "K", "H"):
-            _guard(target, lambda: target.say(self.ctx, register_reply(target, reg)))
+            _guard(target, lambda: target.say(self.ctx, display_reply(target, reg)))
 
     def _accel(self, target: "MotorCore", index: int, run: _Run) -> None:
         """First A of a line: acceleration; a second A: the deceleration (4.1.3)."""
@@ -527,6 +527,8 @@ def _limits(target: "MotorCore", run: _Run) -> Limits | None:
 
 def _add_motion(target: "MotorCore", run: _Run, kind: str, index: int, modifier: str | None,
                 now: int, delay: int = 0) -> None:
+    if modifier is not None and not target.resolution.incremental_allowed:
+        raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
     value = int(target.memory.get("P", index))
     motion = run.motions.get(target.id)
     if motion is None or motion.issued_at != now:

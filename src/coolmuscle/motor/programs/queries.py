@@ -45,6 +45,18 @@ def register_reply(motor: "MotorCore", reg: ast.Reg) -> str:
     return f"{register_name(reg.kind, reg.index, motor.id)}={format_value(value)}"
 
 
+def display_reply(motor: "Motor", reg: ast.Reg) -> str:
+    """A register named alone on a bank line (2.2.1, 2.2.2 "V": "When this command is
+    used alone, it displays the specified variable data"): a V holding a state shows
+    the state's value now (``V4.1=10000`` for ``V4.1="Px"``), as ``V5.1=V4.1`` reads
+    it; everything else as :func:`register_reply`."""
+    if reg.kind == "V":
+        value = motor.memory.get("V", reg.number)
+        if isinstance(value, VState):
+            return f"{register_name('V', reg.index, motor.id)}={motor.state_value(value.name)}"
+    return register_reply(motor, reg)
+
+
 def group_lines(items: list[str], per_line: int = PER_LINE) -> list[str]:
     """Join items four to a line with ", " (6.6 ?90, ?A ...)."""
     return [", ".join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
