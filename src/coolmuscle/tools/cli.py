@@ -22,7 +22,6 @@ import logging
 import os
 import signal
 import sys
-import traceback
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -30,10 +29,10 @@ import typer
 from rich.console import Console
 
 from .. import __version__
-from ..errors import CoolMuscleError, TransportError
+from ..errors import TransportError
 from .usage import UsageError
-from ..chain.machine import MachineFileError
-from .script import ScriptError, TranscriptEntry, load_script, run_script
+from .entry import guarded
+from .runcmd import make_chain, run_command, setup_logging
 from ..frontends.transports.base import Transport
 
 log = logging.getLogger("coolmuscle")
@@ -80,18 +79,7 @@ def _show_path(path: Path) -> str:
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
                 machine: Path | None = None) -> Any:
-    if state is not None:
-        try:
-            state.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise TransportError(f"cannot use state directory {state}: "
-                                 f"{exc.strerror or exc}") from exc
-    extra: dict[str, Any] = {}
-    if machine is not None:
-        from ..chain.machine import load_machine
-        extra["machine"] = load_machine(machine)
-    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace,
-                         **extra)
+    return make_chain(chain_factory, motors, firmware.value, state, pace, machine)
 
 
 _MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
@@ -102,8 +90,7 @@ def _ids(motors: int) -> str:
 
 
 def _setup_logging(verbose: bool) -> None:
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, stream=sys.stderr,
-                        format="coolmuscle: %(message)s")
+    setup_logging(verbose)
 
 
 # -- sim -----------------------------------------------------------------
@@ -264,71 +251,11 @@ def run(
                                            help=_MACHINE_HELP),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
-    _setup_logging(False)
-    script = load_script(file)
-    if check and not script.expectations:
-        raise UsageError(f"{file}: --check needs a script with '<<' expectations")
-    if until is not None and until < 0:
-        raise UsageError("--until must be >= 0")
-    xy_pairs = _xy_pairs(xy, motors)
-    if trace is not None:
-        from .trace import TraceFormatError, check_trace_path
-        try:
-            check_trace_path(trace)
-        except TraceFormatError as exc:
-            raise UsageError(str(exc)) from None
-    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
-                        machine)
-    try:
-        if plot is not None:
-            from .trace import NoTraceRecorderError, record as record_trace
-            try:
-                record_trace(chain)
-            except NoTraceRecorderError as exc:
-                raise ScriptError(f"cannot plot to {plot}: {exc}") from None
-
-        def show(entry: TranscriptEntry) -> None:
-            sys.stdout.write(entry.format() + "\n")
-
-        result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show)
-        sys.stdout.flush()
-        if plot is not None:
-            from .plot import plot as plot_chain
-            if xy_pairs is None:
-                plot_chain(chain, plot)
-            else:
-                plot_chain(chain, plot, xy=xy_pairs)
-    finally:
-        chain.close()
-    if record is not None:
-        try:
-            record.write_text(result.to_script(), encoding="utf-8")
-        except OSError as exc:
-            raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
-    if not result.ok:
-        err.print(f"coolmuscle: {result.summary()}", markup=False)
-        raise typer.Exit(EXIT_FAILED)
-    if check:
-        sys.stdout.write(f"coolmuscle: {result.summary()}\n")
-    elif script.expectations:
-        err.print(f"coolmuscle: {result.summary()}", markup=False)
-
-
-def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
-    """``--xy 1,2`` -> [(1, 2)]; ``none`` -> []; absent -> None (automatic)."""
-    if text is None:
-        return None
-    if text.strip().lower() == "none":
-        return []
-    parts = text.split(",")
-    try:
-        x, y = (int(p) for p in parts)
-    except ValueError:
-        raise UsageError(f"--xy takes two motor IDs as X,Y, not {text!r}") from None
-    if not (1 <= x <= motors and 1 <= y <= motors) or x == y:
-        raise UsageError(f"--xy {text}: two different IDs of the chain (1..{motors})")
-    return [(x, y)]
+    code = run_command(file, until=until, trace=trace, plot=plot, xy=xy, motors=motors,
+                       firmware=firmware.value, state=state, check=check, pace=pace,
+                       record=record, machine=machine, chain_factory=chain_factory)
+    if code:
+        raise typer.Exit(code)
 
 
 def _register_tools() -> None:
@@ -346,31 +273,7 @@ def version() -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
-    try:
-        app(args=argv, prog_name="coolmuscle")
-    except SystemExit:
-        raise
-    except KeyboardInterrupt:
-        err.print("coolmuscle: interrupted", markup=False)
-        raise SystemExit(130) from None
-    except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        raise SystemExit(EXIT_FAILED) from None
-    except (UsageError, ScriptError, MachineFileError) as exc:
-        _report(exc, EXIT_USAGE)
-    except (CoolMuscleError, OSError) as exc:
-        _report(exc, EXIT_FAILED)
-    except Exception as exc:  # a bug: still one line unless asked for more
-        _report(exc, EXIT_INTERNAL, prefix="internal error: ")
-
-
-def _report(exc: BaseException, code: int, prefix: str = "") -> None:
-    if os.environ.get("COOLMUSCLE_DEBUG"):
-        traceback.print_exc()
-    text = str(exc) or type(exc).__name__
-    if prefix:
-        text = f"{prefix}{type(exc).__name__}: {text} (COOLMUSCLE_DEBUG=1 shows a traceback)"
-    err.print(f"coolmuscle: error: {text}", markup=False)
-    raise SystemExit(code) from None
+    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes
+    (:func:`coolmuscle.tools.entry.guarded`; the installed command starts in
+    :func:`coolmuscle.tools.entry.main`, which runs plain scripts without typer)."""
+    guarded(lambda: app(args=argv, prog_name="coolmuscle"))
