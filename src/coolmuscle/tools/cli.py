@@ -31,7 +31,7 @@ from rich.console import Console
 from .. import __version__
 from ..errors import TransportError
 from .usage import UsageError
-from .entry import guarded
+from .exits import guarded
 from .runcmd import make_chain, run_command, setup_logging
 from ..frontends.transports.base import Transport
 
@@ -274,6 +274,6 @@ def version() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes
-    (:func:`coolmuscle.tools.entry.guarded`; the installed command starts in
+    (:func:`coolmuscle.tools.exits.guarded`; the installed command starts in
     :func:`coolmuscle.tools.entry.main`, which runs plain scripts without typer)."""
     guarded(lambda: app(args=argv, prog_name="coolmuscle"))
