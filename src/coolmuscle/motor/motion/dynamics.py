@@ -284,11 +284,13 @@ class Motion:
 
     def first(self, after_ns: int, *alternatives: Conditions,
               horizon_ns: int | None = None,
-              skip: Callable[[Piece], bool] | None = None) -> int | None:
+              skip: Callable[[Piece], bool] | None = None,
+              accept: Callable[[Piece], bool] | None = None) -> int | None:
         """First kernel time >= ``after_ns`` where, for one alternative, every condition
         it gives for the piece is > 0 (``None`` from a piece: not there).  Pieces for
-        which ``skip`` is true are known not to qualify.  The instant is rounded up to
-        the next nanosecond, so the condition already holds then."""
+        which ``skip`` is true are known not to qualify; pieces for which ``accept`` is
+        true are known to qualify all along (a bound says so: no roots are sought).  The
+        instant is rounded up to the next nanosecond, so the condition already holds then."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -297,6 +299,9 @@ class Motion:
             if skip is not None and skip(piece):
                 continue
             a = max(0.0, rel - piece.start)
+            if accept is not None and a < piece.end - piece.start and accept(piece):
+                at = self.origin_ns + math.ceil((piece.start + a) * NS_PER_S)
+                return max(after_ns, at)
             best: float | None = None
             for alt in alternatives:
                 conds = alt(piece)
