@@ -18,6 +18,7 @@ written down in docs/fidelity.md "Motion".
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -92,6 +93,7 @@ def scurve_jerk(accel: float, speed: float, scurve: int) -> float:
     return accel * accel * (2.0 - r) / (r * speed)
 
 
+@lru_cache(maxsize=256)
 def limits_from_data(s_value: int, a_value: int, *, k37: int, k44: int, k51: int,
                      k69: int, decel_a_value: int | None = None) -> Limits:
     """Limits from S and A data (2.1, 2.1.1) and K37, K44, K51, K69 (ch. 3).

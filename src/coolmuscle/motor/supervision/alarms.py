@@ -48,12 +48,13 @@ class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
     bit = Ux(0)
+    mask = int(bit)
 
     def __init__(self, motor: "Motor") -> None:
         self.motor = motor
 
     def active(self, axis: "Axis") -> bool:
-        return axis.enabled and not self.motor.alarm & self.bit.value   # int & int: no enum
+        return axis.enabled and not self.motor.alarm & self.mask   # int & int: no enum
 
     def fire(self, axis: "Axis") -> None:
         del axis
@@ -64,6 +65,7 @@ class PositionErrorWatch(_AlarmWatch):
     """Ux=1: |Pe| > K56 × 100 pulses (ch. 3 K56)."""
 
     bit = Ux.POSITION_ERROR_OVERFLOW
+    mask = int(bit)
 
     def limit(self) -> float:
         unit = 1000 if self.motor.firmware.name == "cm1" else 100
@@ -83,6 +85,7 @@ class OverSpeedWatch(_AlarmWatch):
     """Ux=2: |speed| > 1.2 × K40 min⁻¹."""
 
     bit = Ux.OVER_SPEED
+    mask = int(bit)
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
@@ -109,6 +112,7 @@ class OverloadWatch(_AlarmWatch):
     start on (:meth:`_since_at`)."""
 
     bit = Ux.OVERLOAD
+    mask = int(bit)
 
     def __init__(self, motor: "Motor") -> None:
         super().__init__(motor)
@@ -168,9 +172,10 @@ class TemperatureWatch(_AlarmWatch):
     """Ux=128: the driver temperature above its alarm level (6.6 ?71, ?99)."""
 
     bit = Ux.TEMPERATURE
+    mask = int(bit)
 
     def active(self, axis: "Axis") -> bool:
-        return not self.motor.alarm & self.bit.value
+        return not self.motor.alarm & self.mask
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
