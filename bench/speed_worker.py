@@ -12,8 +12,9 @@ Rows:
   ``sys.setprofile`` over a separate short run, so the timing is not disturbed).
 * ``chain MOTORS SECONDS``: bench_chain.py's chain, each motor looping its bank.
 * ``stream MOTORS CYCLES``: ``target_stream`` on every motor, a new csp target every
-  1 ms (a cosine ramp of 4,000 pulses in 2 s and back: every cycle differs from the
-  one before), CPU per axis-cycle.
+  1 ms (a cosine ramp of 4,000 pulses in 2 s and back, each motor's a little longer
+  than the one before: every cycle of every axis differs from every other, so no
+  solved motion is reused), wall and CPU per axis-cycle.
 """
 
 from __future__ import annotations
@@ -91,9 +92,11 @@ def row_chain(motors: int, virtual_s: float) -> dict[str, float]:
             "ratio": virtual_s / wall, "us_per_move": wall / max(moves[0], 1) * 1e6}
 
 
-def ramp(i: int) -> int:
-    """The csp target of cycle ``i``: 0 -> 4,000 -> 0 pulses, 2 s each way (cosine)."""
-    return round(2000.0 - 2000.0 * math.cos(2.0 * math.pi * i / 4000.0))
+def ramp(i: int, n: int = 1) -> int:
+    """Motor ``n``'s csp target of cycle ``i``: 0 -> 4,000 (+ 100 n) -> 0 pulses, 2 s
+    each way (cosine)."""
+    half = 2000.0 + 50.0 * n
+    return round(half - half * math.cos(2.0 * math.pi * i / 4000.0))
 
 
 def row_stream(motors: int, cycles: int) -> dict[str, float]:
@@ -105,9 +108,8 @@ def row_stream(motors: int, cycles: int) -> dict[str, float]:
     def go(first: int, last: int) -> None:
         nonlocal lag
         for i in range(first, last):
-            target = ramp(i)
-            for stream in streams:
-                stream.push(target)
+            for n, stream in enumerate(streams, 1):
+                stream.push(ramp(i, n))
             kernel.advance(NS_PER_MS)
             lag = max(lag, abs(chain.motors[1].axis.position_error()))
     wall, cpu = time.perf_counter(), time.process_time()
