@@ -411,9 +411,24 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
     """
     if not waypoints:
         raise ValueError("plan_moves needs at least one waypoint")
-    b = _Builder(start_state)
-    _path(b, waypoints)
-    return b.profile(origin_ns, start_state, float(waypoints[-1].target))
+    key = (tuple(start_state), tuple(waypoints))
+    found = _PLANNED.get(key)
+    if found is None:
+        b = _Builder(start_state)
+        _path(b, waypoints)
+        found = (tuple(b.segments), tuple(b.passing))
+        if len(_PLANNED) >= _PLANNED_MAX:
+            _PLANNED.clear()
+        _PLANNED[key] = found
+    return Profile(origin_ns, found[0], start_state=start_state,
+                   final_position=float(waypoints[-1].target), passing_times=found[1])
+
+
+#: Planned moves by (start state, waypoints): the segments are relative to the origin
+#: and immutable, so a machine cycle that repeats its moves plans each one once (the
+#: same numbers: the plan depends on nothing else; docs/performance.md).
+_PLANNED: dict[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = {}
+_PLANNED_MAX = 1024
 
 
 def plan_velocity(start_state: State, velocity_pps: float, limits: Limits,
