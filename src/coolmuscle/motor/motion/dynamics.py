@@ -362,7 +362,18 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif piece.pos is piece.cmd:                     # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    peaks = {what: max(piece.reach(what) for piece in pieces) for what in _REACH}
+    pieces[0].reach("err")                            # Motion.peak: as max() over pieces
+    top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
+    for piece in pieces:
+        piece.reach("err")                            # computes the piece's three bounds
+        b_err, b_vel, b_torque = piece._bounds         # type: ignore[misc]
+        if b_err > top_err:
+            top_err = b_err
+        if b_vel > top_vel:
+            top_vel = b_vel
+        if b_torque > top_torque:
+            top_torque = b_torque
+    peaks = {"err": top_err, "vel": top_vel, "torque": top_torque}
     return tuple(pieces), [p.start for p in pieces], peaks, {}
 
 
