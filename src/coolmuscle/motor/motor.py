@@ -13,7 +13,8 @@ import logging
 from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
-from .context import Context, MotorBus
+from .context import Context
+from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from .state import units

@@ -78,8 +78,8 @@ def _show_path(path: Path) -> str:
 
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
-                machine: Path | None = None) -> Any:
-    return make_chain(chain_factory, motors, firmware.value, state, pace, machine)
+                machine: Path | None = None, per_motor: str | None = None) -> Any:
+    return make_chain(chain_factory, motors, per_motor or firmware.value, state, pace, machine)
 
 
 _MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
@@ -96,13 +96,13 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                ) -> list[Transport]:
+                enip: bool = False) -> list[Transport]:
     from ..frontends import transports
     from ..frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
         try:
@@ -116,6 +116,24 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
         chosen.append(transports.create("stdio"))
     chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
     return chosen
+
+
+def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, pty: bool,
+                         pty_link: Path | None, stdio: bool,
+                         modbus: tuple[str | None, str | None, str | None],
+                         ) -> tuple[list[Transport], int, str]:
+    """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
+    from ..frontends.ethercat.cli import EthercatUsageError, chain_firmware, sim_transport
+    if motors not in (1, 4):
+        raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
+    try:
+        fw = chain_firmware(bridge)
+    except EthercatUsageError as exc:
+        raise UsageError(f"--bridge: {exc}") from None
+    chosen: list[Transport] = [sim_transport(iface, bridge)]  # type: ignore[list-item]
+    if tcp or pty or pty_link or stdio or any(modbus):
+        chosen += _transports(tcp, pty, pty_link, stdio, modbus)
+    return chosen, 4, fw
 
 
 def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> list[Transport]:
@@ -137,13 +155,26 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
     return chosen
 
 
+def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
+                     priority: int | None = None) -> list[Transport]:
+    """``--enip`` (docs/enip.md)."""
+    if value is None:
+        return []
+    from ..frontends.enip.cli import transports as enip_transports
+    try:
+        return enip_transports(value, io_port, firmware.value, priority)
+    except TransportError as exc:
+        raise UsageError(str(exc)) from None
+
+
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
-                 state: Path | None, scale: float) -> None:
+                 state: Path | None, scale: float, label: str | None = None) -> None:
     from ..frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
     await service.start()
-    err.print(f"coolmuscle: virtual {firmware.value.upper()} {_ids(motors)} ready", markup=False)
+    err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} ready",
+              markup=False)
     where = "   ".join(t.describe() for t in chosen)
     shown = _show_path(state) if state is not None else "none, not saved"
     err.print(f"{where}   (state: {shown})", markup=False)
@@ -202,6 +233,21 @@ def sim(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    ethercat: Optional[str] = typer.Option(
+        None, "--ethercat", metavar="IFACE",
+        help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
+             "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
+    bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
+                               help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
+    enip: Optional[str] = typer.Option(
+        None, "--enip", metavar="[HOST[:PORT]]",
+        help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
+             "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
+    enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
+                                     max=65535, help="UDP port of Class 1 I/O."),
+    enip_priority: Optional[int] = typer.Option(
+        None, "--enip-rt-priority", metavar="N", min=1, max=99,
+        help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -212,10 +258,22 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
-    chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
-    chain = _make_chain(motors, firmware, state_dir, pace, machine)
+    fw = ""
+    if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
+        if enip is not None:
+            raise UsageError("--ethercat and --enip exclude each other (the bridge's four "
+                             "motors are not the EtherNet/IP module's CM1)")
+        chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
+                                                  stdio, (modbus_rtu, modbus_tcp, com1))
+        chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
+    else:
+        chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
+                             enip=enip is not None)
+        chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
+        chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
-        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
+        label = fw.upper().replace(",", "/") if ethercat is not None else None
+        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
     finally:
         chain.close()
     err.print("coolmuscle: stopped", markup=False)
@@ -259,11 +317,21 @@ def run(
 
 
 def _register_tools() -> None:
+    from ..frontends.enip.cli import register as register_enip
     from .commands import register
     register(app)
+    register_enip(app)   # coolmuscle enip eds
 
 
 _register_tools()  # check, upload, term (coolmuscle.tools)
+
+
+def _register_batch() -> None:
+    from .batchcommands import register
+    register(app)
+
+
+_register_batch()  # batch, sweep (coolmuscle.tools.batchcommands, docs/batch.md)
 
 
 @app.command()
@@ -272,8 +340,17 @@ def version() -> None:
     sys.stdout.write(f"coolmuscle {__version__}\n")
 
 
+def _register_subapps() -> None:
+    from ..frontends.ethercat.cli import app as ethercat_app
+    app.add_typer(ethercat_app)
+
+
+_register_subapps()
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes
     (:func:`coolmuscle.tools.exits.guarded`; the installed command starts in
     :func:`coolmuscle.tools.entry.main`, which runs plain scripts without typer)."""
-    guarded(lambda: app(args=argv, prog_name="coolmuscle"))
+    from ..frontends.enip.cli import optional_value_argv
+    guarded(lambda: app(args=optional_value_argv(argv), prog_name="coolmuscle"))

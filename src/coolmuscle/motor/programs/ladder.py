@@ -35,7 +35,7 @@ from ..state.memory import VState
 from .queries import format_value, register_name, register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
     from ..context import Context
 
 IDLE, RUNNING, PAUSED = "idle", "running", "paused"
@@ -51,7 +51,7 @@ _Code = tuple[ast.Statement, "Compiled | None", bool]
 class LadderRunner:
     """Scans one ladder bank: the ladder (``motion=False``) or the logic motion bank."""
 
-    def __init__(self, motor: "Motor", *, motion: bool = False) -> None:
+    def __init__(self, motor: "MotorCore", *, motion: bool = False) -> None:
         from ..context import Context
         self.motor = motor
         self.kernel = motor.kernel
@@ -368,7 +368,7 @@ class LadderRunner:
             runner.start(stmt.index, self.ctx)
 
 
-def _assigned(target: "Motor", reg: ast.Reg, value: int | str | None) -> str:
+def _assigned(target: "MotorCore", reg: ast.Reg, value: int | str | None) -> str:
     """The display of an assignment: the register as written, ``=`` and what it holds."""
     name = register_name(reg.kind, reg.index, target.id)
     if reg.kind == "K":
