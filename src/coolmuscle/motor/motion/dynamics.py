@@ -163,7 +163,27 @@ def _sign(x: float) -> int:
 
 
 def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
-    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless."""
+    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
+
+    Remembered for a reused plan (the same segment tuple: planner.plan_moves) seen from
+    the same offset: a repeated move builds its command once."""
+    segments, base = profile.segments, profile.origin_ns
+    key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
+           None if profile.end_ns is None else profile.end_ns - base)
+    found = _COMMANDS.get(key)
+    if found is not None and found[0] is segments:
+        return list(found[1])
+    out = _command_pieces(profile, origin_ns)
+    if len(_COMMANDS) >= 1024:
+        _COMMANDS.clear()
+    _COMMANDS[key] = (segments, tuple(out))
+    return out
+
+
+_COMMANDS: dict[tuple[object, ...], tuple[object, tuple[tuple[float, float, F], ...]]] = {}
+
+
+def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
     off = (origin_ns - profile.origin_ns) / NS_PER_S
     out: list[tuple[float, float, F]] = []
     if profile.end_ns is not None and origin_ns >= profile.end_ns:

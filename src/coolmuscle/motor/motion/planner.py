@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from ..state import units
-from .profile import Profile, Segment, State
+from .profile import _CHECKED, Profile, Segment, State, _check_chain
 
 #: K69 value of a pure S-curve (ch. 3 K69, range 0..1024).
 SCURVE_MAX = 1024
@@ -419,6 +419,8 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
         found = (tuple(b.segments), tuple(b.passing))
         if len(_PLANNED) >= _PLANNED_MAX:
             _PLANNED.clear()
+        _check_chain(found[0])
+        _CHECKED.add(found[0])
         _PLANNED[key] = found
     return Profile(origin_ns, found[0], start_state=start_state,
                    final_position=float(waypoints[-1].target), passing_times=found[1])
