@@ -61,6 +61,7 @@ class Motor(Supervision):
         self.firmware = firmware
         self.bus = bus
         self.params = ParamTable(firmware)
+        self.k = self.params.get       # K lookups are many a move: no extra frame
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,

@@ -73,7 +73,9 @@ class Kernel:
     """Virtual-time event kernel: ``now``, ``schedule``, ``peek``, ``step``, ``run``."""
 
     def __init__(self, start: int = 0) -> None:
-        self._now = start
+        #: Current virtual time in nanoseconds (read it; only the kernel moves it).  A
+        #: plain attribute, not a property: the model reads it dozens of times a move.
+        self.now = start
         self._queue: list[tuple[int, int, int, Timer]] = []
         self._counter = itertools.count()
         self._events_run = 0
@@ -81,14 +83,9 @@ class Kernel:
 
     # -- time -----------------------------------------------------------
     @property
-    def now(self) -> int:
-        """Current virtual time in nanoseconds."""
-        return self._now
-
-    @property
     def now_s(self) -> float:
         """Current virtual time in seconds."""
-        return self._now / NS_PER_S
+        return self.now / NS_PER_S
 
     @property
     def events_run(self) -> int:
@@ -101,19 +98,19 @@ class Kernel:
         """Run ``callback`` ``delay`` nanoseconds from now (``delay`` >= 0)."""
         if delay < 0:
             raise ValueError(f"negative delay {delay}")
-        return self.schedule_at(self._now + int(delay), callback, priority=priority, name=name)
+        return self.schedule_at(self.now + int(delay), callback, priority=priority, name=name)
 
     def schedule_at(self, at: int, callback: Callback, *, priority: int = PRIO_MOTION,
                     name: str = "") -> Timer:
         """Run ``callback`` at absolute time ``at`` (not before now)."""
-        at = max(int(at), self._now)
+        at = max(int(at), self.now)
         timer = Timer(at, callback, name)
         heapq.heappush(self._queue, (at, priority, next(self._counter), timer))
         return timer
 
     def call_soon(self, callback: Callback, *, priority: int = PRIO_LOGIC, name: str = "") -> Timer:
         """Run ``callback`` at the current instant, after what is already due now."""
-        return self.schedule_at(self._now, callback, priority=priority, name=name)
+        return self.schedule_at(self.now, callback, priority=priority, name=name)
 
     def add_observer(self, observer: Callback) -> Callable[[], None]:
         """Call ``observer()`` after every event (trace recorders); returns a remover."""
@@ -140,7 +137,7 @@ class Kernel:
         if not self._queue:
             return False
         at, _prio, _count, timer = heapq.heappop(self._queue)
-        self._now = at
+        self.now = at
         timer.cancelled = True
         self._events_run += 1
         timer.callback()
@@ -167,20 +164,20 @@ class Kernel:
             if max_events is not None and count >= max_events:
                 return count
             pop(queue)
-            self._now = at
+            self.now = at
             timer.cancelled = True
             self._events_run += 1
             timer.callback()
             for observer in observers:
                 observer()
             count += 1
-        if until is not None and until > self._now:
-            self._now = until
+        if until is not None and until > self.now:
+            self.now = until
         return count
 
     def advance(self, delay: int) -> int:
         """Run everything due within the next ``delay`` nanoseconds."""
-        return self.run(self._now + int(delay))
+        return self.run(self.now + int(delay))
 
     def run_until(self, predicate: Callable[[], bool], timeout: int) -> bool:
         """Run events until ``predicate()`` is true or ``timeout`` ns pass.
@@ -188,13 +185,13 @@ class Kernel:
         The predicate is checked after every event.  Returns whether it became
         true; on timeout, ``now`` is the deadline.
         """
-        deadline = self._now + int(timeout)
+        deadline = self.now + int(timeout)
         if predicate():
             return True
         while True:
             nxt = self.peek()
             if nxt is None or nxt > deadline:
-                self._now = max(self._now, deadline)
+                self.now = max(self.now, deadline)
                 return predicate()
             self.step()
             if predicate():

@@ -22,7 +22,6 @@ import logging
 import os
 import signal
 import sys
-import traceback
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -30,17 +29,15 @@ import typer
 from rich.console import Console
 
 from .. import __version__
-from ..errors import CoolMuscleError, TransportError
+from ..errors import TransportError
 from .usage import UsageError
-from ..chain.machine import MachineFileError
-from .script import ScriptError, TranscriptEntry, load_script, run_script
+from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
+from .runcmd import header_defaults, make_chain, run_command, setup_logging
+from .script import load_script
 from ..frontends.transports.base import Transport
 
 log = logging.getLogger("coolmuscle")
 
-EXIT_FAILED = 1
-EXIT_USAGE = 2
-EXIT_INTERNAL = 70
 
 app = typer.Typer(name="coolmuscle", add_completion=False, no_args_is_help=True,
                   pretty_exceptions_enable=False,
@@ -96,18 +93,7 @@ def _show_path(path: Path) -> str:
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
                 machine: Path | None = None, per_motor: str | None = None) -> Any:
-    if state is not None:
-        try:
-            state.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise TransportError(f"cannot use state directory {state}: "
-                                 f"{exc.strerror or exc}") from exc
-    extra: dict[str, Any] = {}
-    if machine is not None:
-        from ..chain.machine import load_machine
-        extra["machine"] = load_machine(machine)
-    return chain_factory(None, motors, firmware=per_motor or firmware.value, state_dir=state,
-                         pacing=pace, **extra)
+    return make_chain(chain_factory, motors, per_motor or firmware.value, state, pace, machine)
 
 
 _WEB_HELP = ("Serve the web dashboard (docs/web.md) on [HOST:]PORT, default "
@@ -122,8 +108,7 @@ def _ids(motors: int) -> str:
 
 
 def _setup_logging(verbose: bool) -> None:
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, stream=sys.stderr,
-                        format="coolmuscle: %(message)s")
+    setup_logging(verbose)
 
 
 # -- sim -----------------------------------------------------------------
@@ -394,120 +379,20 @@ def run(
              "(docs/web.md); starts when a page connects."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
-    _setup_logging(False)
-    script = load_script(file)
-    motors, firmware, machine = _header_defaults(file, motors, firmware, machine)
     if web is not None:
+        _setup_logging(False)
+        script = load_script(file)
+        motors, fw, machine = header_defaults(file, motors, firmware.value if firmware else None,
+                                              machine)
         _run_web(script, web, until, (check, record, trace, plot),
-                 lambda: _make_chain(motors, firmware, state.expanduser() if state else None,
+                 lambda: _make_chain(motors, Firmware(fw), state.expanduser() if state else None,
                                      pace, machine))
         return
-    if check and not script.expectations:
-        raise UsageError(f"{file}: --check needs a script with '<<' expectations")
-    if until is not None and until < 0:
-        raise UsageError("--until must be >= 0")
-    xy_pairs = _xy_pairs(xy, motors)
-    if trace is not None:
-        from .trace import TraceFormatError, check_trace_path
-        try:
-            check_trace_path(trace)
-        except TraceFormatError as exc:
-            raise UsageError(str(exc)) from None
-    if plot is not None:
-        from .plot import PlotFormatError, check_plot_path
-        try:
-            check_plot_path(plot)
-        except PlotFormatError as exc:
-            raise UsageError(str(exc)) from None
-    chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
-                        machine)
-    try:
-        if plot is not None:
-            from .trace import NoTraceRecorderError, record as record_trace
-            try:
-                record_trace(chain)
-            except NoTraceRecorderError as exc:
-                raise ScriptError(f"cannot plot to {plot}: {exc}") from None
-
-        def show(entry: TranscriptEntry) -> None:
-            sys.stdout.write(entry.format() + "\n")
-
-        result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show)
-        sys.stdout.flush()
-        if plot is not None:
-            from .plot import plot as plot_chain
-            title = f"{file.name} (virtual time)"     # the script's name, not a generic one
-            if xy_pairs is None:
-                plot_chain(chain, plot, title=title)
-            else:
-                plot_chain(chain, plot, title=title, xy=xy_pairs)
-    finally:
-        chain.close()
-    if record is not None:
-        try:
-            record.write_text(result.to_script(), encoding="utf-8")
-        except OSError as exc:
-            raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
-    if not result.ok:
-        err.print(f"coolmuscle: {result.summary()}", markup=False)
-        raise typer.Exit(EXIT_FAILED)
-    if check:
-        sys.stdout.write(f"coolmuscle: {result.summary()}\n")
-    elif script.expectations:
-        err.print(f"coolmuscle: {result.summary()}", markup=False)
-
-
-def _header_defaults(file: Path, motors: int | None, firmware: Firmware | None,
-                     machine: Path | None) -> tuple[int, Firmware, Path | None]:
-    """``# coolmuscle: motors=2 firmware=rt3 machine=axis.toml`` in a script gives the
-    defaults (``machine`` relative to the script); an option given on the command line
-    wins, with a note when it differs from the header (docs/scripts.md)."""
-    header: dict[str, str] = {}
-    try:
-        with file.open(encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if line.lower().startswith("# coolmuscle:"):
-                    for item in line.split(":", 1)[1].split():
-                        key, _, value = item.partition("=")
-                        header[key.lower()] = value
-    except OSError:
-        pass                               # load_script has reported a missing file
-    given_motors = header.get("motors")
-    if given_motors is not None and not (given_motors.isdigit() and 1 <= int(given_motors) <= 15):
-        raise UsageError(f"{file}: '# coolmuscle: motors={given_motors}' is not 1..15")
-    given_fw = header.get("firmware")
-    if given_fw is not None and given_fw.lower() not in Firmware.__members__:
-        raise UsageError(f"{file}: '# coolmuscle: firmware={given_fw}' is not cm2, rt3 or cm1")
-    for option, value, key in (("--motors", motors, "motors"),
-                               ("--firmware", firmware.value if firmware else None,
-                                "firmware")):
-        if value is not None and header.get(key) not in (None, str(value)):
-            err.print(f"coolmuscle: note: {option} {value} overrides the script's "
-                      f"{key}={header[key]}", markup=False)
-    if motors is None:
-        motors = int(given_motors) if given_motors else 1
-    if firmware is None:
-        firmware = Firmware(given_fw.lower()) if given_fw else Firmware.cm2
-    if machine is None and header.get("machine"):
-        machine = file.parent / header["machine"]
-    return motors, firmware, machine
-
-
-def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
-    """``--xy 1,2`` -> [(1, 2)]; ``none`` -> []; absent -> None (automatic)."""
-    if text is None:
-        return None
-    if text.strip().lower() == "none":
-        return []
-    parts = text.split(",")
-    try:
-        x, y = (int(p) for p in parts)
-    except ValueError:
-        raise UsageError(f"--xy takes two motor IDs as X,Y, not {text!r}") from None
-    if not (1 <= x <= motors and 1 <= y <= motors) or x == y:
-        raise UsageError(f"--xy {text}: two different IDs of the chain (1..{motors})")
-    return [(x, y)]
+    code = run_command(file, until=until, trace=trace, plot=plot, xy=xy, motors=motors,
+                       firmware=firmware.value if firmware else None, state=state, check=check,
+                       pace=pace, record=record, machine=machine, chain_factory=chain_factory)
+    if code:
+        raise typer.Exit(code)
 
 
 def _web_transport(address: str) -> Transport:
@@ -582,34 +467,13 @@ _register_subapps()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes
+    (:func:`coolmuscle.tools.exits.guarded`; the installed command starts in
+    :func:`coolmuscle.tools.entry.main`, which runs plain scripts without typer)."""
     from ..frontends.enip.cli import optional_value_argv
-    try:
-        from ..frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+    from ..frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+
+    def call() -> None:
         args = expand_web_flag(sys.argv[1:] if argv is None else argv)
         app(args=optional_value_argv(args), prog_name="coolmuscle")
-    except SystemExit:
-        raise
-    except KeyboardInterrupt:
-        err.print("coolmuscle: interrupted", markup=False)
-        raise SystemExit(130) from None
-    except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        raise SystemExit(EXIT_FAILED) from None
-    except (UsageError, ScriptError, MachineFileError) as exc:
-        _report(exc, EXIT_USAGE)
-    except (CoolMuscleError, OSError) as exc:
-        _report(exc, EXIT_FAILED)
-    except Exception as exc:  # a bug: still one line unless asked for more
-        _report(exc, EXIT_INTERNAL, prefix="internal error: ")
-
-
-def _report(exc: BaseException, code: int, prefix: str = "") -> None:
-    if os.environ.get("COOLMUSCLE_DEBUG"):
-        traceback.print_exc()
-    text = str(exc) or type(exc).__name__
-    if prefix:
-        text = f"{prefix}{type(exc).__name__}: {text} (COOLMUSCLE_DEBUG=1 shows a traceback)"
-    err.print(f"coolmuscle: error: {text}", markup=False)
-    raise SystemExit(code) from None
+    guarded(call)

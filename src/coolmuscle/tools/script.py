@@ -356,6 +356,12 @@ class _Recorder:
     def on_bytes(self, data: bytes) -> None:
         now = self.kernel.now
         self.stream += data
+        if (self._held is None and not self._line and data[-2:] == b"\r\n"
+                and data.count(b"\r") == 1 and data.count(b"\n") == 1):
+            # one whole CR LF line (a report, a reply): what the loop below makes of it
+            self.lines.append(data[:-2].decode("latin-1"))
+            self.emit(TranscriptEntry(now, "<", bytes(data)))
+            return
         for byte in data:
             if byte == 0x0A and self._held is not None and not self._line:
                 held, self._held = self._held, None

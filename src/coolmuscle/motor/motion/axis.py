@@ -329,8 +329,16 @@ class Axis:
         self._remember()
         if self.moving:
             self._schedule_milestones()
-        for watcher in list(self.watchers):
-            self._arm(watcher, now)
+        timers, schedule_at = self._watch_timers, self.kernel.schedule_at
+        for watcher in list(self.watchers):      # _arm written out: the hot path of a move
+            old = timers.pop(id(watcher), None)
+            if old is not None:
+                old.cancel()
+            at = watcher.next_time(self, now)
+            if at is not None:
+                timers[id(watcher)] = schedule_at(
+                    at, lambda w=watcher: self._fire(w), priority=PRIO_MOTION,
+                    name=type(watcher).__name__)
 
     def _current_drive(self) -> Drive:
         drive = self._drive()

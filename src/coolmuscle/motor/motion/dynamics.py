@@ -163,7 +163,27 @@ def _sign(x: float) -> int:
 
 
 def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
-    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless."""
+    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
+
+    Remembered for a reused plan (the same segment tuple: planner.plan_moves) seen from
+    the same offset: a repeated move builds its command once."""
+    segments, base = profile.segments, profile.origin_ns
+    key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
+           None if profile.end_ns is None else profile.end_ns - base)
+    found = _COMMANDS.get(key)
+    if found is not None and found[0] is segments:
+        return list(found[1])
+    out = _command_pieces(profile, origin_ns)
+    if len(_COMMANDS) >= 1024:
+        _COMMANDS.clear()
+    _COMMANDS[key] = (segments, tuple(out))
+    return out
+
+
+_COMMANDS: dict[tuple[object, ...], tuple[object, tuple[tuple[float, float, F], ...]]] = {}
+
+
+def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
     off = (origin_ns - profile.origin_ns) / NS_PER_S
     out: list[tuple[float, float, F]] = []
     if profile.end_ns is not None and origin_ns >= profile.end_ns:
@@ -297,11 +317,13 @@ class Motion:
 
     def first(self, after_ns: int, *alternatives: Conditions,
               horizon_ns: int | None = None,
-              skip: Callable[[Piece], bool] | None = None) -> int | None:
+              skip: Callable[[Piece], bool] | None = None,
+              accept: Callable[[Piece], bool] | None = None) -> int | None:
         """First kernel time >= ``after_ns`` where, for one alternative, every condition
         it gives for the piece is > 0 (``None`` from a piece: not there).  Pieces for
-        which ``skip`` is true are known not to qualify.  The instant is rounded up to
-        the next nanosecond, so the condition already holds then."""
+        which ``skip`` is true are known not to qualify; pieces for which ``accept`` is
+        true are known to qualify all along (a bound says so: no roots are sought).  The
+        instant is rounded up to the next nanosecond, so the condition already holds then."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -310,6 +332,9 @@ class Motion:
             if skip is not None and skip(piece):
                 continue
             a = max(0.0, rel - piece.start)
+            if accept is not None and a < piece.end - piece.start and accept(piece):
+                at = self.origin_ns + math.ceil((piece.start + a) * NS_PER_S)
+                return max(after_ns, at)
             best: float | None = None
             for alt in alternatives:
                 conds = alt(piece)
@@ -370,7 +395,18 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif piece.pos is piece.cmd:                     # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    peaks = {what: max(piece.reach(what) for piece in pieces) for what in _REACH}
+    pieces[0].reach("err")                            # Motion.peak: as max() over pieces
+    top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
+    for piece in pieces:
+        piece.reach("err")                            # computes the piece's three bounds
+        b_err, b_vel, b_torque = piece._bounds         # type: ignore[misc]
+        if b_err > top_err:
+            top_err = b_err
+        if b_vel > top_vel:
+            top_vel = b_vel
+        if b_torque > top_torque:
+            top_torque = b_torque
+    peaks = {"err": top_err, "vel": top_vel, "torque": top_torque}
     return tuple(pieces), [p.start for p in pieces], peaks, {}
 
 

@@ -18,11 +18,12 @@ written down in docs/fidelity.md "Motion".
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from ..state import units
-from .profile import Profile, Segment, State
+from .profile import _CHECKED, Profile, Segment, State, _check_chain
 
 #: K69 value of a pure S-curve (ch. 3 K69, range 0..1024).
 SCURVE_MAX = 1024
@@ -92,6 +93,7 @@ def scurve_jerk(accel: float, speed: float, scurve: int) -> float:
     return accel * accel * (2.0 - r) / (r * speed)
 
 
+@lru_cache(maxsize=256)
 def limits_from_data(s_value: int, a_value: int, *, k37: int, k44: int, k51: int,
                      k69: int, decel_a_value: int | None = None) -> Limits:
     """Limits from S and A data (2.1, 2.1.1) and K37, K44, K51, K69 (ch. 3).
@@ -409,9 +411,26 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
     """
     if not waypoints:
         raise ValueError("plan_moves needs at least one waypoint")
-    b = _Builder(start_state)
-    _path(b, waypoints)
-    return b.profile(origin_ns, start_state, float(waypoints[-1].target))
+    key = (tuple(start_state), tuple(waypoints))
+    found = _PLANNED.get(key)
+    if found is None:
+        b = _Builder(start_state)
+        _path(b, waypoints)
+        found = (tuple(b.segments), tuple(b.passing))
+        if len(_PLANNED) >= _PLANNED_MAX:
+            _PLANNED.clear()
+        _check_chain(found[0])
+        _CHECKED.add(found[0])
+        _PLANNED[key] = found
+    return Profile(origin_ns, found[0], start_state=start_state,
+                   final_position=float(waypoints[-1].target), passing_times=found[1])
+
+
+#: Planned moves by (start state, waypoints): the segments are relative to the origin
+#: and immutable, so a machine cycle that repeats its moves plans each one once (the
+#: same numbers: the plan depends on nothing else; docs/performance.md).
+_PLANNED: dict[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = {}
+_PLANNED_MAX = 1024
 
 
 def plan_velocity(start_state: State, velocity_pps: float, limits: Limits,

@@ -86,7 +86,8 @@ class Profile:
         """Build a profile; ``passing_times`` are (seconds from origin, waypoint index)."""
         self.origin_ns = int(origin_ns)
         self.segments: tuple[Segment, ...] = tuple(segments)
-        _check_chain(self.segments)
+        if self.segments not in _CHECKED:     # a reused plan's tuple was checked once
+            _check_chain(self.segments)
         last = self.segments[-1] if self.segments else None
         if start_state is None:
             start_state = ((self.segments[0].p, self.segments[0].v, self.segments[0].a)
@@ -252,6 +253,25 @@ def hold(position: float, origin_ns: int) -> Profile:
 
 
 # -- helpers ---------------------------------------------------------------
+class _Checked:
+    """Segment tuples already checked (by identity; they are immutable): the planner's
+    reused plans (:func:`coolmuscle.motor.motion.planner.plan_moves`)."""
+
+    def __init__(self) -> None:
+        self._ids: dict[int, tuple[Segment, ...]] = {}
+
+    def __contains__(self, segments: object) -> bool:
+        return self._ids.get(id(segments)) is segments
+
+    def add(self, segments: tuple[Segment, ...]) -> None:
+        if len(self._ids) >= 2048:
+            self._ids.clear()
+        self._ids[id(segments)] = segments        # kept alive: the id stays its own
+
+
+_CHECKED = _Checked()
+
+
 def _check_chain(segments: Sequence[Segment]) -> None:
     """Segments must follow each other in time; only the last may be endless."""
     t = 0.0

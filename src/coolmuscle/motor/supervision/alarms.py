@@ -39,16 +39,22 @@ def _beyond(f: xp.F, limit: float) -> tuple:
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
 
 
+def _constant_beyond(f: xp.F, limit: float) -> bool:
+    """``f`` is a constant beyond ``±limit`` (a piece at the torque limit)."""
+    return f[1] == f[2] == f[3] == f[4] == 0.0 and abs(f[0]) > limit
+
+
 class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
     bit = Ux(0)
+    mask = int(bit)
 
     def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
 
     def active(self, axis: "Axis") -> bool:
-        return axis.enabled and not self.motor.alarm & self.bit.value   # int & int: no enum
+        return axis.enabled and not self.motor.alarm & self.mask   # int & int: no enum
 
     def fire(self, axis: "Axis") -> None:
         del axis
@@ -59,6 +65,7 @@ class PositionErrorWatch(_AlarmWatch):
     """Ux=1: |Pe| > K56 × 100 pulses (ch. 3 K56)."""
 
     bit = Ux.POSITION_ERROR_OVERFLOW
+    mask = int(bit)
 
     def limit(self) -> float:
         unit = 1000 if self.motor.firmware.name == "cm1" else 100
@@ -78,6 +85,7 @@ class OverSpeedWatch(_AlarmWatch):
     """Ux=2: |speed| > 1.2 × K40 min⁻¹."""
 
     bit = Ux.OVER_SPEED
+    mask = int(bit)
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
@@ -92,59 +100,82 @@ class OverSpeedWatch(_AlarmWatch):
 
 
 class OverloadWatch(_AlarmWatch):
-    """Ux=4: the torque beyond rated (Ix > 100) for more than K57 ms (ch. 3 K57)."""
+    """Ux=4: the torque beyond rated (Ix > 100) for more than K57 ms (ch. 3 K57).
+
+    The stretches beyond rated are walked on the motion at once: the instant the torque
+    goes beyond rated, the instant it comes back, the next stretch ..., until one lasts
+    K57 ms (the alarm) or the motion has none left.  The instants are those that one
+    kernel event per crossing would find (each search starts 1 ns after the crossing
+    before it, as a re-armed watcher does), without the events: a servo that touches
+    the limit on every cycle of a csp stream (issue 12 item 9) costs no event for it.
+    The stretches found are kept, so that a re-solve in the middle of one carries its
+    start on (:meth:`_since_at`)."""
 
     bit = Ux.OVERLOAD
+    mask = int(bit)
 
     def __init__(self, motor: "MotorCore") -> None:
         super().__init__(motor)
         self.since: int | None = None
-        self._action = ""
+        #: [enter, back or None] of each stretch beyond rated found on the motion.
+        self._walk: list[list[int | None]] = []
 
     def _rated(self, axis: "Axis") -> float:
         per = axis.motion.drive.percent_per_accel
         return 100.0 / per if per > 0.0 else float("inf")
 
+    def _since_at(self, now: int) -> int | None:
+        """Where the stretch beyond rated that is on at ``now`` began (``None``: none)."""
+        for enter, back in self._walk:
+            if enter is not None and enter <= now and (back is None or back > now):
+                return enter
+        return None
+
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
-            self.since = None
+            self.since, self._walk = None, []
             return None
+        since = self.since = self._since_at(after_ns)
         rated = self._rated(axis)
         motion = axis.motion
-        if self.since is None:
-            self._action = "enter"
-            if motion.peak("torque") <= rated:    # every piece would be skipped
-                return None
-            return motion.first(after_ns, *_beyond(lambda p: p.torque, rated),
-                                skip=lambda p: motion.reach(p, "torque") <= rated)
-        deadline = self.since + self.motor.k(57) * 1_000_000 + 1
-        back = motion.first(after_ns, lambda p: [xp.plus(p.torque, rated),
-                                                 xp.plus(xp.scale(p.torque, -1.0), rated)],
-                            horizon_ns=deadline)
-        if back is not None and back <= deadline:
-            self._action = "leave"
-            return back
-        self._action = "alarm"
-        return max(deadline, after_ns)
+        hold = self.motor.k(57) * 1_000_000 + 1
+        walk: list[list[int | None]] = [[since, None]] if since is not None else []
+        self._walk = walk
+        t = after_ns
+        while True:
+            if since is None:
+                if motion.peak("torque") <= rated:    # every piece would be skipped
+                    return None
+                since = motion.first(t, *_beyond(lambda p: p.torque, rated),
+                                     skip=lambda p: motion.reach(p, "torque") <= rated,
+                                     accept=lambda p: _constant_beyond(p.torque, rated))
+                if since is None:
+                    return None
+                walk.append([since, None])
+                t = since + 1
+            deadline = since + hold
+            back = motion.first(t, lambda p: [xp.plus(p.torque, rated),
+                                              xp.plus(xp.scale(p.torque, -1.0), rated)],
+                                horizon_ns=deadline,
+                                accept=lambda p: motion.reach(p, "torque") < rated)
+            if back is None or back > deadline:
+                return max(deadline, t)
+            walk[-1][1] = back
+            since, t = None, back + 1
 
     def fire(self, axis: "Axis") -> None:
-        now = self.motor.kernel.now
-        if self._action == "enter":
-            self.since = now
-        elif self._action == "leave":
-            self.since = None
-        else:
-            self.since = None
-            super().fire(axis)
+        self.since, self._walk = None, []
+        super().fire(axis)
 
 
 class TemperatureWatch(_AlarmWatch):
     """Ux=128: the driver temperature above its alarm level (6.6 ?71, ?99)."""
 
     bit = Ux.TEMPERATURE
+    mask = int(bit)
 
     def active(self, axis: "Axis") -> bool:
-        return not self.motor.alarm & self.bit.value
+        return not self.motor.alarm & self.mask
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):

@@ -71,6 +71,8 @@ class Thermal:
             return after_ns
         if self.idle + self.rise_at_rated * _peak_square(motion) <= limit:
             return None
+        if not self._may_exceed(motion, after_ns, temp, limit):
+            return None
         t = after_ns
         for q, dt in _stretches(motion, after_ns, None):
             steady = self.idle + self.rise_at_rated * q
@@ -83,6 +85,24 @@ class Thermal:
             temp = self._after(temp, q, dt)
             t += round(dt * NS_PER_S)
         return None
+
+    def _may_exceed(self, motion: Motion, after_ns: int, temp: float, limit: float) -> bool:
+        """Whether a bound of the temperature passes ``limit`` on ``motion`` after
+        ``after_ns``: each piece heats at most as its torque bound would (the temperature
+        grows with the heating and with where it starts, and on a stretch it is highest
+        at an end), so ``False`` means never; a short spike at the torque limit (a csp
+        step) is then answered without integrating every stretch."""
+        rel = max(0.0, (after_ns - motion.origin_ns) / NS_PER_S)
+        scale = motion.drive.percent_per_accel / 100.0
+        for piece in motion.pieces:
+            if piece.end <= rel:
+                continue
+            q = (piece.reach("torque") * scale) ** 2
+            if self.idle + self.rise_at_rated * q > temp:
+                temp = self._after(temp, q, piece.end - max(rel, piece.start))
+                if temp > limit:
+                    return True
+        return False
 
     def _after(self, temp: float, q: float, dt: float) -> float:
         steady = self.idle + self.rise_at_rated * q

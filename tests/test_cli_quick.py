@@ -1,0 +1,75 @@
+"""``coolmuscle run`` without typer (coolmuscle.tools.entry): the same bytes, errors and
+exit codes as the typer command, a start that loads only what the run needs
+(issue 18, docs/performance.md "Starting a run")."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coolmuscle.tools.runcmd import parse_run_args
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "200"}
+ENV.pop("COOLMUSCLE_DEBUG", None)
+
+BANK = "S1.1=100\nA1.1=100\nP1.1=1000\nB1.1\nS1.1, A1.1, P1.1\nEND\n[1.1\n@wait 1\n?96.1\n"
+GOLDEN = "?96.1\n<< ?96.1\\r\\nPx.1=0\\r\\n\n"
+WRONG = "?96.1\n<< ?96.1\\r\\nPx.1=5\\r\\n\n"
+
+#: Python code run in a child: the quick entry point, or the typer command.
+QUICK = "import sys; from coolmuscle.tools.entry import main; main(sys.argv[1:])"
+TYPER = "import sys; from coolmuscle.tools.cli import main; main(sys.argv[1:])"
+
+
+def run(code: str, *args: str) -> subprocess.CompletedProcess[bytes]:
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, env=ENV,
+                          timeout=60)
+
+
+@pytest.mark.parametrize("script, extra", [
+    (BANK, ()), (BANK, ("--until", "3")), (BANK, ("--motors", "2", "--firmware=rt3")),
+    (GOLDEN, ("--check",)), (GOLDEN, ()), (WRONG, ()), (BANK, ("--check",)),
+    (BANK, ("--until", "-1")), (BANK, ("--motors", "16")), (BANK, ("--frobnicate",)),
+    ("@wiat 1\n", ()),
+])
+def test_quick_run_answers_as_the_typer_command(tmp_path: Path, script: str,
+                                                extra: tuple[str, ...]) -> None:
+    path = tmp_path / "s.cml"
+    path.write_text(script)
+    quick, full = run(QUICK, "run", str(path), *extra), run(TYPER, "run", str(path), *extra)
+    assert (quick.returncode, quick.stdout, quick.stderr) == \
+        (full.returncode, full.stdout, full.stderr)
+    assert b"Traceback" not in quick.stderr
+
+
+def test_a_missing_script_is_the_same_one_line_error(tmp_path: Path) -> None:
+    missing = str(tmp_path / "nope.cml")
+    quick, full = run(QUICK, "run", missing), run(TYPER, "run", missing)
+    assert quick.returncode == full.returncode == 2
+    assert quick.stderr == full.stderr and quick.stderr.startswith(b"coolmuscle: error: ")
+
+
+def test_a_plain_run_loads_no_command_line_library_nor_unused_protocols(tmp_path: Path) -> None:
+    path = tmp_path / "s.cml"
+    path.write_text(BANK)
+    code = (QUICK + "; print(sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'typer', 'rich', 'click', 'asyncio', 'matplotlib', 'pymodbus', 'numpy', "
+            "'pydantic'}), file=sys.stderr)")
+    out = run(code, "run", str(path))
+    assert out.returncode == 0, out.stderr
+    assert out.stderr.strip().splitlines()[-1] == b"[]"
+
+
+def test_parse_run_args_leaves_anything_unusual_to_typer() -> None:
+    assert parse_run_args(["run", "a.cml", "--until", "5", "--motors=3", "--check"]) == {
+        "file": Path("a.cml"), "until": 5.0, "motors": 3, "check": True}
+    for argv in (["run"], ["run", "a", "b"], ["run", "a", "--help"], ["run", "a", "--until"],
+                 ["run", "a", "--until", "1e3"], ["run", "a", "--check", "--check"],
+                 ["run", "a", "--motors", "0"], ["run", "a", "--firmware", "cm9"],
+                 ["run", "a", "--trace", "-"], ["sim"], []):
+        assert parse_run_args(argv) is None, argv
