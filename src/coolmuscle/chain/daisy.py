@@ -101,6 +101,7 @@ class Chain:
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
+        self.host_line.on_source_end = lambda source: self.uploads.abandon("host", source)
         self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
         self.motors[1].params.on_change(
             lambda k, _old, new: self._k65_written(new) if k == 65 else None)
@@ -145,7 +146,7 @@ class Chain:
         return found
 
     def _on_host_line(self, text: str) -> None:
-        self._execute_text(text, Context(origin="host"))
+        self._execute_text(text, Context(origin="host", session=self.host_line.source))
         self._changed()
 
     def observe(self, observer: Callable[[], None]) -> Callable[[], None]:
@@ -160,12 +161,15 @@ class Chain:
         for observer in self._observers:
             observer()
 
-    def execute(self, line: str, *, origin: str = "api", motor: int | None = None) -> list[str]:
+    def execute(self, line: str, *, origin: str = "api", motor: int | None = None,
+                session: object = None) -> list[str]:
         """Run a CML line as ``origin``; return the replies it produced at once.
 
         ``motor`` is the ID statements without ``.n`` go to (default ID1).
+        ``session`` names the sender within ``origin`` (a bank upload ``B#.n``
+        takes only the lines of the sender that opened it).
         """
-        ctx = Context(origin=origin, replies=[],
+        ctx = Context(origin=origin, replies=[], session=session,
                       default_motor=1 if motor is None else self._require(motor).id)
         self._execute_text(line, ctx)
         self._changed()

@@ -54,6 +54,7 @@ class PtyTransport(Transport):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._unsubscribe: Any = None
         self._link_made = False
+        self._lane: Any = None
         self.bytes_discarded = 0
 
     # -- life cycle -----------------------------------------------------
@@ -76,8 +77,18 @@ class PtyTransport(Transport):
             if isinstance(exc, TransportError):
                 raise
             raise TransportError(f"pty: cannot set up the pseudo-terminal: {exc}") from exc
+        self._lane = port.open_lane("pty")
+        self._lane.set_flow(self._pause_reading, self._resume_reading)
         self._loop.add_reader(master, self._on_readable)
         self._unsubscribe = port.add_listener(self._send)
+
+    def _pause_reading(self) -> None:
+        if self._loop is not None and self._master is not None:
+            self._loop.remove_reader(self._master)
+
+    def _resume_reading(self) -> None:
+        if self._loop is not None and self._master is not None:
+            self._loop.add_reader(self._master, self._on_readable)
 
     def _make_link(self, target: str) -> None:
         assert self.link is not None
@@ -116,6 +127,9 @@ class PtyTransport(Transport):
                 pass
             self._link_made = False
         self._close_fds()
+        if self._lane is not None:
+            self._lane.close()
+            self._lane = None
         self.finished.set()
 
     def _close_fds(self) -> None:
@@ -145,8 +159,8 @@ class PtyTransport(Transport):
                 return
             log.warning("pty: read failed: %s", exc)
             return
-        if data and self.port is not None:
-            self.port.feed(data)
+        if data and self._lane is not None:
+            self._lane.feed(data)
 
     def _send(self, data: bytes) -> None:
         room = self.max_buffer - len(self._pending)
