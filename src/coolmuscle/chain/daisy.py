@@ -20,7 +20,7 @@ from ..cml import ast
 from ..cml.parser import parse
 from ..device.api import Event, EventListener, MotorSnapshot, TargetStream
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      NoSuchMotorError, OutOfRangeError)
+                      NoSuchMotorError, OutOfRangeError, StoreError)
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..motor.programs.banks import BankUploads
 from .links import ChainLinks
@@ -386,9 +386,19 @@ class Chain:
                 saved = self.store.load(motor.id)
                 if saved:
                     motor.load_snapshot(saved)
-                store = self.store
                 motor.params.on_change(
-                    lambda k, old, new, m=motor.id: store.save_param(m, k, new))
+                    lambda k, old, new, m=motor.id: self._store_param(m, k, new))
+
+    def _store_param(self, motor_id: int, k: int, value: int) -> None:
+        """Persist an accepted K change (ch. 3); a failed write is told, never raised:
+        the value holds in memory until the next power cycle."""
+        if self.store is None:
+            return
+        try:
+            self.store.save_param(motor_id, k, value)
+        except StoreError as exc:
+            log.warning("K%d.%d=%d not stored: %s", k, motor_id, value, exc)
+            self.emit(motor_id, "message", f"K{k}.{motor_id} not stored: {exc}")
 
     def close(self) -> None:
         """Close the store (unsaved data is lost, as at power off)."""
