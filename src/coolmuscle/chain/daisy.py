@@ -33,7 +33,7 @@ from ..motor.state.memory import VNumber, VState
 from ..motor.motor import Motor
 from ..motor.context import Context
 from ..motor.status import Report
-from ..motor.state.store import Store
+from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
 
 if TYPE_CHECKING:
@@ -383,9 +383,16 @@ class Chain:
     def _restore(self) -> None:
         for motor in self.motors.values():
             if self.store is not None:
-                saved = self.store.load(motor.id)
+                saved = self.store.load(motor.id)   # shape checked: StoreError names it
+                problem = snapshot_problem(saved) if saved else ""
+                if problem:
+                    raise StoreError(bad_state_message(self.store.path, motor.id, problem))
                 if saved:
-                    motor.load_snapshot(saved)
+                    try:
+                        motor.load_snapshot(saved)
+                    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+                        raise StoreError(bad_state_message(
+                            self.store.path, motor.id, f"cannot be restored ({exc})")) from exc
                 motor.params.on_change(
                     lambda k, old, new, m=motor.id: self._store_param(m, k, new))
 

@@ -65,8 +65,13 @@ chain_factory: Callable[..., Any] = _default_chain_factory
 
 
 def default_state_dir() -> Path:
-    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``)."""
-    base = os.environ.get("XDG_DATA_HOME") or os.path.expanduser("~/.local/share")
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``).
+
+    A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says
+    ("If an implementation encounters a relative path ... it should consider the
+    path invalid and ignore it")."""
+    xdg = os.environ.get("XDG_DATA_HOME", "")
+    base = xdg if xdg and os.path.isabs(xdg) else os.path.expanduser("~/.local/share")
     return Path(base) / "coolmuscle" / "state"
 
 
