@@ -1,8 +1,8 @@
-"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.tools.cli)."""
+"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.tools.entry)."""
 
 from __future__ import annotations
 
-from .tools.cli import main
+from .tools.entry import main
 
 if __name__ == "__main__":
     main()

@@ -22,6 +22,7 @@ import logging
 import os
 import signal
 import sys
+import threading
 import traceback
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -32,6 +33,8 @@ from rich.console import Console
 from .. import __version__
 from ..errors import CoolMuscleError, TransportError
 from .usage import UsageError
+from .stopsignals import (STOP_SIGNALS, SignalStop, ignore_stop_signals, install_startup_handlers,
+                          stop_line)
 from ..chain.machine import MachineFileError
 from .script import ScriptError, TranscriptEntry, load_script, run_script
 from ..frontends.transports.base import Transport
@@ -171,13 +174,14 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
                   "line send FFFFFFFFF, then K81.1=0 (5.6.9)", markup=False)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         loop.add_signal_handler(sig, stop.set)
     try:
         await service.wait(stop)
     finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in STOP_SIGNALS:
             loop.remove_signal_handler(sig)
+        ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
 
 
@@ -221,7 +225,7 @@ def sim(
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
 ) -> None:
-    """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
+    """Serve a virtual chain in real time until Ctrl-C, SIGTERM or SIGHUP."""
     _setup_logging(verbose)
     if state is not None and no_state:
         raise UsageError("--state and --no-state exclude each other")
@@ -235,8 +239,10 @@ def sim(
     try:
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
     finally:
+        ignore_stop_signals()
         chain.close()
     err.print("coolmuscle: stopped", markup=False)
+
 
 
 # -- run -----------------------------------------------------------------
@@ -352,13 +358,17 @@ def version() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    if threading.current_thread() is threading.main_thread():
+        install_startup_handlers()    # also when started as coolmuscle.tools.cli:main
     try:
         app(args=argv, prog_name="coolmuscle")
     except SystemExit:
         raise
-    except KeyboardInterrupt:
-        err.print("coolmuscle: interrupted", markup=False)
-        raise SystemExit(130) from None
+    except (KeyboardInterrupt, SignalStop) as exc:  # a stop signal outside the serving loop
+        ignore_stop_signals()
+        text, code = stop_line(exc)
+        err.print(text, markup=False)
+        raise SystemExit(code) from None
     except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
