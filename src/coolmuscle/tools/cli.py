@@ -253,7 +253,11 @@ def run(
                                           help="After the script, run on to this virtual time."),
     trace: Optional[Path] = typer.Option(
         None, "--trace", metavar="OUT.csv",
-        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow)."),
+        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow); streamed "
+             "as the run goes."),
+    trace_step: float = typer.Option(
+        0.001, "--trace-step", metavar="SECONDS",
+        help="Trace grid step (default 0.001); changes are recorded at their instant."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
     xy: Optional[str] = typer.Option(
         None, "--xy", metavar="X,Y",
@@ -282,6 +286,8 @@ def run(
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
     xy_pairs = _xy_pairs(xy, motors)
+    if not trace_step > 0:
+        raise UsageError("--trace-step must be > 0")
     if trace is not None:
         from .trace import TraceFormatError, check_trace_path
         try:
@@ -301,8 +307,14 @@ def run(
         def show(entry: TranscriptEntry) -> None:
             sys.stdout.write(entry.format() + "\n")
 
+        from .trace import DEFAULT_WARN_BYTES
+
+        def warn(text: str) -> None:
+            err.print(f"coolmuscle: warning: {text}", markup=False)
+
         result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show)
+                            on_entry=None if check else show, trace_step=trace_step,
+                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn)
         sys.stdout.flush()
         if plot is not None:
             from .plot import plot as plot_chain
