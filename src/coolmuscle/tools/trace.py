@@ -346,6 +346,7 @@ class TraceStream:
         self.bytes_written = 0
         self._warned = False
         self._last: list[tuple[float, ...]] | None = None
+        self._last_t: int | None = None
         self._closed = False
         self._busy = False
         self._parquet = self.path.suffix.lower() == ".parquet"
@@ -417,7 +418,7 @@ class TraceStream:
                 continue
             self._row(c0)
             self._grid(c0 + 1, c1)
-        if inclusive and (not changes or changes[-1] != end):
+        if inclusive and self._last_t != end:
             self._row(end)
         self.next_t = stop
         if self.prune:
@@ -426,17 +427,23 @@ class TraceStream:
             self._flush_parquet()
         elif self._fh is not None:
             self._fh.flush()
+        self._check_size()
 
     def _grid(self, lo: int, c1: int) -> None:
         """Grid rows at ``lo <= t < c1``, skipping stretches at rest."""
         start, step = self.recorder.start, self.step_ns
         k = -(-(lo - start) // step)
         t = start + k * step
+        span = REST_CHUNK_NS
         while t < c1:
-            chunk_end = min(c1, t + REST_CHUNK_NS)
+            chunk_end = min(c1, t + span)
             if self._at_rest(t, chunk_end - 1):
                 k = (chunk_end - 1 - start) // step + 1
                 t = start + k * step
+                span *= 2                  # at rest: try a longer stretch next
+                continue
+            if span > REST_CHUNK_NS:       # a long stretch failed: look closer
+                span = REST_CHUNK_NS
                 continue
             while t < chunk_end:
                 self._row(t)
@@ -468,6 +475,7 @@ class TraceStream:
         rec = self.recorder
         samples = [rec.sample(mid, t).row() for mid in rec._logs]
         self._last = samples
+        self._last_t = t
         row: list[float] = [t / NS_PER_S]
         for values in samples:
             row.extend(values)
@@ -477,15 +485,19 @@ class TraceStream:
                 column.append(value)
             self.bytes_written += 8 * len(row)
         else:
-            text = [f"{row[0]:.9f}"] + [_fmt(v) for v in row[1:]]
-            self._csv.writerow(text)
-            self.bytes_written += sum(len(x) for x in text) + len(text) + 1
+            self._csv.writerow([f"{row[0]:.9f}"] + [_fmt(v) for v in row[1:]])
+
+    def _check_size(self) -> None:
+        if self._fh is not None:
+            self.bytes_written = self._fh.tell()
         if (self.warn_bytes is not None and not self._warned
                 and self.bytes_written > self.warn_bytes):
             self._warned = True
             if self.on_warning is not None:
-                self.on_warning(f"trace {self.path} passed {self.warn_bytes // (1 << 20)} MB "
-                                f"at virtual {t / NS_PER_S:.3f} s; a larger --trace-step "
+                size = (f"{self.warn_bytes / (1 << 20):g} MB" if self.warn_bytes >= 1 << 20
+                        else f"{self.warn_bytes} bytes")
+                self.on_warning(f"trace {self.path} passed {size} at virtual "
+                                f"{self.next_t / NS_PER_S:.3f} s; a larger --trace-step "
                                 "makes it smaller")
 
     def _changes(self, a: int, end: int) -> set[int]:
