@@ -369,9 +369,27 @@ def version() -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes.
+
+    Called with ``argv`` (in-process, tests), the caller's signal handlers are put back
+    on return."""
+    saved = ({sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+             if argv is not None and threading.current_thread() is threading.main_thread()
+             else None)
+    try:
+        _main(argv)
+    finally:
+        for sig, handler in (saved or {}).items():
+            signal.signal(sig, handler)
+
+
+def _main(argv: list[str] | None) -> None:
     if threading.current_thread() is threading.main_thread():
         install_startup_handlers()    # also when started as coolmuscle.tools.cli:main
+        args = sys.argv[1:] if argv is None else argv
+        if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
+            # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         app(args=argv, prog_name="coolmuscle")
     except SystemExit:
