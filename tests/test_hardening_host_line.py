@@ -201,3 +201,18 @@ def test_modbus_register_write_during_a_cml_upload_is_a_register_write() -> None
     assert wire.transact(write) == frame("01 10 01 2C 00 02")
     assert wire.chain.get_register(1, "P", 0) == 777
     assert wire.chain.motors[1].banks.listing(False, 1) in (None, [])
+
+
+def test_the_lines_of_a_client_that_sends_and_closes_all_run(served: ServiceThread) -> None:
+    """``printf 'P1.1=...\\r...' | nc``: every line that arrived runs, then the upload ends."""
+    a = connect(served)
+    wait_clients(served, 1)
+    a.sendall(b"".join(b"P%d.1=%d\r" % (i, i) for i in range(1, 201)) + b"B1.1\r")
+    a.close()
+    deadline = time.monotonic() + 5
+    while served.call(lambda: served.chain.get_register(1, "P", 200)) != 200:
+        assert time.monotonic() < deadline, "lines sent before the close were lost"
+        time.sleep(0.02)
+    b = connect(served)
+    b.sendall(b"?96.1\r")
+    assert b"Px.1=" in read_until(b, b"Px.1=", timeout=3)     # the upload ended with A

@@ -105,9 +105,14 @@ class Port:
         try:
             if self.driver is not None:
                 self.driver.clock.catch_up()
+            try:
+                asyncio.get_running_loop()
+                paced = True
+            except RuntimeError:      # no loop (the port driven directly): run it all now
+                paced = False
             deadline = time.perf_counter() + MAX_SECONDS_PER_WAKE
             budget = MAX_PIECES_PER_WAKE
-            while self._ready and budget > 0:
+            while self._ready and (budget > 0 or not paced):
                 lane = self._ready.popleft()
                 piece = lane._take()
                 if piece is None:
@@ -120,7 +125,9 @@ class Port:
                 except Exception:
                     self.errors += 1
                     log.exception("motor model failed on host input %r", piece[:64])
-                if time.perf_counter() > deadline:
+                if lane.closing and not lane.backlog:
+                    lane._end()
+                if paced and time.perf_counter() > deadline:
                     break
             if self._ready:
                 self.wakeups += 1
@@ -133,14 +140,7 @@ class Port:
     def _schedule_resume(self) -> None:
         if self._resume_scheduled:
             return
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:      # no loop (a test driving the port directly): go on now
-            loop = None
-        if loop is None:
-            self._draining = False
-            self._drain()
-            return
+        loop = asyncio.get_running_loop()     # only paced drains stop at the budget
         self._resume_scheduled = True
 
         def resume() -> None:
@@ -191,6 +191,7 @@ class Lane:
         self._pieces: deque[bytes] = deque()
         self.backlog = 0
         self.closed = False
+        self.closing = False
         self._paused = False
         self._pause: Callable[[], None] | None = None
         self._resume: Callable[[], None] | None = None
@@ -201,7 +202,7 @@ class Lane:
 
     def feed(self, data: bytes) -> None:
         """Queue bytes from this host; they run in turn (failures logged, never raised)."""
-        if not data or self.closed:
+        if not data or self.closed or self.closing:
             return
         pieces = split_after_line_ends(data)
         self._pieces.extend(pieces)
@@ -233,7 +234,15 @@ class Lane:
             log.exception("lane flow control failed")
 
     def close(self) -> None:
-        """The host went away: drop its unrun input and end what it owned."""
+        """The host went away: the lines it sent still run, in turn; then its half
+        line is forgotten and what it owned (a bank upload) ends."""
+        if self.closed or self.closing:
+            return
+        self.closing = True
+        if not self.backlog:
+            self._end()
+
+    def _end(self) -> None:
         if self.closed:
             return
         self.closed = True
