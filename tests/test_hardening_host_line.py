@@ -8,11 +8,9 @@ not read is dropped.  Real chain, real sockets on loopback, a real pty.
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
 import time
-from pathlib import Path
 from typing import Iterator
 
 import pytest
