@@ -33,8 +33,8 @@ from rich.console import Console
 from .. import __version__
 from ..errors import CoolMuscleError, TransportError
 from .usage import UsageError
-from .stopsignals import (STOP_SIGNALS, SignalStop, ignore_stop_signals, install_startup_handlers,
-                          stop_line)
+from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
+                          clear_stop, install_startup_handlers, stop_line, stop_requested)
 from ..chain.machine import MachineFileError
 from .script import ScriptError, TranscriptEntry, load_script, run_script
 from ..frontends.transports.base import Transport
@@ -176,6 +176,9 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
     loop = asyncio.get_running_loop()
     for sig in STOP_SIGNALS:
         loop.add_signal_handler(sig, stop.set)
+    if stop_requested():              # a signal whose exception was swallowed on the way
+        clear_stop()
+        stop.set()
     try:
         await service.wait(stop)
     finally:
@@ -235,8 +238,10 @@ def sim(
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
     chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
+    check_stop()
     chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
+        check_stop()
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
     finally:
         ignore_stop_signals()
@@ -376,8 +381,16 @@ def main(argv: list[str] | None = None) -> None:
     saved = ({sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
              if argv is not None and threading.current_thread() is threading.main_thread()
              else None)
+    if argv is not None:
+        clear_stop()                      # in-process: a new command
     try:
         _main(argv)
+        check_stop()
+    except SignalStop as exc:             # requested, its exception swallowed on the way
+        ignore_stop_signals()
+        text, code = stop_line(exc)
+        err.print(text, markup=False)
+        raise SystemExit(code) from None
     finally:
         for sig, handler in (saved or {}).items():
             signal.signal(sig, handler)

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import sys
 
-from .stopsignals import SignalStop, ignore_stop_signals, install_startup_handlers, stop_line
+from .stopsignals import (SignalStop, check_stop, ignore_stop_signals, install_startup_handlers,
+                          stop_line)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -22,6 +23,7 @@ def main(argv: list[str] | None = None) -> None:
     install_startup_handlers()
     try:
         from .cli import main as cli_main
+        check_stop()
     except (KeyboardInterrupt, SignalStop) as exc:
         ignore_stop_signals()
         text, code = stop_line(exc)

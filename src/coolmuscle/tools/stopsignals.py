@@ -24,8 +24,33 @@ class SignalStop(BaseException):
         self.signum = signum
 
 
+_requested: list[int] = []
+
+
 def _raise_stop(signum: int, _frame: FrameType | None) -> None:
+    if not _requested:
+        _requested.append(signum)
     raise SignalStop(signum)
+
+
+def stop_requested() -> int | None:
+    """The first stop signal received so far (``None``: none).
+
+    A handler's exception can land where Python ignores it (a weakref callback inside
+    the import machinery: "Exception ignored in ..."); the request is kept here, and
+    :func:`check_stop` raises it again at the next checkpoint."""
+    return _requested[0] if _requested else None
+
+
+def clear_stop() -> None:
+    """The stop request has been acted on (or a new command starts)."""
+    _requested.clear()
+
+
+def check_stop() -> None:
+    """Raise :class:`SignalStop` if a stop signal came (a checkpoint of start-up)."""
+    if _requested:
+        raise SignalStop(_requested[0])
 
 
 def install_startup_handlers() -> None:

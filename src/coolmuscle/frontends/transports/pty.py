@@ -54,6 +54,7 @@ class PtyTransport(Transport):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._unsubscribe: Any = None
         self._link_made = False
+        self._tmp_link: Path | None = None
         self._lane: Any = None
         self.bytes_discarded = 0
 
@@ -97,14 +98,16 @@ class PtyTransport(Transport):
             if not link.is_symlink():
                 raise TransportError(f"pty: {link} exists and is not a symlink; not replacing it")
         tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
+        self._tmp_link = tmp            # removed by close() if a signal cuts this short
         try:
             if tmp.is_symlink():
                 tmp.unlink()
             os.symlink(target, tmp)
+            self._link_made = True      # from here on close() removes what points at us
             os.replace(tmp, link)
         except OSError as exc:
+            self._link_made = False
             raise TransportError(f"pty: cannot create link {link}: {exc}") from exc
-        self._link_made = True
 
     def describe(self) -> str:
         where = self.path or "(not open)"
@@ -120,11 +123,12 @@ class PtyTransport(Transport):
             self._unsubscribe()
             self._unsubscribe = None
         if self._link_made and self.link is not None:
-            try:
-                if self.link.is_symlink() and os.readlink(self.link) == self.path:
-                    self.link.unlink()
-            except OSError:
-                pass
+            for made in (self.link, self._tmp_link):
+                try:
+                    if made is not None and made.is_symlink() and os.readlink(made) == self.path:
+                        made.unlink()
+                except OSError:
+                    pass
             self._link_made = False
         self._close_fds()
         if self._lane is not None:
