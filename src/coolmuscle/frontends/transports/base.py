@@ -216,7 +216,12 @@ class Lane:
         if not self._pieces:
             return None
         piece = self._pieces.popleft()
-        if ends_mid_line(piece):       # an unfinished tail: join what follows it so far
+        mode = getattr(self.port.host_line, "mode", None)
+        if mode is not None and mode.active():
+            # COM0 speaks Modbus RTU (5.6): no lines; a frame's bytes go in together
+            piece = b"".join((piece, *self._pieces))
+            self._pieces.clear()
+        elif ends_mid_line(piece):     # an unfinished tail: join what follows it so far
             while self._pieces and ends_mid_line(piece):
                 piece += self._pieces.popleft()
         self.backlog -= len(piece)
