@@ -168,3 +168,31 @@ def test_non_reading_clients_are_bounded_and_dropped_alone() -> None:
         for sock in idle + [reader]:
             sock.close()
     assert DEFAULT_MAX_BUFFER * tcp_module.DEFAULT_MAX_CLIENTS <= 32 << 20
+
+
+def test_with_wire_pacing_a_flood_does_not_queue_ahead_of_another_client() -> None:
+    """--pace (K20 wire time): a flood is fed to the wire as it frees, so another
+    client's line waits one turn of the wire, not the flood's whole wire time."""
+    with ServiceThread(lambda: Chain(motors=2, pacing=True),
+                       lambda: [TcpTransport(port=0)]) as st_:
+        port = st_.transports[0].info()["port"]
+        flood, probe = _connect(port), _connect(port)
+        stop = threading.Event()
+
+        def drain() -> None:
+            flood.settimeout(0.2)
+            while not stop.is_set():
+                try:
+                    if not flood.recv(1 << 16):
+                        return
+                except (socket.timeout, OSError):
+                    continue
+        thread = threading.Thread(target=drain)
+        thread.start()
+        try:
+            flood.sendall(b"?99.1\r" * 2000)     # 12 KB: 3 s of wire time at 38.4 kbps
+            time.sleep(0.2)
+            assert _round_trip(probe, b"?96.2\r", b"Px.2=") < 1.0
+        finally:
+            stop.set()
+            thread.join(5)

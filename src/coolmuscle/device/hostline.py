@@ -146,6 +146,10 @@ class HostLine:
         self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data, source),
                                 priority=PRIO_IO, name="hostline-rx")
 
+    def rx_backlog_ns(self) -> int:
+        """With pacing: virtual time until the bytes fed so far have all arrived."""
+        return max(0, self._rx_free_at - self.kernel.now) if self.pacing else 0
+
     def _receive(self, data: bytes, source: object = None) -> None:
         self.bytes_in += len(data)
         if self.mode is not None and self.mode.active():

@@ -44,6 +44,8 @@ MAX_SECONDS_PER_WAKE = 0.02
 #: Unrun input bytes a lane may hold before its reader is paused, and resumed.
 LANE_HIGH_WATER = 16 * 1024
 LANE_LOW_WATER = 4 * 1024
+#: With wire pacing (--pace), virtual time of host bytes fed ahead of the wire.
+WIRE_AHEAD_NS = 20_000_000
 
 ByteListener = Callable[[bytes], None]
 
@@ -113,6 +115,12 @@ class Port:
             deadline = time.perf_counter() + MAX_SECONDS_PER_WAKE
             budget = MAX_PIECES_PER_WAKE
             while self._ready and (budget > 0 or not paced):
+                ahead = self._wire_ahead()
+                if paced and ahead > WIRE_AHEAD_NS:
+                    # --pace: the wire is busy with what was fed; feeding more now would
+                    # queue it behind a flood: the lanes take their turns as it frees
+                    self._schedule_resume(ahead - WIRE_AHEAD_NS)
+                    break
                 lane = self._ready.popleft()
                 piece = lane._take()
                 if piece is None:
@@ -129,7 +137,7 @@ class Port:
                     lane._end()
                 if paced and time.perf_counter() > deadline:
                     break
-            if self._ready:
+            if self._ready and not self._resume_scheduled:
                 self.wakeups += 1
                 self._schedule_resume()
         finally:
@@ -137,7 +145,11 @@ class Port:
         if self.driver is not None:
             self.driver.wake()
 
-    def _schedule_resume(self) -> None:
+    def _wire_ahead(self) -> int:
+        ahead = getattr(self.host_line, "rx_backlog_ns", None)
+        return ahead() if ahead is not None else 0
+
+    def _schedule_resume(self, after_ns: int = 0) -> None:
         if self._resume_scheduled:
             return
         loop = asyncio.get_running_loop()     # only paced drains stop at the budget
@@ -146,7 +158,11 @@ class Port:
         def resume() -> None:
             self._resume_scheduled = False
             self._drain()
-        loop.call_soon(resume)
+        if after_ns <= 0:
+            loop.call_soon(resume)
+            return
+        scale = getattr(getattr(self.driver, "clock", None), "scale", 1.0) or 1.0
+        loop.call_later(after_ns / 1e9 / scale, resume)
 
     def _close_lane(self, lane: "Lane") -> None:
         if lane in self._ready:
