@@ -1,13 +1,15 @@
 """Plots of the cml-users-guide.txt 4.1 motion examples (the images of docs/plots.md).
 
-Run: ``PYTHONPATH=src python examples/plot_4_1.py [OUT_DIR]`` (default docs/images).
+Run: ``python examples/plot_4_1.py [OUT_DIR]`` (default docs/images), with the
+virtual environment active (README.md).
 
 Each example is the manual's program bank, uploaded and run on a virtual motor in
 virtual time with the script runner (docs/scripts.md), then plotted from its trace.
 The data tables of 4.1 were lost with the manual's figures, so the values below are
 chosen to show each motion clearly.  Output 1 is the in-position signal in merge
 motion (K34=6, K73=30 ms), output 2 the in-position signal (K34=1).  4.1.4 pushes an
-object the machine file ``push-object.toml`` puts at 11000 pulses.
+object the machine file ``push-object.toml`` puts at 11000 pulses (drawn dotted); the
+plot runs on half a second past the push's completion (Ux=40) so that state shows.
 """
 
 from __future__ import annotations
@@ -92,7 +94,7 @@ B4.1
 S3.1, A1.1, P1.1, S1.1, Q2.1
 END
 [4.1
-@wait 1.8
+@wait 2.3
 """, "push-object.toml"),
 }
 

@@ -58,3 +58,11 @@ def rig(*lines: str, motors: int = 1, firmware: str = "cm2", k23: int = 25,
     result.type(f"K23.1={k23}")
     result.type(*lines)
     return result
+
+
+def enters_window(trace: Any, motor_id: int, t: int, target: float, window: int = 5) -> bool:
+    """Whether ``t`` is when the actual position comes within ``window`` (K55) of
+    ``target``: inside at ``t``, outside 1 µs before (ch. 3 K55 in-position)."""
+    inside = abs(trace.sample(motor_id, t).position - target) <= window + 1e-6
+    before = abs(trace.sample(motor_id, t - 1000).position - target) > window
+    return inside and before

@@ -93,15 +93,40 @@ def test_ch3_k40_over_speed_when_the_load_runs_away() -> None:
     _free_and_recover(chain, 2)
 
 
-def test_ch3_k40_the_loop_never_asks_more_than_k40() -> None:
-    # a command faster than K40 is not followed: the motor runs at K40 and falls behind
+def test_ch3_k40_an_s_above_the_maximum_speed_is_limited_to_it() -> None:
+    # ch. 3 K40: "This parameter sets motor's maximum speed" and "S value = speed[min⁻¹]
+    # x resolution[ppr] / speed unit / 60": K40=1000 at K37=3 is S 166.7; S=250 runs
+    # at that speed, in position at the end, no position error overflow
     chain, events = _chain()
     chain.execute("K40.1=1000, S.1=250, A.1=100, P.1=100000")  # 25 000 pps > 16 667
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
     assert chain.motors[1].axis.velocity() == pytest.approx(1000 * 1000 / 60)
-    chain.kernel.run(until=seconds(2))
-    assert [t for _, t in _reports(events)] == ["Ux.1=1"]
+    assert chain.execute("?97.1") == ["Sx.1=167"]
+    chain.kernel.run(until=seconds(8))
+    assert [t for _, t in _reports(events)] == ["Ux.1=8"]
+    assert chain.execute("?96.1") == ["Px.1=100000"]
+
+
+def test_ch3_k40_issue_example_k40_600_s200_runs_at_s100() -> None:
+    # the issue's case: K40=600 -> max S = 600 x 1000 / 100 / 60 = 100
+    chain, events = _chain()
+    chain.execute("K40.1=600, S.1=200, A.1=100, P.1=50000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    assert chain.execute("?97.1") == ["Sx.1=100"]
+    chain.kernel.run(until=seconds(7))
+    assert [t for _, t in _reports(events)] == ["Ux.1=8"]
+    assert chain.execute("?99.1") == ["Ux.1=8"]
+
+
+def test_ch3_k40_limits_continuous_rotation_too() -> None:
+    chain, _ = _chain()
+    chain.execute("K40.1=600, S.1=-200, A.1=100, P.1=1000000000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    assert chain.execute("?97.1") == ["Sx.1=-100"]
+    assert chain.execute("?99.1") == ["Ux.1=0"]
 
 
 def test_6_6_temperature_rises_and_cools_in_closed_form_then_alarms() -> None:

@@ -2,7 +2,8 @@
 
 - layers: tools > client > frontends > chain > device > motor > cml > sim > errors; a
   module imports only from its own layer or below (type-only imports included);
-- no import circle between modules;
+- no import circle between modules; with type-only imports counted, the one documented
+  mixin pair (the façade ``motor.motor`` and ``motor.supervision.mixin``) is the only one;
 - rule 1: nothing under motor/, chain/, device/, cml/ (nor the kernel) imports time,
   asyncio, socket or threading: virtual time only.
 """
@@ -78,8 +79,34 @@ def test_layers_import_only_downward(type_checking: bool) -> None:
     assert illegal == []
 
 
+#: docs/architecture.md: the supervision mixin is part of the façade class and types ``self``
+#: with it; every other part of a motor sees it through ``motor.core.MotorCore``.
+MIXIN_PAIR = ["coolmuscle.motor.motor", "coolmuscle.motor.supervision.mixin"]
+
+
 def test_no_import_circle_at_run_time() -> None:
     assert circles(graph(False)) == []
+
+
+def test_no_import_circle_with_type_only_imports_but_the_mixin_pair() -> None:
+    assert circles(graph(True)) == [MIXIN_PAIR]
+
+
+def test_the_facade_has_every_member_the_parts_see() -> None:
+    """``MotorCore`` (what programs, signals and supervision use) is met by ``Motor``."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.motor import core
+
+    motor = Chain(motors=1).motor(1)
+    for protocol, part in ((core.MotorCore, motor), (core.ProgramRunner, motor.program),
+                           (core.BankRunner, motor.ladder), (core.BankRunner, motor.logic_motion),
+                           (core.InputFunctionsView, motor.inputs),
+                           (core.OriginSearchView, motor.origin)):
+        members = [n for n in dir(protocol) if not n.startswith("_")] + list(
+            getattr(protocol, "__annotations__", {}))
+        assert members
+        missing = [n for n in members if not hasattr(part, n)]
+        assert missing == [], (protocol.__name__, missing)
 
 
 def test_every_layer_exists_and_the_graph_is_whole() -> None:

@@ -7,6 +7,7 @@ example shows, the reply that proves it is checked too.  (The ``@`` interpolatio
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -24,6 +25,9 @@ PROVES = {
     "2.2-program-bank.cml": b"Ux.1=8\r\n",
     "2.2.3-ladder-bank.cml": b"Px.1=10000\r\n",
     "4.1.3-accel-decel.cml": b"Px.1=10000\r\n",
+    # 4.1.4 with its machine file (the object at 11000): the push completes
+    "4.1.4-push-motion.cml": b"Ux.1=40\r\n",
+    "origin-search.cml": b"Px.1=0\r\n",
     "4.3.2-two-axes.cml": b"Px.2=2000\r\n",
     "4.5.1-ladder-basic.cml": b"V1.1=100\r\n",
     "6.3-loop.cml": b"Px.1=2000\r\n",
@@ -36,7 +40,9 @@ PROVES = {
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
 def test_example_runs(path: Path) -> None:
     program = load_program(path)
-    chain = Chain(firmware=program.firmware or "cm2", motors=program.motors or 1)
+    machine = re.search(r"^# coolmuscle:.*\bmachine=(\S+)", path.read_text(), re.M)
+    chain = Chain(firmware=program.firmware or "cm2", motors=program.motors or 1,
+                  machine=path.parent / machine.group(1) if machine else None)
     try:
         result = run_script(path, chain)
     finally:
@@ -45,3 +51,16 @@ def test_example_runs(path: Path) -> None:
     received = b"".join(e.data for e in result.transcript if e.direction == "<")
     assert PROVES.get(path.name, b"") in received
     assert b"error" not in received
+
+
+def test_every_file_an_example_names_exists() -> None:
+    """Examples and machine files name other files (``coolmuscle run examples/X.cml``,
+    ``machine=X.toml``): each one is in the checkout."""
+    named = set()
+    for path in (ROOT / "examples").iterdir():
+        if path.suffix in (".cml", ".toml", ".py"):
+            text = path.read_text(encoding="utf-8")
+            named |= {ROOT / m for m in re.findall(r"\b(examples/[\w.-]+\.(?:cml|toml))", text)}
+            named |= {path.parent / m for m in re.findall(r"machine=([\w.-]+\.toml)", text)}
+    assert named and all(p.exists() for p in named), sorted(str(p) for p in named
+                                                            if not p.exists())

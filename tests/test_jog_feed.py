@@ -58,8 +58,9 @@ def test_table_6_1_k50_jog_speed_and_acceleration_are_automatic() -> None:
         chain.kernel.run(until=seconds(1))
         timings.append(_status_times(events))
     assert timings[0] == timings[1]
-    # 100 pulses at 1 rev/s (1000 pps at K37=3), 100 kpps²: 10 ms up, 90 ms, 10 ms down
-    assert timings[0][0][0] == pytest.approx(0.11, abs=0.002)
+    # 100 pulses at 1 rev/s (1000 pps at K37=3), 100 kpps²: 10 ms up, 90 ms, 10 ms down;
+    # in position (K55 = 5) once within 5 pulses of 100, a few ms before the command ends
+    assert 0.1 < timings[0][0][0] < 0.11
 
 
 def test_5_1_jog_while_moving_is_ignored() -> None:
@@ -99,7 +100,8 @@ def test_5_1_feed_runs_at_k49_with_k43_while_the_signal_is_on() -> None:
     chain.kernel.run(until=seconds(2))
     # 20 ms ramp (20 pulses) + 1 s cruise... stop: 2000²/(2·100000) = 20 pulses
     assert motor.axis.target() == pytest.approx(40 + 1920 + 20, abs=1e-6)
-    assert [t for t, _ in _status_times(events)] == [pytest.approx(1.02, abs=0.002)]
+    (stopped, _), = _status_times(events)    # within K55 of the stop point (1.02 s)
+    assert 1.01 < stopped < 1.02
     motor.feed(-1)
     chain.kernel.run(until=seconds(3))
     assert chain.execute("?97.1") == ["Sx.1=-20"]

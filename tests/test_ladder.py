@@ -30,17 +30,25 @@ def ladder(*lines: str, **options: object) -> Rig:
 
 
 def periodic(lines: int, k63: int, firmware: str = "cm2") -> Rig:
-    """A bank of 1 + 3 x ``lines`` steps whose last line shows each scan."""
-    body = ["V1.1=V1.1+V2.1;"] * (lines - 1) + ["V3.1=V3.1+V2.1"]
+    """A bank of 1 + 3 x ``lines`` steps (RT3) whose last line shows each scan; on CM2
+    assignments do not display (4.5.1), so a last ``V3.1`` (one more step) shows it."""
+    if firmware == "rt3":
+        body = ["V1.1=V1.1+V2.1;"] * (lines - 1) + ["V3.1=V3.1+V2.1"]
+    else:
+        body = ["V1.1=V1.1+V2.1;"] * (lines - 1) + ["V3.1=V3.1+V2.1", "V3.1"]
     k = "K87" if firmware == "rt3" else "K63"
     return ladder(f"{k}.1={k63}", "V2.1=1", "L1.1", *body, "END.1", firmware=firmware)
+
+
+def periodic_steps(lines: int, firmware: str = "cm2") -> int:
+    return 1 + 3 * lines + (0 if firmware == "rt3" else 1)
 
 
 @settings(max_examples=25, deadline=None)
 @given(st.integers(1, 20), st.integers(1, 12))
 def test_rt3_3_4_a_scan_of_n_steps_every_max_k63_n_quarter_ms(lines: int, k63: int) -> None:
     r = periodic(lines, k63)
-    steps = 1 + 3 * lines
+    steps = periodic_steps(lines)
     r.type("[L1.1")
     r.until(0.2)
     starts = [t for t, _ in r.printed]
@@ -71,10 +79,10 @@ def test_k63_0_does_not_scan_and_a_new_k63_reschedules() -> None:
 
 def test_k63_overrun_carries_over_and_displays_follow_the_scans() -> None:
     """K63: "remaining processing is carried over to the next cycle"; RT3 3.5.2."""
-    r = periodic(10, 2)                # 31 steps = 7.75 ms > 2 ms
+    r = periodic(10, 2)                # 32 steps = 8 ms > 2 ms
     r.type("[L1.1")
-    r.until(0.04)
-    assert [t for t, _ in r.printed] == [n * 7750 * 1000 for n in range(6)]
+    r.until(0.045)
+    assert [t for t, _ in r.printed] == [n * 8000 * 1000 for n in range(6)]
 
 
 def test_branch_steps_count_what_runs() -> None:
@@ -165,15 +173,28 @@ def test_cl_nesting_under_10_no_recursion_and_missing_banks() -> None:
 
 
 def test_rt3_1_1_display_rules() -> None:
-    """An assignment displays its result unless its line ends with ";"; a register
-    named alone displays it (4.5.1 "P1.1 ... Display P1 value"); branch actions too."""
-    r = ladder("K63.1=100", 'V5.1="ab"', "P1.1=7", "L1.1", "V1.1=V1.1+P1.1;",
+    """RT3 1.1 ";": "Logic Bank: -stops the results of an equation from being
+    displayed": an assignment displays its result unless its line ends with ";"; a
+    register named alone displays it; branch actions too."""
+    r = ladder("K87.1=100", 'V5.1="ab"', "P1.1=7", "L1.1", "V1.1=V1.1+P1.1;",
                "V2.1=V1.1*P1.1", "S.1=V2.1", "V1.1>P1.1, V3.1=P1.1, V4.1=P1.1", "P1.1",
-               "V5.1", 'V6.1="xy"', "END", "[L1.1")
+               "V5.1", 'V6.1="xy"', "END", "[L1.1", firmware="rt3")
     r.until(0.15)
     first = ["V2.1=49", "S.1=49", "V4.1=7", "P1.1=7", 'V5.1="ab"', 'V6.1="xy"']
     second = ["V2.1=98", "S.1=98", "V3.1=7", "P1.1=7", 'V5.1="ab"', 'V6.1="xy"']
     assert r.texts() == first + second
+
+
+def test_4_5_1_cm2_ladder_assignments_are_silent_a_register_alone_displays() -> None:
+    """4.5.1: "V1=V1+V2 ... Add V2 to V1", "P1.1 ... Display P1 value": on CM2 only the
+    register named alone displays (the RT3 ";" rule is RT3's); the 2.2.3 operation
+    example's "S.1= S1.1" does not flood the host line every K63."""
+    r = ladder("K63.1=100", "S1.1=50", "S2.1=10", 'V1.1="Px"', "V2.1=5000", "P1.1=7",
+               "L1.1", "V1.1> V2.1, S.1= S1.1, S.1= S2.1", "V3.1=V3.1+P1.1", "P1.1", "END",
+               "[L1.1")
+    r.until(0.25)
+    assert r.texts() == ["P1.1=7"] * 3
+    assert r.chain.execute("S.1") == ["S.1=10"] and r.chain.execute("V3.1") == ["V3.1=21"]
 
 
 def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(tmp_path: Path) -> None:
@@ -225,18 +246,21 @@ def test_rt3_1_5_sine_has_the_frequency_of_its_formula() -> None:
 
 def test_rt3_3_6_logic_motion_bank_follows_its_dx_curve() -> None:
     """[LM1 scans every 1 ms whatever K87 is; V3 bound to "Dx" is the target position."""
-    # the curve starts at U2(10) = 9980: a step that far is a position error overflow
-    # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised
-    r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10", "L1", "V1=V1+V2;",
+    # the curve starts at U2(5) = 9995: a step that far is a position error overflow
+    # (Ux=1) with K56 = 50 (5000 pulses), so the threshold is raised; V2 = 5 keeps the
+    # 2 s sine below K40's 50 000 pps
+    r = ladder("K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=5", "L1", "V1=V1+V2;",
                "V3=U2(V1);", "END", firmware="rt3")
     trace = record(r.chain)
     r.type("[LM1")
     r.until(1.2)
     motor = r.motor()
-    assert motor.logic_motion.scans == 801   # 6 steps (RT3 3.6 "does show 6 steps"): 1.5 ms
-    scan = 1500 * 1000
+    # RT3 3.6: "These banks execute on 1 ms intervals and are independent of K87" and
+    # of the 6-step example "the timing is less than 1ms": a scan every 1 ms, 0..1200 ms
+    assert motor.logic_motion.scans == 1201
+    scan = 1000 * 1000
     n = (seconds(1.2) // scan)
-    v1 = 10 * (n + 1)
+    v1 = 5 * (n + 1)
     assert motor.axis.target() == int(10000 * math.cos(2 * math.pi * (v1 % 10000) / 10000))
     assert abs(trace.sample(1, seconds(1.2)).position - motor.axis.target()) < 400
     r.type("]LM")

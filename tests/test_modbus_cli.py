@@ -32,7 +32,7 @@ def test_sim_serves_modbus_rtu_tcp_and_com1_and_says_com0_speaks_modbus() -> Non
         child.expect(r"modbus-rtu: (/dev/pts/\d+) \(station 1\)\s+modbus-tcp: 127\.0\.0\.1:(\d+)"
                      r"\s+com1: (/dev/pts/\d+)")
         rtu_path, tcp_port, com1_path = child.match.groups()
-        child.expect(r"COM0 speaks Modbus RTU, station 1 \(K81\.1=1\)")
+        child.expect(r"note: K81\.1=1: COM0 speaks Modbus RTU; no state is saved")
         with serial.Serial(rtu_path, 38400, timeout=3) as port:          # K81 over RTU
             port.write(frame("01 03 03 6A 00 02"))
             assert port.read(9) == frame("01 03 04 00 00 00 01")

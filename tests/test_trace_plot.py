@@ -165,7 +165,7 @@ def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("ux, name", [(0, "moving"), (8, "in position"), (16, "motor free"),
-                                      (32, "push"), (40, "push"), (4, "alarm"),
+                                      (32, "push"), (40, "push complete"), (4, "alarm"),
                                       (512, "emergency stop"), (256, "moving")])
 def test_6_6_status_classes_of_the_timeline(ux: int, name: str) -> None:
     assert status_class(ux) == name

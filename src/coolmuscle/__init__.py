@@ -29,14 +29,22 @@ if _run_as_the_command():
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "connect", "connect_async"]
+__all__ = ["__version__", "connect", "connect_async", "Ux", "Version", "CoolMuscleError"]
 
 
 def __getattr__(name: str) -> object:
-    """``connect`` / ``connect_async`` load the host library on first use."""
-    if name in ("connect", "connect_async"):
+    """``connect`` / ``connect_async`` / ``Version`` load the host library on first use;
+    ``Ux`` (the 6.6 ?99 status flags) and ``CoolMuscleError`` (the root of every
+    exception) are the names its results and errors carry."""
+    if name in ("connect", "connect_async", "Version"):
         from . import client
         return getattr(client, name)
+    if name == "Ux":
+        from .motor.status import Ux
+        return Ux
+    if name == "CoolMuscleError":
+        from .errors import CoolMuscleError
+        return CoolMuscleError
     raise AttributeError(f"module 'coolmuscle' has no attribute {name!r}")
 
 from .frontends.urlhandler import register as _register_url_handler  # noqa: E402

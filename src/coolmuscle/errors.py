@@ -107,6 +107,11 @@ class CcwLimitError(MotorError):
     number = 8
 
 
+class InvalidArgumentError(CoolMuscleError, ValueError):
+    """A call the host library refuses before sending anything (a motor ID outside
+    1..15, an unknown register, K20 through ``write_param``)."""
+
+
 class NoSuchMotorError(CoolMuscleError, LookupError):
     """A motor ID that is not on the chain."""
 

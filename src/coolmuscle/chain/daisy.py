@@ -88,7 +88,8 @@ class Chain:
         if not 1 <= motors <= 15:
             raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
         self.kernel = kernel or Kernel()
-        self.firmware = get_firmware(firmware)
+        per_motor = firmware.split(",")   # "cm1,cm1,cm2,cm2": one profile per motor (EB12)
+        self.firmware = get_firmware(per_motor[0])
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
         self._listeners: list[EventListener] = []
@@ -97,7 +98,9 @@ class Chain:
         self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
-            self.motors[motor_id] = Motor(motor_id, self.kernel, self.firmware, self)
+            profile = self.firmware if len(per_motor) == 1 else \
+                get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
+            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self)
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
@@ -178,6 +181,8 @@ class Chain:
     def _execute_text(self, text: str, ctx: Context) -> None:
         if self.uploads.consume(text, ctx):   # a bank definition is being typed
             return
+        if self._baud_answer(text):
+            return
         try:
             lines = _parse(text)
         except CmlSyntaxError as error:
@@ -197,6 +202,18 @@ class Chain:
             else:
                 self._run_statements([stmt for stmt, _ in line], line_ctx)
         self.poke()
+
+    def _baud_answer(self, text: str) -> bool:
+        """The line after a K20 prompt (ch. 3 K23 16 "Change Baud Rate ?? XXX kbps
+        (Y/N)"): ``Y`` applies the new K20, ``N`` keeps the old one; both are consumed.
+        Any other line cancels the change and runs as usual (docs/fidelity.md)."""
+        asking = [m for m in self.motors.values() if m.pending_baud is not None]
+        if not asking:
+            return False
+        answer = text.strip().upper()
+        for motor in asking:
+            motor.answer_baud(answer == "Y")
+        return answer in ("Y", "N")
 
     def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
         for stmt in statements:

@@ -22,7 +22,7 @@ from typing import Any, Callable, Iterable
 
 import serial
 
-from ..errors import CoolMuscleTimeout
+from ..errors import CoolMuscleTimeout, InvalidArgumentError
 from ..motor.status import Ux
 from . import banks, commands, ops
 from .aio_driver import AsyncDriver
@@ -40,7 +40,7 @@ class AsyncMotor:
 
     def __init__(self, driver: AsyncDriver, motor_id: int) -> None:
         if not 1 <= motor_id <= 15:
-            raise ValueError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
+            raise InvalidArgumentError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
         self._driver = driver
         self.id = motor_id
 

@@ -14,7 +14,7 @@ Motion (2.1.1, 2.1.2): ``S.n``/``A.n``/``M.n``/``P.n`` then ``^.n``, followed by
 
 from __future__ import annotations
 
-from ..errors import OutOfRangeError
+from ..errors import InvalidArgumentError, OutOfRangeError
 from ..motor.state.firmware import Firmware, get_firmware
 from ..motor.state.memory import Memory, NoSuchRegisterError
 from ..motor.programs.queries import format_value
@@ -74,7 +74,7 @@ def _expected(fw: Firmware, kind: str, value: int | str, k37: int) -> str:
 def _kind(kind: str) -> str:
     kind = kind.upper()
     if kind not in REGISTER_KINDS:
-        raise ValueError(f"unknown register {kind!r} (one of {' '.join(REGISTER_KINDS)}; "
+        raise InvalidArgumentError(f"unknown register {kind!r} (one of {' '.join(REGISTER_KINDS)}; "
                          "K parameters: read_param / write_param)")
     return kind
 
@@ -129,7 +129,7 @@ def _write_then_read(session: Session, motor: int, assignment: str | None,
 def write_param(session: Session, motor: int, k: int, value: int) -> Op[None]:
     """``K#.n=v`` (ch. 3), validated against the firmware's table 6.1 and read back."""
     if k == 20:
-        raise ValueError("K20 changes the baud rate of this very line (ch. 3 K20): "
+        raise InvalidArgumentError("K20 changes the baud rate of this very line (ch. 3 K20): "
                          "send it with send() and reopen the port at the new rate")
     fw = yield from firmware(session, motor)
     try:

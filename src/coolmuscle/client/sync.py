@@ -24,10 +24,11 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Any, Callable, Iterable
+from urllib.parse import urlsplit
 
 import serial
 
-from ..errors import CoolMuscleTimeout, TransportError
+from ..errors import CoolMuscleTimeout, InvalidArgumentError, TransportError
 from ..frontends.urlhandler import register as register_url_handler
 from ..motor.status import Ux
 from . import banks, commands, ops
@@ -42,11 +43,26 @@ __all__ = ["connect", "CoolMuscle", "Motor", "open_port"]
 def open_port(url: str, *, baudrate: int = 38400, **kwargs: Any) -> Any:
     """Open any pyserial URL or device path (``coolmuscle://`` included)."""
     register_url_handler()
+    _check_socket_url(url)
     try:
         return serial.serial_for_url(url, baudrate=baudrate, timeout=ops.DEFAULT_TIMEOUT,
                                      **kwargs)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise TransportError(f"cannot open {url}: {exc}") from exc
+
+
+def _check_socket_url(url: str) -> None:
+    """``socket://`` needs a host and a port (pyserial's own error is a comparison)."""
+    if not url.lower().startswith("socket://"):
+        return
+    parts = urlsplit(url)
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if not parts.hostname or port is None:
+        raise TransportError(f"cannot open {url}: a socket URL is socket://HOST:PORT, e.g. "
+                             "socket://127.0.0.1:5150 (what 'coolmuscle sim' serves)")
 
 
 def program_of(source: str | Path | ProgramFile) -> ProgramFile:
@@ -63,7 +79,7 @@ class Motor:
 
     def __init__(self, driver: SyncDriver, motor_id: int) -> None:
         if not 1 <= motor_id <= 15:
-            raise ValueError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
+            raise InvalidArgumentError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
         self._driver = driver
         self.id = motor_id
 

@@ -10,10 +10,13 @@ stream.  Spec: cml-users-guide.txt 2.1.2 (execution commands), ch. 3 (K paramete
 from __future__ import annotations
 
 import logging
+import math
+from dataclasses import replace
 from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
-from .context import Context, MotorBus
+from .context import Context
+from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from .state import units
@@ -45,6 +48,8 @@ log = logging.getLogger(__name__)
 _IN_POSITION = int(Ux.IN_POSITION)
 
 
+#: The K20 table (ch. 3 K20) as the confirmation message writes the rate.
+_K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
 
 
 class Motor(Supervision):
@@ -100,6 +105,8 @@ class Motor(Supervision):
         # which of R0 / N0 direct-mode "@" uses (the one written last)
         self.path: "PairMotion | None" = None
         self.direct_interp_kind = "R"
+        #: a K20 value waiting for the host's Y/N (ch. 3 K23 16)
+        self.pending_baud: int | None = None
 
     # -- parameters and units ----------------------------------------------
     def k(self, number: int) -> int:
@@ -206,8 +213,17 @@ class Motor(Supervision):
         """
         if s_value == 0 or a_value == 0 or decel_a == 0:
             return None
-        return limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
-                                k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
+        lim = limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
+                               k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
+        top = self.max_speed_pps()
+        if lim.speed > top:            # ch. 3 K40: S above the maximum is limited to it
+            lim = replace(lim, speed=top, creep=min(lim.creep, top))
+        return lim
+
+    def max_speed_pps(self) -> float:
+        """K40 (the motor's maximum speed, min⁻¹) in pulses/s of the current K37:
+        S value = speed x resolution / speed unit / 60 (ch. 3 K40)."""
+        return units.rpm_to_pps(self.k(40), self.k(37))
 
     def move_to(self, waypoints: Sequence[tuple[float, Limits | None]],
                 delay_ns: int = 0) -> None:
@@ -259,7 +275,8 @@ class Motor(Supervision):
         self._last_limits = limits
         if self._continuous_blocked(s_value, limits):
             return
-        self.axis.run(s_value * self.resolution.speed_unit_pps, limits)
+        pps = s_value * self.resolution.speed_unit_pps
+        self.axis.run(math.copysign(min(abs(pps), limits.speed), pps), limits)   # K40
 
     def go(self) -> None:
         """``^``: execute the direct data P0, S0, A0, M0 (2.1.2).
@@ -487,6 +504,24 @@ class Motor(Supervision):
             self.direct_speed_changed()
         elif kind in ("N", "R") and index == 0:
             self.direct_interp_kind = kind     # direct "@" draws by this one (4.4)
+
+    def propose_baud(self, ctx: Context | None, value: int) -> None:
+        """``K20.n=X`` with K23 including 16: the confirmation message of the K23 table,
+        "Change Baud Rate ?? XXX kbps (Y/N)"; K20 changes only when ``Y`` answers it
+        (:meth:`answer_baud`).  An out-of-range value is error00 and asks nothing."""
+        if not isinstance(value, int):
+            raise OutOfRangeError()
+        self.params.check(20, value)
+        self.pending_baud = value
+        kbps = _K20_KBPS.get(value, "38.4")
+        self.say(ctx, f"Change Baud Rate ?? {kbps} kbps (Y/N)", kind="message")
+
+    def answer_baud(self, yes: bool) -> None:
+        """The host answered the K20 prompt: ``Y`` applies the new rate, ``N`` keeps the
+        old one (docs/fidelity.md "Issue 17: fidelity decisions")."""
+        value, self.pending_baud = self.pending_baud, None
+        if yes and value is not None:
+            self.params.set(20, value)
 
     def write_state(self, name: str, value: int) -> None:
         """Write through a V bound to a writable state (cm-banks-rt3.txt 1.3, 3.6).

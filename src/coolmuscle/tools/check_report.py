@@ -17,6 +17,7 @@ Severity = Literal["error", "warning"]
 #: rule -> (severity, the motor's error number or None)
 RULES: Final[dict[str, tuple[Severity, int | None]]] = {
     "syntax": ("error", 1), "statement-length": ("error", None),
+    "script": ("error", None),      # a script line coolmuscle run refuses (docs/scripts.md)
     "too-many-commands": ("error", 2), "too-many-steps": ("error", 2),
     "bank-number": ("error", 0), "bank-end": ("error", None),
     "not-in-bank": ("error", 3), "cannot-follow": ("error", 4),

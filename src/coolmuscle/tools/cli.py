@@ -52,6 +52,22 @@ app = typer.Typer(name="coolmuscle", add_completion=False, no_args_is_help=True,
 err = Console(stderr=True, soft_wrap=True, highlight=False)
 
 
+def _flags_take_no_value() -> None:
+    """The help shows no ``<bool>`` after a flag such as ``--pty`` (it takes no value);
+    typer >= 0.17 prints every option's type, flags included."""
+    from typer.core import TyperOption
+
+    shown = TyperOption.display_type_rich
+
+    def display_type_rich(self: TyperOption, ctx: Any) -> str | None:
+        return None if self.is_flag and self.metavar is None else shown(self, ctx)
+
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_take_no_value()
+
+
 class Firmware(str, enum.Enum):
     cm2 = "cm2"
     rt3 = "rt3"
@@ -87,7 +103,7 @@ def _show_path(path: Path) -> str:
 
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
-                machine: Path | None = None) -> Any:
+                machine: Path | None = None, per_motor: str | None = None) -> Any:
     if state is not None:
         try:
             state.mkdir(parents=True, exist_ok=True)
@@ -98,8 +114,12 @@ def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
     if machine is not None:
         from ..chain.machine import load_machine
         extra["machine"] = load_machine(machine)
-    return chain_factory(None, motors, firmware=firmware.value, state_dir=state, pacing=pace,
-                         **extra)
+    return chain_factory(None, motors, firmware=per_motor or firmware.value, state_dir=state,
+                         pacing=pace, **extra)
+
+
+_WEB_HELP = ("Serve the web dashboard (docs/web.md) on [HOST:]PORT, default "
+             "127.0.0.1:8080; another host than loopback needs the printed token.")
 
 
 _MACHINE_HELP = "Machine file (TOML): load, stoppers, sensors, faults (docs/machine-file.md)."
@@ -117,13 +137,13 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                ) -> list[Transport]:
+                enip: bool = False) -> list[Transport]:
     from ..frontends import transports
     from ..frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
         try:
@@ -137,6 +157,24 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
         chosen.append(transports.create("stdio"))
     chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
     return chosen
+
+
+def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, pty: bool,
+                         pty_link: Path | None, stdio: bool,
+                         modbus: tuple[str | None, str | None, str | None],
+                         ) -> tuple[list[Transport], int, str]:
+    """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
+    from ..frontends.ethercat.cli import EthercatUsageError, chain_firmware, sim_transport
+    if motors not in (1, 4):
+        raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
+    try:
+        fw = chain_firmware(bridge)
+    except EthercatUsageError as exc:
+        raise UsageError(f"--bridge: {exc}") from None
+    chosen: list[Transport] = [sim_transport(iface, bridge)]  # type: ignore[list-item]
+    if tcp or pty or pty_link or stdio or any(modbus):
+        chosen += _transports(tcp, pty, pty_link, stdio, modbus)
+    return chosen, 4, fw
 
 
 def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> list[Transport]:
@@ -158,20 +196,33 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
     return chosen
 
 
+def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
+                     priority: int | None = None) -> list[Transport]:
+    """``--enip`` (docs/enip.md)."""
+    if value is None:
+        return []
+    from ..frontends.enip.cli import transports as enip_transports
+    try:
+        return enip_transports(value, io_port, firmware.value, priority)
+    except TransportError as exc:
+        raise UsageError(str(exc)) from None
+
+
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
-                 state: Path | None, scale: float) -> None:
+                 state: Path | None, scale: float, label: str | None = None) -> None:
     from ..frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
     await service.start()
-    err.print(f"coolmuscle: virtual {firmware.value.upper()} {_ids(motors)} ready", markup=False)
+    err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} ready",
+              markup=False)
     where = "   ".join(t.describe() for t in chosen)
     shown = _show_path(state) if state is not None else "none, not saved"
     err.print(f"{where}   (state: {shown})", markup=False)
     station = _modbus_station(chain)
     if station:
-        err.print(f"COM0 speaks Modbus RTU, station {station} (K81.1={station}); for the text "
-                  "line send FFFFFFFFF, then K81.1=0 (5.6.9)", markup=False)
+        asked = any(t.name == "modbus-rtu" for t in chosen)
+        err.print(_modbus_notice(station, state, asked), markup=False)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in STOP_SIGNALS:
@@ -186,6 +237,38 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
             loop.remove_signal_handler(sig)
         ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
+
+
+def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str:
+    """Why a plain ``sim`` answers no CML text: K81 (kept like every K) hands COM0 to
+    Modbus RTU (5.6.1), and how to get the text line back (5.6.9, ``--reset``)."""
+    saved = f" (saved in {_show_path(state)})" if state is not None else ""
+    if asked and state is None:
+        return (f"coolmuscle: note: K81.1={station}: COM0 speaks Modbus RTU; no state is "
+                "saved, so the next sim starts with K81.1=0 (CML text).")
+    if asked:
+        return (f"coolmuscle: note: K81.1={station}{saved}: COM0 speaks Modbus RTU; the "
+                "motor keeps K81, so later sims with this state speak Modbus on COM0 too, "
+                "until you start one with --reset or send K81.1=0 in text mode (5.6.9).")
+    return (f"coolmuscle: note: K81.1={station}{saved}: COM0 (the TCP port, the pty, "
+            f"stdio) speaks Modbus RTU as station {station}, not CML text. For CML text "
+            "again: start with --reset (forgets all saved data and K values), or send "
+            "FFFFFFFFF and then K81.1=0 (5.6.9).")
+
+
+def _reset_state(state: Path | None) -> None:
+    """``sim --reset``: forget what the state directory holds (factory state)."""
+    if state is None:
+        return
+    from ..motor.state.store import DEFAULT_FILENAME, Store
+    path = state / DEFAULT_FILENAME
+    if not path.exists():
+        return
+    with Store(path) as store:
+        for motor_id in store.motors():
+            store.delete(motor_id)
+    err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
+              markup=False)
 
 
 def _modbus_station(chain: Any) -> int:
@@ -218,6 +301,9 @@ def sim(
         None, "--state", metavar="DIR",
         help="State directory (default: ~/.local/share/coolmuscle/state)."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
+    reset: bool = typer.Option(False, "--reset",
+                               help="Forget the saved state first (factory settings, "
+                                    "K81=0: CML text on COM0)."),
     motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
     firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
     pace: bool = typer.Option(False, "--pace",
@@ -227,6 +313,23 @@ def sim(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    web: Optional[str] = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
+                                      help=_WEB_HELP),
+    ethercat: Optional[str] = typer.Option(
+        None, "--ethercat", metavar="IFACE",
+        help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
+             "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
+    bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
+                               help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
+    enip: Optional[str] = typer.Option(
+        None, "--enip", metavar="[HOST[:PORT]]",
+        help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
+             "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
+    enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
+                                     max=65535, help="UDP port of Class 1 I/O."),
+    enip_priority: Optional[int] = typer.Option(
+        None, "--enip-rt-priority", metavar="N", min=1, max=99,
+        help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C, SIGTERM or SIGHUP."""
     _setup_logging(verbose)
@@ -237,12 +340,31 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
-    chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
     check_stop()
-    chain = _make_chain(motors, firmware, state_dir, pace, machine)
+    dashboard = _web_transport(web) if web is not None else None   # docs/web.md
+    fw = ""
+    if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
+        if enip is not None:
+            raise UsageError("--ethercat and --enip exclude each other (the bridge's four "
+                             "motors are not the EtherNet/IP module's CM1)")
+        chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
+                                                  stdio, (modbus_rtu, modbus_tcp, com1))
+        if reset:
+            _reset_state(state_dir)
+        chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
+    else:
+        chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
+                             enip=enip is not None)
+        chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
+        if reset:
+            _reset_state(state_dir)
+        chain = _make_chain(motors, firmware, state_dir, pace, machine)
+    if dashboard is not None:
+        chosen.append(dashboard)
     try:
         check_stop()
-        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
+        label = fw.upper().replace(",", "/") if ethercat is not None else None
+        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
     finally:
         ignore_stop_signals()
         chain.close()
@@ -268,8 +390,12 @@ def run(
         None, "--xy", metavar="X,Y",
         help="With --plot: draw the XY path of motors X and Y (default: pairs that "
              "interpolated; 'none' for no XY panel)."),
-    motors: int = typer.Option(1, "--motors", min=1, max=15, help="Motors on the chain."),
-    firmware: Firmware = typer.Option(Firmware.cm2, "--firmware", help="Firmware profile."),
+    motors: Optional[int] = typer.Option(
+        None, "--motors", min=1, max=15,
+        help="Motors on the chain (default: the script's '# coolmuscle: motors=N', else 1)."),
+    firmware: Optional[Firmware] = typer.Option(
+        None, "--firmware",
+        help="Firmware profile (default: the script's 'firmware=', else cm2)."),
     state: Optional[Path] = typer.Option(
         None, "--state", metavar="DIR",
         help="Start from (and save to) this state (default: a fresh chain)."),
@@ -282,10 +408,20 @@ def run(
         help="Write the script with the received bytes as expectations."),
     machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
+    web: Optional[str] = typer.Option(
+        None, "--web", metavar="[[HOST:]PORT]",
+        help="Play the script in real time and show it on the web dashboard "
+             "(docs/web.md); starts when a page connects."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     _setup_logging(False)
     script = load_script(file)
+    motors, firmware, machine = _header_defaults(file, motors, firmware, machine)
+    if web is not None:
+        _run_web(script, web, until, (check, record, trace, plot),
+                 lambda: _make_chain(motors, firmware, state.expanduser() if state else None,
+                                     pace, machine))
+        return
     if check and not script.expectations:
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
@@ -298,6 +434,12 @@ def run(
         try:
             check_trace_path(trace)
         except TraceFormatError as exc:
+            raise UsageError(str(exc)) from None
+    if plot is not None:
+        from .plot import PlotFormatError, check_plot_path
+        try:
+            check_plot_path(plot)
+        except PlotFormatError as exc:
             raise UsageError(str(exc)) from None
     chain = _make_chain(motors, firmware, state.expanduser() if state else None, pace,
                         machine)
@@ -323,10 +465,11 @@ def run(
         sys.stdout.flush()
         if plot is not None:
             from .plot import plot as plot_chain
+            title = f"{file.name} (virtual time)"     # the script's name, not a generic one
             if xy_pairs is None:
-                plot_chain(chain, plot)
+                plot_chain(chain, plot, title=title)
             else:
-                plot_chain(chain, plot, xy=xy_pairs)
+                plot_chain(chain, plot, title=title, xy=xy_pairs)
     finally:
         chain.close()
     if record is not None:
@@ -341,6 +484,42 @@ def run(
         sys.stdout.write(f"coolmuscle: {result.summary()}\n")
     elif script.expectations:
         err.print(f"coolmuscle: {result.summary()}", markup=False)
+
+
+def _header_defaults(file: Path, motors: int | None, firmware: Firmware | None,
+                     machine: Path | None) -> tuple[int, Firmware, Path | None]:
+    """``# coolmuscle: motors=2 firmware=rt3 machine=axis.toml`` in a script gives the
+    defaults (``machine`` relative to the script); an option given on the command line
+    wins, with a note when it differs from the header (docs/scripts.md)."""
+    header: dict[str, str] = {}
+    try:
+        with file.open(encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.lower().startswith("# coolmuscle:"):
+                    for item in line.split(":", 1)[1].split():
+                        key, _, value = item.partition("=")
+                        header[key.lower()] = value
+    except OSError:
+        pass                               # load_script has reported a missing file
+    given_motors = header.get("motors")
+    if given_motors is not None and not (given_motors.isdigit() and 1 <= int(given_motors) <= 15):
+        raise UsageError(f"{file}: '# coolmuscle: motors={given_motors}' is not 1..15")
+    given_fw = header.get("firmware")
+    if given_fw is not None and given_fw.lower() not in Firmware.__members__:
+        raise UsageError(f"{file}: '# coolmuscle: firmware={given_fw}' is not cm2, rt3 or cm1")
+    for option, value, key in (("--motors", motors, "motors"),
+                               ("--firmware", firmware.value if firmware else None,
+                                "firmware")):
+        if value is not None and header.get(key) not in (None, str(value)):
+            err.print(f"coolmuscle: note: {option} {value} overrides the script's "
+                      f"{key}={header[key]}", markup=False)
+    if motors is None:
+        motors = int(given_motors) if given_motors else 1
+    if firmware is None:
+        firmware = Firmware(given_fw.lower()) if given_fw else Firmware.cm2
+    if machine is None and header.get("machine"):
+        machine = file.parent / header["machine"]
+    return motors, firmware, machine
 
 
 def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
@@ -359,18 +538,75 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
     return [(x, y)]
 
 
+def _web_transport(address: str) -> Transport:
+    """``--web [HOST:]PORT`` (coolmuscle.frontends.web)."""
+    from .web_run import web_transport
+    try:
+        return web_transport(address)
+    except TransportError as exc:
+        raise UsageError(f"--web: {exc}") from None
+
+
+def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
+             make_chain: Callable[[], Any]) -> None:
+    """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
+    from .web_run import run_script_web
+    if any(o not in (None, False) for o in others):
+        raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
+                         "are for fast runs (the page downloads the trace and the plot)")
+    _web_transport(address)                       # a bad address is a usage error
+    chain = make_chain()
+    try:
+        run_script_web(script, chain, address, until=until,
+                       err=lambda text: err.print(text, markup=False))
+    finally:
+        chain.close()
+
+
 def _register_tools() -> None:
+    from ..frontends.enip.cli import register as register_enip
     from .commands import register
     register(app)
+    register_enip(app)   # coolmuscle enip eds
 
 
 _register_tools()  # check, upload, term (coolmuscle.tools)
+
+
+def _register_batch() -> None:
+    from .batchcommands import register
+    register(app)
+
+
+_register_batch()  # batch, sweep (coolmuscle.tools.batchcommands, docs/batch.md)
 
 
 @app.command()
 def version() -> None:
     """Print the version."""
     sys.stdout.write(f"coolmuscle {__version__}\n")
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        sys.stdout.write(f"coolmuscle {__version__}\n")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main_options(
+    show_version: bool = typer.Option(False, "--version", callback=_print_version,
+                                      is_eager=True, help="Print the version and exit."),
+) -> None:
+    """A virtual Cool Muscle integrated servo motor and host tools."""
+
+
+def _register_subapps() -> None:
+    from ..frontends.ethercat.cli import app as ethercat_app
+    app.add_typer(ethercat_app)
+
+
+_register_subapps()
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -403,8 +639,11 @@ def _main(argv: list[str] | None) -> None:
         if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
+    from ..frontends.enip.cli import optional_value_argv
     try:
-        app(args=argv, prog_name="coolmuscle")
+        from ..frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+        args = expand_web_flag(sys.argv[1:] if argv is None else argv)
+        app(args=optional_value_argv(args), prog_name="coolmuscle")
     except SystemExit:
         raise
     except (KeyboardInterrupt, SignalStop) as exc:  # a stop signal outside the serving loop

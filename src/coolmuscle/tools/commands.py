@@ -11,7 +11,7 @@ import json
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import List, Optional
+from typing import Any, List, Optional
 
 import typer
 
@@ -53,8 +53,10 @@ def check(
             program = load_program(path)
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}")
-        reports.append(check_program(program, firmware=firmware.value if firmware else None,
-                                     motors=motors))
+        report = check_program(program, firmware=firmware.value if firmware else None,
+                               motors=motors)
+        _check_script_lines(path, report)
+        reports.append(report)
     if output is Format.json:
         document = to_json(reports, strict=strict)
         sys.stdout.write(json.dumps(document, indent=2) + "\n")
@@ -65,6 +67,28 @@ def check(
         ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
     if not ok:
         raise typer.Exit(1)
+
+
+def _check_script_lines(path: Path, report: Any) -> None:
+    """The script lines (``@wait`` ...) as ``coolmuscle run`` reads them: a directive
+    ``run`` refuses (``@wiat``) is a ``script`` error here too (docs/scripts.md)."""
+    from .script import ScriptError, parse_line
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return
+    for number, raw in enumerate(text.splitlines(), start=1):
+        source = raw.rstrip("\r")
+        stripped = source.lstrip()
+        if not (stripped[:1] == "@" and stripped[1:2].isalpha()) and \
+                not stripped.startswith("<<"):
+            continue
+        try:
+            parse_line(stripped, number)
+        except ScriptError as exc:
+            message = str(exc).split(": ", 1)[1] if str(exc).startswith("line ") else str(exc)
+            report.add(number, "script", message)
+    report.diagnostics.sort(key=lambda d: (d.line, d.column))
 
 
 def upload(

@@ -3,7 +3,8 @@
 Drawn like the charts of cml-users-guide.txt 4.1 (speed against time, with the
 in-position and output signals under it): one colour per motor in every panel, the
 target dashed, speed in pulses/s with min⁻¹ on the right, and a timeline with one
-status bar per motor (moving, in position, free, push, alarm, emergency stop) and a
+status bar per motor (moving, in position, free, push, push complete, alarm, emergency
+stop; the legend lists those that occur) and a
 logic-analyser row for every input and output that is ever on.  Panels for the
 analog input/output and the external encoder count appear only when those change.
 Sample instants include every discrete change and solved pulse edge, so steps are
@@ -37,10 +38,26 @@ if TYPE_CHECKING:
 #: Status classes of the timeline bar, in priority order (6.6 ?99).
 STATUS_COLORS = {
     "alarm": "#d62728", "emergency stop": "#7f0000", "motor free": "#f2c200",
-    "push": "#9467bd", "in position": "#2ca02c", "moving": "#9ecae1",
+    "push complete": "#3f007d", "push": "#9467bd", "in position": "#2ca02c",
+    "moving": "#9ecae1",
 }
 ROW_HEIGHT_IN = 0.24
 MAX_POINTS = 2000
+
+
+class PlotFormatError(ValueError):
+    """A plot path whose extension matplotlib cannot write."""
+
+
+def check_plot_path(path: str | Path) -> None:
+    """Refuse, before anything runs, a plot file matplotlib could not write."""
+    suffix = Path(path).suffix.lower().lstrip(".")
+    formats = plt.figure().canvas.get_supported_filetypes()
+    plt.close("all")
+    if suffix not in formats:
+        known = ", ".join(f".{f}" for f in sorted(formats))
+        raise PlotFormatError(f"cannot plot to {path}: the extension decides the format; "
+                              f"one of {known}")
 
 
 def status_class(ux: int) -> str:
@@ -52,7 +69,7 @@ def status_class(ux: int) -> str:
     if ux & Ux.MOTOR_FREE:
         return "motor free"
     if ux & Ux.PUSH:
-        return "push"
+        return "push complete" if ux & Ux.IN_POSITION else "push"   # Ux 40 (4.1.4)
     if ux & Ux.IN_POSITION:
         return "in position"
     return "moving"
@@ -66,16 +83,27 @@ def _changes(values: Sequence[float]) -> bool:
     return any(v != values[0] for v in values)
 
 
-def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool
-              ) -> list[tuple[str, list[bool]]]:
-    """Inputs and outputs that are ever on (or change), as (label, bits)."""
+#: K34 output functions (ch. 3 K34) as the timeline labels them.
+OUTPUT_FUNCTIONS = {0: "no function", 1: "in-position", 2: "alarm", 3: "general",
+                    4: "origin done", 6: "merge pulse", 7: "rotation pulse",
+                    8: "motor free", 9: "push"}
+
+
+def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
+              k34: int = 0) -> list[tuple[str, list[bool]]]:
+    """Inputs and outputs that are ever on (or change), as (label, bits); an output is
+    labelled with its K34 function (``OUT1 in-position``)."""
     rows = []
     prefix = f"ID{motor} " if multi else ""
     for kind, field in (("IN", "inputs"), ("OUT", "outputs")):
         for n in range(count if kind == "IN" else 4):
             bits = [bool(getattr(s, field) >> n & 1) for s in samples]
             if any(bits):
-                rows.append((f"{prefix}{kind}{n + 1}", bits))
+                label = f"{prefix}{kind}{n + 1}"
+                if kind == "OUT":
+                    function = (abs(k34) // 10 ** n) % 10
+                    label += f" {OUTPUT_FUNCTIONS.get(function, f'K34={function}')}"
+                rows.append((label, bits))
     return rows
 
 
@@ -139,7 +167,9 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     data = {mid: [recorder.sample(mid, x) for x in times] for mid in motors}
     colors = dict(zip(motors, _palette(len(motors))))
     inputs = {mid: recorder.chain.motors[mid].io.input_count for mid in motors}
-    bit_rows = {mid: _bit_rows(data[mid], mid, inputs[mid], multi) for mid in motors}
+    bit_rows = {mid: _bit_rows(data[mid], mid, inputs[mid], multi,
+                               recorder.chain.motors[mid].k(34)) for mid in motors}
+    occurring = {status_class(s.status) for d in data.values() for s in d}
     show_analog = any(_changes([s.analog_in for s in data[m]])
                       or recorder.chain.motors[m].k(35) != 0 for m in motors)
     show_encoder = any(_changes([s.encoder for s in d]) for d in data.values())
@@ -170,6 +200,7 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
+        _draw_stoppers(ax["position"], recorder.chain.motors[mid], colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
@@ -186,7 +217,7 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
             a.grid(True, alpha=0.3)
     ax["timeline"].set_xlabel("virtual time [s]")
     ax["timeline"].set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1e-3)
-    _legends(fig, ax, motors, colors, legend_outside, show_analog)
+    _legends(fig, ax, motors, colors, legend_outside, show_analog, occurring)
     fig.suptitle(title or "coolmuscle trace")
     fig.tight_layout(rect=(0, 0, 0.88 if legend_outside else 1, 1))
     path = Path(path)
@@ -222,8 +253,9 @@ def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple
         color = colors[x_id]
         ax.plot([s.position for s in xs], [s.position for s in ys], color=color,
                 linewidth=1.3, label=f"ID{x_id} x ID{y_id}")
-        ax.plot([s.command for s in xs], [s.command for s in ys], "--", color=color,
-                linewidth=0.8, alpha=0.7)
+        ax.plot([s.command for s in xs], [s.command for s in ys], "--", color="0.15",
+                linewidth=0.9, dashes=(4, 3), zorder=3,
+                label="command" if (x_id, y_id) == pairs[0] else None)
         ax.plot([xs[0].position], [ys[0].position], "o", color=color)
         ax.plot([xs[-1].position], [ys[-1].position], "s", color=color)
     ax.set_aspect("equal", adjustable="datalim")
@@ -260,9 +292,29 @@ def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
+def _draw_stoppers(ax: "Axes", motor: object, color: object, multi: bool) -> None:
+    """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
+    motor's user coordinates."""
+    geometry = getattr(motor, "geometry", None)
+    axis = getattr(motor, "axis", None)
+    if geometry is None or axis is None:
+        return
+    ppr = motor.resolution.pulses_per_rev  # type: ignore[attr-defined]
+    for raw in geometry.walls(ppr):
+        if math.isfinite(raw):
+            where = axis.to_user(raw)
+            ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
+            name = f"ID{motor.id} stopper" if multi else "stopper"  # type: ignore[attr-defined]
+            ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+                        xycoords=("axes fraction", "data"), fontsize="x-small",
+                        va="bottom", color=color)
+
+
 def _legends(fig: "plt.Figure", ax: dict[str, "Axes"], motors: Sequence[int],
-             colors: dict[int, object], outside: bool, analog: bool) -> None:
-    status = [Patch(color=c, label=name) for name, c in STATUS_COLORS.items()]
+             colors: dict[int, object], outside: bool, analog: bool,
+             occurring: set[str] | None = None) -> None:
+    status = [Patch(color=c, label=name) for name, c in STATUS_COLORS.items()
+              if occurring is None or name in occurring]
     ax["timeline"].legend(handles=status, loc="upper left", bbox_to_anchor=(1.0, 1.0),
                           fontsize="x-small", frameon=False)
     if analog:

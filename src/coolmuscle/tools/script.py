@@ -228,7 +228,10 @@ def parse_script(text: str) -> Script:
 
 
 def load_script(source: str | os.PathLike[str]) -> Script:
-    """A path (``Path``, or a one-line ``str`` naming an existing file) or script text."""
+    """A path (``Path``, or a one-line ``str`` naming an existing file) or script text.
+
+    A one-line ``str`` ending in ``.cml`` that names no file is a :class:`ScriptError`
+    (it is a mistyped path, not a line of CML)."""
     if isinstance(source, os.PathLike) or ("\n" not in source and os.path.isfile(source)):
         path = Path(source)
         try:
@@ -236,6 +239,10 @@ def load_script(source: str | os.PathLike[str]) -> Script:
         except (OSError, UnicodeDecodeError) as exc:
             raise ScriptError(f"cannot read script {path}: {exc}") from exc
         return parse_script(text)
+    if "\n" not in source and source.strip().lower().endswith(".cml"):
+        # a file name, not CML: sending it to the motor would "succeed" silently
+        raise ScriptError(f"no such script file: {source} (a one-line str naming a "
+                          ".cml file must name an existing file; script text is sent)")
     return parse_script(source)
 
 

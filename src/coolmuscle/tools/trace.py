@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ..motor.signals.analog_output import output_volts
-from ..motor.signals.io import digit
+from ..motor.signals.io import OUT_ROTATION_PULSE, digit
 from ..motor.status import ALARM_BITS, Ux
 from ..sim.kernel import NS_PER_S
 
@@ -96,11 +96,17 @@ class _MotorLog:
         self.motor = motor
         self.times: list[int] = []
         self.states: list[tuple[int, int, int]] = []
+        #: (time, (K33, K34, K35)) at each change: a sample uses the values of its time
+        self.k_times: list[int] = []
+        self.k_values: list[tuple[int, int, int]] = []
         self._starts: list[int] = []
         self.capture()
 
     def capture(self) -> None:
         m = self.motor
+        ks = (m.k(33), m.k(34), m.k(35))
+        if not self.k_values or self.k_values[-1] != ks:
+            _append(self.k_times, self.k_values, m.kernel.now, ks)
         state = (m.status, m.io.input_word(), m.io.output_word())
         if not self.states or self.states[-1] != state:
             now = m.kernel.now
@@ -113,6 +119,10 @@ class _MotorLog:
     def state_at(self, t: int) -> tuple[int, int, int]:
         i = bisect_right(self.times, t) - 1
         return self.states[max(i, 0)]
+
+    def k_at(self, t: int) -> tuple[int, int, int]:
+        """(K33, K34, K35) in force at ``t``."""
+        return self.k_values[max(bisect_right(self.k_times, t) - 1, 0)]
 
     def starts(self, history: list) -> list[int]:
         """Start times of the axis history (cached; the history only grows)."""
@@ -188,12 +198,14 @@ class TraceRecorder:
         command = sign * (command_raw - zero)
         position = sign * (actual_raw - zero)
         error = command_raw - actual_raw
-        analog_out = output_volts(motor.k(35), target=target if math.isfinite(target)
+        k33, k34, k35 = log.k_at(t)          # the K values of that instant, not of now
+        analog_out = output_volts(k35, target=target if math.isfinite(target)
                                   else command, position=position, error=sign * error,
                                   speed_pps=speed, torque=torque, pulses_per_rev=ppr)
         return Sample(t, target, command, position, speed, torque, status, inputs,
-                      _pulse_ports(motor, t, outputs), _signal(motor, "analog_input", t),
-                      analog_out, _signal(motor, "encoder", t))
+                      _pulse_ports(motor, t, outputs, k33, k34),
+                      _signal(motor, "analog_input", t), analog_out,
+                      _signal(motor, "encoder", t))
 
     def times(self, step: float, end: int | None = None) -> list[int]:
         """A grid of ``step`` seconds from the start to ``end`` (default now), plus changes."""
@@ -585,13 +597,24 @@ def _record_signals(motor: "Motor") -> None:
         analog.recording = True
 
 
-def _pulse_ports(motor: "Motor", t: int, outputs: int) -> int:
-    """The output word at ``t`` with the rotation pulse ports (K34=7, K33) filled in."""
+def _append(times: list[int], values: list, now: int, value: object) -> None:
+    """Append a change at ``now`` (a second change at the same instant replaces it)."""
+    if times and times[-1] == now:
+        values[-1] = value
+    else:
+        times.append(now)
+        values.append(value)
+
+
+def _pulse_ports(motor: "Motor", t: int, outputs: int, k33: int, k34: int) -> int:
+    """The output word at ``t`` with the rotation pulse ports (K34=7, K33 of that
+    instant) filled in."""
     pulses = getattr(motor, "pulses", None)
     if pulses is None:
         return outputs
-    k33 = motor.k(33)
     for number, signal in pulses.signals_at(t).items():
+        if digit(k34, number) != OUT_ROTATION_PULSE:     # K34=7 at that instant
+            continue
         port = signal if digit(k33, number) == 1 else not signal
         bit = 1 << (number - 1)
         outputs = (outputs | bit) if port else (outputs & ~bit)

@@ -58,8 +58,30 @@ def upload_file(path: Path, url: str, *, save: bool = False, verify: bool = True
             for motor_id in motors_of(program):
                 motor.motor(motor_id).save()
                 result.saved.append(motor_id)
+        hint = _firmware_hint(path, program.firmware, motor) if not result.ok else None
     _report(console, path, result)
+    if hint:
+        console.print(hint, markup=False)
     return result
+
+
+def _firmware_hint(path: Path, written_for: str | None, motor: Any) -> str | None:
+    """Why banks may be missing: the file names another firmware than the motor's
+    (``# coolmuscle: firmware=rt3`` sent to a CM2, whose banks differ: RT3 logic
+    motion, U functions, states)."""
+    if written_for is None:
+        return None
+    try:
+        actual = motor.version.profile()
+    except CoolMuscleError:
+        return None
+    if actual == written_for:
+        return None
+    return (f"{path}: hint: the file is written for {written_for} (its '# coolmuscle: "
+            f"firmware={written_for}' line) but the motor is {actual} (?85); commands "
+            f"of {written_for} that {actual} lacks are refused, so banks come back missing "
+            f"or different. Use a motor with {written_for} firmware (coolmuscle sim --firmware "
+            f"{written_for}) or a file for {actual}.")
 
 
 def _report(console: Console, path: Path, result: UploadResult) -> None:

@@ -32,6 +32,9 @@ BUILTIN: dict[str, str] = {
     "modbus-rtu": "coolmuscle.frontends.transports.serial_line:ModbusRtuTransport",
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
+    "web": "coolmuscle.tools.web:WebDashboard",
+    "ethercat": "coolmuscle.frontends.ethercat.transport:EthercatTransport",
+    "enip": "coolmuscle.frontends.enip.server:EnipTransport",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).

@@ -12,8 +12,9 @@ Coordinates: the axis works in raw encoder pulses (the machine file's coordinate
 docs/machine-file.md); the user coordinate is ``sign * (raw - zero)``: ``|2`` moves
 ``zero`` (2.1.2), reverse coordinates (K45 first digit 2/3, ch. 3 K45) flip ``sign``.
 
-In-position (ch. 3 K55, Ux=8) is declared when the command has reached its target and
-the tracking error is within K55 (docs/fidelity.md "Motion").
+In-position (ch. 3 K55, Ux=8) is declared when the actual position is within K55 of the
+target, on the command's final approach: possibly before the command has ended
+(docs/fidelity.md "Servo, load and alarms").
 """
 
 from __future__ import annotations
@@ -357,11 +358,20 @@ class Axis:
                                                         name="in-position"))
 
     def in_position_time(self, after_ns: int) -> int | None:
-        """When the command has ended and |Pe| <= K55 (``None``: not in this motion)."""
-        end = self.profile.end_ns
-        if end is None:
+        """When the actual position comes within K55 of the target (``None``: not in
+        this motion).
+
+        Ch. 3 K55: "Different from motion completion signal, in-position is detected
+        when the current position is within the set range against the target
+        position" and "In-Position may be detected before reaching the target
+        position": the command may still be on its last pulses.  Only the command's
+        final approach counts (from where it stays within K55 of the target), so a
+        path that passes the target earlier is not in position there."""
+        window = float(self._window())
+        approach = self.profile.settles_ns(self.target_raw, window)
+        if approach is None:
             return None
-        return self.motion.settled(float(self._window()), max(after_ns, end))
+        return self.motion.within(self.target_raw, window, max(after_ns, approach))
 
     def _arrived(self) -> None:
         self.moving = False

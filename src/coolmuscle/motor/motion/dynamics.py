@@ -277,6 +277,19 @@ class Motion:
             found = self._memo[key] = None if at is None else at - self.origin_ns
         return None if found is None else self.origin_ns + found
 
+    def within(self, center: float, window: float, after_ns: int) -> int | None:
+        """The first instant >= ``after_ns`` where the actual position is within
+        ``window`` of ``center`` (ch. 3 K55 in-position; ``None``: never in this motion)."""
+        key = ("within", center, window, after_ns - self.origin_ns)
+        found = self._memo.get(key, self)
+        if found is self:
+            def inside(piece: Piece) -> list[F]:
+                off = xp.sub(piece.pos, xp.const(center))
+                return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
+            at = self.first(after_ns, inside)
+            found = self._memo[key] = None if at is None else at - self.origin_ns
+        return None if found is None else self.origin_ns + found
+
     def span(self, piece: Piece) -> tuple[float, float]:
         """Bounds (lowest, highest) of the actual position over a piece."""
         spread = xp.spread(piece.pos, piece.duration)

@@ -208,6 +208,27 @@ class Profile:
             return max(after_ns, self.end_ns)
         return None
 
+    def settles_ns(self, center: float, window: float) -> int | None:
+        """The instant from which the command stays within ``window`` of ``center`` to
+        its end (ch. 3 K55: the approach to the target); ``None`` for an endless profile.
+
+        Walked backward over monotonic pieces, so a path that passes the target earlier
+        (a full circle, a merge through it) counts only its final approach."""
+        if self.end_ns is None:
+            return None
+        if abs(self.final_position - center) > window:
+            return self.end_ns
+        for seg in reversed(self.segments):
+            cuts = [0.0, *_velocity_roots(seg, 0.0, seg.duration), seg.duration]
+            for lo, hi in zip(reversed(cuts[:-1]), reversed(cuts[1:])):
+                off = seg.position(lo) - center
+                if abs(off) <= window:
+                    continue
+                edge = center + math.copysign(window, off)
+                tau = _solve_monotone(seg, edge, lo, hi, seg.position(lo) - edge)
+                return self.origin_ns + round((seg.start + tau) * NS_PER_S)
+        return self.origin_ns
+
     def time_speed_below(self, speed: float, after_ns: int) -> int | None:
         """First kernel time >= ``after_ns`` at which |velocity| <= ``speed``."""
         if after_ns < self.origin_ns:

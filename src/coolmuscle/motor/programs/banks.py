@@ -31,7 +31,7 @@ from ..state.firmware import Firmware
 from ..status import Report
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
     from ..context import Context
 
 log = logging.getLogger(__name__)
@@ -144,7 +144,7 @@ class BankStore:
 class _Session:
     """One bank definition in progress (on one origin: host line, API ...)."""
 
-    motor: "Motor | None"
+    motor: "MotorCore | None"
     ladder: bool
     number: int
     failed: bool = False
@@ -160,7 +160,7 @@ class BankUploads:
     (:meth:`abandon`).
     """
 
-    def __init__(self, motors: Mapping[int, "Motor"]) -> None:
+    def __init__(self, motors: Mapping[int, "MotorCore"]) -> None:
         self.motors = motors
         self._sessions: dict[tuple[str, object], _Session] = {}
 

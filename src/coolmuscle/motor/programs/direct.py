@@ -19,9 +19,10 @@ from .evaluate import EvalHost, condition, evaluate
 from ..state.memory import VState
 from ..state.memory import WRITABLE_STATES
 from .queries import query_lines, register_reply
+from ..status import Report
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
     from ..context import Context
 
 log = logging.getLogger(__name__)
@@ -30,10 +31,10 @@ log = logging.getLogger(__name__)
 class MotorEval(EvalHost):
     """Evaluation of expressions for one motor (reads other motors through its chain)."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
 
-    def _target(self, motor_id: int | None) -> "Motor | None":
+    def _target(self, motor_id: int | None) -> "MotorCore | None":
         if motor_id is None or motor_id == self.motor.id:
             return self.motor
         return self.motor.bus.motor(motor_id)
@@ -62,7 +63,7 @@ class MotorEval(EvalHost):
         return self.motor.firmware.cosine(x)
 
 
-def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str | None:
+def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | str | None:
     """Compute and store an assignment; returns the stored value (for ladder display)."""
     reg = stmt.target
     host = MotorEval(motor)
@@ -70,7 +71,13 @@ def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str 
         motor.write_register("V", reg.number, stmt.value.text)
         return None
     value = evaluate(stmt.value, host)
+    if reg.kind == "K" and reg.number == 20 and stmt.op == "=" and \
+            motor.reports(Report.MESSAGES):
+        motor.propose_baud(ctx, value)    # ch. 3 K23 16: "Change Baud Rate ?? XXX kbps (Y/N)"
+        return value
     if stmt.op != "=":
+        if reg.kind == "P" and not motor.resolution.incremental_allowed:
+            raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
         if reg.kind == "P" and reg.number == 0 and not ctx.program and not ctx.ladder:
             base = motor.position()          # 6.2: direct P0 is relative to the current position
         else:
@@ -85,7 +92,7 @@ def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str 
     return value
 
 
-def run_statement(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def run_statement(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     """Execute one statement in direct mode on ``motor``."""
     try:
         _dispatch(motor, stmt, ctx)
@@ -95,7 +102,7 @@ def run_statement(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.report_error(ctx, OutOfRangeError())
 
 
-def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def _dispatch(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     if isinstance(stmt, ast.Assign):
         assign_value(motor, stmt, ctx)
     elif isinstance(stmt, ast.Ref):
@@ -124,7 +131,7 @@ def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.bank_command(motor, stmt, ctx)
 
 
-def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def route(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     """Run ``stmt`` on the motor it names (``motor`` when it names none); a statement
     for an ID not on the chain goes to the chain (the COM1 device, or nobody)."""
     motor_id = inner_motor(stmt) or motor.id
@@ -135,7 +142,7 @@ def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.beyond_chain(motor_id, stmt, ctx)
 
 
-def _query(motor: "Motor", q: ast.Query, ctx: "Context") -> None:
+def _query(motor: "MotorCore", q: ast.Query, ctx: "Context") -> None:
     lines = query_lines(motor, q)
     if lines is None:
         lines = motor.bus.bank_query(motor, q)
@@ -143,7 +150,7 @@ def _query(motor: "Motor", q: ast.Query, ctx: "Context") -> None:
         motor.say(ctx, line)
 
 
-def _exec(motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
+def _exec(motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
     op = stmt.op
     if op == "go":
         motor.go()

@@ -27,7 +27,7 @@ from ...sim.kernel import NS_PER_MS, PRIO_IO, Timer
 from .io import digit
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
     from ..context import Context
 
 # K27/K30 level functions (ch. 3 K27)
@@ -43,7 +43,7 @@ QUICK_LEVEL, QUICK_RISE, QUICK_FALL, SLOW_LEVEL, SLOW_RISE, SLOW_FALL = 27, 28, 
 class InputFunctions:
     """Quick and slow signals of every input and the functions they run."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         count = motor.io.input_count
         self.quick = [False] * (count + 1)

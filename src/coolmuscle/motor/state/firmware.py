@@ -71,6 +71,9 @@ class Firmware:
     pnr_pool: int | None = None   # 2.1.2: P+N+R allocatable total (R type only)
     max_bank_steps: int | None = None     # RT3: steps shared by all banks
     max_bank_commands: int | None = None  # CM2 2.2.2: commands per motor
+    #: a ladder assignment displays its result unless its line ends with ";" (RT3 1.1);
+    #: CM2 displays only a register named alone (4.5.1 "P1.1 ... Display P1 value")
+    ladder_displays: bool = False
     program_banks: int = 30
     ladder_banks: int = 30
     series: str = "CM2"
@@ -341,7 +344,7 @@ RT3 = Firmware(
     name="rt3", params=_table(_rt3_params()), inputs=4, outputs=2,
     registers=RegisterCounts(p=25, s=15, a=7, m=7, t=7, v=15, n=25, r=25),
     ladder_bank_k=85, ladder_period_k=87, trig="rt3", drive="servo",
-    states=_RT3_STATES, max_bank_steps=200,
+    states=_RT3_STATES, max_bank_steps=200, ladder_displays=True,
     series="CM1", version="3.00", motor_type="R", serial="0000A00000",
 )
 
@@ -349,7 +352,7 @@ CM1 = Firmware(
     name="cm1", params=_table(_cm1_params()), inputs=4, outputs=2,
     registers=RegisterCounts(p=25, s=15, a=7, m=7, t=7, v=15, n=25, r=25),
     ladder_bank_k=85, ladder_period_k=87, trig="rt3", drive="stepper",
-    states=_RT3_STATES, max_bank_steps=200,
+    states=_RT3_STATES, max_bank_steps=200, ladder_displays=True,
     series="CM1", version="3.00", motor_type="C", serial="0000A00000",
 )
 

@@ -1,0 +1,91 @@
+"""The bridge application: the four Cool Muscles behind the slave (manual 1.4, 6.3).
+
+:class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
+object dictionary built from the table, the SII image, and the 1 ms cycle
+(:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
+the output image into each axis's :class:`~.drive.Drive` (CiA402 6.1, csp 6.3) and
+the device API's snapshots into the input image (6041h, 6064h + 0x800 n).  Further
+modes attach here through :class:`~.dictionary.Dictionary` hooks and
+:meth:`outputs` / :meth:`cycle`, without touching the ESC.
+
+Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
+:meth:`safe_outputs` and the dictionary hooks run in the frame thread and must
+not call the model; :meth:`cycle` runs in the model's thread.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from . import esm
+from . import identity as ident
+from .dictionary import Dictionary
+from .drive import Drive
+from .objects import Table, build_table
+from .sii import build_sii
+from .slave import SlaveStack
+
+log = logging.getLogger(__name__)
+
+AXIS_OFFSET = 0x800
+#: 6.2 operation modes: hm 6, csp 8, CML 101, CMD 120, CPIO 121.
+MODES = frozenset({6, 8, 101, 120, 121})
+MODE_CSP = 8
+INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+
+
+class BridgeApp:
+    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4)."""
+
+    def __init__(self, device: Any, bridge: str = ident.DEFAULT_VARIANT) -> None:
+        self.device = device
+        self.table: Table = build_table(bridge)
+        self.variant = self.table.variant
+        self.dictionary = Dictionary(self.table)
+        self.sii = build_sii(self.table)
+        self.stack = SlaveStack(self, self.sii)
+        ids = tuple(device.motor_ids) if device is not None else ()
+        self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
+        self.drives = {n: Drive(device, n) for n in self.axes}
+        self.operational = False
+        for axis in range(ident.AXES):
+            self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
+
+    @staticmethod
+    def _mode_written(axis: int) -> Any:
+        def hook(sub: int, value: Any) -> int | None:
+            """6.2.2 note 3: a mode that is not available is set to csp (8)."""
+            return None if value in MODES else MODE_CSP
+        return hook
+
+    # -- frame thread ---------------------------------------------------------
+    def state_change(self, current: int, requested: int) -> int:
+        """Every valid transition is accepted (the CiA402 checks come with part 2)."""
+        if requested == esm.OP:
+            self.operational = True
+        elif current == esm.OP:
+            self.operational = False
+        return 0
+
+    def outputs(self, image: bytes) -> None:
+        """An output image in OP: already in the dictionary (6040h/607Ah per axis)."""
+
+    def safe_outputs(self) -> None:
+        """OP left: the commands of the output image are no longer valid (6.3)."""
+        self.operational = False
+
+    # -- model thread ---------------------------------------------------------------
+    def cycle(self) -> None:
+        """One bridge cycle: each axis's drive steps (6.1, 6.3), then the inputs go out."""
+        od = self.dictionary
+        operational = self.operational
+        for axis in self.axes:
+            d = AXIS_OFFSET * (axis - 1)
+            snap = self.device.snapshot(axis)
+            word = self.drives[axis].step(int(od.get(0x6040 + d)), int(od.get(0x607A + d)),
+                                          int(od.get(0x6060 + d)), snap, operational)
+            od.set(0x6041 + d, 0, word)
+            od.set(0x6064 + d, 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
+            od.set(0x6061 + d, 0, od.get(0x6060 + d))
+        self.stack.set_inputs(od.pack_inputs())

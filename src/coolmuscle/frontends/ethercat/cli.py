@@ -1,0 +1,89 @@
+"""``coolmuscle ethercat ...`` (lab up/down, esi) and the ``sim --ethercat`` helpers.
+
+Registered on the main command in :mod:`coolmuscle.tools.cli` with ``add_typer``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from ...errors import CoolMuscleError
+from . import identity as ident
+
+app = typer.Typer(name="ethercat", no_args_is_help=True,
+                  help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
+lab_app = typer.Typer(name="lab", no_args_is_help=True,
+                      help="A veth pair with one end in a network namespace, for trying "
+                           "the bridge without hardware (root).")
+app.add_typer(lab_app)
+
+
+class EthercatUsageError(CoolMuscleError, ValueError):
+    """Bad --ethercat / --bridge options (exit status 2)."""
+
+
+def chain_firmware(bridge: str) -> str:
+    """The Chain firmware string of a bridge variant ("cm1,cm1,cm2,cm2" for EB12)."""
+    try:
+        v = ident.variant(bridge)
+    except ValueError as exc:
+        raise EthercatUsageError(str(exc)) from None
+    return ",".join(v.firmware)
+
+
+def sim_transport(iface: str, bridge: str) -> object:
+    """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
+    from .transport import EthercatTransport
+    chain_firmware(bridge)
+    return EthercatTransport(iface, ident.variant(bridge).code)
+
+
+@lab_app.command("up")
+def lab_up(
+    namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
+    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
+    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
+                                 help="The slave's end (inside the namespace)."),
+) -> None:
+    """Make the veth pair and print which end to give the master."""
+    from .lab import LabError, up
+    try:
+        lab = up(namespace, master_if, slave_if)
+    except LabError as exc:
+        typer.echo(f"coolmuscle: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(lab.instructions())
+
+
+@lab_app.command("down")
+def lab_down(
+    namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
+    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
+    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
+                                 help="The slave's end (inside the namespace)."),
+) -> None:
+    """Remove the pair and the namespace that ``up`` made (nothing else)."""
+    from .lab import LabError, down
+    try:
+        removed = down(namespace, master_if, slave_if)
+    except LabError as exc:
+        typer.echo(f"coolmuscle: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo("removed: " + ", ".join(removed) if removed else "nothing to remove")
+
+
+@app.command("esi")
+def esi(
+    bridge: list[str] = typer.Option(list(ident.VARIANTS), "--bridge",
+                                     help="Variants to describe (default: all)."),
+) -> None:
+    """Write the ESI file (ETG.2000 XML) to stdout: ``> CoolMuscleBridge.xml``."""
+    from .esi import esi_text
+    try:
+        codes = tuple(ident.variant(b).code for b in bridge)
+    except ValueError as exc:
+        typer.echo(f"coolmuscle: {exc}", err=True)
+        raise typer.Exit(2) from None
+    sys.stdout.write(esi_text(codes))

@@ -1,0 +1,248 @@
+"""Raw-socket transport: EtherCAT frames (EtherType 0x88A4) on an AF_PACKET socket.
+
+:class:`FrameThread` answers every frame in its own thread (like an ESC answers in
+hardware), so the motor model never delays an answer; the model side exchanges
+process data through the slave stack's buffers.  :class:`EthercatTransport` is the
+:class:`~coolmuscle.transports.base.Transport` that ``coolmuscle sim --ethercat``
+starts in the service loop: it owns the frame thread and the bridge's 1 ms cycle
+task (manual 6.3) that runs in the model's thread.
+
+Needs root or CAP_NET_RAW.  The loopback interface is refused: a frame sent on
+``lo`` comes back to the sender unchanged, so a master there would read its own
+frames as answers (and the slave its own answers as requests).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import logging
+import os
+import socket
+import struct
+import sys
+import threading
+import time
+from collections import deque
+from typing import Any
+
+from ...errors import TransportError
+from ..transports.base import Port, Transport
+from .esc import ETHERTYPE_ECAT
+
+log = logging.getLogger(__name__)
+
+PACKET_OUTGOING = 4
+FRAME_PRIORITY = 40
+MODEL_PRIORITY = 20
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+#: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
+SWITCH_INTERVAL = 0.0002
+
+
+def check_interface(iface: str) -> None:
+    """Refuse a name that cannot carry the bridge (loopback, missing interface)."""
+    if not iface:
+        raise TransportError("--ethercat needs an interface name (there is no default)")
+    if iface == "lo" or iface.startswith("lo:"):
+        raise TransportError("refusing the loopback interface 'lo': it reflects every frame "
+                             "to its sender, so a master would read its own frames; use a "
+                             "veth pair (coolmuscle ethercat lab up) or a real NIC")
+    try:
+        socket.if_nametoindex(iface)
+    except OSError:
+        raise TransportError(f"no network interface {iface!r}") from None
+
+
+def open_socket(iface: str) -> socket.socket:
+    """An AF_PACKET socket bound to ``iface`` for EtherType 0x88A4."""
+    try:
+        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETHERTYPE_ECAT))
+    except PermissionError:
+        raise TransportError("raw sockets need root or CAP_NET_RAW "
+                             "(sudo setcap cap_net_raw+ep on the python binary)") from None
+    except OSError as exc:
+        raise TransportError(f"cannot open an AF_PACKET socket: {exc}") from None
+    try:
+        sock.bind((iface, ETHERTYPE_ECAT))
+    except OSError as exc:
+        sock.close()
+        raise TransportError(f"cannot bind to {iface!r}: {exc.strerror or exc}") from None
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    return sock
+
+
+def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
+    """The kernel's receive time stamp (ns, CLOCK_REALTIME) of a frame, 0 if none."""
+    for level, kind, data in ancdata:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack_from("@qq", data)
+            return sec * 1_000_000_000 + nsec
+    return 0
+
+
+class FrameThread:
+    """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
+
+    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000,
+                 priority: int = FRAME_PRIORITY) -> None:
+        self.esc = esc
+        self.priority = priority
+        self.realtime = False
+        self.iface = iface
+        self.sock = open_socket(iface)
+        self.sock.settimeout(0.001)
+        #: Kernel receive time stamp to answer sent, ns (includes waiting for the GIL).
+        self.turnaround_ns: deque[int] = deque(maxlen=keep)
+        self.errors = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"ethercat-{iface}", daemon=True)
+        self._old_switch = sys.getswitchinterval()
+
+    def start(self) -> None:
+        sys.setswitchinterval(min(self._old_switch, SWITCH_INTERVAL))
+        self._thread.start()
+
+    def _realtime(self) -> None:
+        """Run this thread under SCHED_FIFO when allowed (root): a real ESC never waits."""
+        if self.priority <= 0 or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
+                                  os.sched_param(self.priority))
+            self.realtime = True
+        except (OSError, PermissionError):
+            log.info("frame thread stays at normal priority (no CAP_SYS_NICE)")
+
+    def _run(self) -> None:
+        self._realtime()
+        sock, esc = self.sock, self.esc
+        buf = bytearray(2048)
+        view = memoryview(buf)
+        clock, wall = time.monotonic_ns, time.time_ns
+        anc = socket.CMSG_SPACE(16)
+        while not self._stop.is_set():
+            try:
+                n, ancdata, _flags, addr = sock.recvmsg_into([buf], anc)
+            except socket.timeout:
+                esc.tick(clock())
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    break
+                self.errors += 1
+                continue
+            if addr[2] == PACKET_OUTGOING:
+                continue
+            try:
+                out = esc.process(view[:n], clock())
+            except Exception:      # a bug must not stop the slave: the frame is lost
+                self.errors += 1
+                log.exception("ESC failed on a frame")
+                continue
+            if out is None:
+                continue
+            try:
+                sock.send(out)
+            except OSError:
+                self.errors += 1
+            arrived = _kernel_time(ancdata)
+            if arrived:
+                self.turnaround_ns.append(wall() - arrived)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self.sock.close()
+        sys.setswitchinterval(self._old_switch)
+
+
+class EthercatTransport(Transport):
+    """``sim --ethercat IFACE``: the bridge as an EtherCAT slave on a raw interface."""
+
+    name = "ethercat"
+
+    def __init__(self, where: str = "", bridge: str = "EB02", cycle_s: float = 0.001) -> None:
+        super().__init__()
+        check_interface(where)
+        self.iface = where
+        self.bridge = bridge
+        self.cycle_s = cycle_s
+        self.app: Any = None
+        self.frames: FrameThread | None = None
+        self._task: asyncio.Task[None] | None = None
+        self.late_cycles = 0
+        self.cycles = 0
+        self.realtime_model = True
+        self._old_policy: tuple[int, os.sched_param] | None = None
+
+    async def start(self, port: Port) -> None:
+        from .app import BridgeApp
+        self.port = port
+        self.app = BridgeApp(port.device, self.bridge)
+        self.frames = FrameThread(self.app.stack.esc, self.iface)
+        gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
+        self._model_realtime(True)
+        self.frames.start()
+        self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
+
+    async def _cycle(self) -> None:
+        """The bridge's 1 ms cycle in the model's thread (6.3), paced to the wall clock."""
+        assert self.port is not None
+        loop = asyncio.get_running_loop()
+        period = self.cycle_s
+        due = loop.time()
+        while True:
+            due += period
+            delay = due - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            elif delay < -period:
+                self.late_cycles += 1
+                due = loop.time()
+            try:
+                self.port.call(self.app.cycle)
+            except Exception:
+                log.exception("bridge cycle failed")
+            self.cycles += 1
+
+    def _model_realtime(self, on: bool) -> None:
+        """The model's thread under SCHED_FIFO below the frame thread (when allowed).
+
+        The frame thread needs the GIL; a model thread preempted by another program
+        while it holds the GIL would delay every answer.  At a real-time priority the
+        model thread runs until it releases the GIL (at most the switch interval).
+        """
+        if not self.realtime_model or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            if on:
+                self._old_policy = os.sched_getscheduler(0), os.sched_getparam(0)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(MODEL_PRIORITY))
+            elif self._old_policy is not None:
+                os.sched_setscheduler(0, self._old_policy[0], self._old_policy[1])
+                self._old_policy = None
+        except (OSError, PermissionError):
+            log.info("model thread stays at normal priority (no CAP_SYS_NICE)")
+
+    def describe(self) -> str:
+        return f"ethercat: {self.iface} ({self.bridge}, EtherCAT slave, EtherType 0x88A4)"
+
+    def info(self) -> dict[str, Any]:
+        return {"iface": self.iface, "bridge": self.bridge}
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            try:
+                await self._task
+            except asyncio.CancelledError:
+                pass
+            self._task = None
+        if self.frames is not None:
+            self.frames.close()
+            self.frames = None
+            self._model_realtime(False)
+            gc.unfreeze()

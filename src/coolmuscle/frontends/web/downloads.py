@@ -1,0 +1,115 @@
+"""The page's downloads: the recorded trace (CSV / Parquet) and its plot (PNG).
+
+The trace is sampled from the recorder in the model's thread a few hundred rows at a
+time, between which the simulator runs on (virtual time keeps pace with the wall clock),
+up to the instant of the request; the file is then written from those rows in a worker
+thread, which touches no model state.  The plot is drawn in the model's thread (it reads
+the recorder) and pauses the simulator for about a second.  One download is prepared
+at a time; another request meanwhile gets 429.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+from aiohttp import web
+
+from ..transports.base import Port
+from .toolbox import Toolbox
+
+#: Most samples (rows x motors) of one downloaded trace: the step grows for long
+#: recordings (at least 1 ms, the step of ``coolmuscle run --trace``).
+MAX_TRACE_SAMPLES = 600_000
+#: Rows sampled in one turn of the model's loop.
+ROWS_PER_TURN = 400
+
+_TYPES = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "png": "image/png"}
+
+
+class Downloads:
+    """``/api/trace.{csv,parquet}`` and ``/api/plot.png`` of one dashboard."""
+
+    def __init__(self, port: Port, toolbox: Toolbox | None, recorder: Callable[[], Any],
+                 title: str = "") -> None:
+        self.port = port
+        self.toolbox = toolbox
+        self._recorder = recorder
+        self.title = title
+        self._busy = asyncio.Lock()
+
+    def _refusal(self) -> web.Response | None:
+        if self.toolbox is None or self._recorder() is None:
+            return _error(409, "nothing recorded: press Record first")
+        if self._busy.locked():
+            return _error(429, "a download is being prepared; try again in a moment")
+        return None
+
+    async def trace(self, request: web.Request) -> web.StreamResponse:
+        fmt = request.match_info["fmt"]
+        refused = self._refusal()
+        if refused is not None:
+            return refused
+        assert self.toolbox is not None
+        if fmt == "parquet" and not self.toolbox.parquet_available():
+            return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
+        async with self._busy:
+            header, rows = await self._sample()
+            body = await asyncio.to_thread(self._write, f"trace.{fmt}", header, rows)
+        return _file(f"trace.{fmt}", body)
+
+    async def _sample(self) -> tuple[list[str], list[list[float]]]:
+        assert self.toolbox is not None
+        recorder, device = self._recorder(), self.port.device
+        end = device.kernel.now
+        span = max(end - getattr(recorder, "start", 0), 0) / 1e9
+        motors = max(len(device.motor_ids), 1)
+        step = max(0.001, span * motors / MAX_TRACE_SAMPLES)
+        header, source = self.port.call(self.toolbox.trace_rows, recorder, step, end)
+        rows: list[list[float]] = []
+        while True:
+            chunk = self.port.call(_take, source, ROWS_PER_TURN)
+            rows += chunk
+            if len(chunk) < ROWS_PER_TURN:
+                return header, rows
+            await asyncio.sleep(0)
+
+    def _write(self, name: str, header: list[str], rows: list[list[float]]) -> bytes:
+        assert self.toolbox is not None
+        with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
+            path = Path(tmp) / name
+            self.toolbox.write_rows(path, header, rows)
+            return path.read_bytes()
+
+    async def plot(self, _request: web.Request) -> web.StreamResponse:
+        refused = self._refusal()
+        if refused is not None:
+            return refused
+        toolbox, device = self.toolbox, self.port.device
+        assert toolbox is not None
+        async with self._busy:
+            with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
+                path = Path(tmp) / "plot.png"
+                self.port.call(toolbox.plot, device, path, self.title)
+                body = path.read_bytes()
+        return _file("plot.png", body)
+
+
+def _take(rows: Any, count: int) -> list[list[float]]:
+    out = []
+    for row in rows:
+        out.append(row)
+        if len(out) >= count:
+            break
+    return out
+
+
+def _file(name: str, body: bytes) -> web.Response:
+    return web.Response(body=body, content_type=_TYPES[name.rsplit(".", 1)[1]], headers={
+        "Content-Disposition": f'attachment; filename="coolmuscle-{name}"'})
+
+
+def _error(status: int, message: str) -> web.Response:
+    return web.json_response({"error": message}, status=status)

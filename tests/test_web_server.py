@@ -1,0 +1,353 @@
+"""The dashboard server over its own protocol (aiohttp WebSocket client), no browser.
+
+What the page may do and what it may not: every request is checked against the motor's
+own answers on its TCP host line (cml-users-guide.txt 6.6 queries), bad input gets a
+clear message or the motor's own error, and access is guarded (token off loopback,
+Host and Origin checks).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import multiprocessing
+import os
+import socket
+import struct
+import time
+
+import aiohttp
+import pytest
+
+from coolmuscle.frontends.web.access import Access, expand_web_flag, parse_web_address
+from coolmuscle.errors import TransportError
+
+from web_support import ROOT, HostLine, ask, count_snapshots, serve, ws_frames
+
+
+@pytest.fixture(scope="module")
+def served():
+    st = serve(motors=2)
+    yield st
+    st.stop()
+
+
+def _url(st) -> str:
+    return st.transports[1].url
+
+
+def _run(coro):
+    return asyncio.run(coro)
+
+
+async def _with_ws(url: str, body, **kw):
+    async with aiohttp.ClientSession() as session:
+        async with session.ws_connect(url + "ws", **kw) as ws:
+            hello = await ws_frames(ws, lambda f: f["t"] == "hello")
+            return await body(ws, hello)
+
+
+def test_hello_describes_the_chain(served):
+    async def body(ws, hello):
+        return hello
+    hello = _run(_with_ws(_url(served), body))
+    assert hello["motors"] == [1, 2]
+    assert hello["io"] == {"inputs": 6, "outputs": 4}
+    assert set(hello["faults"]) >= {"overload", "encoder", "stuck_input", "broken_cable"}
+    assert [row[0] for row in hello["snap"]["m"]] == [1, 2]
+
+
+def test_6_6_query_from_the_page_answers_as_the_host_line(served):
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        async def body(ws, hello):
+            return await ask(ws, {"t": "cml", "line": "?96.2"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["replies"] == [host.query("?96.2", r"Px\.2=-?\d+")]
+    finally:
+        host.close()
+
+
+def test_malformed_cml_gets_a_clear_note_and_the_motor_stays_silent_k23(served):
+    async def body(ws, hello):
+        return await ask(ws, {"t": "cml", "line": "P.1=((("})
+    result = _run(_with_ws(_url(served), body))
+    assert result["ok"] and result["replies"] == []
+    assert "not CML" in result["note"] and "K23.1 lacks 16" in result["note"]
+
+
+def test_out_of_range_with_k23_messages_gets_the_motors_error_line(served):
+    """ch. 3 K23 function 16: error messages are printed; P out of range is error00/02."""
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        host.query("K23.1=17", r"K23\.1=17")
+        async def body(ws, hello):
+            return await ask(ws, {"t": "cml", "line": "P.1=999999999"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["replies"] == [host.query("P.1=999999999",
+                                                                  r"error\d\d\.1.*")]
+        assert result["replies"][0].startswith("error00.1")
+    finally:
+        host.query("K23.1=1", r"K23\.1=1")
+        host.close()
+
+
+@pytest.mark.parametrize("request_, words", [
+    ({"t": "analog", "counts": 2000}, "0..1023"),
+    ({"t": "analog", "counts": 10, "motor": 9}, "no motor ID9"),
+    ({"t": "input", "n": "x", "on": True}, "input"),
+    ({"t": "fault", "fault": "gremlins"}, "unknown fault"),
+    ({"t": "fault", "fault": "overload", "params": {"torque": "x" * 100}}, "parameters"),
+    ({"t": "fault", "fault": "stuck_input", "params": {"input": 99}}, "1..6"),
+    ({"t": "cml", "line": "P.1=1\rP.1=2"}, "one line"),
+    ({"t": "cml", "line": "?" * 600}, "too long"),
+    ({"t": "warp"}, "unknown request"),
+])
+def test_bad_requests_get_a_clear_message(served, request_, words):
+    async def body(ws, hello):
+        return await ask(ws, request_)
+    result = _run(_with_ws(_url(served), body))
+    assert result["ok"] is False and words in result["error"]
+    assert "Traceback" not in result["error"]
+
+
+def test_malformed_json_and_nan_are_refused_and_the_socket_lives_on(served):
+    async def body(ws, hello):
+        await ws.send_str("{not json")
+        first = await ws_frames(ws, lambda f: f["t"] == "result")
+        await ws.send_str('{"t": "analog", "id": 3, "counts": NaN}')
+        second = await ws_frames(ws, lambda f: f["t"] == "result")
+        third = await ask(ws, {"t": "cml", "line": "?99.1"}, rid=4)
+        return first, second, third
+    first, second, third = _run(_with_ws(_url(served), body))
+    assert not first["ok"] and "not a JSON request" in first["error"]
+    assert not second["ok"]
+    assert third["ok"] and third["replies"][0].startswith("Ux.1=")
+
+
+def test_huge_websocket_message_closes_that_socket_1009_only(served):
+    async def body(ws, hello):
+        await ws.send_str(json.dumps({"t": "cml", "line": "x" * 400_000}))
+        msg = await ws.receive(timeout=5)
+        return msg.type, ws.close_code
+    kind, code = _run(_with_ws(_url(served), body))
+    assert kind in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING)
+    assert code == 1009
+
+    async def again(ws, hello):
+        return await ask(ws, {"t": "cml", "line": "?99.1"})
+    assert _run(_with_ws(_url(served), again))["ok"]
+
+
+def test_bank_with_checker_errors_is_not_sent_and_names_its_line(served):
+    host = HostLine(served.transports[0].info()["port"])
+    try:
+        async def body(ws, hello):
+            return await ask(ws, {"t": "bank_upload", "motor": 2,
+                                  "text": "B3.2\nS.2=100\nP.2=(((\nEND"})
+        result = _run(_with_ws(_url(served), body))
+        assert result["ok"] and result["uploaded"] is False
+        errors = [d for d in result["diagnostics"] if d["severity"] == "error"]
+        assert errors and errors[0]["line"] == 3
+        host.query("K23.2=17", r"K23\.2=17")
+        assert host.query("?3.2", r"error\d\d\.2.*").startswith("error")   # 6.6: no bank 3
+    finally:
+        host.query("K23.2=1", r"K23\.2=1")
+        host.close()
+
+
+def _raw_websocket(port: int) -> socket.socket:
+    """A WebSocket opened by hand (RFC 6455 handshake), to send what no library would."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                  f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                  "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(4096)
+    assert head.startswith(b"HTTP/1.1 101"), head[:80]
+    return sock
+
+
+def test_page_closed_mid_upload_leaves_the_banks_and_the_server_alone(served):
+    """A request cut off in the middle (the first fragment of a WebSocket message, then
+    the connection drops: RFC 6455 5.4) is never applied; the server and the other
+    pages go on."""
+    url, port = _url(served), served.transports[1].info()["port"]
+
+    async def watch_while_cut_off():
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(url + "ws") as other:
+                await ws_frames(other, lambda f: f["t"] == "hello")
+                sock = _raw_websocket(port)
+                text = json.dumps({"t": "bank_upload", "id": 1,
+                                   "text": "B7.1\nT1.1\nEND"}).encode()
+                mask = os.urandom(4)
+                piece = bytes(b ^ mask[i % 4] for i, b in enumerate(text[:20]))
+                sock.sendall(bytes([0x01, 0x80 | 20]) + mask + piece)   # TEXT, FIN clear
+                await asyncio.sleep(0.2)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                sock.close()                                           # the tab is gone
+                return await ask(other, {"t": "banks", "motor": 1}, rid=9)
+    listing = _run(watch_while_cut_off())
+    assert listing["ok"]
+    assert "B7.1" not in [b["label"] for b in listing["banks"]["banks"]]
+
+
+def test_token_required_off_loopback_and_checked():
+    access = Access("0.0.0.0", token="s3cret")
+    assert access.token_required and access.token_ok("s3cret")
+    assert not access.token_ok("nope") and not access.token_ok(None)
+    assert not Access("127.0.0.1").token_required and Access("127.0.0.1").token_ok(None)
+    assert Access("192.168.1.5").token          # a fresh random token when none is given
+
+
+def test_non_loopback_bind_refuses_websocket_without_token():
+    from coolmuscle.frontends.transports.service import ServiceThread
+    from coolmuscle.chain import Chain
+    from coolmuscle.frontends.web.server import WebTransport
+    with ServiceThread(lambda: Chain(), lambda: [WebTransport("0.0.0.0", 0)]) as st:
+        web = st.transports[0]
+        token, port = web.access.token, web.info()["port"]
+        assert token and token in web.describe()
+
+        async def probe():
+            async with aiohttp.ClientSession() as session:
+                base = f"http://127.0.0.1:{port}"
+                async with session.get(base + "/") as page:
+                    page_status = page.status
+                async with session.get(base + "/api/info") as info:
+                    needs = (await info.json())["token_required"]
+                with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                    await session.ws_connect(base + "/ws")
+                async with session.get(base + "/api/trace.csv") as trace:
+                    trace_status = trace.status
+                async with session.ws_connect(base + "/ws?token=" + token) as ws:
+                    hello = await ws_frames(ws, lambda f: f["t"] == "hello")
+                return page_status, needs, refused.value.status, trace_status, hello
+        page_status, needs, ws_status, trace_status, hello = _run(probe())
+        assert (page_status, needs, ws_status, trace_status) == (200, True, 401, 401)
+        assert hello["motors"] == [1]
+
+
+def test_loopback_refuses_foreign_origin_and_host(served):
+    url = _url(served)
+
+    async def probe():
+        async with aiohttp.ClientSession() as session:
+            with pytest.raises(aiohttp.WSServerHandshakeError) as foreign:
+                await session.ws_connect(url + "ws", headers={"Origin": "http://evil.example"})
+            async with session.get(url, headers={"Host": "evil.example:8080"}) as rebound:
+                rebound_status = rebound.status
+            return foreign.value.status, rebound_status
+    assert _run(probe()) == (403, 421)
+
+
+def test_trace_and_plot_download_after_record():
+    st = serve(motors=1)
+    url = st.transports[1].url
+
+    async def fetch():
+        async with aiohttp.ClientSession() as session:
+            async with session.get(url + "api/trace.csv") as r:
+                before = (r.status, (await r.json())["error"])
+            async with session.ws_connect(url + "ws") as ws:
+                await ws_frames(ws, lambda f: f["t"] == "hello")
+                recording = await ask(ws, {"t": "record"})
+                await ask(ws, {"t": "cml", "line": "S.1=100, A.1=100, P.1=500, ^.1"}, rid=2)
+                await asyncio.sleep(0.5)
+            async with session.get(url + "api/trace.csv") as r:
+                csv = (r.status, await r.text())
+            async with session.get(url + "api/plot.png") as r:
+                png = (r.status, await r.read())
+            return before, recording, csv, png
+    try:
+        before, recording, (csv_status, csv), (png_status, png) = _run(fetch())
+    finally:
+        st.stop()
+    assert before[0] == 409 and "Record" in before[1]
+    assert recording["ok"] and recording["recording"]
+    assert csv_status == 200 and csv.startswith("time_s,m1.")
+    positions = [float(row.split(",")[3]) for row in csv.splitlines()[1:]]
+    assert max(positions) > 0                   # the move is in the trace
+    assert png_status == 200 and png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_web_address_forms():
+    assert parse_web_address(None) == ("127.0.0.1", 8080)
+    assert parse_web_address("9000") == ("127.0.0.1", 9000)
+    assert parse_web_address("0.0.0.0:8080") == ("0.0.0.0", 8080)
+    assert parse_web_address("[::1]:81") == ("::1", 81)
+    assert parse_web_address("0.0.0.0") == ("0.0.0.0", 8080)
+    with pytest.raises(TransportError, match="HOST:"):
+        parse_web_address("http://x")
+    assert expand_web_flag(["sim", "--web"]) == ["sim", "--web", "127.0.0.1:8080"]
+    assert expand_web_flag(["run", "a.cml", "--web", "--motors", "2"])[3] == "127.0.0.1:8080"
+    assert expand_web_flag(["sim", "--web", "9000"]) == ["sim", "--web", "9000"]
+    assert expand_web_flag(["sim", "--web", "bad:x"]) == ["sim", "--web", "bad:x"]
+    script = str(ROOT / "examples" / "2.1-operation.cml")
+    assert expand_web_flag(["run", "--web", script]) == ["run", "--web", "127.0.0.1:8080",
+                                                         script]
+
+
+def test_twenty_clients_on_fifteen_motors_keep_20_updates_a_second():
+    """Load: 20 WebSocket clients (in another process, as browsers are) watch a 15-motor
+    chain while every motor moves; each gets at least 20 snapshots a second."""
+    st = serve(motors=15)
+    try:
+        url = st.transports[1].url
+        host = HostLine(st.transports[0].info()["port"])
+        moves = ", ".join(f"S.{m}=20, A.{m}=100, P.{m}=50000" for m in range(1, 16))
+        host.sock.sendall(moves.encode() + b"\r" + ", ".join(
+            f"^.{m}" for m in range(1, 16)).encode() + b"\r")
+        spawn = multiprocessing.get_context("spawn")
+        queue = spawn.Queue()
+        child = spawn.Process(target=count_snapshots, args=(url, 20, 2.0, queue))
+        child.start()
+        results = queue.get(timeout=60)
+        child.join(10)
+        host.close()
+    finally:
+        st.stop()
+    assert [motors for _, motors in results] == [15] * 20
+    counts = [count for count, _ in results]
+    print("snapshots in 2 s per client:", counts)
+    assert min(counts) / 2.0 >= 20, counts
+
+
+def test_trace_download_writes_what_run_trace_writes(tmp_path):
+    """The page's CSV is the recorder's own CSV (docs/plots.md), sampled in chunks."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.sim.kernel import seconds
+    from coolmuscle.tools.trace import record
+    from coolmuscle.tools.web import DashboardTools
+
+    chain = Chain(motors=2)
+    recorder = record(chain)
+    chain.execute("S.1=100, A.1=100, P.1=3000, ^.1, S.2=50, A.2=50, P.2=-800, ^.2")
+    chain.kernel.run(until=seconds(2))
+    tools = DashboardTools()
+    header, rows = tools.trace_rows(recorder, 0.001, chain.kernel.now)
+    tools.write_rows(tmp_path / "page.csv", header, list(rows))
+    recorder.write_csv(tmp_path / "run.csv", 0.001)
+    assert (tmp_path / "page.csv").read_text() == (tmp_path / "run.csv").read_text()
+
+
+def test_no_polling_storm_while_nothing_moves(served):
+    """Idle motors: no snapshot is sent while no value changes, only the 1 s tick."""
+    async def body(ws, hello):
+        await asyncio.sleep(1.5)              # the fast second after connecting passes
+        frames = []
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:
+            try:
+                frames.append(await ws_frames(ws, lambda f: True,
+                                              timeout=max(0.05, end - time.monotonic())))
+            except asyncio.TimeoutError:
+                break
+        return frames
+    frames = _run(_with_ws(_url(served), body))    # 3.5 s since the hello in all
+    kinds = [f["t"] for f in frames]
+    assert "snap" not in kinds and kinds.count("tick") <= 5 and len(kinds) <= 5, kinds
