@@ -282,3 +282,107 @@ def test_kill_9_during_dollar_leaves_the_last_save(tmp_path: Path) -> None:
             saved = store.load(1)["memory"]["P"][1]
         assert saved in (acknowledged, acknowledged + 1), (saved, acknowledged)
         acknowledged = saved
+
+
+# -- EtherNet/IP (the CM1 module, landed with issue 14) -------------------------------------
+def _encap(command: int, data: bytes, session: int = 0, context: bytes = b"\0" * 8) -> bytes:
+    return struct.pack("<HHII8sI", command, len(data), session, 0, context, 0) + data
+
+
+def _enip_alive(port: int, timeout: float = 3.0) -> None:
+    """A fresh connection's RegisterSession (CIP Vol 2 2-4.4) is answered with status 0."""
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
+        sock.sendall(_encap(0x65, struct.pack("<HH", 1, 0), context=b"alive!!!"))
+        reply = b""
+        while len(reply) < 28:
+            chunk = sock.recv(64)
+            assert chunk, reply
+            reply += chunk
+    command, length, session, status, context = struct.unpack("<HHII8s", reply[:20])
+    assert (command, length, status, context) == (0x65, 4, 0, b"alive!!!") and session
+
+
+def test_fuzz_the_ethernet_ip_front_end_with_a_liveness_check_between_batches() -> None:
+    from coolmuscle.frontends.enip.server import EnipTransport
+
+    rng = random.Random(44818)
+    with ServiceThread(lambda: Chain(None, 1, firmware="cm1", state_dir=None),
+                       lambda: [EnipTransport(port=0, io_port=0),
+                                TcpTransport(port=0)]) as st_:
+        port = st_.transports[0].info()["port"]
+        cml = st_.transports[1].info()["port"]
+        for _batch in range(20):
+            with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+                out = bytearray()
+                for _ in range(rng.randint(1, 30)):
+                    roll = rng.random()
+                    data = bytes(rng.randrange(256) for _ in range(rng.randint(0, 60)))
+                    if roll < 0.3:
+                        out += data                                     # raw garbage
+                    elif roll < 0.8:                                    # a plausible header
+                        out += _encap(rng.choice((0x65, 0x66, 0x6F, 0x70, 0x63, 0x04, 0x01,
+                                                  rng.randrange(0x10000))),
+                                      data, session=rng.choice((0, 1, rng.randrange(1 << 32))))
+                    else:                                               # a lying length
+                        out += struct.pack("<HH", 0x6F, rng.randrange(0x10000)) + data
+                try:
+                    sock.sendall(bytes(out))
+                    sock.settimeout(0.05)
+                    while sock.recv(1 << 16):
+                        pass
+                except OSError:
+                    pass                        # closed by the adapter: allowed
+            _enip_alive(port)
+            with socket.create_connection(("127.0.0.1", cml), timeout=3) as sock:
+                sock.sendall(b"\r?96.1\r")
+                data = b""
+                while b"Px.1=" not in data:
+                    chunk = sock.recv(4096)
+                    assert chunk
+                    data += chunk
+
+
+# -- the web dashboard (HTTP / WebSocket, landed with issue 12) ----------------------------
+def _http_alive(port: int, timeout: float = 3.0) -> None:
+    with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
+        sock.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        reply = b""
+        while chunk := sock.recv(1 << 16):
+            reply += chunk
+    assert reply.startswith(b"HTTP/1.1 ") and b" 500 " not in reply[:20], reply[:200]
+
+
+def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
+    from coolmuscle.frontends.transports import create
+
+    rng = random.Random(8080)
+    requests = [b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", b"POST /api HTTP/1.1\r\nContent-Length: 5\r\n\r\n",
+                b"GET /ws HTTP/1.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
+                b"\x16\x03\x01\x00\xa5", b"GET /" + b"A" * 9000 + b" HTTP/1.1\r\n\r\n"]
+    with ServiceThread(lambda: Chain(), lambda: [create("tcp", port=0),
+                                                 create("web", port=0)]) as st_:
+        cml, web = (t.info()["port"] for t in st_.transports)
+        for _batch in range(15):
+            with socket.create_connection(("127.0.0.1", web), timeout=5) as sock:
+                data = bytearray(rng.choice(requests))
+                for _ in range(rng.randint(0, 6)):
+                    pos = rng.randint(0, len(data))
+                    data[pos:pos + rng.randint(0, 4)] = bytes(rng.randrange(256)
+                                                              for _ in range(rng.randint(0, 6)))
+                data += bytes(rng.randrange(256) for _ in range(rng.randint(0, 300)))
+                try:
+                    sock.sendall(bytes(data))
+                    sock.settimeout(0.05)
+                    while sock.recv(1 << 16):
+                        pass
+                except OSError:
+                    pass
+            _http_alive(web)
+            with socket.create_connection(("127.0.0.1", cml), timeout=3) as sock:
+                sock.sendall(b"\r?96.1\r")
+                got = b""
+                while b"Px.1=" not in got:
+                    chunk = sock.recv(4096)
+                    assert chunk
+                    got += chunk
