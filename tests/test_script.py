@@ -239,7 +239,7 @@ def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path,
 
     traced: list[Path] = []
 
-    def fake_trace(chain: Any, path: Path) -> Handle:
+    def fake_trace(chain: Any, path: Path, step: float = 0.001, **options: Any) -> Handle:
         traced.append(path)
         return Handle()
 

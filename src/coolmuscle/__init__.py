@@ -6,6 +6,27 @@ are stable.
 
 from __future__ import annotations
 
+import os as _os
+import sys as _sys
+
+
+def _run_as_the_command() -> bool:
+    """``python -m coolmuscle ...`` (argv[0] is "-m" while the package loads) or the
+    ``coolmuscle`` script."""
+    if _sys.argv[:1] == ["-m"]:
+        orig = list(getattr(_sys, "orig_argv", []))
+        return "-m" in orig and orig[orig.index("-m") + 1:][:1] == ["coolmuscle"]
+    return _os.path.basename(_sys.argv[0] if _sys.argv else "") == "coolmuscle"
+
+
+if _run_as_the_command():
+    # Started as the command: stop signals are handled from here on,
+    # before anything else loads (docs/reliability.md "signals").  A library import
+    # leaves the program's signal handlers alone.
+    from .tools.stopsignals import install_startup_handlers as _install
+
+    _install()
+
 __version__ = "0.1.0"
 
 __all__ = ["__version__", "connect", "connect_async", "Ux", "Version", "CoolMuscleError"]

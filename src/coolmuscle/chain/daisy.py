@@ -20,7 +20,7 @@ from ..cml import ast
 from ..cml.parser import parse
 from ..device.api import Event, EventListener, MotorSnapshot, TargetStream
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      NoSuchMotorError, OutOfRangeError)
+                      NoSuchMotorError, OutOfRangeError, StoreError)
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..motor.programs.banks import BankUploads
 from .links import ChainLinks
@@ -33,7 +33,7 @@ from ..motor.state.memory import VNumber, VState
 from ..motor.motor import Motor
 from ..motor.context import Context
 from ..motor.status import Report
-from ..motor.state.store import Store
+from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
 
 if TYPE_CHECKING:
@@ -104,6 +104,7 @@ class Chain:
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
+        self.host_line.on_source_end = lambda source: self.uploads.abandon("host", source)
         self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
         self.motors[1].params.on_change(
             lambda k, _old, new: self._k65_written(new) if k == 65 else None)
@@ -148,7 +149,7 @@ class Chain:
         return found
 
     def _on_host_line(self, text: str) -> None:
-        self._execute_text(text, Context(origin="host"))
+        self._execute_text(text, Context(origin="host", session=self.host_line.source))
         self._changed()
 
     def observe(self, observer: Callable[[], None]) -> Callable[[], None]:
@@ -163,12 +164,15 @@ class Chain:
         for observer in self._observers:
             observer()
 
-    def execute(self, line: str, *, origin: str = "api", motor: int | None = None) -> list[str]:
+    def execute(self, line: str, *, origin: str = "api", motor: int | None = None,
+                session: object = None) -> list[str]:
         """Run a CML line as ``origin``; return the replies it produced at once.
 
         ``motor`` is the ID statements without ``.n`` go to (default ID1).
+        ``session`` names the sender within ``origin`` (a bank upload ``B#.n``
+        takes only the lines of the sender that opened it).
         """
-        ctx = Context(origin=origin, replies=[],
+        ctx = Context(origin=origin, replies=[], session=session,
                       default_motor=1 if motor is None else self._require(motor).id)
         self._execute_text(line, ctx)
         self._changed()
@@ -396,12 +400,29 @@ class Chain:
     def _restore(self) -> None:
         for motor in self.motors.values():
             if self.store is not None:
-                saved = self.store.load(motor.id)
+                saved = self.store.load(motor.id)   # shape checked: StoreError names it
+                problem = snapshot_problem(saved) if saved else ""
+                if problem:
+                    raise StoreError(bad_state_message(self.store.path, motor.id, problem))
                 if saved:
-                    motor.load_snapshot(saved)
-                store = self.store
+                    try:
+                        motor.load_snapshot(saved)
+                    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+                        raise StoreError(bad_state_message(
+                            self.store.path, motor.id, f"cannot be restored ({exc})")) from exc
                 motor.params.on_change(
-                    lambda k, old, new, m=motor.id: store.save_param(m, k, new))
+                    lambda k, old, new, m=motor.id: self._store_param(m, k, new))
+
+    def _store_param(self, motor_id: int, k: int, value: int) -> None:
+        """Persist an accepted K change (ch. 3); a failed write is told, never raised:
+        the value holds in memory until the next power cycle."""
+        if self.store is None:
+            return
+        try:
+            self.store.save_param(motor_id, k, value)
+        except StoreError as exc:
+            log.warning("K%d.%d=%d not stored: %s", k, motor_id, value, exc)
+            self.emit(motor_id, "message", f"K{k}.{motor_id} not stored: {exc}")
 
     def close(self) -> None:
         """Close the store (unsaved data is lost, as at power off)."""

@@ -88,10 +88,12 @@ class Device(Protocol):
         """IDs on the chain, 1..N."""
 
     def execute(self, line: str, *, origin: Origin = "api",
-                motor: int | None = None) -> list[str]:
+                motor: int | None = None, session: object = None) -> list[str]:
         """Run one CML line as if sent by ``origin``; return the reply lines it produced
         at once (queries, error messages).  Later events arrive via :meth:`subscribe`.
-        Statements without ``.n`` go to ``motor`` (default ID1)."""
+        Statements without ``.n`` go to ``motor`` (default ID1).  ``session`` names
+        the sender within ``origin``: a bank upload (``B#.n``) takes only the lines
+        of the sender that opened it."""
 
     def get_param(self, motor: int, k: int) -> int:
         """Read K parameter ``k`` of ``motor``."""

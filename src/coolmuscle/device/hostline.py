@@ -13,6 +13,13 @@ Transports (TCP, pty, stdio, pyserial URL) only shuttle bytes: they call
 :meth:`HostLine.feed` with what the host sent and subscribe to the bytes the
 motor sends with :meth:`HostLine.add_listener`.
 
+Several hosts may share the line (TCP clients, a pty program): ``feed(data,
+source=...)`` assembles each source's line apart (its own partial line, CRLF
+state and over-long-line discard), so one host's unfinished ``P1.1=12`` and
+another's ``?96.1`` are never run as one line.  While a line runs,
+:attr:`HostLine.source` names its sender (bank uploads belong to it);
+:meth:`HostLine.end_source` forgets a sender that went away.
+
 COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
 :attr:`HostLine.mode` then takes the received bytes instead of the text line,
 and text replies are not sent while it is active.
@@ -75,9 +82,11 @@ class HostLine:
         self._on_line = on_line
         self._settings = settings
         self.pacing = pacing
-        self._buf = bytearray()
-        self._overflow = False
-        self._last_was_cr = False
+        self._assembly: dict[object, _Assembly] = {}
+        #: The sender of the line being run (``None``: the single default host).
+        self.source: object = None
+        #: Called with a source that went away (its bank upload ends with it).
+        self.on_source_end: Callable[[object], None] | None = None
         self._listeners: list[ByteListener] = []
         self._tx_free_at = 0  # virtual time the transmitter is free again (pacing)
         self._rx_free_at = 0
@@ -124,69 +133,105 @@ class HostLine:
                 log.exception("host line listener failed")
 
     # -- input ----------------------------------------------------------
-    def feed(self, data: bytes) -> None:
-        """Bytes from the host; with pacing they arrive at the K20 rate."""
+    def feed(self, data: bytes, source: object = None) -> None:
+        """Bytes from the host ``source``; with pacing they arrive at the K20 rate."""
         if not data:
             return
         if not self.pacing:
-            self._receive(data)
+            self._receive(data, source)
             return
         bt = byte_time_ns(self._settings().baud)
         start = max(self.kernel.now, self._rx_free_at)
         self._rx_free_at = start + len(data) * bt
-        self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data),
+        self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data, source),
                                 priority=PRIO_IO, name="hostline-rx")
 
-    def _receive(self, data: bytes) -> None:
+    def rx_backlog_ns(self) -> int:
+        """With pacing: virtual time until the bytes fed so far have all arrived."""
+        return max(0, self._rx_free_at - self.kernel.now) if self.pacing else 0
+
+    def _receive(self, data: bytes, source: object = None) -> None:
         self.bytes_in += len(data)
         if self.mode is not None and self.mode.active():
             self.mode.receive(data)
             return
-        self.receive_text(data)
+        self.receive_text(data, source)
 
-    def receive_text(self, data: bytes) -> None:
+    def _assembly_of(self, source: object) -> "_Assembly":
+        found = self._assembly.get(source)
+        if found is None:
+            found = self._assembly[source] = _Assembly()
+        return found
+
+    def receive_text(self, data: bytes, source: object = None) -> None:
         """Bytes for the RS-232 text line (also what follows a Modbus escape, 5.6.9)."""
         settings = self._settings()
+        asm = self._assembly_of(source)
         echo = bytearray()
         failure: Exception | None = None
         for byte in data:
-            if byte == 0x0A and self._last_was_cr:
-                self._last_was_cr = False
+            if byte == 0x0A and asm.last_was_cr:
+                asm.last_was_cr = False
                 continue
-            self._last_was_cr = byte == 0x0D
+            asm.last_was_cr = byte == 0x0D
             if byte in (0x0D, 0x0A):
                 if settings.echo:
                     echo += settings.delimiter
                     self.write(bytes(echo))
                     echo.clear()
                 try:
-                    self._end_line()
+                    self._end_line(asm, source)
                 except Exception as exc:  # isolate the line; report after the chunk
                     failure = failure or exc
                 settings = self._settings()  # the line may have changed K23/K70
                 continue
             if settings.echo:
                 echo.append(byte)
-            if len(self._buf) >= MAX_LINE:
-                self._overflow = True
+            if len(asm.buf) >= MAX_LINE:
+                asm.overflow = True
             else:
-                self._buf.append(byte)
+                asm.buf.append(byte)
         if echo:
             self.write(bytes(echo))
         if failure is not None:
             raise failure
 
-    def discard_partial(self) -> None:
-        """Forget a partly received line (its sender went away mid-line)."""
-        self._buf.clear()
-        self._overflow = False
-        self._last_was_cr = False
+    def discard_partial(self, source: object = None) -> None:
+        """Forget a partly received line of ``source`` (its sender went away mid-line)."""
+        asm = self._assembly.get(source)
+        if asm is not None:
+            asm.buf.clear()
+            asm.overflow = False
+            asm.last_was_cr = False
 
-    def _end_line(self) -> None:
-        raw = bytes(self._buf)
-        self._buf.clear()
-        if self._overflow:
-            self._overflow = False
+    def end_source(self, source: object) -> None:
+        """``source`` went away: forget its half line and end what it owned."""
+        if source is None:
+            return
+        self._assembly.pop(source, None)
+        if self.on_source_end is not None:
+            self.on_source_end(source)
+
+    def _end_line(self, asm: "_Assembly", source: object) -> None:
+        raw = bytes(asm.buf)
+        asm.buf.clear()
+        if asm.overflow:
+            asm.overflow = False
             log.debug("discarded over-long line (%d+ bytes)", MAX_LINE)
             return
-        self._on_line(raw.decode("latin-1"))
+        self.source = source
+        try:
+            self._on_line(raw.decode("latin-1"))
+        finally:
+            self.source = None
+
+
+class _Assembly:
+    """One sender's line in progress: its bytes, over-long flag and CRLF state."""
+
+    __slots__ = ("buf", "overflow", "last_was_cr")
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+        self.overflow = False
+        self.last_was_cr = False

@@ -19,4 +19,5 @@ class Context:
     program: bool = False   # inside a program bank
     ladder: bool = False    # inside a ladder bank
     quiet: bool = False     # ladder line ending with ';'
+    session: object = None  # which sender of ``origin`` (a TCP client ...): owns bank uploads
     extra: dict[str, object] = field(default_factory=dict)

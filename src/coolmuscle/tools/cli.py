@@ -22,6 +22,7 @@ import logging
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -31,6 +32,8 @@ from rich.console import Console
 from .. import __version__
 from ..errors import TransportError
 from .usage import UsageError
+from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
+                          clear_stop, install_startup_handlers, stop_line, stop_requested)
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .runcmd import header_defaults, make_chain, run_command, setup_logging
 from .script import load_script
@@ -78,8 +81,13 @@ chain_factory: Callable[..., Any] = _default_chain_factory
 
 
 def default_state_dir() -> Path:
-    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``)."""
-    base = os.environ.get("XDG_DATA_HOME") or os.path.expanduser("~/.local/share")
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``).
+
+    A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says
+    ("If an implementation encounters a relative path ... it should consider the
+    path invalid and ignore it")."""
+    xdg = os.environ.get("XDG_DATA_HOME", "")
+    base = xdg if xdg and os.path.isabs(xdg) else os.path.expanduser("~/.local/share")
     return Path(base) / "coolmuscle" / "state"
 
 
@@ -202,13 +210,17 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         err.print(_modbus_notice(station, state, asked), markup=False)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in STOP_SIGNALS:
         loop.add_signal_handler(sig, stop.set)
+    if stop_requested():              # a signal whose exception was swallowed on the way
+        clear_stop()
+        stop.set()
     try:
         await service.wait(stop)
     finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in STOP_SIGNALS:
             loop.remove_signal_handler(sig)
+        ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
 
 
@@ -304,7 +316,7 @@ def sim(
         None, "--enip-rt-priority", metavar="N", min=1, max=99,
         help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
-    """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
+    """Serve a virtual chain in real time until Ctrl-C, SIGTERM or SIGHUP."""
     _setup_logging(verbose)
     if state is not None and no_state:
         raise UsageError("--state and --no-state exclude each other")
@@ -313,6 +325,7 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
+    check_stop()
     dashboard = _web_transport(web) if web is not None else None   # docs/web.md
     fw = ""
     if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
@@ -334,11 +347,14 @@ def sim(
     if dashboard is not None:
         chosen.append(dashboard)
     try:
+        check_stop()
         label = fw.upper().replace(",", "/") if ethercat is not None else None
         asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
     finally:
+        ignore_stop_signals()
         chain.close()
     err.print("coolmuscle: stopped", markup=False)
+
 
 
 # -- run -----------------------------------------------------------------
@@ -349,7 +365,11 @@ def run(
                                           help="After the script, run on to this virtual time."),
     trace: Optional[Path] = typer.Option(
         None, "--trace", metavar="OUT.csv",
-        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow)."),
+        help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow); streamed "
+             "as the run goes."),
+    trace_step: float = typer.Option(
+        0.001, "--trace-step", metavar="SECONDS",
+        help="Trace grid step (default 0.001); changes are recorded at their instant."),
     plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
     xy: Optional[str] = typer.Option(
         None, "--xy", metavar="X,Y",
@@ -388,9 +408,10 @@ def run(
                  lambda: _make_chain(motors, Firmware(fw), state.expanduser() if state else None,
                                      pace, machine))
         return
-    code = run_command(file, until=until, trace=trace, plot=plot, xy=xy, motors=motors,
-                       firmware=firmware.value if firmware else None, state=state, check=check,
-                       pace=pace, record=record, machine=machine, chain_factory=chain_factory)
+    code = run_command(file, until=until, trace=trace, trace_step=trace_step, plot=plot, xy=xy,
+                       motors=motors, firmware=firmware.value if firmware else None,
+                       state=state, check=check, pace=pace, record=record, machine=machine,
+                       chain_factory=chain_factory)
     if code:
         raise typer.Exit(code)
 
@@ -467,9 +488,35 @@ _register_subapps()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes
-    (:func:`coolmuscle.tools.exits.guarded`; the installed command starts in
-    :func:`coolmuscle.tools.entry.main`, which runs plain scripts without typer)."""
+    """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes.
+
+    Called with ``argv`` (in-process, tests), the caller's signal handlers are put back
+    on return."""
+    saved = ({sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+             if argv is not None and threading.current_thread() is threading.main_thread()
+             else None)
+    if argv is not None:
+        clear_stop()                      # in-process: a new command
+    try:
+        _main(argv)
+        check_stop()
+    except SignalStop as exc:             # requested, its exception swallowed on the way
+        ignore_stop_signals()
+        text, code = stop_line(exc)
+        err.print(text, markup=False)
+        raise SystemExit(code) from None
+    finally:
+        for sig, handler in (saved or {}).items():
+            signal.signal(sig, handler)
+
+
+def _main(argv: list[str] | None) -> None:
+    if threading.current_thread() is threading.main_thread():
+        install_startup_handlers()    # also when started as coolmuscle.tools.cli:main
+        args = sys.argv[1:] if argv is None else argv
+        if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
+            # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     from ..frontends.enip.cli import optional_value_argv
     from ..frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
 

@@ -2,7 +2,7 @@
 :mod:`.entry` and the typer application of :mod:`.cli`).
 
 Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad script;
-70 an internal error (a bug: please report it).  No traceback reaches the user unless
+70 an internal error (a bug: please report it); 128 + N after stop signal N (130: Ctrl-C).  No traceback reaches the user unless
 ``COOLMUSCLE_DEBUG=1``.
 """
 
@@ -11,6 +11,8 @@ from __future__ import annotations
 import os
 import sys
 from typing import Callable
+
+from .stopsignals import SignalStop, ignore_stop_signals, stop_line
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
@@ -23,9 +25,11 @@ def guarded(call: Callable[[], object]) -> None:
         call()
     except SystemExit:
         raise
-    except KeyboardInterrupt:
-        _line("coolmuscle: interrupted")
-        raise SystemExit(130) from None
+    except (KeyboardInterrupt, SignalStop) as exc:   # a stop signal outside a serving loop
+        ignore_stop_signals()
+        text, code = stop_line(exc)
+        _line(text)
+        raise SystemExit(code) from None
     except BrokenPipeError:  # `coolmuscle run x.cml | head`: the reader left, not an error
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

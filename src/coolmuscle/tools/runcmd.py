@@ -23,7 +23,8 @@ EXIT_FAILED = 1
 FIRMWARES = ("cm2", "rt3", "cm1")
 
 #: Options of ``run`` that take a value -> the key of :func:`run_command`.
-_VALUED = {"--until": "until", "--trace": "trace", "--plot": "plot", "--xy": "xy",
+_VALUED = {"--until": "until", "--trace": "trace", "--trace-step": "trace_step",
+           "--plot": "plot", "--xy": "xy",
            "--motors": "motors", "--firmware": "firmware", "--state": "state",
            "--record": "record", "--machine": "machine"}
 _FLAGS = {"--check": "check", "--pace": "pace"}
@@ -71,6 +72,10 @@ def parse_run_args(argv: list[str]) -> dict[str, Any] | None:
         if not _PLAIN_NUMBER.match(out["until"]):
             return None
         out["until"] = float(out["until"])
+    if "trace_step" in out:
+        if not _PLAIN_NUMBER.match(out["trace_step"]):
+            return None
+        out["trace_step"] = float(out["trace_step"])
     if "motors" in out:
         if not _PLAIN_INT.match(out["motors"]) or not 1 <= int(out["motors"]) <= 15:
             return None
@@ -169,7 +174,7 @@ def header_defaults(file: Path, motors: int | None, firmware: str | None,
 
 
 def run_command(file: Path, until: float | None = None, trace: Path | None = None,
-                plot: Path | None = None, xy: str | None = None, motors: int | None = None,
+                trace_step: float = 0.001, plot: Path | None = None, xy: str | None = None, motors: int | None = None,
                 firmware: str | None = None, state: Path | None = None, check: bool = False,
                 pace: bool = False, record: Path | None = None, machine: Path | None = None,
                 chain_factory: Callable[..., Any] = default_chain) -> int:
@@ -184,6 +189,8 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
     if until is not None and until < 0:
         raise UsageError("--until must be >= 0")
+    if not trace_step > 0:
+        raise UsageError("--trace-step must be > 0")
     pairs = xy_pairs(xy, motors)
     if trace is not None:
         from .trace import TraceFormatError, check_trace_path
@@ -212,8 +219,13 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
         def show(entry: TranscriptEntry) -> None:
             write(entry.format() + "\n")
 
+        def warn(text: str) -> None:
+            stderr_line(f"coolmuscle: warning: {text}")
+
+        from .trace import DEFAULT_WARN_BYTES
         result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show)
+                            on_entry=None if check else show, trace_step=trace_step,
+                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn)
         sys.stdout.flush()
         if plot is not None:
             from .plot import plot as plot_chain

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Literal
@@ -423,22 +424,31 @@ class _Checker:
                        f'"{escape(extra[:80])}"{"..." if len(extra) > 80 else ""}', None, now)
 
 
-def _start_trace(chain: Any, trace: str | os.PathLike[str]) -> Any:
+def _start_trace(chain: Any, trace: str | os.PathLike[str], step: float,
+                 warn_bytes: int | None, on_warning: Callable[[str], None] | None) -> Any:
     from .trace import TraceFormatError, trace as start_trace
     try:
-        return start_trace(chain, Path(trace))
+        return start_trace(chain, Path(trace), step, warn_bytes=warn_bytes,
+                           on_warning=on_warning)
+    except OSError as exc:
+        raise ScriptError(f"cannot write trace {os.fspath(trace)}: "
+                          f"{exc.strerror or exc}") from None
     except TraceFormatError as exc:
         raise ScriptError(f"cannot write trace {os.fspath(trace)}: {exc}") from None
 
 
 def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
                until: float | None = None, trace: str | os.PathLike[str] | None = None,
-               on_entry: Callable[[TranscriptEntry], None] | None = None) -> RunResult:
+               on_entry: Callable[[TranscriptEntry], None] | None = None,
+               trace_step: float = 0.001, trace_warn_bytes: int | None = None,
+               on_warning: Callable[[str], None] | None = None) -> RunResult:
     """Run a script against ``chain`` in fast virtual time and check its expectations.
 
     ``source`` is a :class:`Script`, a path or script text (:func:`load_script`).
     ``until``: after the last line, keep running virtual time up to ``until`` seconds
-    (absolute).  ``trace``: CSV path for the chain's trace recorder.  ``on_entry`` is
+    (absolute).  ``trace``: CSV (or Parquet) path the trace streams to, one grid row
+    every ``trace_step`` seconds plus every change (``on_warning`` is told once the
+    file passes ``trace_warn_bytes``; an interrupt leaves the rows so far).  ``on_entry`` is
     called with every transcript entry as it happens (for live display; if it raises,
     the run goes on silently and the exception is re-raised at the end).  The run stops
     at the first failure; the result says which.
@@ -448,7 +458,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
     host_line = chain.host_line
     recorder = _Recorder(kernel, on_entry)
     checker = _Checker(recorder.stream)
-    tracer = _start_trace(chain, trace) if trace is not None else None
+    tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
+              if trace is not None else None)
     remove = host_line.add_listener(recorder.on_bytes)
     failure: Failure | None = None
     exception: BaseException | None = None
@@ -509,7 +520,9 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
     finally:
         remove()
         recorder.finish()
-        close = getattr(tracer, "close", None)
+        interrupted = sys.exc_info()[0] is not None and not issubclass(
+            sys.exc_info()[0], Exception)     # Ctrl-C, a stop signal: stop at once
+        close = getattr(tracer, "abort" if interrupted else "close", None)
         if callable(close):
             close()
     if recorder.display_error is not None:

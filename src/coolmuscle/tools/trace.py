@@ -26,7 +26,7 @@ import weakref
 from bisect import bisect_right
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ..motor.signals.analog_output import output_volts
 from ..motor.signals.io import OUT_ROTATION_PULSE, digit
@@ -282,22 +282,309 @@ def record(chain: "Chain") -> TraceRecorder:
 
 
 class TraceFile:
-    """A trace being recorded; :meth:`close` writes it (CSV, or Parquet for .parquet)."""
+    """A trace written to its file as the run goes (see :class:`TraceStream`);
+    :meth:`close` writes the rows up to now and closes it, :meth:`abort` closes it
+    at once (Ctrl-C): either way the file is complete and valid up to its last row."""
 
-    def __init__(self, recorder: TraceRecorder, path: Path, step: float) -> None:
+    def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
+                 prune: bool = True, warn_bytes: int | None = None,
+                 on_warning: "Callable[[str], None] | None" = None) -> None:
         self.recorder = recorder
         self.path = path
         self.step = step
+        self.stream = TraceStream(recorder, path, step, prune=prune, warn_bytes=warn_bytes,
+                                  on_warning=on_warning)
 
     def close(self) -> Path:
-        return self.recorder.write(self.path, self.step)
+        self.stream.close()
+        return self.path
+
+    def abort(self) -> Path:
+        self.stream.abort()
+        return self.path
 
 
-def trace(chain: "Chain", path: str | Path, step: float = 0.001) -> TraceFile:
-    """Record ``chain`` from now on; ``close()`` on the handle writes ``path``: CSV, or
-    Parquet for a ``.parquet`` path (``TraceFormatError`` at once when pyarrow is missing)."""
+def trace(chain: "Chain", path: str | Path, step: float = 0.001, *,
+          warn_bytes: int | None = None,
+          on_warning: "Callable[[str], None] | None" = None) -> TraceFile:
+    """Record ``chain`` from now on into ``path`` (CSV, or Parquet for ``.parquet``:
+    ``TraceFormatError`` at once when pyarrow is missing), streamed as the run goes;
+    ``close()`` on the handle finishes it.  ``warn_bytes``: call ``on_warning`` once
+    when the file passes that size."""
     check_trace_path(path)
-    return TraceFile(record(chain), Path(path), step)
+    if not step > 0:
+        raise TraceFormatError(f"the trace step must be > 0 s, not {step!r}")
+    shared = chain in _RECORDERS     # someone else (a plot) reads the whole history
+    return TraceFile(record(chain), Path(path), step, prune=not shared,
+                     warn_bytes=warn_bytes, on_warning=on_warning)
+
+
+#: Virtual time between two flushes of a streamed trace.
+FLUSH_NS = NS_PER_S // 2
+#: Grid stretch checked at once for a motor at rest (see TraceStream).
+REST_CHUNK_NS = NS_PER_S
+#: Rows per Parquet row group.
+PARQUET_ROWS = 65536
+#: Default size after which a trace warns once (docs/scripts.md "traces").
+DEFAULT_WARN_BYTES = 100 * 1024 * 1024
+
+
+class TraceStream:
+    """Rows written as virtual time passes, with bounded memory.
+
+    Each kernel event (and each API change) lets the stream write every row
+    before now: the grid of ``step`` seconds plus every change instant (a new
+    trajectory, Ux, inputs, outputs, pulse edges).  A row is never revised: the
+    closed-form history fixes everything before now.  What is written is
+    forgotten (the axis history, the discrete logs, pulse checkpoints and analog
+    sources before it), so memory does not grow with the run's length.
+
+    Change recording: while every motor is at rest (equal values at both ends of
+    a stretch and no turning point of the position between), the grid rows of
+    that stretch are left out; the values hold until the next row, exactly.
+    """
+
+    def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
+                 prune: bool = True, warn_bytes: int | None = None,
+                 on_warning: "Callable[[str], None] | None" = None) -> None:
+        self.recorder = recorder
+        self.path = Path(path)
+        self.step_ns = max(int(round(step * NS_PER_S)), 1)
+        self.prune = prune
+        self.warn_bytes = warn_bytes
+        self.on_warning = on_warning
+        self.next_t = recorder.start      # rows before this instant are written
+        self.rows_written = 0
+        self.bytes_written = 0
+        self._warned = False
+        self._last: list[tuple[float, ...]] | None = None
+        self._last_t: int | None = None
+        self._closed = False
+        self._busy = False
+        self._parquet = self.path.suffix.lower() == ".parquet"
+        self._columns: list[list[float]] = []
+        self._pq_writer: Any = None
+        self._fh: Any = None
+        self._csv: Any = None
+        header = recorder.header()
+        if self._parquet:
+            self._columns = [[] for _ in header]
+        else:
+            self._fh = self.path.open("w", newline="")
+            self._csv = csv.writer(self._fh)
+            self._csv.writerow(header)
+        kernel = recorder.chain.kernel
+        self._remove = kernel.add_observer(self._on_event)
+        self._unobserve = recorder.chain.observe(self._on_event)
+
+    # -- driving ----------------------------------------------------------------------
+    def _on_event(self) -> None:
+        if self._busy or self._closed:
+            return
+        now = self.recorder.chain.kernel.now
+        if now - self.next_t >= FLUSH_NS:
+            self._busy = True
+            try:
+                self.recorder.capture()
+                self._write_until(now, inclusive=False)
+            finally:
+                self._busy = False
+
+    def close(self) -> None:
+        """Write the rows up to now (the last instant included) and close the file."""
+        if self._closed:
+            return
+        try:
+            self.recorder.capture()
+            self._write_until(self.recorder.chain.kernel.now, inclusive=True)
+        finally:
+            self._finish()
+
+    def abort(self) -> None:
+        """Close the file now with the rows written so far (Ctrl-C)."""
+        if not self._closed:
+            self._finish()
+
+    def _finish(self) -> None:
+        self._closed = True
+        self._remove()
+        self._unobserve()
+        if self._parquet:
+            self._flush_parquet(final=True)
+        elif self._fh is not None:
+            self._fh.close()
+
+    # -- rows -------------------------------------------------------------------------
+    def _write_until(self, end: int, *, inclusive: bool) -> None:
+        rec = self.recorder
+        a = self.next_t
+        stop = end + 1 if inclusive else end
+        if stop <= a:
+            return
+        changes = sorted(t for t in self._changes(a, end) if a <= t < stop)
+        first_is_change = bool(changes) and changes[0] == a
+        cuts = [a, *(c for c in changes if c != a), stop]
+        for i, (c0, c1) in enumerate(zip(cuts, cuts[1:])):
+            if i == 0 and not first_is_change and a != rec.start:
+                self._grid(c0, c1)          # a flush boundary: only grid rows from here
+                continue
+            self._row(c0)
+            self._grid(c0 + 1, c1)
+        if inclusive and self._last_t != end:
+            self._row(end)
+        self.next_t = stop
+        if self.prune:
+            self._prune(stop - 1)
+        if self._parquet:
+            self._flush_parquet()
+        elif self._fh is not None:
+            self._fh.flush()
+        self._check_size()
+
+    def _grid(self, lo: int, c1: int) -> None:
+        """Grid rows at ``lo <= t < c1``, skipping stretches at rest."""
+        start, step = self.recorder.start, self.step_ns
+        k = -(-(lo - start) // step)
+        t = start + k * step
+        span = REST_CHUNK_NS
+        while t < c1:
+            chunk_end = min(c1, t + span)
+            if self._at_rest(t, chunk_end - 1):
+                k = (chunk_end - 1 - start) // step + 1
+                t = start + k * step
+                span *= 2                  # at rest: try a longer stretch next
+                continue
+            if span > REST_CHUNK_NS:       # a long stretch failed: look closer
+                span = REST_CHUNK_NS
+                continue
+            while t < chunk_end:
+                self._row(t)
+                t += step
+
+    def _at_rest(self, t0: int, t1: int) -> bool:
+        if t1 <= t0:
+            return False
+        rec = self.recorder
+        for mid, log in rec._logs.items():
+            a, b = rec.sample(mid, t0).row(), rec.sample(mid, t1).row()
+            if a != b or (self._last is not None and self._last_of(mid) != a):
+                return False
+            history = log.motor.axis.history or []
+            if history:
+                starts = log.starts(history)
+                entry = history[max(bisect_right(starts, t0) - 1, 0)]
+                piece = _piece(entry)
+                if piece is not None and piece.turns(t0, t1):
+                    return False
+        return True
+
+    def _last_of(self, motor_id: int) -> tuple[float, ...] | None:
+        if self._last is None:
+            return None
+        return self._last[list(self.recorder._logs).index(motor_id)]
+
+    def _row(self, t: int) -> None:
+        rec = self.recorder
+        samples = [rec.sample(mid, t).row() for mid in rec._logs]
+        self._last = samples
+        self._last_t = t
+        row: list[float] = [t / NS_PER_S]
+        for values in samples:
+            row.extend(values)
+        self.rows_written += 1
+        if self._parquet:
+            for column, value in zip(self._columns, row):
+                column.append(value)
+            self.bytes_written += 8 * len(row)
+        else:
+            self._csv.writerow([f"{row[0]:.9f}"] + [_fmt(v) for v in row[1:]])
+
+    def _check_size(self) -> None:
+        if self._fh is not None:
+            self.bytes_written = self._fh.tell()
+        if (self.warn_bytes is not None and not self._warned
+                and self.bytes_written > self.warn_bytes):
+            self._warned = True
+            if self.on_warning is not None:
+                size = (f"{self.warn_bytes / (1 << 20):g} MB" if self.warn_bytes >= 1 << 20
+                        else f"{self.warn_bytes} bytes")
+                self.on_warning(f"trace {self.path} passed {size} at virtual "
+                                f"{self.next_t / NS_PER_S:.3f} s; a larger --trace-step "
+                                "makes it smaller")
+
+    def _changes(self, a: int, end: int) -> set[int]:
+        times: set[int] = set()
+        for log in self.recorder._logs.values():
+            times.update(t for t in log.times if t >= a)
+            times.update(t for t, *_ in log.motor.axis.history or () if t >= a)
+            pulses = getattr(log.motor, "pulses", None)
+            if pulses is not None and end > a:
+                times.update(pulses.edge_times(a, end)[:MAX_EDGE_SAMPLES])
+            analog = getattr(log.motor, "analog_input", None)
+            if analog is not None:
+                times.update(t for t in analog.since if t >= a)
+        return times
+
+    # -- bounded memory ---------------------------------------------------------------
+    def _prune(self, upto: int) -> None:
+        """Forget what only rows before ``upto`` needed (keep what covers ``upto``)."""
+        for log in self.recorder._logs.values():
+            _trim_pairs(log.times, log.states, upto)
+            history = log.motor.axis.history
+            if history:
+                starts = [h[0] for h in history]
+                i = bisect_right(starts, upto) - 1
+                if i > 0:
+                    del history[:i]
+                    log._starts = []
+            analog = getattr(log.motor, "analog_input", None)
+            if analog is not None and analog.recording:
+                _trim_pairs(analog.since, analog.sources, upto)
+            timeline = getattr(log.motor, "timeline", None)
+            for track in getattr(timeline, "tracks", ()):
+                _trim_pairs(track._times, track.checkpoints, upto)
+
+    def _flush_parquet(self, final: bool = False) -> None:
+        if not final and len(self._columns[0]) < PARQUET_ROWS:
+            return
+        import pyarrow as pa  # noqa: PLC0415  (optional dependency)
+        import pyarrow.parquet as pq  # noqa: PLC0415
+        header = self.recorder.header()
+        arrays = {}
+        for name, values in zip(header, self._columns):
+            if name.rsplit(".", 1)[-1] in INTEGER_FIELDS:
+                arrays[name] = pa.array([int(v) for v in values], type=pa.int64())
+            else:
+                arrays[name] = pa.array(values, type=pa.float64())
+        table = pa.table(arrays)
+        writer_class = getattr(pq, "ParquetWriter", None)
+        if writer_class is None:          # a minimal pyarrow: one table at the end
+            if final:
+                pq.write_table(table, str(self.path))
+            return
+        if self._pq_writer is None:
+            self._pq_writer = writer_class(str(self.path), table.schema)
+        if len(self._columns[0]):
+            self._pq_writer.write_table(table)
+        self._columns = [[] for _ in header]
+        if final:
+            self._pq_writer.close()
+
+
+def _trim_pairs(times: list[int], values: list[Any], upto: int) -> None:
+    """Drop the entries of two parallel lists before the last one at or before ``upto``."""
+    i = bisect_right(times, upto) - 1
+    if i > 0:
+        del times[:i]
+        del values[:i]
+
+
+def _piece(entry: tuple[Any, ...]) -> Any:
+    from ..motor.motion.trajectory import Piece  # noqa: PLC0415  (sampling helper)
+    try:
+        return Piece(*entry)
+    except TypeError:
+        return None
 
 
 def _record_signals(motor: "Motor") -> None:

@@ -48,6 +48,10 @@ MODBUS_FIRMWARES = frozenset({"cm2", "rt3"})
 ENDIAN_FIRMWARES = frozenset({"cm2"})
 
 
+#: The sender name of the CML command inputs (K78+100 / K78+102) for bank uploads.
+CML_SESSION = "cml-input"
+
+
 def exception_pdu(function: int, code: int) -> bytes:
     """``function + 0x80`` and the exception code (5.6.8)."""
     return bytes((function | 0x80, code))
@@ -193,7 +197,9 @@ class ModbusSlave:
         rel = address - regs.base
         if rel in (CML_COMMAND, CML_COMMAND_MODBUS):
             text = decode_cml_command(data, binary_value=rel == CML_COMMAND, little=regs.little)
-            self.device.execute(text, origin="modbus", motor=regs.motor)
+            # The CML inputs are their own sender: a bank upload opened here takes
+            # only later CML inputs, never the register writes below.
+            self.device.execute(text, origin="modbus", motor=regs.motor, session=CML_SESSION)
             return echo
         try:
             cells = regs.writable_cells(address, count)

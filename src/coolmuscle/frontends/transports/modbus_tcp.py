@@ -14,15 +14,21 @@ exceptions and broadcast rule.  It owns only the framing and the sockets:
 * the unit id is the Modbus address as on COM0 (K81, |K84|); unit 255 and, while
   K81 is 0, unit 1 also reach ID1, so the door works with COM0 in text mode.
 
-Requests of one connection are answered in order; several clients may connect.
-Each request runs in the loop's thread at the wall-clock instant it arrived
-(``Port.call``).  Binds 127.0.0.1 unless told otherwise.
+Requests of one connection are answered in order; several clients may connect
+(at most ``max_clients``; more are closed at once).  Each request runs in the
+loop's thread at the wall-clock instant it arrived (``Port.call``).  The work
+per wake-up is bounded (``MAX_ADUS_PER_WAKE`` requests or
+``MAX_SECONDS_PER_WAKE``), so a client pipelining 64 KB of requests shares the
+loop with the motor's time and the other clients; a client that does not read
+its replies is no longer read (back pressure) and at most ``max_buffer`` bytes
+of its replies are kept.  Binds 127.0.0.1 unless told otherwise.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from typing import Any
 
 from ...errors import TransportError
@@ -32,7 +38,11 @@ log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 1502
-READ_SIZE = 65536
+READ_SIZE = 4096
+#: Requests answered per wake-up, and wall time, before the others get a turn.
+MAX_ADUS_PER_WAKE = 32
+MAX_SECONDS_PER_WAKE = 0.01
+DEFAULT_MAX_CLIENTS = 64
 HEADER = 7            # transaction (2), protocol (2), length (2), unit (1)
 MAX_LENGTH = 254      # unit id + the largest PDU (253 bytes)
 
@@ -43,11 +53,14 @@ class ModbusTcpTransport(Transport):
     name = "modbus-tcp"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 max_buffer: int = DEFAULT_MAX_BUFFER) -> None:
+                 max_buffer: int = DEFAULT_MAX_BUFFER,
+                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
         super().__init__()
         self.host = host
         self.requested_port = port
         self.max_buffer = max_buffer
+        self.max_clients = max_clients
+        self.refused_clients = 0
         self.bound: tuple[str, int] | None = None
         self._server: asyncio.base_events.Server | None = None
         self._writers: set[asyncio.StreamWriter] = set()
@@ -95,8 +108,14 @@ class ModbusTcpTransport(Transport):
 
     # -- one connection ---------------------------------------------------------------
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        self._writers.add(writer)
         peer = writer.get_extra_info("peername")
+        if len(self._writers) >= self.max_clients:
+            self.refused_clients += 1
+            log.warning("modbus-tcp: refused %s: %d clients connected (the limit)",
+                        peer, len(self._writers))
+            writer.transport.close()
+            return
+        self._writers.add(writer)
         buf = bytearray()
         try:
             while True:
@@ -104,11 +123,15 @@ class ModbusTcpTransport(Transport):
                 if not data:
                     break
                 buf += data
-                out, ok = self._take_adus(buf)
-                if out:
-                    writer.write(bytes(out))
-                    if writer.transport.get_write_buffer_size() > self.max_buffer:
-                        await writer.drain()
+                while True:
+                    out, ok, more = self._take_adus(buf)
+                    if out:
+                        writer.write(bytes(out))
+                        if writer.transport.get_write_buffer_size() > self.max_buffer:
+                            await writer.drain()   # it does not read: read no more of it
+                    if not ok or not more:
+                        break
+                    await asyncio.sleep(0)         # the budget is spent: others' turn
                 if not ok:
                     self.closed_connections += 1
                     log.info("modbus-tcp: %s sent a frame without valid length; closed", peer)
@@ -124,17 +147,23 @@ class ModbusTcpTransport(Transport):
             if not writer.transport.is_closing():
                 writer.transport.close()
 
-    def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool]:
-        """Answer every complete ADU at the start of ``buf`` (consumed); ``ok`` is
-        ``False`` when the stream lost its framing."""
+    def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool, bool]:
+        """Answer the complete ADUs at the start of ``buf`` (consumed) within the
+        per-wake-up budget; ``ok`` is ``False`` when the stream lost its framing,
+        ``more`` is ``True`` when the budget ran out before the complete ADUs did."""
         out = bytearray()
+        budget = MAX_ADUS_PER_WAKE
+        deadline = time.perf_counter() + MAX_SECONDS_PER_WAKE
         while len(buf) >= HEADER:
             length = (buf[4] << 8) | buf[5]
             if not 2 <= length <= MAX_LENGTH:
-                return out, False
+                return out, False, False
             total = 6 + length
             if len(buf) < total:
                 break
+            if budget <= 0 or time.perf_counter() > deadline:
+                return out, True, True
+            budget -= 1
             adu = bytes(buf[:total])
             del buf[:total]
             if adu[2:4] != b"\x00\x00":
@@ -143,7 +172,7 @@ class ModbusTcpTransport(Transport):
             reply = self._answer(adu[6], adu[7:])
             if reply:
                 out += adu[0:4] + (len(reply) + 1).to_bytes(2, "big") + adu[6:7] + reply
-        return out, True
+        return out, True, False
 
     def _answer(self, unit: int, pdu: bytes) -> bytes | None:
         assert self.port is not None

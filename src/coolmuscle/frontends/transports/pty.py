@@ -54,6 +54,8 @@ class PtyTransport(Transport):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._unsubscribe: Any = None
         self._link_made = False
+        self._tmp_link: Path | None = None
+        self._lane: Any = None
         self.bytes_discarded = 0
 
     # -- life cycle -----------------------------------------------------
@@ -76,8 +78,18 @@ class PtyTransport(Transport):
             if isinstance(exc, TransportError):
                 raise
             raise TransportError(f"pty: cannot set up the pseudo-terminal: {exc}") from exc
+        self._lane = port.open_lane("pty")
+        self._lane.set_flow(self._pause_reading, self._resume_reading)
         self._loop.add_reader(master, self._on_readable)
         self._unsubscribe = port.add_listener(self._send)
+
+    def _pause_reading(self) -> None:
+        if self._loop is not None and self._master is not None:
+            self._loop.remove_reader(self._master)
+
+    def _resume_reading(self) -> None:
+        if self._loop is not None and self._master is not None:
+            self._loop.add_reader(self._master, self._on_readable)
 
     def _make_link(self, target: str) -> None:
         assert self.link is not None
@@ -86,14 +98,16 @@ class PtyTransport(Transport):
             if not link.is_symlink():
                 raise TransportError(f"pty: {link} exists and is not a symlink; not replacing it")
         tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
+        self._tmp_link = tmp            # removed by close() if a signal cuts this short
         try:
             if tmp.is_symlink():
                 tmp.unlink()
             os.symlink(target, tmp)
+            self._link_made = True      # from here on close() removes what points at us
             os.replace(tmp, link)
         except OSError as exc:
+            self._link_made = False
             raise TransportError(f"pty: cannot create link {link}: {exc}") from exc
-        self._link_made = True
 
     def describe(self) -> str:
         where = self.path or "(not open)"
@@ -109,13 +123,17 @@ class PtyTransport(Transport):
             self._unsubscribe()
             self._unsubscribe = None
         if self._link_made and self.link is not None:
-            try:
-                if self.link.is_symlink() and os.readlink(self.link) == self.path:
-                    self.link.unlink()
-            except OSError:
-                pass
+            for made in (self.link, self._tmp_link):
+                try:
+                    if made is not None and made.is_symlink() and os.readlink(made) == self.path:
+                        made.unlink()
+                except OSError:
+                    pass
             self._link_made = False
         self._close_fds()
+        if self._lane is not None:
+            self._lane.close()
+            self._lane = None
         self.finished.set()
 
     def _close_fds(self) -> None:
@@ -145,8 +163,8 @@ class PtyTransport(Transport):
                 return
             log.warning("pty: read failed: %s", exc)
             return
-        if data and self.port is not None:
-            self.port.feed(data)
+        if data and self._lane is not None:
+            self._lane.feed(data)
 
     def _send(self, data: bytes) -> None:
         room = self.max_buffer - len(self._pending)

@@ -39,8 +39,8 @@ class Service:
         self._driver_task = asyncio.create_task(self.driver.run(), name="coolmuscle-driver")
         try:
             for transport in self.transports:
+                self._started.append(transport)   # closed too if its start is cut short
                 await transport.start(self.port)
-                self._started.append(transport)
         except BaseException:
             await self.close()
             raise

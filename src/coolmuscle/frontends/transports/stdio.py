@@ -54,6 +54,7 @@ class StdioTransport(Transport):
         self._writer_thread: threading.Thread | None = None
         self._closing = False
         self._unsubscribe: Any = None
+        self._lane: Any = None
 
     # -- life cycle -----------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -76,7 +77,17 @@ class StdioTransport(Transport):
         self._writer_thread = threading.Thread(target=self._write_loop,
                                                name="coolmuscle-stdout", daemon=True)
         self._writer_thread.start()
+        self._lane = port.open_lane("stdio")
+        self._lane.set_flow(self._pause_reading, self._resume_reading)
         self._unsubscribe = port.add_listener(self._send)
+
+    def _pause_reading(self) -> None:
+        if self._reader_added and self._loop is not None:
+            self._loop.remove_reader(self.in_fd)
+
+    def _resume_reading(self) -> None:
+        if self._reader_added and self._loop is not None:
+            self._loop.add_reader(self.in_fd, self._on_readable)
 
     def _enter_raw(self) -> None:
         try:
@@ -128,12 +139,19 @@ class StdioTransport(Transport):
 
     def _deliver(self, data: bytes) -> None:
         if data:
-            if self.port is not None:
-                self.port.feed(data)
+            if self._lane is not None:
+                self._lane.feed(data)
             return
         if self._reader_added and self._loop is not None:
             self._loop.remove_reader(self.in_fd)
             self._reader_added = False
+        self._finish_when_run()
+
+    def _finish_when_run(self) -> None:
+        """End of input: finish once every line read has had its turn."""
+        if self._lane is not None and self._lane.backlog and self._loop is not None:
+            self._loop.call_soon(self._finish_when_run)
+            return
         log.info("stdio: end of input")
         self.finished.set()
 

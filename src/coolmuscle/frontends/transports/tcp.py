@@ -2,16 +2,22 @@
 
 Owns the asyncio TCP server (default bind 127.0.0.1:5150, docs/transports.md):
 
-* every client's bytes go to the host line (``Port.feed``); every byte the motor
-  sends goes to every client, so each one sees echoes, replies and events;
-* **line ownership**: a client whose input stops in the middle of a line owns the
-  line until it sends the line end (or disconnects, or stays silent for ``hold``
-  seconds while others wait).  Other clients' bytes wait meanwhile (TCP back
-  pressure), so lines from different clients are never interleaved byte-wise;
-* **bounded output**: each client has at most ``max_buffer`` bytes queued and
-  unsent.  A client that does not read fast enough is dropped, never waited for:
-  the motor is not blocked by a slow reader;
-* a client's disconnect, reset or garbage never affects the others.
+* every client's bytes go to the host line through its own
+  :class:`~coolmuscle.frontends.transports.base.Lane`: its lines are assembled
+  apart from every other client's and run whole, in turn with the others, so a
+  client that floods or leaves a line unfinished never delays the others' lines
+  by more than one turn (docs/reliability.md);
+* every byte the motor sends goes to every client, so each one sees echoes,
+  replies and events;
+* **bounded output**: a client with more than ``max_buffer`` bytes it has not
+  read (what the socket would not take) is dropped, never waited for: the motor
+  is not blocked by a slow reader, and only a client that fails to read is
+  dropped.  A client whose own output backs up stops being read (TCP back
+  pressure to it alone);
+* **connection limit**: beyond ``max_clients`` a new client gets one line
+  ``coolmuscle: too many clients (N); connection refused`` and is closed;
+* a client's disconnect, reset or garbage never affects the others; a bank
+  upload it opened ends with it.
 """
 
 from __future__ import annotations
@@ -21,16 +27,15 @@ import logging
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport, ends_mid_line
+from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport
 
 log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5150
 
-#: Seconds a silent client keeps the line while it is in the middle of a line
-#: and another client is waiting.
-DEFAULT_HOLD = 2.0
+#: Clients served at once; more are refused with one line (docs/reliability.md).
+DEFAULT_MAX_CLIENTS = 64
 
 READ_SIZE = 4096
 
@@ -52,24 +57,23 @@ def parse_address(text: str, default_host: str = DEFAULT_HOST) -> tuple[str, int
 
 
 class _Client:
-    """One connected host: its stream and its bounded output queue."""
+    """One connected host: its stream, its input lane and its output queue."""
 
-    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                 lane: Lane) -> None:
         self.reader = reader
         self.writer = writer
+        self.lane = lane
         peer = writer.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
         self.pending = bytearray()
         self.flush_scheduled = False
         self.dropped = False
-        self.mid_line = False
-        self.ended_with_cr = False
-        self.last_input = 0.0
 
-    def queued(self) -> int:
+    def unread(self) -> int:
+        """Bytes handed to the socket that it did not take (the client did not read)."""
         transport = self.writer.transport
-        buffered = 0 if transport.is_closing() else transport.get_write_buffer_size()
-        return len(self.pending) + buffered
+        return 0 if transport.is_closing() else transport.get_write_buffer_size()
 
 
 class TcpTransport(Transport):
@@ -78,21 +82,20 @@ class TcpTransport(Transport):
     name = "tcp"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 max_buffer: int = DEFAULT_MAX_BUFFER, hold: float = DEFAULT_HOLD) -> None:
+                 max_buffer: int = DEFAULT_MAX_BUFFER,
+                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
         super().__init__()
         self.host = host
         self.requested_port = port
         self.max_buffer = max_buffer
-        self.hold = hold
+        self.max_clients = max_clients
         self._server: asyncio.base_events.Server | None = None
         self._clients: list[_Client] = []
-        self._owner: _Client | None = None
-        self._last_feeder: _Client | None = None
-        self._released = asyncio.Event()
         self._unsubscribe: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.bound: tuple[str, int] | None = None
         self.dropped_clients = 0
+        self.refused_clients = 0
 
     # -- life cycle -----------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -137,7 +140,22 @@ class TcpTransport(Transport):
     # -- input ----------------------------------------------------------
     async def _serve_client(self, reader: asyncio.StreamReader,
                             writer: asyncio.StreamWriter) -> None:
-        client = _Client(reader, writer)
+        assert self.port is not None
+        if len(self._clients) >= self.max_clients:
+            self.refused_clients += 1
+            log.warning("tcp: refused a client: %d clients connected (the limit)",
+                        len(self._clients))
+            try:
+                writer.write(b"coolmuscle: too many clients (%d); connection refused\r\n"
+                             % self.max_clients)
+                writer.close()
+            except (ConnectionError, OSError):
+                pass
+            return
+        client = _Client(reader, writer, self.port.open_lane("tcp"))
+        room = asyncio.Event()
+        room.set()
+        client.lane.set_flow(room.clear, room.set)
         self._clients.append(client)
         log.info("tcp: client %s connected", client.peer)
         try:
@@ -145,22 +163,10 @@ class TcpTransport(Transport):
                 data = await reader.read(READ_SIZE)
                 if not data:
                     break
-                await self._take_line(client)
-                if client.dropped:
-                    break
-                assert self.port is not None
-                if (data[:1] == b"\n" and client.ended_with_cr
-                        and self._last_feeder not in (None, client)):
-                    data = data[1:]   # the rest of this client's CRLF, after someone else's line
-                self._last_feeder = client
-                self.port.feed(data)
-                client.last_input = self._now()
-                client.mid_line = ends_mid_line(data)
-                client.ended_with_cr = data[-1:] == b"\r"
-                if client.mid_line:
-                    self._owner = client
-                elif self._owner is client:
-                    self._release()
+                client.lane.feed(data)
+                await room.wait()           # its lines wait their turn: read no further
+                if client.unread() and not client.dropped:
+                    await writer.drain()    # its own output backs up: stop reading it
         except (ConnectionError, OSError) as exc:
             log.info("tcp: client %s: %s", client.peer, exc)
         except asyncio.CancelledError:
@@ -170,53 +176,23 @@ class TcpTransport(Transport):
         finally:
             self._forget(client)
 
-    async def _take_line(self, client: _Client) -> None:
-        """Wait while another client is in the middle of a line (at most ``hold`` idle)."""
-        while self._owner is not None and self._owner is not client:
-            owner = self._owner
-            remaining = owner.last_input + self.hold - self._now()
-            if remaining <= 0:
-                log.info("tcp: client %s idle mid-line for %.1f s; line released",
-                         owner.peer, self.hold)
-                self._release()
-                return
-            self._released.clear()
-            try:
-                await asyncio.wait_for(self._released.wait(), remaining)
-            except (asyncio.TimeoutError, TimeoutError):
-                pass
-
-    def _release(self) -> None:
-        self._owner = None
-        self._released.set()
-
     def _forget(self, client: _Client) -> None:
         if client in self._clients:
             self._clients.remove(client)
-        if self._last_feeder is client:
-            self._last_feeder = None
-        if self._owner is client:
-            # The departed client's half line must not prefix the next client's line.
-            if self.port is not None and client.mid_line:
-                self.port.discard_partial()
-            self._release()
+        client.lane.close()         # its half line and its bank upload end with it
         if not client.writer.transport.is_closing():
             client.writer.transport.close()
         log.info("tcp: client %s disconnected", client.peer)
-
-    def _now(self) -> float:
-        return self._loop.time() if self._loop is not None else 0.0
 
     # -- output ---------------------------------------------------------
     def _broadcast(self, data: bytes) -> None:
         for client in list(self._clients):
             if client.dropped:
                 continue
-            if client.queued() + len(data) > self.max_buffer:
-                self._drop(client)
-                continue
             client.pending += data
-            if not client.flush_scheduled and self._loop is not None:
+            if len(client.pending) >= self.max_buffer:
+                self._flush(client)     # hand it to the socket now; judge what it takes
+            elif not client.flush_scheduled and self._loop is not None:
                 client.flush_scheduled = True
                 self._loop.call_soon(self._flush, client)
 
@@ -226,8 +202,11 @@ class TcpTransport(Transport):
             return
         data = bytes(client.pending)
         client.pending.clear()
-        if not client.writer.transport.is_closing():
-            client.writer.write(data)
+        if client.writer.transport.is_closing():
+            return
+        client.writer.write(data)
+        if client.unread() > self.max_buffer:
+            self._drop(client)
 
     def _drop(self, client: _Client) -> None:
         client.dropped = True

@@ -632,6 +632,10 @@ class _Solver:
         u = xp.sub(vel, xp.deriv(cmd, 0.0))
         exits = self._walls(pos) + [("landed", [xp.scale(u, -float(s))]),
                                     ("vzero", [xp.scale(vel, -float(sgn))])]
+        # Braking through zero speed onto a command faster than the top speed (K56
+        # raised, S beyond it) would otherwise accelerate the shaft past v_max: the
+        # modes after it then chatter (sat -> track -> vmax) until MAX_PIECES.
+        exits.append(("vmax", [xp.sub(xp.scale(vel, float(sgn)), xp.const(d.v_max))]))
         return Piece(t, math.inf, BRAKE, pos, cmd, xp.const(-s * d.a_limit), 0.0, s), exits
 
     def _vsat(self, t: float, p: float, cmd: F, s: int) -> tuple[Piece, list]:

@@ -152,14 +152,27 @@ class _Session:
 
 
 class BankUploads:
-    """Bank definitions typed line by line, one session per origin (chain-level)."""
+    """Bank definitions typed line by line, one session per sender (chain-level).
+
+    A sender is the origin and its session (``Context.session``: one TCP client,
+    the pty program, the Modbus CML input): an upload belongs to the sender that
+    opened it, takes only that sender's lines, and ends when it goes away
+    (:meth:`abandon`).
+    """
 
     def __init__(self, motors: Mapping[int, "MotorCore"]) -> None:
         self.motors = motors
-        self._sessions: dict[str, _Session] = {}
+        self._sessions: dict[tuple[str, object], _Session] = {}
 
-    def active(self, origin: str) -> bool:
-        return origin in self._sessions
+    def active(self, origin: str, session: object = None) -> bool:
+        return (origin, session) in self._sessions
+
+    def abandon(self, origin: str, session: object = None) -> bool:
+        """The sender went away: its definition ends with the lines stored so far."""
+        found = self._sessions.pop((origin, session), None)
+        if found is not None:
+            log.info("bank upload of a departed %s sender ended", origin)
+        return found is not None
 
     def begins(self, lines: list[ast.Line], ctx: "Context") -> bool:
         """Start a definition if ``lines`` hold ``B#.n`` / ``L#.n``; True when they do."""
@@ -173,7 +186,7 @@ class BankUploads:
                 "a bank header stands alone on its line", text=lines[0].source))
             return True
         session = _Session(motor, head.ladder, head.index)
-        self._sessions[ctx.origin] = session
+        self._sessions[(ctx.origin, ctx.session)] = session
         if motor is not None:
             self._open(session, ctx)
         return True
@@ -191,7 +204,7 @@ class BankUploads:
 
     def consume(self, text: str, ctx: "Context") -> bool:
         """Feed a line to the definition in progress; False when there is none."""
-        session = self._sessions.get(ctx.origin)
+        session = self._sessions.get((ctx.origin, ctx.session))
         if session is None:
             return False
         if not text.strip(" \t"):
@@ -243,7 +256,7 @@ class BankUploads:
         session.motor.report_error(ctx, error)
 
     def _finish(self, ctx: "Context") -> None:
-        session = self._sessions.pop(ctx.origin)
+        session = self._sessions.pop((ctx.origin, ctx.session))
         motor = session.motor
         if motor is None or session.failed:
             return

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ...cml.ast import inner_motor
-from ...errors import MotorError, OutOfRangeError
+from ...errors import MotorError, OutOfRangeError, StoreError
 from .coordinated import direct_interp
 from .evaluate import EvalHost, condition, evaluate
 from ..state.memory import VState
@@ -165,7 +165,12 @@ def _exec(motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
     elif op == "free":
         motor.free()
     elif op == "save":
-        motor.bus.save(motor)
+        try:
+            motor.bus.save(motor)
+        except StoreError as exc:   # full disk, read-only file: the host is told, always
+            log.warning("motor %d: $ not saved: %s", motor.id, exc)
+            motor.say(ctx, f"not saved.{motor.id}: {exc}", kind="message")
+            return
         motor.say(ctx, f"saved.{motor.id}")
     else:
         motor.bus.chain_command(motor, stmt, ctx)

@@ -45,7 +45,7 @@ def register_reply(motor: "MotorCore", reg: ast.Reg) -> str:
     return f"{register_name(reg.kind, reg.index, motor.id)}={format_value(value)}"
 
 
-def display_reply(motor: "Motor", reg: ast.Reg) -> str:
+def display_reply(motor: "MotorCore", reg: ast.Reg) -> str:
     """A register named alone on a bank line (2.2.1, 2.2.2 "V": "When this command is
     used alone, it displays the specified variable data"): a V holding a state shows
     the state's value now (``V4.1=10000`` for ``V4.1="Px"``), as ``V5.1=V4.1`` reads

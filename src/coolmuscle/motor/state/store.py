@@ -138,11 +138,18 @@ class Store:
                                    " ORDER BY k", (motor_id,)).fetchall()
         if row is None and not overlay:
             return None
-        snapshot = _decode(row[0], motor_id) if row is not None else {}
+        snapshot = _decode(row[0], motor_id, self._path) if row is not None else {}
+        for k, v in overlay:
+            if not (_is_int(k) and _is_int(v)):
+                raise StoreError(self._bad(motor_id, f"saved K{k!r}={v!r} (automatic K save) "
+                                                     "is not an integer K value"))
         if overlay:
             params = snapshot.setdefault("params", {})
             params.update((int(k), int(v)) for k, v in overlay)
         return snapshot
+
+    def _bad(self, motor_id: int, problem: str) -> str:
+        return bad_state_message(self._path, motor_id, problem)
 
     def motors(self) -> list[int]:
         """Motor IDs with anything saved."""
@@ -208,12 +215,28 @@ class Store:
 
 # -- opening -----------------------------------------------------------------------
 
+def bad_state_message(path: str, motor_id: int, problem: str) -> str:
+    """One message naming the file, the entry and how to recover."""
+    return (f"{path}: saved state of motor {motor_id}: {problem}; move the file aside "
+            f"(mv {path} {path}.bad) to start with defaults, or start with --no-state")
+
+
 def _open(path: str) -> sqlite3.Connection:
     if path != ":memory:":
         try:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StoreError(f"cannot create the state directory for {path}: {exc}") from exc
+        try:
+            size = os.stat(path).st_size
+        except FileNotFoundError:
+            _create(path)
+        except OSError as exc:
+            raise StoreError(f"cannot open store {path}: {exc.strerror or exc}") from exc
+        else:
+            if size == 0:    # never written by us (a new store appears whole): truncated
+                raise StoreError(f"{path} is empty (0 bytes), not a coolmuscle store; move "
+                                 f"it aside (mv {path} {path}.bad) to start with defaults")
     try:
         conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
                                check_same_thread=False)
@@ -228,6 +251,26 @@ def _open(path: str) -> sqlite3.Connection:
         conn.close()
         raise StoreError(f"{path} is not a usable coolmuscle store: {exc}") from exc
     return conn
+
+
+def _create(path: str) -> None:
+    """A new store appears whole: built under a temporary name, then renamed, so a
+    crash while creating it never leaves a 0-byte or half-made file at ``path``."""
+    tmp = f"{path}.{os.getpid()}.new"
+    try:
+        for leftover in (tmp, tmp + "-wal", tmp + "-shm"):
+            if os.path.exists(leftover):
+                os.unlink(leftover)
+        conn = sqlite3.connect(tmp, isolation_level=None)
+        try:
+            _prepare(conn, tmp)
+        finally:
+            conn.close()
+        os.replace(tmp, path)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot create store {path}: {exc}") from exc
+    except OSError as exc:
+        raise StoreError(f"cannot create store {path}: {exc.strerror or exc}") from exc
 
 
 def _prepare(conn: sqlite3.Connection, path: str) -> None:
@@ -274,16 +317,52 @@ def _encode(snapshot: Mapping[str, Any]) -> str:
     return text
 
 
-def _decode(text: str, motor_id: int) -> dict[str, Any]:
+def _decode(text: str, motor_id: int, path: str = "") -> dict[str, Any]:
     try:
         data = json.loads(text)
         if not isinstance(data, dict):
-            raise TypeError("not an object")
+            raise TypeError("the snapshot is not an object")
         if "params" in data:
-            data["params"] = {int(k): v for k, v in dict(data["params"]).items()}
+            if not isinstance(data["params"], dict):
+                raise TypeError("'params' is not an object")
+            data["params"] = {int(k): v for k, v in data["params"].items()}
     except (ValueError, TypeError) as exc:
-        raise StoreError(f"saved snapshot of motor {motor_id} is unreadable: {exc}") from exc
+        raise StoreError(bad_state_message(path, motor_id,
+                                           f"the $ snapshot is unreadable ({exc})")) from exc
     return data
+
+
+def snapshot_problem(snapshot: Mapping[str, Any]) -> str:
+    """What is wrong with the shape of a loaded motor snapshot (``""``: nothing).
+
+    The store itself keeps any JSON data; this checks the shape the motor writes (module docstring): ``params`` K number -> integer,
+    ``memory`` an object of register lists, ``banks`` ``{"program"|"ladder":
+    {"N": [line, ...]}}``.  Values are checked by the motor as it restores them.
+    """
+    params = snapshot.get("params", {})
+    if not isinstance(params, Mapping):
+        return "'params' is not an object"
+    for k, v in params.items():
+        if not (_is_int(k) and _is_int(v)):
+            return f"parameter K{k}={v!r} is not an integer"
+    memory = snapshot.get("memory", {})
+    if not isinstance(memory, Mapping):
+        return f"'memory' is a {type(memory).__name__}, not an object"
+    for kind, cells in memory.items():
+        if kind != "alloc" and not isinstance(cells, list):
+            return f"memory '{kind}' is a {type(cells).__name__}, not a list"
+    banks = snapshot.get("banks", {})
+    if not isinstance(banks, Mapping):
+        return f"'banks' is a {type(banks).__name__}, not an object"
+    for kind, table in banks.items():
+        if not isinstance(table, Mapping):
+            return f"banks '{kind}' is a {type(table).__name__}, not an object"
+        for number, lines in table.items():
+            if not str(number).isdigit():
+                return f"{kind} bank {number!r} is not a bank number"
+            if not isinstance(lines, list) or not all(isinstance(t, str) for t in lines):
+                return f"{kind} bank {number} is not a list of lines"
+    return ""
 
 
 def _is_int(value: object) -> bool:

@@ -1,0 +1,104 @@
+"""Issue 16 item 8: every stop signal at every moment of ``coolmuscle sim``.
+
+SIGINT, SIGTERM and SIGHUP during start-up (imports, store, transports), while
+serving, under load and during ``$`` (cml-users-guide.txt 2.1.2): one line, no
+traceback, the pty link removed, the store intact; a second signal during the
+stop changes nothing.  ``sim`` runs as a real subprocess.  The Python interpreter's
+own start-up (before any of our code runs: about 50 ms, more on a loaded machine) is
+outside what a program can handle, so the earliest signal here comes at 0.25 s.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from coolmuscle.motor.state.store import Store
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
+ENV.pop("COOLMUSCLE_DEBUG", None)
+
+STOP_LINES = ("coolmuscle: stopped", "coolmuscle: interrupted")
+
+
+def start(tmp_path: Path) -> tuple[subprocess.Popen[str], Path]:
+    link = tmp_path / "cm-link"
+    proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
+                             "--pty-link", str(link), "--state", str(tmp_path / "state")],
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+                            env=ENV)
+    return proc, link
+
+
+def finish(proc: subprocess.Popen[str], link: Path) -> str:
+    _, stderr = proc.communicate(timeout=30)
+    assert "Traceback" not in stderr, stderr
+    stops = [line for line in stderr.splitlines() if line.startswith(STOP_LINES)]
+    assert len(stops) == 1, stderr
+    assert proc.returncode in (0, 130, 128 + signal.SIGTERM, 128 + signal.SIGHUP), \
+        (proc.returncode, stderr)
+    assert not link.is_symlink(), "the --pty-link symlink was left behind"
+    return stderr
+
+
+def wait_ready(proc: subprocess.Popen[str]) -> int:
+    assert proc.stderr is not None
+    while True:
+        line = proc.stderr.readline()
+        assert line, "sim ended before it was ready"
+        if "tcp: 127.0.0.1:" in line:
+            return int(line.split("tcp: 127.0.0.1:")[1].split()[0])
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("delay", [0.25, 0.4, 0.6, 0.9])
+def test_a_signal_during_start_up_is_one_clean_line(tmp_path: Path, sig: int,
+                                                    delay: float) -> None:
+    # the interpreter's own start-up, measured now (the machine may be loaded): no
+    # program can handle a signal before its first line runs
+    began = time.monotonic()
+    subprocess.run([sys.executable, "-c", "import coolmuscle"], env=ENV, check=True)
+    interpreter = time.monotonic() - began
+    proc, link = start(tmp_path)
+    time.sleep(max(delay, 2 * interpreter))
+    proc.send_signal(sig)
+    finish(proc, link)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_while_serving_under_load_and_a_second_one(tmp_path: Path, sig: int) -> None:
+    proc, link = start(tmp_path)
+    port = wait_ready(proc)
+    stop = threading.Event()
+
+    def load() -> None:
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+            sock.settimeout(0.2)
+            while not stop.is_set():
+                try:
+                    sock.sendall(b"?96.1\rP1.1=5\r$.1\r")
+                    sock.recv(1 << 16)
+                except OSError:
+                    return
+    thread = threading.Thread(target=load)
+    thread.start()
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)          # a second one during the stop
+    stop.set()
+    thread.join(5)
+    stderr = finish(proc, link)
+    assert proc.returncode == 0, stderr
+    with Store(tmp_path / "state" / "coolmuscle.sqlite3") as store:   # a whole $, not half
+        assert store.integrity_check() == "ok"
+        assert store.load(1)["memory"]["P"][1] == 5

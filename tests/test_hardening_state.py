@@ -1,0 +1,110 @@
+"""Issue 16 items 7 and 10: saved state is validated; the XDG rule for the state dir.
+
+A store whose ``$`` snapshot (cml-users-guide.txt 2.1.2) or automatic K save
+(ch. 3) holds something the motor never writes stops start-up with one line that
+names the file, the entry and how to recover; a 0-byte store is refused, never
+silently replaced by defaults.  A relative ``XDG_DATA_HOME`` is ignored (XDG base
+directory spec).  ``coolmuscle sim`` runs as a real subprocess.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.errors import StoreError
+from coolmuscle.motor.state.store import Store
+from coolmuscle.tools import cli
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
+ENV.pop("COOLMUSCLE_DEBUG", None)
+
+
+def make_store(state: Path) -> Path:
+    chain = Chain(state_dir=state)
+    chain.execute("P1.1=5")
+    chain.execute("$.1")
+    chain.execute("K37.1=1")
+    chain.close()
+    return state / "coolmuscle.sqlite3"
+
+
+def edit_snapshot(path: Path, change: dict) -> None:
+    conn = sqlite3.connect(path)
+    data = json.loads(conn.execute("SELECT data FROM snapshot WHERE motor_id=1").fetchone()[0])
+    data.update(change)
+    conn.execute("UPDATE snapshot SET data=? WHERE motor_id=1", (json.dumps(data),))
+    conn.commit()
+    conn.close()
+
+
+def start_sim(state: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
+                           "--state", str(state)], capture_output=True, text=True, env=ENV,
+                          timeout=30)
+
+
+CORRUPTIONS = {
+    "param-text": ({"params": {"20": "abc"}}, "K20='abc'"),
+    "param-list": ({"params": {"20": [1, 2]}}, "K20=[1, 2]"),
+    "bank-list": ({"banks": {"program": [["S.1=1"]]}}, "banks 'program' is a list"),
+    "bank-string": ({"banks": {"program": {"1": "S.1=1"}}}, "program bank 1"),
+    "memory-string": ({"memory": "P1=5"}, "'memory' is a str"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CORRUPTIONS))
+def test_corrupted_snapshot_names_file_entry_and_recovery(tmp_path: Path, case: str) -> None:
+    change, entry = CORRUPTIONS[case]
+    path = make_store(tmp_path)
+    edit_snapshot(path, change)
+    out = start_sim(tmp_path)
+    assert out.returncode == 1, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    assert str(path) in lines[0] and entry in lines[0] and "move the file aside" in lines[0]
+
+
+def test_overlay_of_another_type_names_file_and_entry(tmp_path: Path) -> None:
+    path = make_store(tmp_path)
+    conn = sqlite3.connect(path)
+    conn.execute("UPDATE param SET value='abc' WHERE motor_id=1 AND k=37")
+    conn.commit()
+    conn.close()
+    with pytest.raises(StoreError, match=r"K37='abc'.*move the file aside"):
+        Store(path).load(1)
+    out = start_sim(tmp_path)
+    assert out.returncode == 1 and str(path) in out.stderr and "K37" in out.stderr, out.stderr
+
+
+def test_a_zero_byte_store_is_refused_not_replaced(tmp_path: Path) -> None:
+    path = tmp_path / "coolmuscle.sqlite3"
+    path.write_bytes(b"")
+    out = start_sim(tmp_path)
+    assert out.returncode == 1, out.stderr
+    assert str(path) in out.stderr and "0 bytes" in out.stderr and "move" in out.stderr
+    assert path.stat().st_size == 0          # left as found
+
+
+def test_a_new_store_appears_whole(tmp_path: Path) -> None:
+    with Store(tmp_path / "new.sqlite3") as store:
+        assert store.load(1) is None
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("new")) == \
+        ["new.sqlite3"]
+
+
+def test_a_relative_xdg_data_home_is_ignored(monkeypatch: pytest.MonkeyPatch,
+                                             tmp_path: Path) -> None:
+    monkeypatch.setenv("XDG_DATA_HOME", "relative/data")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert cli.default_state_dir() == tmp_path / ".local/share/coolmuscle/state"
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "abs"))
+    assert cli.default_state_dir() == tmp_path / "abs/coolmuscle/state"
