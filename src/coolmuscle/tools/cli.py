@@ -198,27 +198,29 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
     from ..frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
-    await service.start()
-    err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} ready",
-              markup=False)
-    where = "   ".join(t.describe() for t in chosen)
-    shown = _show_path(state) if state is not None else "none, not saved"
-    err.print(f"{where}   (state: {shown})", markup=False)
-    station = _modbus_station(chain)
-    if station:
-        asked = any(t.name == "modbus-rtu" for t in chosen)
-        err.print(_modbus_notice(station, state, asked), markup=False)
-    stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    for sig in STOP_SIGNALS:
-        loop.add_signal_handler(sig, stop.set)
-    if stop_requested():              # a signal whose exception was swallowed on the way
-        clear_stop()
-        stop.set()
-    try:
+    handled: list[int] = []
+    try:          # a stop signal may land anywhere from here on: close what was started
+        await service.start()
+        err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} "
+                  "ready", markup=False)
+        where = "   ".join(t.describe() for t in chosen)
+        shown = _show_path(state) if state is not None else "none, not saved"
+        err.print(f"{where}   (state: {shown})", markup=False)
+        station = _modbus_station(chain)
+        if station:
+            asked = any(t.name == "modbus-rtu" for t in chosen)
+            err.print(_modbus_notice(station, state, asked), markup=False)
+        stop = asyncio.Event()
+        for sig in STOP_SIGNALS:
+            loop.add_signal_handler(sig, stop.set)
+            handled.append(sig)
+        if stop_requested():          # a signal whose exception was swallowed on the way
+            clear_stop()
+            stop.set()
         await service.wait(stop)
     finally:
-        for sig in STOP_SIGNALS:
+        for sig in handled:
             loop.remove_signal_handler(sig)
         ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
