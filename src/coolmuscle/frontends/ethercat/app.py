@@ -42,9 +42,13 @@ class BridgeApp:
         self.dictionary = Dictionary(self.table)
         self.sii = build_sii(self.table)
         self.stack = SlaveStack(self, self.sii)
-        ids = tuple(getattr(device, "motor_ids", lambda: ())()) if device is not None else ()
+        ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
         self.operational = False
+        self.drive: Any = None
+        if device is not None:                  # part 2: the CiA402 drive and the modes
+            from .drive.drive import BridgeDrive
+            self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     # -- frame thread ---------------------------------------------------------
     def state_change(self, current: int, requested: int) -> int:
@@ -57,15 +61,23 @@ class BridgeApp:
 
     def outputs(self, image: bytes) -> None:
         """An output image in OP: already in the dictionary (6040h/607Ah per axis)."""
+        if self.drive is not None:
+            self.drive.outputs_received()
 
     def safe_outputs(self) -> None:
         """OP left: the commands of the output image are no longer valid (6.3)."""
         self.operational = False
+        if self.drive is not None:
+            self.drive.safe_outputs()
 
     # -- model thread ---------------------------------------------------------------
     def cycle(self) -> None:
         """One bridge cycle: read each motor through the device API, publish the inputs."""
         od = self.dictionary
+        if self.drive is not None:
+            self.drive.cycle()                  # 6041h, 6061h, 6064h ... (drive/)
+            self.stack.set_inputs(od.pack_inputs())
+            return
         for axis in self.axes:
             snap = self.device.snapshot(axis)
             position = max(INT32_MIN, min(INT32_MAX, int(snap.position)))
