@@ -73,7 +73,7 @@ class OriginWatch:
 
     def update(self, snap: Any, now: int) -> str:
         """Follow the search on this cycle's snapshot; the phase after it."""
-        if self.phase != RUNNING:
+        if self.phase != RUNNING or now == self._started:   # ``snap`` is from before ``|``
             return self.phase
         searching = snap.extra.get("origin_search", 0)
         if snap.status & ALARM_BITS:
