@@ -43,11 +43,14 @@ def sim_transport(iface: str, bridge: str) -> object:
 @lab_app.command("up")
 def lab_up(
     namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
+    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
+    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
+                                 help="The slave's end (inside the namespace)."),
 ) -> None:
     """Make the veth pair and print which end to give the master."""
-    from .lab import DEFAULT_MASTER_IF, DEFAULT_SLAVE_IF, LabError, up
+    from .lab import LabError, up
     try:
-        lab = up(namespace, DEFAULT_MASTER_IF, DEFAULT_SLAVE_IF)
+        lab = up(namespace, master_if, slave_if)
     except LabError as exc:
         typer.echo(f"coolmuscle: {exc}", err=True)
         raise typer.Exit(1) from None
@@ -57,11 +60,14 @@ def lab_up(
 @lab_app.command("down")
 def lab_down(
     namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
+    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
+    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
+                                 help="The slave's end (inside the namespace)."),
 ) -> None:
     """Remove the pair and the namespace that ``up`` made (nothing else)."""
-    from .lab import DEFAULT_MASTER_IF, DEFAULT_SLAVE_IF, LabError, down
+    from .lab import LabError, down
     try:
-        removed = down(namespace, DEFAULT_MASTER_IF, DEFAULT_SLAVE_IF)
+        removed = down(namespace, master_if, slave_if)
     except LabError as exc:
         typer.echo(f"coolmuscle: {exc}", err=True)
         raise typer.Exit(1) from None

@@ -293,8 +293,10 @@ class Esc:
         inc = 0
         if cmd in _AUTO or cmd in _BCAST:
             struct.pack_into("<H", buf, pos + 2, (adp + 1) & 0xFFFF)
-        if cmd in _AUTO:
+        if cmd in (APRD, APWR, APRW):
             ours = adp == 0
+        elif cmd == ARMW or cmd == FRMW:
+            ours = True                # the addressed slave reads, every other one writes
         elif cmd in _FIXED:
             ours = adp == self.station or (adp == self._alias() and adp != 0)
         elif cmd in _BCAST:
@@ -348,11 +350,13 @@ class Esc:
                 return 1
             return 1 if self.write(ado, bytes(buf[data:data + length])) else 0
         if cmd == FRMW:
-            got = self.read(ado, length)
-            if got is None:
-                return 0
-            buf[data:data + length] = got
-            return 1
+            if adp == self.station:
+                got = self.read(ado, length)
+                if got is None:
+                    return 0
+                buf[data:data + length] = got
+                return 1
+            return 1 if self.write(ado, bytes(buf[data:data + length])) else 0
         return 0
 
     # -- FMMU ------------------------------------------------------------------

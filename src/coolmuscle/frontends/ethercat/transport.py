@@ -15,8 +15,11 @@ frames as answers (and the slave its own answers as requests).
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
+import os
 import socket
+import struct
 import sys
 import threading
 import time
@@ -30,6 +33,7 @@ from .esc import ETHERTYPE_ECAT
 log = logging.getLogger(__name__)
 
 PACKET_OUTGOING = 4
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 #: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
 SWITCH_INTERVAL = 0.0002
 
@@ -63,17 +67,31 @@ def open_socket(iface: str) -> socket.socket:
         sock.close()
         raise TransportError(f"cannot bind to {iface!r}: {exc.strerror or exc}") from None
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     return sock
+
+
+def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
+    """The kernel's receive time stamp (ns, CLOCK_REALTIME) of a frame, 0 if none."""
+    for level, kind, data in ancdata:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack_from("@qq", data)
+            return sec * 1_000_000_000 + nsec
+    return 0
 
 
 class FrameThread:
     """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
 
-    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000) -> None:
+    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000,
+                 priority: int = 40) -> None:
         self.esc = esc
+        self.priority = priority
+        self.realtime = False
         self.iface = iface
         self.sock = open_socket(iface)
         self.sock.settimeout(0.001)
+        #: Kernel receive time stamp to answer sent, ns (includes waiting for the GIL).
         self.turnaround_ns: deque[int] = deque(maxlen=keep)
         self.errors = 0
         self._stop = threading.Event()
@@ -84,14 +102,27 @@ class FrameThread:
         sys.setswitchinterval(min(self._old_switch, SWITCH_INTERVAL))
         self._thread.start()
 
+    def _realtime(self) -> None:
+        """Run this thread under SCHED_FIFO when allowed (root): a real ESC never waits."""
+        if self.priority <= 0 or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
+                                  os.sched_param(self.priority))
+            self.realtime = True
+        except (OSError, PermissionError):
+            log.info("frame thread stays at normal priority (no CAP_SYS_NICE)")
+
     def _run(self) -> None:
+        self._realtime()
         sock, esc = self.sock, self.esc
         buf = bytearray(2048)
         view = memoryview(buf)
-        clock = time.monotonic_ns
+        clock, wall = time.monotonic_ns, time.time_ns
+        anc = socket.CMSG_SPACE(16)
         while not self._stop.is_set():
             try:
-                n, addr = sock.recvfrom_into(buf)
+                n, ancdata, _flags, addr = sock.recvmsg_into([buf], anc)
             except socket.timeout:
                 esc.tick(clock())
                 continue
@@ -102,9 +133,8 @@ class FrameThread:
                 continue
             if addr[2] == PACKET_OUTGOING:
                 continue
-            t0 = clock()
             try:
-                out = esc.process(view[:n], t0)
+                out = esc.process(view[:n], clock())
             except Exception:      # a bug must not stop the slave: the frame is lost
                 self.errors += 1
                 log.exception("ESC failed on a frame")
@@ -115,7 +145,9 @@ class FrameThread:
                 sock.send(out)
             except OSError:
                 self.errors += 1
-            self.turnaround_ns.append(clock() - t0)
+            arrived = _kernel_time(ancdata)
+            if arrived:
+                self.turnaround_ns.append(wall() - arrived)
 
     def close(self) -> None:
         self._stop.set()
@@ -147,6 +179,7 @@ class EthercatTransport(Transport):
         self.port = port
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)
+        gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
         self.frames.start()
         self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
 

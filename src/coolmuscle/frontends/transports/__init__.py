@@ -32,6 +32,7 @@ BUILTIN: dict[str, str] = {
     "modbus-rtu": "coolmuscle.frontends.transports.serial_line:ModbusRtuTransport",
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
+    "ethercat": "coolmuscle.frontends.ethercat.transport:EthercatTransport",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).

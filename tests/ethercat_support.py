@@ -1,0 +1,57 @@
+"""Helpers of the EtherCAT tests: a veth pair per test, masters run in its namespace.
+
+The slave runs in this process on the root-namespace end; the master (pysoem,
+KickCAT) runs as a subprocess inside the namespace and prints JSON.  Names start
+with ``cmecat`` and every link is deleted in a ``finally`` (lab.veth_pair).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+
+from coolmuscle.frontends.ethercat.lab import Lab, veth_pair
+from coolmuscle.frontends.ethercat.transport import FrameThread
+
+MASTERS = Path(__file__).parent / "ethercat_masters"
+
+needs_net_admin = pytest.mark.skipif(
+    os.geteuid() != 0 or shutil.which("ip") is None,
+    reason="veth pairs and network namespaces need root and iproute2")
+
+
+@contextlib.contextmanager
+def link(name: str) -> Iterator[Lab]:
+    """A veth pair ``cmecat<name>``: the master's end inside its own namespace."""
+    with veth_pair(f"cmecat{name}", inside="master") as lab:
+        yield lab
+
+
+def run_master(lab: Lab, script: str, *args: str, timeout: float = 90.0) -> dict[str, Any]:
+    """Run ``ethercat_masters/<script>`` in the lab's namespace; its JSON result."""
+    rt = ["chrt", "-f", "30"] if shutil.which("chrt") else []   # masters run real-time
+    cmd = ["ip", "netns", "exec", lab.namespace, *rt, sys.executable, str(MASTERS / script),
+           lab.master_if, *args]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    if done.returncode != 0:
+        raise AssertionError(f"{script} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@contextlib.contextmanager
+def serving(esc: Any, iface: str) -> Iterator[FrameThread]:
+    """Answer frames for ``esc`` on ``iface`` in a frame thread."""
+    frames = FrameThread(esc, iface)
+    frames.start()
+    try:
+        yield frames
+    finally:
+        frames.close()

@@ -1,0 +1,77 @@
+"""``coolmuscle ethercat lab up|down``, ``ethercat esi`` and ``sim --ethercat`` end to end.
+
+The sim runs inside the lab's namespace as a user would run it (docs/ethercat.md);
+SOEM scans it from the master's end.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+
+from ethercat_support import needs_net_admin
+
+from coolmuscle.frontends.ethercat.lab import ip
+
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+LAB = ["--namespace", "cmecatclins", "--master-if", "cmecatclim", "--slave-if", "cmecatclis"]
+
+
+def coolmuscle(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "coolmuscle", *args], capture_output=True,
+                          text=True, timeout=timeout, env=ENV)
+
+
+def test_sim_refuses_lo_and_says_why():
+    done = coolmuscle("sim", "--ethercat", "lo", "--no-state")
+    assert done.returncode != 0 and "loopback" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_sim_refuses_an_unknown_bridge():
+    done = coolmuscle("sim", "--ethercat", "eth0", "--bridge", "EB99", "--no-state")
+    assert done.returncode == 2 and "EB99" in done.stderr
+
+
+def test_esi_command_writes_xml_with_the_three_bridges_8_1_4():
+    done = coolmuscle("ethercat", "esi")
+    assert done.returncode == 0
+    root = ET.fromstring(done.stdout.split("\n", 1)[1])
+    assert [d.findtext("Type") for d in root.iter("Device")] == ["EB01", "EB02", "EB12"]
+
+
+@needs_net_admin
+def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
+    up = coolmuscle("ethercat", "lab", "up", *LAB)
+    sim = None
+    try:
+        assert up.returncode == 0, up.stderr
+        assert "cmecatclim" in up.stdout and "ip netns exec cmecatclins" in up.stdout
+        sim = subprocess.Popen(["ip", "netns", "exec", "cmecatclins", sys.executable, "-m",
+                                "coolmuscle", "sim", "--ethercat", "cmecatclis", "--bridge",
+                                "EB12", "--no-state"], env=ENV, stderr=subprocess.PIPE,
+                               text=True)
+        time.sleep(2.0)
+        scan = subprocess.run([sys.executable, "-c", (
+            "import pysoem,sys; m=pysoem.Master(); m.open('cmecatclim'); n=m.config_init();"
+            "print(n, m.slaves[0].name, hex(m.slaves[0].id)); m.close()")],
+            capture_output=True, text=True, timeout=30)
+        assert scan.stdout.split()[0] == "1", scan.stderr
+        assert "EB12" in scan.stdout and "0xeb0012" in scan.stdout
+    finally:
+        if sim is not None:
+            sim.send_signal(signal.SIGTERM)
+            try:
+                _out, err = sim.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+                _out, err = sim.communicate()
+            assert "Traceback" not in err
+        down = coolmuscle("ethercat", "lab", "down", *LAB)
+    assert down.returncode == 0 and "cmecatclins" in down.stdout
+    assert "cmecatclins" not in ip("netns", "list").stdout
+    again = coolmuscle("ethercat", "lab", "down", *LAB)
+    assert "nothing to remove" in again.stdout
