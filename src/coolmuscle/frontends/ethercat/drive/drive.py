@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 COMMAND_BYTES = 8
 STATUS_BYTES = 8
 #: K parameters re-read from each motor per cycle (the cache of the 60F6h reads).
-K_REFRESH_PER_CYCLE = 4
+K_REFRESH_PER_CYCLE = 1
 
 
 class BridgeDrive:
