@@ -77,7 +77,7 @@ def test_sdo_fuzz_of_the_drive_objects_answers_or_aborts_never_crashes_5_4_1(see
                 assert service == SDO_RESPONSE
         if i % 10 == 0:
             b.cycles(1)                                  # the model thread keeps going
-    assert seen[SDO_REQUEST] > 50 and seen[SDO_RESPONSE] > 50, seen   # both paths taken
+    assert seen[SDO_REQUEST] > 50 and seen[SDO_RESPONSE] > 20, seen   # both paths taken
     b.cycles(5)
     assert b.chain.execute("?99.1", origin="host")       # the motor still answers
     assert b.status(1) & 0x0200                          # and the drive still publishes
