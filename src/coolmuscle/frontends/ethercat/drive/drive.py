@@ -28,6 +28,7 @@ COMMAND_BYTES = 8
 STATUS_BYTES = 8
 #: K parameters re-read from each motor per cycle (the cache of the 60F6h reads).
 K_REFRESH_PER_CYCLE = 1
+LATE_NS = 1_500_000
 
 
 class BridgeDrive:
@@ -43,6 +44,10 @@ class BridgeDrive:
         self.mailboxes = {n: CmlMailbox(n, self.links[n]) for n in axes}
         self.axes = {n: AxisDrive(n, firmware[n - 1], device, od) for n in axes}
         self.pdo = PdoCycleStats()
+        self.cycles = 0
+        self.late_cycles = 0               # cycles that came more than 1.5 ms after the last
+        self.max_gap_ns = 0                # the longest interval between two cycles
+        self._last_cycle: int | None = None
         self._k_order = [(n, e.sub + 20) for n in axes
                          for e in od.table.get(0x60F6 + 0x800 * (n - 1)).entries
                          if e.sub and e.available] + [(n, 37) for n in axes]
@@ -82,11 +87,21 @@ class BridgeDrive:
     def cycle(self) -> None:
         """One bridge cycle (6.3: 1 ms)."""
         now = self.device.kernel.now
+        self._count(now)
         for n, axis in self.axes.items():
             self.links[n].cycle(now, COMMAND_BYTES, STATUS_BYTES)
             self.mailboxes[n].pump(self.device, now)
             axis.cycle(now)
         self._refresh_k()
+
+    def _count(self, now: int) -> None:
+        """The cycle's own timing: a late cycle is a CM-port cycle the bridge missed."""
+        self.cycles += 1
+        if self._last_cycle is not None:
+            gap = now - self._last_cycle
+            self.max_gap_ns = max(self.max_gap_ns, gap)
+            self.late_cycles += gap > LATE_NS
+        self._last_cycle = now
 
     def _refresh_k(self) -> None:
         order = self._k_order

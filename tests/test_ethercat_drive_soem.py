@@ -1,0 +1,103 @@
+"""SOEM (pysoem) drives the bridge's CiA402 axes over a veth pair (issue 12 acceptance).
+
+ethercat-bridge-users-guide.txt 6.1 (06h/07h/0Fh to Operation enabled, fault and
+fault reset), 6.3 (csp ramp on four axes), Appendix 4 (homing on a stopper),
+Appendix 1.1 (CMD mode F307h), 7.1 (CPIO outputs, seen by ``?50`` on the motor's own
+line).  The veth pair and namespace (prefix ``cmec2``) are made and always deleted
+by the test; the master runs in the namespace, the slave in this process in real time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from ethercat_drive_support import Bench
+from ethercat_support import MASTERS, needs_net_admin
+
+from coolmuscle.chain import Chain
+from coolmuscle.frontends.ethercat.lab import veth_pair
+from coolmuscle.frontends.ethercat.transport import EthercatTransport
+from coolmuscle.frontends.transports.service import ServiceThread
+
+pytestmark = needs_net_admin
+
+DATA = Path(__file__).parent / "data"
+STOPPERS = DATA / "ethercat_stoppers.toml"
+FAULT = DATA / "ethercat_fault_id2.toml"
+IN_POSITION_WINDOW = 10        # pulses: what the motor's own in-position settles within
+
+
+def servo_lag() -> int:
+    """The servo model's own lag on the same ramp (2 pulses a ms), in virtual time."""
+    b = Bench("EB02")
+    b.enable((1,))
+    lag = 0
+    for i in range(1, 2001):
+        b.pdo(1, 0x0F, 2 * i)
+        b.cycles(1)
+        lag = max(lag, 2 * i - b.position(1))
+    return lag
+
+
+def run_master(lab, st) -> dict:
+    """The master in the namespace; injects the alarm when it asks (machine file)."""
+    cmd = ["ip", "netns", "exec", lab.namespace, sys.executable,
+           str(MASTERS / "drive_master.py"), lab.master_if]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        lines = []
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            if line.startswith("STEP fault"):
+                st.call(lambda: st.chain.load_machine(FAULT))
+        proc.wait(timeout=100)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    if proc.returncode != 0:
+        raise AssertionError(f"drive_master failed:\n{proc.stderr.read()[-3000:]}")
+    return json.loads(lines[-1])
+
+
+def test_soem_drives_cia402_csp_homing_cmd_cpio_and_fault_reset_6_1_6_3_6_4_7_1():
+    lag0 = servo_lag()
+    with veth_pair("cmec2a", inside="master") as lab:
+        with ServiceThread(lambda: Chain(None, 4, firmware="cm2", machine=STOPPERS),
+                           lambda: [EthercatTransport(lab.slave_if, "EB02")]) as st:
+            r = run_master(lab, st)
+            drive = st.transports[0].app.drive
+            gap_ms = -(-drive.max_gap_ns // 1_000_000)
+            print(r, "bridge cycles", drive.cycles, "late", drive.late_cycles, "gap ms", gap_ms)
+            out4 = st.call(lambda: st.chain.execute("?50.4", origin="host"))
+            origin1 = st.call(lambda: st.chain.snapshot(1).extra["origin_done"])
+            k42_3 = st.call(lambda: st.chain.get_param(3, 42))
+    assert r["op"] == 8
+    assert r["sw_start"] == [0x0240] * 4                          # switch on disabled
+    assert r["sw_06"] == [0x0231] * 4 and r["sw_07"] == [0x0233] * 4
+    assert r["sw_0f"] == [0x1237] * 4                             # operation enabled, csp
+    assert (r["al_after_ramp"], r["al_code"]) == (8, 0), "the slave left OP during the ramp"
+    for a in range(4):                                            # 6.3: on target, in step
+        assert abs(r["ramp_end"][a] - (r["ramp_start"][a] + 4000)) <= IN_POSITION_WINDOW
+        # the servo's own lag, plus 2 pulses for each ms the bridge's cycle came late
+        # (its cycle gap: the motor follows the stream the bridge could give it)
+        assert r["max_lag3"][a] <= lag0 + 2 * (1 + gap_ms), (r["max_lag3"], lag0, gap_ms)
+    assert r["hm_switch"] >= 0 and r["hm_running"] >= 0           # Appendix 4: in progress
+    assert r["hm_cycles"] >= 0 and r["hm_sw"] & 0x3400 == 0x1400  # bits 10 and 12
+    assert abs(r["hm_pos"]) <= 2 and origin1 == 1
+    assert r["k42_3"] == 100 == k42_3                             # 60F6h reached ID3
+    assert r["cmd_switch"] >= 0 and r["cmd_ack"] == 0xF3          # Appendix 1.1 / 7.1.3
+    assert r["cmd_done"] == 0xF8
+    assert r["cpio_switch"] >= 0 and r["cpio_sw"] >> 12 == 0xC    # 7.1.3 CPIO statusword
+    assert out4 == ["OUT.4=03"]                                   # ?50 on the motor's line
+    assert r["f530_tx"] > 1000                                    # 7.4 CM port counters
+    assert r["fault_cycles"] >= 0 and r["fault_sw"] & 0x4F == 0x08 and r["fault_sw"] & 0x4000
+    assert r["reset_sw"] & 0x4F == 0x40 and not r["reset_sw"] & 0x4000   # 15: SOD, cleared
+    assert r["reenabled_sw"] == 0x1237
+    assert r["init"] == 1
