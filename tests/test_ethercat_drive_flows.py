@@ -35,7 +35,7 @@ def test_6_1_power_up_csp_switch_on_disabled_then_06_07_0f_operation_enabled():
     assert b.read(0x6061) == 8 and b.read(0x6502) == 0xA0          # 6.2.1: hm, csp
     for axis in (1, 2, 3, 4):
         assert b.status(axis) == 0x0240                            # SOD + remote
-    expected = {0x06: 0x0231, 0x07: 0x0233, 0x0F: 0x1237}          # RTSO, SO, OE+following
+    expected = {0x06: 0x0221, 0x07: 0x0223, 0x0F: 0x1227}          # RTSO, SO, OE+following
     for cw, sw in expected.items():
         for axis in (1, 2, 3, 4):
             b.pdo(axis, cw, b.position(axis))
@@ -50,10 +50,10 @@ def test_6_1_1_state_a_frees_the_motor_and_state_b_enables_it():
     b.enable((1,))
     b.pdo(1, 0x06)                                                 # 8: shut down -> State A
     b.cycles(2)
-    assert b.status(1) == 0x8231 and not b.chain.snapshot(1).enabled
+    assert b.status(1) == 0x8221 and not b.chain.snapshot(1).enabled
     b.pdo(1, 0x07)                                                 # 3: switch on -> State B
     b.cycles(2)
-    assert b.status(1) == 0x0233 and b.chain.snapshot(1).enabled
+    assert b.status(1) == 0x0223 and b.chain.snapshot(1).enabled
     b.pdo(1, 0x00)                                                 # 10: disable voltage
     b.cycles(2)
     assert b.status(1) == 0x8240 and b.axis(1).transitions[-1] == 10
@@ -64,7 +64,7 @@ def test_6_1_1_quick_stop_is_ignored():
     b.enable((1,))
     b.pdo(1, 0x0B)                                                 # quick stop (bit 2 = 0)
     b.cycles(3)
-    assert b.status(1) == 0x1237 and b.axis(1).transitions == [1, 2, 3, 4]
+    assert b.status(1) == 0x1227 and b.axis(1).transitions == [1, 2, 3, 4]
 
 
 def test_6_1_motor_alarm_is_fault_and_fault_reset_clears_it():
@@ -82,10 +82,14 @@ def test_6_1_motor_alarm_is_fault_and_fault_reset_clears_it():
     assert b.status(1) == 0xC208                                   # no edge: still fault
     b.pdo(1, 0x80)                                                 # 15: fault reset 0 -> 1
     b.cycles(2)
-    assert b.status(1) == 0x8240                                   # SOD, motor free, no error
-    assert b.chain.execute("?99.1") == ["Ux.1=16"]
+    assert b.status(1) == 0xC240                   # SOD, free; the alarm stays latched ...
+    b.pdo(1, 0x06)
+    b.cycles(2)
+    b.pdo(1, 0x07)                                 # ... until state B enables the motor
+    b.cycles(2)                                    # (6.1.1 State C note 1)
+    assert b.status(1) == 0x0223 and b.chain.execute("?99.1") == ["Ux.1=8"]
     b.enable((1,))
-    assert b.status(1) == 0x1237
+    assert b.status(1) == 0x1227
 
 
 # -- 6.3 csp ----------------------------------------------------------------------------
@@ -101,7 +105,7 @@ def test_6_3_csp_follows_the_target_every_cycle_on_all_axes():
     assert max(lags) < 100 and all(abs(b.position(a) - 4000) < 50 for a in (1, 2, 3, 4))
     b.cycles(200)
     assert [b.position(a) for a in (1, 2, 3, 4)] == [4000] * 4
-    assert [b.status(a) for a in (1, 2, 3, 4)] == [0x1237] * 4
+    assert [b.status(a) for a in (1, 2, 3, 4)] == [0x1227] * 4
 
 
 def test_appendix_5_target_beyond_the_resolution_maximum_is_held_at_it():
@@ -181,7 +185,7 @@ def test_appendix_1_1_origin_search_f307_acknowledged_f3_then_f8(bench):
 
 
 def test_appendix_1_1_origin_search_without_a_stopper_times_out_f9():
-    from coolmuscle.frontends.ethercat.drive import homing
+    from coolmuscle.frontends.ethercat.bridge import homing
     b = Bench("EB02")
     b.switch_mode(120)
     assert high(_cmd(b, 0xF307)) == 0xF3

@@ -341,3 +341,19 @@ def test_sdo_information_lists_and_describes_the_dictionary(server):
     assert entry[16:] == b"Vendor ID"
     err = info(5, b"\x18\x10\x09\x00")[0]
     assert err[2] == 7 and struct.unpack_from("<I", err, 6)[0] == 0x06090011
+
+
+def test_fmmu2_maps_the_mailbox_full_bit_bitwise_2_3(app):
+    """FMMU2 (manual 2.3: mailbox status): one bit, SM1 status 0x080D bit 3, to logical bit 5."""
+    configure_mailbox(app)
+    request_state(app, esm.PREOP)
+    one(app, E.FPWR, 0x1001, E.REG_FMMU + 32,
+        struct.pack("<IHBBHBBB3x", 0x20000, 1, 5, 5, E.REG_SM + 13, 3, 1, 1))
+    assert one(app, E.LRD, 0x0000, 0x0002, b"\x00\x00")[1:] == (b"\x00\x00", 1)
+    sdo = struct.pack("<HHBB", 10, 0, 0, 0x13) + struct.pack("<H", 0x2000) + \
+        struct.pack("<BHBI", 0x40, 0x1000, 0, 0)
+    one(app, E.FPWR, 0x1001, ident.MBX_OUT_START, sdo.ljust(128, b"\0"))
+    _a, data, wkc = one(app, E.LRD, 0x0000, 0x0002, b"\x00\x00")
+    assert (data, wkc) == (b"\x20\x00", 1)                 # only logical bit 5, nothing more
+    _a, data, _w = one(app, E.LRD, 0x0000, 0x0002, b"\xdf\xff")
+    assert data == b"\xff\xff"                              # the other bits pass untouched

@@ -108,3 +108,13 @@ def test_the_eb12_bridge_has_cm1_on_id1_2_and_cm2_on_id3_4_1_4_3():
     with pytest.raises(Exception):
         od.lookup(0x60FB, 1)
     assert struct.unpack("<I", od.read(0x1018, 2))[0] == 0x00EB0012
+
+
+def test_an_eb12_chain_has_one_firmware_per_motor_1_4_3():
+    from coolmuscle.chain import Chain
+    from coolmuscle.frontends.ethercat.cli import chain_firmware
+    chain = Chain(None, 4, firmware=chain_firmware("EB12"))
+    try:
+        assert [m.firmware.name for m in chain.motors.values()] == ["cm1", "cm1", "cm2", "cm2"]
+    finally:
+        chain.close()

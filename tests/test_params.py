@@ -8,7 +8,7 @@ import pytest
 
 from coolmuscle.errors import OutOfRangeError
 from coolmuscle.motor.state.firmware import CM1, CM2, FIRMWARES, RT3, get_firmware
-from coolmuscle.motor.state.params import NoSuchParameterError, ParamTable
+from coolmuscle.motor.state.param_table import NoSuchParameterError, ParamTable
 from coolmuscle.motor.state.units import RESOLUTIONS
 
 # Table 6.1 (cml-users-guide.txt), typed in again by hand: k -> (min, max, default).

@@ -13,7 +13,7 @@ import pytest
 from coolmuscle.errors import StoreError
 from coolmuscle.motor.state.firmware import CM2
 from coolmuscle.motor.state.memory import Memory
-from coolmuscle.motor.state.params import ParamTable
+from coolmuscle.motor.state.param_table import ParamTable
 from coolmuscle.motor.state.store import (APPLICATION_ID, DEFAULT_FILENAME, SCHEMA_VERSION,
                                           Store, default_state_dir)
 

@@ -126,11 +126,76 @@ def watchdog(master) -> dict:
     return res
 
 
+def csp(master) -> dict:
+    """6.1.2: 0x06, 0x07, 0x0F on every axis, then a 2 s csp ramp of 4,000 pulses."""
+    master.config_init()
+    s = master.slaves[0]
+    res = to_op(master, s)
+
+    def exchange(cw: int, targets: list[int]) -> list[tuple[int, int]]:
+        s.output = b"".join(struct.pack("<Hi", cw, t) for t in targets)
+        master.send_processdata()
+        master.receive_processdata(10_000)
+        time.sleep(0.001)
+        return [struct.unpack_from("<Hi", s.input, 6 * a) for a in range(4)]
+    now = exchange(0, [0] * 4)
+    start = [p for _w, p in now]
+    words = {}
+    for cw in (0x06, 0x07, 0x0F):
+        for _ in range(30):
+            now = exchange(cw, start)
+        words[hex(cw)] = [w for w, _p in now]
+    lag = 0
+    for i in range(2000):
+        targets = [p + 4000 * (i + 1) // 2000 for p in start]
+        now = exchange(0x0F, targets)
+        lag = max(lag, max(abs(t - p) for t, (_w, p) in zip(targets, now)))
+    for _ in range(500):
+        now = exchange(0x0F, targets)
+    res.update(words=words, start=start, final=[p for _w, p in now],
+               final_words=[w for w, _p in now], targets=targets, max_lag=lag)
+    for _ in range(30):
+        now = exchange(0x06, targets)
+    res["after_shutdown"] = [w for w, _p in now]
+    return res
+
+
+def fault(master) -> dict:
+    """Operation enabled, then the test injects an alarm on ID2: Fault, fault reset."""
+    master.config_init()
+    s = master.slaves[0]
+    res = to_op(master, s)
+
+    def exchange(cws: list[int], targets: list[int]) -> list[tuple[int, int]]:
+        s.output = b"".join(struct.pack("<Hi", c, t) for c, t in zip(cws, targets))
+        master.send_processdata()
+        master.receive_processdata(10_000)
+        time.sleep(0.001)
+        return [struct.unpack_from("<Hi", s.input, 6 * a) for a in range(4)]
+    now = exchange([0] * 4, [0] * 4)
+    start = [p for _w, p in now]
+    for cw in (0x06, 0x07, 0x0F):
+        for _ in range(30):
+            now = exchange([cw] * 4, start)
+    res["enabled"] = [w for w, _p in now]
+    print("READY", flush=True)
+    sys.stdin.readline()                          # the test injects the alarm now
+    for _ in range(100):
+        now = exchange([0x0F] * 4, start)
+    res["faulted"] = [w for w, _p in now]
+    for cw in (0x80, 0x06, 0x07, 0x0F):
+        for _ in range(30):
+            now = exchange([cw] * 4, start)
+        res[f"after_{cw:#04x}"] = [w for w, _p in now]
+    return res
+
+
 def main() -> None:
     master = pysoem.Master()
     master.open(sys.argv[1])
     try:
-        result = {"full": full, "invalid": invalid, "watchdog": watchdog}[sys.argv[2]](master)
+        result = {"full": full, "invalid": invalid, "watchdog": watchdog,
+                  "csp": csp, "fault": fault}[sys.argv[2]](master)
     finally:
         master.close()
     print(json.dumps(result))

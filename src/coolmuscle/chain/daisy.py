@@ -24,12 +24,14 @@ from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBa
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..motor.programs.banks import BankUploads
 from .links import ChainLinks
-from ..motor.motion.coordinated import LINE_PAIRS, end_of_line, pair_line
-from ..motor.programs.direct import MotorEval, inner_motor, run_statement
+from ..motor.programs.coordinated import LINE_PAIRS, end_of_line, pair_line
+from ..cml.ast import inner_motor
+from ..motor.programs.direct import MotorEval, run_statement
 from ..motor.programs.evaluate import evaluate
 from ..motor.state.firmware import get_firmware
 from ..motor.state.memory import VNumber, VState
-from ..motor.motor import Context, Motor
+from ..motor.motor import Motor
+from ..motor.context import Context
 from ..motor.status import Report
 from ..motor.state.store import Store
 from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel

@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterable
 import serial
 
 from ..errors import CoolMuscleTimeout, TransportError
+from ..frontends.urlhandler import register as register_url_handler
 from ..motor.status import Ux
 from . import banks, commands, ops
 from .driver import Listener, SyncDriver
@@ -39,8 +40,8 @@ __all__ = ["connect", "CoolMuscle", "Motor", "open_port"]
 
 
 def open_port(url: str, *, baudrate: int = 38400, **kwargs: Any) -> Any:
-    """Open any pyserial URL or device path (``import coolmuscle`` adds ``coolmuscle://``)."""
-    import coolmuscle  # noqa: F401  (registers the coolmuscle:// handler)
+    """Open any pyserial URL or device path (``coolmuscle://`` included)."""
+    register_url_handler()
     try:
         return serial.serial_for_url(url, baudrate=baudrate, timeout=ops.DEFAULT_TIMEOUT,
                                      **kwargs)

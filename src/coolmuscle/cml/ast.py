@@ -354,3 +354,12 @@ class Line:
     @property
     def empty(self) -> bool:
         return not self.statements
+
+
+def inner_motor(stmt: Statement) -> int | None:
+    """The motor ID a statement names (None when it names none)."""
+    if isinstance(stmt, Assign):
+        return stmt.target.motor
+    if isinstance(stmt, Ref):
+        return stmt.reg.motor
+    return getattr(stmt, "motor", None)

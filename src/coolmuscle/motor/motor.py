@@ -10,10 +10,11 @@ stream.  Spec: cml-users-guide.txt 2.1.2 (execution commands), ch. 3 (K paramete
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Iterable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from ..cml import ast
+from .context import Context
+from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from .state import units
@@ -28,7 +29,7 @@ from .signals.io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_
                          OUT_ORIGIN_DONE, OUT_PUSH, OUT_ROTATION_PULSE, DigitalIO)
 from .signals.manual import ManualMotion
 from .state.memory import Memory, VNumber, VState, VString
-from .state.params import ParamTable
+from .state.param_table import ParamTable
 from .motion.planner import ESTOP_DECEL, Limits, limits_from_data
 from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
 from .motion.profile import Profile
@@ -38,49 +39,13 @@ from .supervision.mixin import Supervision
 from .motion.trajectory import Timeline
 
 if TYPE_CHECKING:
-    from .motion.coordinated import PairMotion
+    from .programs.coordinated import PairMotion
 
 log = logging.getLogger(__name__)
 
 _IN_POSITION = int(Ux.IN_POSITION)
 
-#: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
-WRITABLE_STATES = frozenset({"Dx", "ST"})
 
-
-
-class MotorBus(Protocol):
-    """What a motor needs from its chain."""
-
-    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
-             origin: str = "motor") -> None:
-        """Report a line (host line + event stream)."""
-
-    def motor(self, motor_id: int) -> "Motor | None":
-        """Another motor of the chain (None when absent)."""
-
-    def watch(self, callback: Callable[[], None],
-              motors: Iterable[int] | None = None) -> Callable[[], None]:
-        """Call ``callback`` at every poke (about ``motors``) until the remover is called."""
-
-    def poke(self, motor: int | None = None) -> None:
-        """Something changed (input, data, motion of ``motor``): re-check the bank waits."""
-
-    def chain_command(self, motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
-        """Chain-wide execution commands (``]``, ``*``, ``*1`` ...)."""
-
-
-@dataclass
-class Context:
-    """Who is executing: the origin of the line and where its replies go."""
-
-    origin: str = "host"
-    replies: list[str] | None = None
-    default_motor: int = 1
-    program: bool = False   # inside a program bank
-    ladder: bool = False    # inside a ladder bank
-    quiet: bool = False     # ladder line ending with ';'
-    extra: dict[str, object] = field(default_factory=dict)
 
 
 class Motor(Supervision):

@@ -1,9 +1,12 @@
-"""The everyday tools of a Cool Muscle user, as ``coolmuscle`` subcommands.
+"""The user's tools: the ``coolmuscle`` command and what observes a run.
 
-* :mod:`~coolmuscle.tools.check` - ``coolmuscle check``: the CML linter;
-* :mod:`~coolmuscle.tools.upload` - ``coolmuscle upload``: send a file, verify by readback;
-* :mod:`~coolmuscle.tools.term` - ``coolmuscle term``: the interactive terminal;
-* :mod:`~coolmuscle.tools.commands` - their command-line definitions (typer).
+* :mod:`.cli` - the ``coolmuscle`` command (``sim``, ``run``, ...);
+* :mod:`.script` - ``coolmuscle run`` scripts and golden transcripts;
+* :mod:`.trace` / :mod:`.plot` - the trace recorder of a chain (CSV, Parquet) and its plots;
+* :mod:`.check` - ``coolmuscle check``: the CML linter;
+* :mod:`.upload` - ``coolmuscle upload``: send a file, verify by readback;
+* :mod:`.term` - ``coolmuscle term``: the interactive terminal;
+* :mod:`.commands` - the command-line definitions of check/upload/term (typer).
 
-They talk to motors only through :mod:`coolmuscle.client`.
+``check``, ``upload`` and ``term`` talk to motors only through :mod:`coolmuscle.client`.
 """

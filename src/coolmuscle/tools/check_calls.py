@@ -21,7 +21,7 @@ from ..cml import ast
 from ..client.program import BankBlock, ProgramFile, SourceLine
 
 if TYPE_CHECKING:
-    from .check import CheckReport
+    from .check_report import CheckReport
 
 __all__ = ["check_calls"]
 

@@ -31,6 +31,7 @@ from rich.console import Console
 
 from .. import __version__
 from ..errors import CoolMuscleError, TransportError
+from .usage import UsageError
 from ..chain.machine import MachineFileError
 from .script import ScriptError, TranscriptEntry, load_script, run_script
 from ..frontends.transports.base import Transport
@@ -61,10 +62,6 @@ def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
 
 #: Builds the chain for ``sim`` and ``run`` (same signature as ``Chain``); replaceable in tests.
 chain_factory: Callable[..., Any] = _default_chain_factory
-
-
-class UsageError(CoolMuscleError, ValueError):
-    """Options that do not fit together (exit status 2)."""
 
 
 def default_state_dir() -> Path:

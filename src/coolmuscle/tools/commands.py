@@ -15,6 +15,8 @@ from typing import List, Optional
 
 import typer
 
+from .usage import UsageError
+
 __all__ = ["register"]
 
 
@@ -42,7 +44,6 @@ def check(
 ) -> None:
     """Lint CML files: syntax, limits, banks, calls, loops, registers."""
     from ..client.program import load_program
-    from .cli import UsageError
     from .check import check_program
     from .check_output import format_human, to_json
 
@@ -79,7 +80,6 @@ def upload(
                                                       help="Skip reading ?85."),
 ) -> None:
     """Send a .cml file to a real or virtual motor and verify it by readback."""
-    from .cli import UsageError
     from .upload import upload_file
 
     if not file.is_file():

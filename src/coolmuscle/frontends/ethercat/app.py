@@ -3,11 +3,10 @@
 :class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
 object dictionary built from the table, the SII image, and the 1 ms cycle
 (:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
-the device API's snapshots into the input image.  Part 1 (the device on the wire)
-fills the csp TxPDO's position actual value (6064h + 0x800 n, 6.3.2) from
-``Device.snapshot``; the CiA402 state machine and the modes (part 2) attach here
-through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` /
-:meth:`cycle`, without touching the ESC.
+the output image into each axis's :class:`~.drive.Drive` (CiA402 6.1, csp 6.3) and
+the device API's snapshots into the input image (6041h, 6064h + 0x800 n).  Further
+modes attach here through :class:`~.dictionary.Dictionary` hooks and
+:meth:`outputs` / :meth:`cycle`, without touching the ESC.
 
 Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
 :meth:`safe_outputs` and the dictionary hooks run in the frame thread and must
@@ -22,6 +21,7 @@ from typing import Any
 from . import esm
 from . import identity as ident
 from .dictionary import Dictionary
+from .drive import Drive
 from .objects import Table, build_table
 from .sii import build_sii
 from .slave import SlaveStack
@@ -44,10 +44,11 @@ class BridgeApp:
         self.stack = SlaveStack(self, self.sii)
         ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
+        self.drives = {n: Drive(device, n) for n in self.axes}
         self.operational = False
-        self.drive: Any = None
-        if device is not None:                  # part 2: the CiA402 drive and the modes
-            from .drive.drive import BridgeDrive
+        self.drive: Any = None                  # part 2: every mode of ch. 6 and 7 (bridge/)
+        if device is not None:
+            from .bridge.drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     # -- frame thread ---------------------------------------------------------
@@ -72,14 +73,19 @@ class BridgeApp:
 
     # -- model thread ---------------------------------------------------------------
     def cycle(self) -> None:
-        """One bridge cycle: read each motor through the device API, publish the inputs."""
+        """One bridge cycle: each axis's drive steps (6.1, 6.3), then the inputs go out."""
         od = self.dictionary
-        if self.drive is not None:
-            self.drive.cycle()                  # 6041h, 6061h, 6064h ... (drive/)
+        if self.drive is not None:              # the modes of bridge/ run each axis
+            self.drive.cycle()
             self.stack.set_inputs(od.pack_inputs())
             return
+        operational = self.operational
         for axis in self.axes:
+            d = AXIS_OFFSET * (axis - 1)
             snap = self.device.snapshot(axis)
-            position = max(INT32_MIN, min(INT32_MAX, int(snap.position)))
-            od.set(0x6064 + AXIS_OFFSET * (axis - 1), 0, position)
+            word = self.drives[axis].step(int(od.get(0x6040 + d)), int(od.get(0x607A + d)),
+                                          int(od.get(0x6060 + d)), snap, operational)
+            od.set(0x6041 + d, 0, word)
+            od.set(0x6064 + d, 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
+            od.set(0x6061 + d, 0, od.get(0x6060 + d))
         self.stack.set_inputs(od.pack_inputs())

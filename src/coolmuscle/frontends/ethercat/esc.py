@@ -387,7 +387,8 @@ class Esc:
                     if got is not None:
                         buf[data + lo - addr:data + hi - addr] = got
                         read_done = True
-                elif self._bits_read(buf, data, addr, lstart, llen, lsb, leb, pstart, psb):
+                elif self._bits_read(buf, data, length, addr, lstart, llen, lsb, leb, pstart,
+                                     psb):
                     read_done = True
             if kind & 2 and cmd in (LWR, LRW):
                 if aligned:
@@ -411,9 +412,8 @@ class Esc:
                 pairs.append((lbit, pstart * 8 + psb + k))
         return pairs
 
-    def _bits_read(self, buf: bytearray, data: int, addr: int, lstart: int, llen: int,
-                   lsb: int, leb: int, pstart: int, psb: int) -> bool:
-        length = len(buf) - data
+    def _bits_read(self, buf: bytearray, data: int, length: int, addr: int, lstart: int,
+                   llen: int, lsb: int, leb: int, pstart: int, psb: int) -> bool:
         pairs = self._bit_pairs(addr, length, lstart, llen, lsb, leb, pstart, psb)
         if not pairs:
             return False
@@ -422,8 +422,6 @@ class Esc:
         if got is None:
             return False
         for lbit, pbit in pairs:
-            if data + lbit // 8 >= len(buf):
-                break
             value = got[pbit // 8 - first] >> (pbit % 8) & 1
             mask = 1 << (lbit % 8)
             buf[data + lbit // 8] = (buf[data + lbit // 8] & ~mask) | (mask if value else 0)

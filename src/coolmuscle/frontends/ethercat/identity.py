@@ -9,9 +9,8 @@ from here.
 
 from __future__ import annotations
 
+import importlib.metadata
 from dataclasses import dataclass
-
-from ... import __version__
 
 #: Not an ETG-assigned vendor ID (the manual gives none): "CMB" in ASCII, chosen so
 #: that it is plainly an emulation and clashes with no vendor a master knows.
@@ -57,7 +56,16 @@ VARIANTS: dict[str, Variant] = {
 DEFAULT_VARIANT = "EB02"
 
 HARDWARE_VERSION = "1.00"
-SOFTWARE_VERSION = f"coolmuscle {__version__}"
+
+
+def _version() -> str:
+    try:
+        return importlib.metadata.version("coolmuscle")
+    except importlib.metadata.PackageNotFoundError:
+        return "0.1.0"
+
+
+SOFTWARE_VERSION = f"coolmuscle {_version()}"
 
 
 def variant(code: str) -> Variant:

@@ -33,6 +33,8 @@ from .esc import ETHERTYPE_ECAT
 log = logging.getLogger(__name__)
 
 PACKET_OUTGOING = 4
+FRAME_PRIORITY = 40
+MODEL_PRIORITY = 20
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 #: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
 SWITCH_INTERVAL = 0.0002
@@ -84,7 +86,7 @@ class FrameThread:
     """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
 
     def __init__(self, esc: Any, iface: str, *, keep: int = 100_000,
-                 priority: int = 40) -> None:
+                 priority: int = FRAME_PRIORITY) -> None:
         self.esc = esc
         self.priority = priority
         self.realtime = False
@@ -173,6 +175,8 @@ class EthercatTransport(Transport):
         self._task: asyncio.Task[None] | None = None
         self.late_cycles = 0
         self.cycles = 0
+        self.realtime_model = True
+        self._old_policy: tuple[int, os.sched_param] | None = None
 
     async def start(self, port: Port) -> None:
         from .app import BridgeApp
@@ -180,6 +184,7 @@ class EthercatTransport(Transport):
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)
         gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
+        self._model_realtime(True)
         self.frames.start()
         self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
 
@@ -203,6 +208,25 @@ class EthercatTransport(Transport):
                 log.exception("bridge cycle failed")
             self.cycles += 1
 
+    def _model_realtime(self, on: bool) -> None:
+        """The model's thread under SCHED_FIFO below the frame thread (when allowed).
+
+        The frame thread needs the GIL; a model thread preempted by another program
+        while it holds the GIL would delay every answer.  At a real-time priority the
+        model thread runs until it releases the GIL (at most the switch interval).
+        """
+        if not self.realtime_model or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            if on:
+                self._old_policy = os.sched_getscheduler(0), os.sched_getparam(0)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(MODEL_PRIORITY))
+            elif self._old_policy is not None:
+                os.sched_setscheduler(0, self._old_policy[0], self._old_policy[1])
+                self._old_policy = None
+        except (OSError, PermissionError):
+            log.info("model thread stays at normal priority (no CAP_SYS_NICE)")
+
     def describe(self) -> str:
         return f"ethercat: {self.iface} ({self.bridge}, EtherCAT slave, EtherType 0x88A4)"
 
@@ -220,3 +244,4 @@ class EthercatTransport(Transport):
         if self.frames is not None:
             self.frames.close()
             self.frames = None
+            self._model_realtime(False)

@@ -31,7 +31,8 @@ from ..state.firmware import Firmware
 from ..status import Report
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +144,7 @@ class BankStore:
 class _Session:
     """One bank definition in progress (on one origin: host line, API ...)."""
 
-    motor: "Motor | None"
+    motor: "MotorCore | None"
     ladder: bool
     number: int
     failed: bool = False
@@ -153,7 +154,7 @@ class _Session:
 class BankUploads:
     """Bank definitions typed line by line, one session per origin (chain-level)."""
 
-    def __init__(self, motors: Mapping[int, "Motor"]) -> None:
+    def __init__(self, motors: Mapping[int, "MotorCore"]) -> None:
         self.motors = motors
         self._sessions: dict[str, _Session] = {}
 

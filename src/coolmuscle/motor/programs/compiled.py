@@ -27,11 +27,12 @@ from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
 from ..state.memory import LIMIT_1E9, VNumber, VState
-from ..motor import WRITABLE_STATES
+from ..state.memory import WRITABLE_STATES
 from .queries import register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 Reader = Callable[[], int]
 Compiled = Callable[[], object]
@@ -56,7 +57,7 @@ def _divide(a: int, b: int) -> int:
     return wrap32(q if (a >= 0) == (b >= 0) else -q)
 
 
-def _register(reg: ast.Reg, motor: "Motor") -> Reader:
+def _register(reg: ast.Reg, motor: "MotorCore") -> Reader:
     if reg.motor not in (None, motor.id):
         host = MotorEval(motor)
         return lambda: host.register_value(reg)
@@ -90,7 +91,7 @@ def _register(reg: ast.Reg, motor: "Motor") -> Reader:
     return read
 
 
-def compile_expr(expr: ast.Expr, motor: "Motor") -> Reader:
+def compile_expr(expr: ast.Expr, motor: "MotorCore") -> Reader:
     """A closure computing ``evaluate(expr)`` on ``motor`` (6.7-6.9)."""
     if isinstance(expr, ast.Num):
         value = wrap32(expr.value)
@@ -122,7 +123,7 @@ def compile_expr(expr: ast.Expr, motor: "Motor") -> Reader:
     raise TypeError(f"not an expression: {expr!r}")
 
 
-def _arithmetic(expr: ast.BinOp, motor: "Motor") -> Reader:
+def _arithmetic(expr: ast.BinOp, motor: "MotorCore") -> Reader:
     """``+ - *`` inline (wrapped to 32 bits only when they leave it), ``/`` as 6.7."""
     left, right = compile_expr(expr.left, motor), compile_expr(expr.right, motor)
     if expr.op == "/":
@@ -141,12 +142,12 @@ def _arithmetic(expr: ast.BinOp, motor: "Motor") -> Reader:
 
 
 def _binary(op: Callable[[int, int], int], expr: ast.BinOp | ast.Compare,
-            motor: "Motor") -> Reader:
+            motor: "MotorCore") -> Reader:
     left, right = compile_expr(expr.left, motor), compile_expr(expr.right, motor)
     return lambda: op(left(), right())
 
 
-def compile_condition(expr: ast.Expr, motor: "Motor") -> Callable[[], bool]:
+def compile_condition(expr: ast.Expr, motor: "MotorCore") -> Callable[[], bool]:
     """Truth of a branch condition: a value alone means "> 0" (6.3 "V")."""
     reader = compile_expr(expr, motor)
     if isinstance(expr, (ast.Reg, ast.Num, ast.BinOp, ast.Func)):
@@ -156,8 +157,8 @@ def compile_condition(expr: ast.Expr, motor: "Motor") -> Callable[[], bool]:
 
 # ---------------------------------------------------------------- statements
 
-def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool, clock: Clock,
-            display: Callable[["Motor", ast.Reg, int], str]) -> Compiled | None:
+def _assign(stmt: ast.Assign, motor: "MotorCore", ctx: "Context", quiet: bool, clock: Clock,
+            display: Callable[["MotorCore", ast.Reg, int], str]) -> Compiled | None:
     """An assignment as one closure: steps, value, store, display, errors."""
     reg = stmt.target
     if reg.motor not in (None, motor.id) or reg.kind not in _PLAIN_KINDS | {"V", "K"}:
@@ -197,8 +198,8 @@ def _assign(stmt: ast.Assign, motor: "Motor", ctx: "Context", quiet: bool, clock
     return run
 
 
-def compile_statement(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet: bool,
-                      clock: Clock, display: Callable[["Motor", ast.Reg, int], str],
+def compile_statement(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
+                      clock: Clock, display: Callable[["MotorCore", ast.Reg, int], str],
                       last: bool = True) -> Compiled | None:
     """A closure for a ladder statement, or ``None`` to leave it to the interpreter."""
     if isinstance(stmt, ast.Branch):
@@ -222,8 +223,8 @@ def compile_statement(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet
     return run
 
 
-def _body(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet: bool,
-          display: Callable[["Motor", ast.Reg, int], str], last: bool) -> Compiled | None:
+def _body(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
+          display: Callable[["MotorCore", ast.Reg, int], str], last: bool) -> Compiled | None:
     if isinstance(stmt, ast.Ref):
         return _ref(stmt, motor, ctx, last)
     if isinstance(stmt, ast.Call):
@@ -234,7 +235,7 @@ def _body(stmt: ast.Statement, motor: "Motor", ctx: "Context", quiet: bool,
     return lambda: run_plain(motor, stmt, ctx)
 
 
-def _ref(stmt: ast.Ref, motor: "Motor", ctx: "Context", last: bool) -> Compiled | None:
+def _ref(stmt: ast.Ref, motor: "MotorCore", ctx: "Context", last: bool) -> Compiled | None:
     reg = stmt.reg
     if reg.motor not in (None, motor.id):
         return None
@@ -250,8 +251,8 @@ def _ref(stmt: ast.Ref, motor: "Motor", ctx: "Context", last: bool) -> Compiled 
     return lambda: motor.say(ctx, register_reply(motor, reg))
 
 
-def _actions(stmts: tuple[ast.Statement, ...], motor: "Motor", ctx: "Context", quiet: bool,
-             clock: Clock, display: Callable[["Motor", ast.Reg, int], str]
+def _actions(stmts: tuple[ast.Statement, ...], motor: "MotorCore", ctx: "Context", quiet: bool,
+             clock: Clock, display: Callable[["MotorCore", ast.Reg, int], str]
              ) -> Callable[[], object] | None:
     fns = [compile_statement(s, motor, ctx, quiet, clock, display, i == len(stmts) - 1)
            for i, s in enumerate(stmts)]
@@ -268,8 +269,8 @@ def _actions(stmts: tuple[ast.Statement, ...], motor: "Motor", ctx: "Context", q
     return run
 
 
-def _branch(stmt: ast.Branch, motor: "Motor", ctx: "Context", quiet: bool, clock: Clock,
-            display: Callable[["Motor", ast.Reg, int], str]) -> Compiled | None:
+def _branch(stmt: ast.Branch, motor: "MotorCore", ctx: "Context", quiet: bool, clock: Clock,
+            display: Callable[["MotorCore", ast.Reg, int], str]) -> Compiled | None:
     if any(isinstance(s, ast.Wait) for s in stmt.then):
         return None
     then = _actions(stmt.then, motor, ctx, quiet, clock, display)

@@ -12,15 +12,17 @@ import logging
 from typing import TYPE_CHECKING
 
 from ...cml import ast
+from ...cml.ast import inner_motor
 from ...errors import MotorError, OutOfRangeError
-from ..motion.coordinated import direct_interp
+from .coordinated import direct_interp
 from .evaluate import EvalHost, condition, evaluate
 from ..state.memory import VState
-from ..motor import WRITABLE_STATES
+from ..state.memory import WRITABLE_STATES
 from .queries import query_lines, register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 log = logging.getLogger(__name__)
 
@@ -28,10 +30,10 @@ log = logging.getLogger(__name__)
 class MotorEval(EvalHost):
     """Evaluation of expressions for one motor (reads other motors through its chain)."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
 
-    def _target(self, motor_id: int | None) -> "Motor | None":
+    def _target(self, motor_id: int | None) -> "MotorCore | None":
         if motor_id is None or motor_id == self.motor.id:
             return self.motor
         return self.motor.bus.motor(motor_id)
@@ -60,7 +62,7 @@ class MotorEval(EvalHost):
         return self.motor.firmware.cosine(x)
 
 
-def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str | None:
+def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | str | None:
     """Compute and store an assignment; returns the stored value (for ladder display)."""
     reg = stmt.target
     host = MotorEval(motor)
@@ -83,7 +85,7 @@ def assign_value(motor: "Motor", stmt: ast.Assign, ctx: "Context") -> int | str 
     return value
 
 
-def run_statement(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def run_statement(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     """Execute one statement in direct mode on ``motor``."""
     try:
         _dispatch(motor, stmt, ctx)
@@ -93,7 +95,7 @@ def run_statement(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.report_error(ctx, OutOfRangeError())
 
 
-def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def _dispatch(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     if isinstance(stmt, ast.Assign):
         assign_value(motor, stmt, ctx)
     elif isinstance(stmt, ast.Ref):
@@ -122,7 +124,7 @@ def _dispatch(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.bank_command(motor, stmt, ctx)
 
 
-def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
+def route(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
     """Run ``stmt`` on the motor it names (``motor`` when it names none); a statement
     for an ID not on the chain goes to the chain (the COM1 device, or nobody)."""
     motor_id = inner_motor(stmt) or motor.id
@@ -133,16 +135,7 @@ def route(motor: "Motor", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.beyond_chain(motor_id, stmt, ctx)
 
 
-def inner_motor(stmt: ast.Statement) -> int | None:
-    """The motor ID a statement names (None when it names none)."""
-    if isinstance(stmt, ast.Assign):
-        return stmt.target.motor
-    if isinstance(stmt, ast.Ref):
-        return stmt.reg.motor
-    return getattr(stmt, "motor", None)
-
-
-def _query(motor: "Motor", q: ast.Query, ctx: "Context") -> None:
+def _query(motor: "MotorCore", q: ast.Query, ctx: "Context") -> None:
     lines = query_lines(motor, q)
     if lines is None:
         lines = motor.bus.bank_query(motor, q)
@@ -150,7 +143,7 @@ def _query(motor: "Motor", q: ast.Query, ctx: "Context") -> None:
         motor.say(ctx, line)
 
 
-def _exec(motor: "Motor", stmt: ast.Exec, ctx: "Context") -> None:
+def _exec(motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
     op = stmt.op
     if op == "go":
         motor.go()

@@ -35,7 +35,8 @@ from ..state.memory import VState
 from .queries import format_value, register_name, register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 IDLE, RUNNING, PAUSED = "idle", "running", "paused"
 MAX_CALL_DEPTH = 10   # 2.2.3 "CL": "The maximum layer (nesting) should be under 10"
@@ -50,8 +51,8 @@ _Code = tuple[ast.Statement, "Compiled | None", bool]
 class LadderRunner:
     """Scans one ladder bank: the ladder (``motion=False``) or the logic motion bank."""
 
-    def __init__(self, motor: "Motor", *, motion: bool = False) -> None:
-        from ..motor import Context
+    def __init__(self, motor: "MotorCore", *, motion: bool = False) -> None:
+        from ..context import Context
         self.motor = motor
         self.kernel = motor.kernel
         self.motion = motion
@@ -367,7 +368,7 @@ class LadderRunner:
             runner.start(stmt.index, self.ctx)
 
 
-def _assigned(target: "Motor", reg: ast.Reg, value: int | str | None) -> str:
+def _assigned(target: "MotorCore", reg: ast.Reg, value: int | str | None) -> str:
     """The display of an assignment: the register as written, ``=`` and what it holds."""
     name = register_name(reg.kind, reg.index, target.id)
     if reg.kind == "K":

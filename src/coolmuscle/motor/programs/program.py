@@ -29,14 +29,15 @@ from .bankcheck import expr_steps, statement_steps
 from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
                        holds, program_units, run_plain, target_motor, timer_ns,
                        wait_branch)
-from ..motion.coordinated import (LinePaths, PairMotion, Selection, message_bytes,
-                                  report_leftovers, request)
+from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
+                          report_leftovers, request)
 from ..motion.planner import Limits
 from ..motion.profile import Profile
 from .queries import register_reply
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 IDLE, RUNNING, PAUSED, STEPPING, ESTOP = "idle", "running", "paused", "stepping", "estop"
 MAX_CALL_DEPTH = 10   # 2.2.2 "C": "The maximum layer (nesting) should be under 10"
@@ -61,7 +62,7 @@ class Frame:
 class _Motion:
     """The motion a line gives one motor: waypoints (merge), push, whether the line waits."""
 
-    motor: "Motor"
+    motor: "MotorCore"
     waypoints: list[tuple[float, Limits]] = field(default_factory=list)
     issued_at: int = -1
     push: bool = False
@@ -93,7 +94,7 @@ class _Run:
 class ProgramExecutor:
     """Runs the program banks of one motor."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.kernel = motor.kernel
         self.state = IDLE
@@ -427,7 +428,7 @@ class ProgramExecutor:
         elif reg.kind in ("V", "K", "H"):
             _guard(target, lambda: target.say(self.ctx, register_reply(target, reg)))
 
-    def _accel(self, target: "Motor", index: int, run: _Run) -> None:
+    def _accel(self, target: "MotorCore", index: int, run: _Run) -> None:
         """First A of a line: acceleration; a second A: the deceleration (4.1.3)."""
         seen = run.accel_seen.get(target.id, 0)
         run.accel_seen[target.id] = seen + 1
@@ -487,7 +488,7 @@ class ProgramExecutor:
                     run.motions[r.motor.id] = _Motion(r.motor, issued_at=self.kernel.now,
                                                       path=path)
 
-    def _delay(self, run: _Run, target: "Motor") -> int:
+    def _delay(self, run: _Run, target: "MotorCore") -> int:
         """ns until this line's statements for ``target`` reach it down (or up) the chain
         as one message (ch. 3 K65; 0 without pacing)."""
         if target is self.motor:
@@ -498,12 +499,12 @@ class ProgramExecutor:
         return max(run.arrivals[target.id] - self.kernel.now, 0)
 
 
-def _bank_context(motor: "Motor") -> "Context":
-    from ..motor import Context
+def _bank_context(motor: "MotorCore") -> "Context":
+    from ..context import Context
     return Context(origin="bank", default_motor=motor.id, program=True)
 
 
-def _guard(motor: "Motor", action: object) -> None:
+def _guard(motor: "MotorCore", action: object) -> None:
     try:
         action()  # type: ignore[operator]
     except (MotorError, LookupError, ValueError):
@@ -515,7 +516,7 @@ def _has_flow(unit: Unit) -> bool:
                for s in unit.statements)
 
 
-def _limits(target: "Motor", run: _Run) -> Limits | None:
+def _limits(target: "MotorCore", run: _Run) -> Limits | None:
     prog = target.program
     s_value = int(target.memory.get("S", prog.sel_s))
     a_value = int(target.memory.get("A", prog.sel_a))
@@ -524,7 +525,7 @@ def _limits(target: "Motor", run: _Run) -> Limits | None:
     return target.limits(s_value, a_value, decel_a)
 
 
-def _add_motion(target: "Motor", run: _Run, kind: str, index: int, modifier: str | None,
+def _add_motion(target: "MotorCore", run: _Run, kind: str, index: int, modifier: str | None,
                 now: int, delay: int = 0) -> None:
     value = int(target.memory.get("P", index))
     motion = run.motions.get(target.id)
@@ -545,7 +546,7 @@ def _add_motion(target: "Motor", run: _Run, kind: str, index: int, modifier: str
     _issue(motion, motion.waypoints)
 
 
-def _base(target: "Motor") -> float:
+def _base(target: "MotorCore") -> float:
     """Where a relative ``P#+`` starts: the motor's target, or where it is (2.2.2 "P")."""
     aim = target.axis.target()
     return aim if abs(aim) != float("inf") else float(target.position())

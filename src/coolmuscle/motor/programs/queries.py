@@ -13,7 +13,7 @@ from ..state.memory import VNumber, VState, VString
 from ..status import io_word_hex
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 #: Memory kinds listed by ?999, in the order 6.6 gives ("All data of P, S, A, T, M, N, R, V").
 ALL_DATA_ORDER = ("P", "S", "A", "T", "M", "N", "R", "V")
@@ -36,7 +36,7 @@ def format_value(value: object) -> str:
     return str(value)
 
 
-def register_reply(motor: "Motor", reg: ast.Reg) -> str:
+def register_reply(motor: "MotorCore", reg: ast.Reg) -> str:
     """Reply to a register named alone in direct mode (6.6 "P1~200", "S1~15", ...)."""
     if reg.kind == "K":
         value: object = motor.k(reg.number)
@@ -50,7 +50,7 @@ def group_lines(items: list[str], per_line: int = PER_LINE) -> list[str]:
     return [", ".join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
 
 
-def data_listing(motor: "Motor", kind: str) -> list[str]:
+def data_listing(motor: "MotorCore", kind: str) -> list[str]:
     """?A, ?S, ?M, ?T, ?V, ?P, ?N, ?R: memory numbers 1..N of one kind."""
     items = []
     for index, value in motor.memory.items(kind):
@@ -60,7 +60,7 @@ def data_listing(motor: "Motor", kind: str) -> list[str]:
     return group_lines(items)
 
 
-def direct_data(motor: "Motor") -> list[str]:
+def direct_data(motor: "MotorCore") -> list[str]:
     """``?.n``: the direct-mode data, in the 2.1 operation example's form."""
     m = motor.id
     get = motor.memory.get
@@ -68,7 +68,7 @@ def direct_data(motor: "Motor") -> list[str]:
             f"A.{m}={format_value(get('A', 0))}, M.{m}={format_value(get('M', 0))}"]
 
 
-def _live(motor: "Motor") -> dict[int, Callable[[], str]]:
+def _live(motor: "MotorCore") -> dict[int, Callable[[], str]]:
     m = motor.id
     return {
         50: lambda: f"OUT.{m}={io_word_hex(motor.io.output_word(), motor.io.output_count)}",
@@ -86,7 +86,7 @@ def _live(motor: "Motor") -> dict[int, Callable[[], str]]:
     }
 
 
-def query_lines(motor: "Motor", query: ast.Query) -> list[str] | None:
+def query_lines(motor: "MotorCore", query: ast.Query) -> list[str] | None:
     """Reply lines for ``query``; ``None`` when the motor does not know it (silence)."""
     m = motor.id
     if query.letter is None and query.number is None:

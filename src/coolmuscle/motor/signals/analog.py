@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 from ...sim.kernel import NS_PER_S
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 FULL_SCALE_V = 5.0
 COUNTS = 1024
@@ -66,7 +66,7 @@ class AnalogSource:
     def next_change(self, t: int) -> int | None:
         return None
 
-    def bind(self, motor: "Motor") -> None:
+    def bind(self, motor: "MotorCore") -> None:
         """Attach to the motor whose input it drives (sensors read the motor)."""
 
     def load_torque(self, t: int | None = None) -> float:
@@ -206,7 +206,7 @@ class TorqueSensor(AnalogSource):
         self.direction = 1 if direction >= 0 else -1
         self._position: Callable[[int | None], float] = lambda t: 0.0
 
-    def bind(self, motor: "Motor") -> None:
+    def bind(self, motor: "MotorCore") -> None:
         def raw(t: int | None) -> float:
             if t is None or t >= motor.kernel.now:
                 return motor.axis.raw_actual()

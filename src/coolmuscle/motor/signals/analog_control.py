@@ -29,7 +29,7 @@ from ..motion.planner import Limits
 from ..motion.profile import Profile, Segment
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ def bipolar(y: float) -> float:
     return 0.0
 
 
-def effective_mode(motor: "Motor") -> int:
+def effective_mode(motor: "MotorCore") -> int:
     """The CM2 control type the parameters select (CM1 maps K64/K38 onto it)."""
     if motor.firmware.name == "cm1":
         k64 = motor.k(64)
@@ -84,12 +84,12 @@ def friction_nm(plant: object, speed_pps: float, ppr: int) -> float:
     return coulomb + getattr(plant, "viscous_friction", 0.0) * omega
 
 
-def k40_pps(motor: "Motor") -> float:
+def k40_pps(motor: "MotorCore") -> float:
     """K40 (min⁻¹) in pulses/s of the current resolution."""
     return units.rpm_to_pps(motor.k(40), motor.k(37))
 
 
-def k40_s_value(motor: "Motor", fraction: float) -> int:
+def k40_s_value(motor: "MotorCore", fraction: float) -> int:
     """S = speed[min⁻¹] x resolution[ppr] / speed unit / 60, truncated (ch. 3 K40)."""
     res = motor.resolution
     return int(motor.k(40) * fraction * res.pulses_per_rev / res.speed_unit_pps / 60)
@@ -109,7 +109,7 @@ class _Feedback:
 class AnalogControl:
     """K38 analog control of one motor."""
 
-    def __init__(self, motor: "Motor", analog_input: AnalogInput) -> None:
+    def __init__(self, motor: "MotorCore", analog_input: AnalogInput) -> None:
         self.motor = motor
         self.input = analog_input
         self.kernel = motor.kernel

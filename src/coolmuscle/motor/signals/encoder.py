@@ -27,7 +27,7 @@ from ..motion.planner import Limits
 from ..motion.trajectory import Piece, Schmitt, Timeline, Track
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 A_PHASE_TYPES = (1, 2, 5, 6)
 INDEX_TYPES = (1, 2, 3)
@@ -122,7 +122,7 @@ class _Clock:
 class ExternalEncoder:
     """K71/K72 external encoder of one motor."""
 
-    def __init__(self, motor: "Motor", timeline: Timeline) -> None:
+    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.gearing = Gearing()

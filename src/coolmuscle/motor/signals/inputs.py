@@ -27,7 +27,8 @@ from ...sim.kernel import NS_PER_MS, PRIO_IO, Timer
 from .io import digit
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 # K27/K30 level functions (ch. 3 K27)
 LV_GENERAL, LV_ORIGIN, LV_FEED_CW, LV_FEED_CCW, LV_STOP_LADDER = 1, 2, 3, 4, 5
@@ -42,7 +43,7 @@ QUICK_LEVEL, QUICK_RISE, QUICK_FALL, SLOW_LEVEL, SLOW_RISE, SLOW_FALL = 27, 28, 
 class InputFunctions:
     """Quick and slow signals of every input and the functions they run."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         count = motor.io.input_count
         self.quick = [False] * (count + 1)
@@ -53,7 +54,7 @@ class InputFunctions:
     @property
     def ctx(self) -> "Context":
         if self._ctx is None:
-            from ..motor import Context
+            from ..context import Context
             self._ctx = Context(origin="motor", default_motor=self.motor.id)
         return self._ctx
 

@@ -26,7 +26,7 @@ from ..motion.planner import Limits
 from ..motion.profile import Profile
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 #: Jog speed: one revolution per second (60 min⁻¹) at any resolution.
 JOG_REV_PER_S = 1.0
@@ -37,7 +37,7 @@ JOG_ACCEL = 100_000.0
 class ManualMotion:
     """Jog and feed state of one motor."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.feed_profile: Profile | None = None
         self.feed_direction = 0

@@ -22,7 +22,7 @@ from .io import OUT_ROTATION_PULSE, digit
 from ..motion.trajectory import Schmitt, Timeline, Track
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 #: Hysteresis: 1/5000 of a revolution (5.2), in pulses of the K37 resolution.
 HYSTERESIS_PER_REV = 1 / 5000
@@ -41,7 +41,7 @@ def _phase_b(quarter: int) -> bool:
 class RotationPulses:
     """The K34=7 outputs of one motor."""
 
-    def __init__(self, motor: "Motor", timeline: Timeline) -> None:
+    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.track: Track | None = None

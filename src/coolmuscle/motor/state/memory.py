@@ -369,3 +369,7 @@ def _decode_v(cell: Any) -> VValue:
     if isinstance(cell, Mapping) and set(cell) == {"state"}:
         return VState(str(cell["state"]))
     raise TypeError(f"bad V cell {cell!r}")
+
+
+#: V states a bank may write through (cm-banks-rt3.txt 1.3: Dx target position, St target speed).
+WRITABLE_STATES = frozenset({"Dx", "ST"})

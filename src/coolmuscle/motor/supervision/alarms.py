@@ -27,7 +27,7 @@ from ..status import Ux
 
 if TYPE_CHECKING:
     from ..motion.axis import Axis
-    from ..motor import Motor
+    from ..core import MotorCore
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
 OVER_SPEED_FACTOR = 1.2
@@ -44,7 +44,7 @@ class _AlarmWatch:
 
     bit = Ux(0)
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
 
     def active(self, axis: "Axis") -> bool:
@@ -96,7 +96,7 @@ class OverloadWatch(_AlarmWatch):
 
     bit = Ux.OVERLOAD
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         super().__init__(motor)
         self.since: int | None = None
         self._action = ""
@@ -153,7 +153,7 @@ class TemperatureWatch(_AlarmWatch):
         return thermal.first_above(axis.motion, after_ns, thermal.alarm)
 
 
-def alarm_watchers(motor: "Motor") -> list[_AlarmWatch]:
+def alarm_watchers(motor: "MotorCore") -> list[_AlarmWatch]:
     """The alarm watchers of one motor, in the order they are checked."""
     return [PositionErrorWatch(motor), OverSpeedWatch(motor), OverloadWatch(motor),
             TemperatureWatch(motor)]

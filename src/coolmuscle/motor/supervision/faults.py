@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Callable
 from ..status import Ux
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 #: Nominal supply, ?72 units of 0.1 V (docs/fidelity.md).
 NOMINAL_VSEN = 240
@@ -44,7 +44,7 @@ NOMINAL_VSEN = 240
 class Faults:
     """The lasting faults of one motor and the injection entry point."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.extra_load_percent = 0.0
         self.stuck: dict[int, bool] = {}

@@ -23,7 +23,7 @@ from ..motion import planner
 from ..signals.io import digit
 
 if TYPE_CHECKING:
-    from ..motor import Motor
+    from ..core import MotorCore
 
 _UNIT = {0: 100, 1: 10, 2: 1}
 
@@ -31,7 +31,7 @@ _UNIT = {0: 100, 1: 10, 2: 1}
 class TravelLimits:
     """Software limits and limit-sensor state of one motor."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.on = {1: False, -1: False}
 

@@ -33,7 +33,7 @@ from ..status import Report
 
 if TYPE_CHECKING:
     from ..motion.axis import Axis
-    from ..motor import Motor
+    from ..core import MotorCore
 
 STOPPER, SENSOR, ZPHASE, SENSOR_Z = "stopper", "sensor", "z", "sensor+z"
 
@@ -59,7 +59,7 @@ def auto_start(k46: int) -> bool:
 class OriginSearch:
     """The origin search of one motor (a watcher on its axis)."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.phase: str | None = None
         self.direction = 1

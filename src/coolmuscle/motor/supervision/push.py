@@ -24,7 +24,7 @@ from ..status import Ux
 
 if TYPE_CHECKING:
     from ..motion.axis import Axis
-    from ..motor import Motor
+    from ..core import MotorCore
 
 APPROACH, PUSHING, COMPLETE, ERROR = "approach", "pushing", "complete", "error"
 
@@ -39,7 +39,7 @@ _AT_LEVEL = 1.0 - 1e-6
 class Push:
     """The push motion of one motor (a watcher on its axis)."""
 
-    def __init__(self, motor: "Motor") -> None:
+    def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.state: str | None = None
         self.since: int | None = None

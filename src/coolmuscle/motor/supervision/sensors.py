@@ -21,7 +21,7 @@ EDGE_MARGIN = 1e-6
 
 if TYPE_CHECKING:
     from ..motion.axis import Axis
-    from ..motor import Motor
+    from ..core import MotorCore
 
 
 @dataclass
@@ -34,10 +34,10 @@ class PositionSensor:
     hi: float
     ppr: int = 1000
     normally_closed: bool = False
-    motor: "Motor | None" = field(default=None, repr=False)
+    motor: "MotorCore | None" = field(default=None, repr=False)
     inside: bool = False
 
-    def _range(self, motor: "Motor") -> tuple[float, float]:
+    def _range(self, motor: "MotorCore") -> tuple[float, float]:
         scale = motor.resolution.pulses_per_rev / self.ppr
         return self.lo * scale, self.hi * scale
 
@@ -45,7 +45,7 @@ class PositionSensor:
         """The electrical level it drives (a normally closed switch opens inside)."""
         return self.inside != self.normally_closed
 
-    def attach(self, motor: "Motor") -> None:
+    def attach(self, motor: "MotorCore") -> None:
         """Start driving ``motor``'s input from the shaft position."""
         self.motor = motor
         lo, hi = self._range(motor)

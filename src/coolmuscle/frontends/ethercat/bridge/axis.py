@@ -6,10 +6,11 @@ the requests the SDO hooks queued (K writes, outputs), reads the motor through t
 device API's ``snapshot``, applies a pending mode switch (6.2.2: at rest, 5 ms
 apart), runs the mode's controlword logic and publishes 6041h, 6061h, 6064h.
 
-* csp / hm / CPIO (CiA402): :func:`.cia402.step`; transitions into state B send
-  ``(`` (motor enable), into state A from B or C send ``)`` (motor free); fault
-  reset clears the motor's alarm (``(`` then ``)``: the motor stays free in Switch
-  on disabled, 6.1.1 State C note 1).  In Operation enabled csp and CPIO follow
+* csp / hm / CPIO (CiA402): part 1's table :func:`..cia402.next_state`; into
+  state B or C from A send ``(`` (motor enable, which also clears a latched alarm),
+  into state A from B or C send ``)`` (motor free); a fault reset leaves the alarm
+  latched until the next Switched on enables the motor (6.1.1 State C note 1).
+  In Operation enabled csp and CPIO follow
   607Ah (:mod:`.csp`), hm starts the motor's origin search on the 0 -> 1 edge of
   controlword bit 4 (:mod:`.homing`), CPIO sets OUT1-OUT4 from bits 4-7 (:mod:`.cpio`).
 * CMD: F107h/F207h/F307h/F407h/F607h send ``)``, ``(``, ``|``, ``|2``, ``]1`` and
@@ -27,8 +28,9 @@ from collections import deque
 from typing import Any, Callable
 
 from ....motor.status import ALARM_BITS, Ux
-from . import cia402, cpio, csp, homing, modes
-from .cia402 import State
+from .. import cia402
+from ..cia402 import State
+from . import cpio, csp, homing, modes
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +40,19 @@ INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 CMD_WORDS = {0x1: (")", 0xF1), 0x2: ("(", 0xF2), 0x3: ("|", 0xF3), 0x4: ("|2", 0xF4),
              0x6: ("]1", 0xF6)}
 ORIGIN_DONE_ACK, ORIGIN_TIMEOUT_ACK = 0xF8, 0xF9
-MOTOR_ERROR, MOTOR_FREE, FOLLOWING = 0x4000, 0x8000, 0x1000     # 6.1.3 bits 14, 15, 12
+#: (from, to) -> PDS transition number of the 6.1.1 diagram (for logs and tests).
+TRANSITIONS = {
+    (State.NOT_READY, State.SWITCH_ON_DISABLED): 1,
+    (State.SWITCH_ON_DISABLED, State.READY): 2, (State.READY, State.SWITCHED_ON): 3,
+    (State.READY, State.OPERATION_ENABLED): 34, (State.SWITCHED_ON, State.OPERATION_ENABLED): 4,
+    (State.OPERATION_ENABLED, State.SWITCHED_ON): 5, (State.SWITCHED_ON, State.READY): 6,
+    (State.READY, State.SWITCH_ON_DISABLED): 7, (State.OPERATION_ENABLED, State.READY): 8,
+    (State.OPERATION_ENABLED, State.SWITCH_ON_DISABLED): 9,
+    (State.SWITCHED_ON, State.SWITCH_ON_DISABLED): 10,
+    (State.SWITCHED_ON, State.FAULT_REACTION): 13,
+    (State.OPERATION_ENABLED, State.FAULT_REACTION): 13,
+    (State.FAULT_REACTION, State.FAULT): 14, (State.FAULT, State.SWITCH_ON_DISABLED): 15,
+}
 
 
 class AxisDrive:
@@ -50,7 +64,7 @@ class AxisDrive:
         self.device = device
         self.od = od
         self.base = AXIS_OFFSET * (motor - 1)
-        self.state = State.NOT_READY_TO_SWITCH_ON
+        self.state = State.NOT_READY
         self.mode = modes.POWER_UP
         self.pending_mode: int | None = None
         self.last_switch = -modes.SWITCH_INTERVAL_NS
@@ -148,11 +162,12 @@ class AxisDrive:
         return cw & 0x000F if self.mode == modes.CPIO and cpio.is_cpio_word(cw) else cw
 
     def _cia402(self, cw: int, now: int) -> None:
-        new, transition = cia402.step(self.state, self._state_bits(cw),
-                                      self._state_bits(self._prev_cw), self.alarm)
-        if transition:
-            self.transitions.append(transition)
-            self._act(transition)
+        old = self.state
+        new = cia402.next_state(old, self._state_bits(cw), self._state_bits(self._prev_cw),
+                                self.alarm)
+        if new is not old:
+            self.transitions.append(TRANSITIONS.get((old, new), 0))
+            self._enter(old, new)
             self.state = new
         if self.state is State.OPERATION_ENABLED:
             if self.mode == modes.HM:
@@ -165,20 +180,16 @@ class AxisDrive:
                 and self.state in (State.SWITCHED_ON, State.OPERATION_ENABLED):
             self.set_outputs(cpio.outputs_of(cw, self.firmware))
 
-    def _act(self, transition: int) -> None:
+    def _enter(self, old: State, new: State) -> None:
         """What a PDS transition does to the Cool Muscle (6.1.1 State A/B/C)."""
-        if transition in (3, 34):
-            self.send(f"(.{self.motor}")                      # A -> B: motor enable
-        elif transition in (5, 13):
+        if old is State.OPERATION_ENABLED:
             self.follower.stop()
             self.origin.abort()
-        elif transition in (6, 8, 9, 10):
-            self.follower.stop()
-            self.origin.abort()
-            self.send(f").{self.motor}")                      # B/C -> A: motor free
-        elif transition == 15:
-            self.send(f"(.{self.motor}")                      # clears the latched alarm
-            self.send(f").{self.motor}")                      # ... and State A is free
+        before, after = cia402.motor_state(old), cia402.motor_state(new)
+        if after == "A" and before in ("B", "C") and new is not State.FAULT:
+            self.send(f").{self.motor}")                      # motor free (6.1.1 A.2)
+        elif after in ("B", "C") and before == "A":
+            self.send(f"(.{self.motor}")                      # motor enable (6.1.1 B)
 
     def _homing(self, cw: int, now: int) -> None:
         start, was = cw & 0x10, self._prev_cw & 0x10
@@ -246,24 +257,19 @@ class AxisDrive:
         """OP was left: the output image is no longer valid; stop following (hold)."""
         if self.state is State.OPERATION_ENABLED:
             self.transitions.append(5)
-            self._act(5)
+            self._enter(self.state, State.SWITCHED_ON)
             self.state = State.SWITCHED_ON
         self._prev_cw = int(self.od.get(self.idx(0x6040)))
 
     # -- statusword (6.1.3, 6.4.2, 7.1.3) ----------------------------------------------------------
     def statusword(self) -> int:
-        sw = cia402.statusword(self.state)
+        csp_following = self.mode == modes.CSP and self.follower.active
+        sw = cia402.statusword(self.state, csp=csp_following, alarm=self.alarm,
+                               free=not self.enabled)
         if self.mode == modes.CPIO:
             return cpio.statusword(sw, self.ux, self.inputs, self.firmware)
         if self.mode == modes.CMD and self.cmd_ack:
             return self.cmd_ack << 8
-        if self.mode == modes.CSP and self.state is State.OPERATION_ENABLED \
-                and self.follower.active:
-            sw |= FOLLOWING
-        elif self.mode == modes.HM:
+        if self.mode == modes.HM:
             sw |= homing.STATUS_BITS[self.origin.phase]
-        if self.alarm:
-            sw |= MOTOR_ERROR
-        if not self.enabled:
-            sw |= MOTOR_FREE
         return sw

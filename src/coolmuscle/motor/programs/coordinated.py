@@ -27,13 +27,14 @@ from typing import TYPE_CHECKING, Callable, Sequence
 from ...cml import ast
 from ...cml.formatter import format_statement
 from ...errors import MotorError, OutOfRangeError
-from .interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
-from .interp import follow_path, leg_starts, plan_path
-from .planner import Limits, plan_stop
-from .profile import Profile
+from ..motion.interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
+from ..motion.interp import follow_path, leg_starts, plan_path
+from ..motion.planner import Limits, plan_stop
+from ..motion.profile import Profile
 
 if TYPE_CHECKING:
-    from ..motor import Context, Motor
+    from ..core import MotorCore
+    from ..context import Context
 
 #: Arc length (pulses) below which the rest of a path counts as travelled.
 _DONE = 1e-6
@@ -67,7 +68,7 @@ class Selection:
 class Request:
     """One ``@#.n`` with what its motor contributes to the pair."""
 
-    motor: "Motor"
+    motor: "MotorCore"
     end_index: int            # P memory of the end point
     direction: str | None     # "+" CW, "-" CCW
     selection: Selection
@@ -75,7 +76,7 @@ class Request:
     delay_ns: int = 0         # when the command reaches the motor (K65 chain timing)
 
 
-def request(motor: "Motor", stmt: ast.Interp, selection: Selection, limits: Limits | None,
+def request(motor: "MotorCore", stmt: ast.Interp, selection: Selection, limits: Limits | None,
             delay_ns: int = 0) -> Request:
     """A request for ``motor``; error00 (:class:`OutOfRangeError`) on a type without
     interpolation (2.1.2 "Only Interpolation type can be used") or a P memory that
@@ -153,7 +154,7 @@ def _shifted(profile: Profile, delay_ns: int) -> Profile:
 class PairMotion:
     """The path a pair of motors follows: legs merged one after the other."""
 
-    def __init__(self, x: "Motor", y: "Motor", delays: tuple[int, int] = (0, 0)) -> None:
+    def __init__(self, x: "MotorCore", y: "MotorCore", delays: tuple[int, int] = (0, 0)) -> None:
         self.x, self.y = x, y
         self.delays = delays
         self.start: Point = (x.axis.command_position(), y.axis.command_position())
@@ -164,7 +165,7 @@ class PairMotion:
         self._stopped_at: int | None = None
 
     @property
-    def motors(self) -> tuple["Motor", "Motor"]:
+    def motors(self) -> tuple["MotorCore", "MotorCore"]:
         return self.x, self.y
 
     def end_point(self) -> Point:
@@ -174,7 +175,7 @@ class PairMotion:
         path = self.legs[-1].path
         return path.point(path.length)
 
-    def owns(self, motor: "Motor") -> bool:
+    def owns(self, motor: "MotorCore") -> bool:
         """Whether ``motor`` still follows this path (nothing else took it over)."""
         return motor.path is self and motor.axis.profile is self._raw.get(motor.id)
 
@@ -205,7 +206,7 @@ class PairMotion:
         end = self.end_point()
         return all([motor.path_end_allowed(target) for motor, target in zip(self.motors, end)])
 
-    def _follow(self, s_profile: Profile, motors: Sequence["Motor"]) -> None:
+    def _follow(self, s_profile: Profile, motors: Sequence["MotorCore"]) -> None:
         self.s_profile = s_profile
         self._stopped_at = None
         x_profile, y_profile = follow_path(self.legs, s_profile)
@@ -310,7 +311,7 @@ class LinePaths:
         path.add(build_leg(x, y, start), now)
         return path
 
-    def busy_before(self, x: Request, y: Request, now: int) -> tuple["Motor", ...]:
+    def busy_before(self, x: Request, y: Request, now: int) -> tuple["MotorCore", ...]:
         """The pair's motors still running another motion: a bank line lets it complete
         first (4.3.2), unless the pair continues a path of this line."""
         if self.joining(x, y, now) is not None:
@@ -326,7 +327,7 @@ class LinePaths:
             x.motor.report_error(ctx, OutOfRangeError())
             return None
 
-    def busy(self, motor: "Motor") -> bool:
+    def busy(self, motor: "MotorCore") -> bool:
         """``motor`` runs a path of this line."""
         path = self.paths.get(motor.id)
         return path is not None and path.owns(motor) and motor.axis.moving
@@ -341,12 +342,12 @@ def report_leftovers(pairing: Pairing, ctx: "Context | None") -> None:
 
 # ---------------------------------------------------------------- direct mode
 
-def direct_selection(motor: "Motor") -> Selection:
+def direct_selection(motor: "MotorCore") -> Selection:
     """Direct mode and ladder banks use R0 or N0, whichever was written last."""
     return Selection(kind=motor.direct_interp_kind)
 
 
-def direct_limits(motor: "Motor") -> Limits | None:
+def direct_limits(motor: "MotorCore") -> Limits | None:
     """S0 and A0 of the motor (as ``^``, 2.1.2)."""
     try:
         return motor.limits(int(motor.memory.get("S", 0)), int(motor.memory.get("A", 0)))
@@ -397,7 +398,7 @@ def pair_line(line: Sequence[tuple[ast.Statement, int]], on_chain: Callable[[int
     return pairs
 
 
-def direct_interp(motor: "Motor", stmt: ast.Interp, ctx: "Context") -> None:
+def direct_interp(motor: "MotorCore", stmt: ast.Interp, ctx: "Context") -> None:
     """``@#.n`` in direct mode (2.1.2 "@.1+, @.2+"): the pair starts when the X motor's
     ``@`` runs; with chain pacing the Y motor starts when the line reaches it.
 
@@ -434,7 +435,7 @@ def direct_interp(motor: "Motor", stmt: ast.Interp, ctx: "Context") -> None:
         _direct_start(line, *pair, ctx)
 
 
-def _direct_request(motor: "Motor", stmt: ast.Interp, ctx: "Context",
+def _direct_request(motor: "MotorCore", stmt: ast.Interp, ctx: "Context",
                     delay_ns: int = 0) -> Request | None:
     try:
         return request(motor, stmt, direct_selection(motor), direct_limits(motor), delay_ns)
@@ -451,7 +452,7 @@ def _direct_start(line: LinePaths, x: Request, y: Request, ctx: "Context") -> No
 def message_bytes(statements: Sequence[ast.Statement], motor_id: int, default: int) -> int:
     """Bytes of the statements of a bank line for ``motor_id`` sent down the chain as
     one message: their canonical text and a separator each (ch. 3 K65 timing)."""
-    from ..programs.direct import inner_motor      # .direct imports this module
+    from ...cml.ast import inner_motor
     return sum(len(format_statement(stmt)) + 1 for stmt in statements
                if (inner_motor(stmt) or default) == motor_id)
 
