@@ -27,7 +27,6 @@ from .link import BAUD_CODE, CYCLE_CODE
 
 if TYPE_CHECKING:
     from .axis import AxisDrive
-    from .drive import BridgeDrive
 
 K_FIRST = 21                 # 60F6h subindex 1h = K21 (7.5)
 
@@ -50,8 +49,8 @@ def check_k(firmware: str, k: int, value: int) -> None:
     raise SdoAbort(VALUE_RANGE, f"K{k}={value}")
 
 
-def register(drive: "BridgeDrive") -> None:
-    """Attach every drive hook to the dictionary."""
+def register(drive: Any) -> None:
+    """Attach every hook of ``drive`` (a :class:`~.drive.BridgeDrive`) to the dictionary."""
     od = drive.od
     for axis in drive.axes.values():
         _axis_hooks(od, axis, drive)
@@ -63,7 +62,7 @@ def register(drive: "BridgeDrive") -> None:
         od.set(0xF510 + n, 3, CYCLE_CODE)                   # "1: 1 msec"
 
 
-def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: "BridgeDrive") -> None:
+def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
     i = axis.idx
     od.on_write(i(0x6060), lambda sub, v: _mode(axis, int(v)))
     od.on_write(i(0x6098), lambda sub, v: _method(int(v)))
