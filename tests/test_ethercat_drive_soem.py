@@ -101,3 +101,18 @@ def test_soem_drives_cia402_csp_homing_cmd_cpio_and_fault_reset_6_1_6_3_6_4_7_1(
     assert r["reset_sw"] & 0x4F == 0x40                           # 15: switch on disabled
     assert r["reenabled_sw"] == 0x1227                            # state B cleared the alarm
     assert r["init"] == 1
+
+
+def test_readme_pysoem_example_moves_a_virtual_motor():
+    example = Path(__file__).parents[1] / "examples" / "ethercat_pysoem_move.py"
+    with veth_pair("cmec2b", inside="master") as lab:
+        with ServiceThread(lambda: Chain(None, 4, firmware="cm2"),
+                           lambda: [EthercatTransport(lab.slave_if, "EB02")]) as st:
+            done = subprocess.run(["ip", "netns", "exec", lab.namespace, sys.executable,
+                                   str(example), lab.master_if],
+                                  capture_output=True, text=True, timeout=60)
+            position = st.call(lambda: st.chain.snapshot(1).position)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "controlword 0x000f: statusword 0x1227" in done.stdout
+    assert done.stdout.strip().splitlines()[-1].startswith("target 4000, 6064h 4000")
+    assert position == 4000
