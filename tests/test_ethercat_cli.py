@@ -70,6 +70,8 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
                 sim.kill()
                 _out, err = sim.communicate()
             assert "Traceback" not in err
+            assert "virtual CM1/CM1/CM2/CM2 ID1-ID4 ready" in err, err
+            assert "ethercat: cmecatclis (EB12" in err
         down = coolmuscle("ethercat", "lab", "down", *LAB)
     assert down.returncode == 0 and "cmecatclins" in down.stdout
     assert "cmecatclins" not in ip("netns", "list").stdout

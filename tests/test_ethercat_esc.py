@@ -357,3 +357,31 @@ def test_fmmu2_maps_the_mailbox_full_bit_bitwise_2_3(app):
     assert (data, wkc) == (b"\x20\x00", 1)                 # only logical bit 5, nothing more
     _a, data, _w = one(app, E.LRD, 0x0000, 0x0002, b"\xdf\xff")
     assert data == b"\xff\xff"                              # the other bits pass untouched
+
+
+def test_a_master_that_never_reads_answers_finds_the_receive_mailbox_full(app):
+    configure_mailbox(app)
+    request_state(app, esm.PREOP)
+    sdo = struct.pack("<HHBB", 10, 0, 0, 0x13) + struct.pack("<H", 0x2000) + \
+        struct.pack("<BHBI", 0x40, 0x1000, 0, 0)
+    wkcs = [one(app, E.FPWR, 0x1001, ident.MBX_OUT_START, sdo.ljust(128, b"\0"))[2]
+            for _ in range(60)]
+    assert wkcs.count(1) < 60 and wkcs[-1] == 0           # bounded: SM0 stays full
+    answers = 0
+    while one(app, E.FPRD, 0x1001, ident.MBX_IN_START, bytes(128))[2]:
+        answers += 1
+    assert answers == wkcs.count(1)                        # every request taken is answered
+    assert one(app, E.FPWR, 0x1001, ident.MBX_OUT_START, sdo.ljust(128, b"\0"))[2] == 1
+
+
+def test_a_download_announcing_gigabytes_is_refused_out_of_memory(server):
+    assert abort_code(sdo(server, 0x21, 0xF581, 0, struct.pack("<I", 1 << 30))) == 0x05040005
+
+
+def test_an_unavailable_mode_of_operation_is_set_to_csp_6_2_2_note_3():
+    app = BridgeApp(None)
+    server = app.stack.coe
+    assert sdo(server, 0x2F, 0x6860, 0, b"\x03\0\0\0")[2] == 0x60     # pv (3): N/A
+    assert app.dictionary.get(0x6860, 0) == 8
+    assert sdo(server, 0x2F, 0x6860, 0, b"\x06\0\0\0")[2] == 0x60     # hm
+    assert app.dictionary.get(0x6860, 0) == 6

@@ -109,13 +109,13 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                ) -> list[Transport]:
+                enip: bool = False) -> list[Transport]:
     from ..frontends import transports
     from ..frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
         tcp = str(DEFAULT_PORT)
     if tcp is not None:
         try:
@@ -168,13 +168,26 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
     return chosen
 
 
+def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
+                     priority: int | None = None) -> list[Transport]:
+    """``--enip`` (docs/enip.md)."""
+    if value is None:
+        return []
+    from ..frontends.enip.cli import transports as enip_transports
+    try:
+        return enip_transports(value, io_port, firmware.value, priority)
+    except TransportError as exc:
+        raise UsageError(str(exc)) from None
+
+
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
-                 state: Path | None, scale: float) -> None:
+                 state: Path | None, scale: float, label: str | None = None) -> None:
     from ..frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
     await service.start()
-    err.print(f"coolmuscle: virtual {firmware.value.upper()} {_ids(motors)} ready", markup=False)
+    err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} ready",
+              markup=False)
     where = "   ".join(t.describe() for t in chosen)
     shown = _show_path(state) if state is not None else "none, not saved"
     err.print(f"{where}   (state: {shown})", markup=False)
@@ -239,6 +252,15 @@ def sim(
              "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
     bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
                                help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
+    enip: Optional[str] = typer.Option(
+        None, "--enip", metavar="[HOST[:PORT]]",
+        help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
+             "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
+    enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
+                                     max=65535, help="UDP port of Class 1 I/O."),
+    enip_priority: Optional[int] = typer.Option(
+        None, "--enip-rt-priority", metavar="N", min=1, max=99,
+        help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
     """Serve a virtual chain in real time until Ctrl-C or SIGTERM."""
     _setup_logging(verbose)
@@ -249,15 +271,22 @@ def sim(
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
-    if ethercat is not None:
+    fw = ""
+    if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
+        if enip is not None:
+            raise UsageError("--ethercat and --enip exclude each other (the bridge's four "
+                             "motors are not the EtherNet/IP module's CM1)")
         chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
                                                   stdio, (modbus_rtu, modbus_tcp, com1))
         chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
     else:
-        chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1))
+        chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
+                             enip=enip is not None)
+        chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
         chain = _make_chain(motors, firmware, state_dir, pace, machine)
     try:
-        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale))
+        label = fw.upper().replace(",", "/") if ethercat is not None else None
+        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
     finally:
         chain.close()
     err.print("coolmuscle: stopped", markup=False)
@@ -361,8 +390,10 @@ def _xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
 
 
 def _register_tools() -> None:
+    from ..frontends.enip.cli import register as register_enip
     from .commands import register
     register(app)
+    register_enip(app)   # coolmuscle enip eds
 
 
 _register_tools()  # check, upload, term (coolmuscle.tools)
@@ -384,8 +415,9 @@ _register_subapps()
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``coolmuscle`` command: one-line errors, meaningful exit codes."""
+    from ..frontends.enip.cli import optional_value_argv
     try:
-        app(args=argv, prog_name="coolmuscle")
+        app(args=optional_value_argv(argv), prog_name="coolmuscle")
     except SystemExit:
         raise
     except KeyboardInterrupt:

@@ -29,6 +29,9 @@ from .slave import SlaveStack
 log = logging.getLogger(__name__)
 
 AXIS_OFFSET = 0x800
+#: 6.2 operation modes: hm 6, csp 8, CML 101, CMD 120, CPIO 121.
+MODES = frozenset({6, 8, 101, 120, 121})
+MODE_CSP = 8
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 
 
@@ -46,10 +49,19 @@ class BridgeApp:
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
         self.drives = {n: Drive(device, n) for n in self.axes}
         self.operational = False
+        for axis in range(ident.AXES):
+            self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
         self.drive: Any = None                  # part 2: every mode of ch. 6 and 7 (bridge/)
         if device is not None:
             from .bridge.drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
+
+    @staticmethod
+    def _mode_written(axis: int) -> Any:
+        def hook(sub: int, value: Any) -> int | None:
+            """6.2.2 note 3: a mode that is not available is set to csp (8)."""
+            return None if value in MODES else MODE_CSP
+        return hook
 
     # -- frame thread ---------------------------------------------------------
     def state_change(self, current: int, requested: int) -> int:

@@ -16,12 +16,14 @@ import struct
 from dataclasses import dataclass
 
 from .dictionary import (BAD_COMMAND, GENERAL, LENGTH_MISMATCH, NO_OBJECT, NO_SUBINDEX,
-                         TOGGLE, Dictionary, SdoAbort)
+                         OUT_OF_MEMORY, TOGGLE, Dictionary, SdoAbort)
 from .objects import ARRAY, RECORD, STRING, VAR, Entry
 
 log = logging.getLogger(__name__)
 
 SDO_REQUEST, SDO_RESPONSE, SDO_INFO = 2, 3, 8
+#: The longest value a download may announce (the longest object is 128 bytes).
+MAX_TRANSFER = 4096
 _MBX_HEADER = 6
 
 # SDO information opcodes (ETG.1000.6 table 43).
@@ -155,6 +157,8 @@ class CoeServer:
         else:
             size, = struct.unpack_from("<I", sdo, 4)
             data = sdo[8:]
+            if size > MAX_TRANSFER:
+                raise SdoAbort(OUT_OF_MEMORY)
             if size <= len(data):
                 self._store(index, sub, complete, data[:size], True)
             else:

@@ -55,7 +55,7 @@ NO_DICTIONARY = 0x08000023
 _ASSIGNMENTS = frozenset({0x1C12, 0x1C13})
 
 ReadHook = Callable[[int], "int | str"]
-WriteHook = Callable[[int, "int | str"], None]
+WriteHook = Callable[[int, "int | str"], "int | str | None"]
 
 
 class SdoAbort(Exception):
@@ -88,7 +88,8 @@ class Dictionary:
         self._read_hooks[index] = hook
 
     def on_write(self, index: int, hook: WriteHook) -> None:
-        """Called with (sub, value) after the access checks, before the value is kept."""
+        """Called with (sub, value) after the access checks, before the value is kept;
+        it may raise :class:`SdoAbort`, or return the value to keep instead."""
         self._write_hooks[index] = hook
 
     def get(self, index: int, sub: int = 0) -> int | str:
@@ -163,7 +164,9 @@ class Dictionary:
                 raise SdoAbort(VALUE_HIGH)
         hook = self._write_hooks.get(index)
         if hook is not None:
-            hook(sub, value)
+            stored = hook(sub, value)
+            if stored is not None:
+                value = stored
         self._values[(index, sub)] = value
 
     @staticmethod

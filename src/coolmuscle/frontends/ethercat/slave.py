@@ -27,6 +27,8 @@ from .esc import Esc, SyncManager
 log = logging.getLogger(__name__)
 
 MBX_ERR, MBX_COE = 0x00, 0x03
+#: Answers kept for a master that has not read them; then SM0 is not taken.
+MAX_QUEUED = 32
 # Mailbox error codes (ETG.1000.4 table 29).
 MBXERR_SYNTAX, MBXERR_UNSUPPORTED_PROTOCOL, MBXERR_SERVICE = 0x01, 0x02, 0x04
 MBXERR_SIZE_TOO_SHORT, MBXERR_INVALID_SIZE = 0x06, 0x08
@@ -56,6 +58,7 @@ class SlaveStack:
         self.esc = Esc(self, sii)
         self.coe = CoeServer(self.od, ident.MBX_IN_SIZE)
         self._queue: deque[bytes] = deque()
+        self._waiting: bytes | None = None
         self._counter = 0
         self.transitions: list[tuple[int, int, int]] = []    # (from, to, code), for tests
 
@@ -84,6 +87,7 @@ class SlaveStack:
             self._call_safe_outputs()
         if new == esm.INIT:
             self._queue.clear()
+            self._waiting = None
 
     def _call_safe_outputs(self) -> None:
         try:
@@ -142,9 +146,13 @@ class SlaveStack:
 
     # -- mailbox ------------------------------------------------------------
     def mailbox_received(self, sm: int, data: bytes) -> None:
-        self.esc.take_mailbox(sm)
         if sm != 0 or self.state == esm.INIT:
+            self.esc.take_mailbox(sm)
             return
+        if len(self._queue) >= MAX_QUEUED:
+            self._waiting = data       # answers not read yet: SM0 stays full (no WKC)
+            return
+        self.esc.take_mailbox(sm)
         try:
             self._serve(data)
         except Exception:
@@ -182,6 +190,9 @@ class SlaveStack:
     def _pump(self) -> None:
         while self._queue and self.esc.post_mailbox(1, self._queue[0]):
             self._queue.popleft()
+        if self._waiting is not None and len(self._queue) < MAX_QUEUED:
+            data, self._waiting = self._waiting, None
+            self.mailbox_received(0, data)
 
 
 def _matches(sm: SyncManager, start: int, length: int, master_writes: bool) -> bool:

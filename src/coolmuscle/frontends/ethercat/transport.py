@@ -245,3 +245,4 @@ class EthercatTransport(Transport):
             self.frames.close()
             self.frames = None
             self._model_realtime(False)
+            gc.unfreeze()

@@ -33,6 +33,7 @@ BUILTIN: dict[str, str] = {
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
     "ethercat": "coolmuscle.frontends.ethercat.transport:EthercatTransport",
+    "enip": "coolmuscle.frontends.enip.server:EnipTransport",
 }
 
 #: Entry-point group for third-party transports (pyproject ``[project.entry-points]``).

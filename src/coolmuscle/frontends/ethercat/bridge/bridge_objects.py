@@ -81,11 +81,13 @@ def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
     od.on_read(0xF590 + axis.motor, lambda sub: mailbox.read())
 
 
-def _mode(axis: "AxisDrive", value: int) -> None:
+def _mode(axis: "AxisDrive", value: int) -> int:
+    """6060h: the mode requested; the value kept is the mode it selects (6.2.2 note 3)."""
     try:
         axis.request_mode(value)
     except ValueError as exc:
         raise SdoAbort(DEVICE_STATE, str(exc)) from None
+    return modes.resolve(value)
 
 
 def _method(value: int) -> None:

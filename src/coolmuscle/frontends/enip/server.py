@@ -1,0 +1,319 @@
+"""The EtherNet/IP adapter as a transport: TCP 44818, UDP 44818 and UDP 2222 (docs/enip.md).
+
+:class:`EnipTransport` is started by :class:`coolmuscle.transports.service.Service`
+like every other transport and lives in its asyncio loop, so every model call
+happens in the thread that drives the kernel, at the wall-clock instant now
+(``Port.call``).  It owns only sockets and timers:
+
+* TCP: one :class:`~.encapsulation.Connection` per client; a frame longer than the
+  encapsulation limit is answered 0x0065 and the connection closed;
+* UDP on the TCP port number: ListIdentity / ListServices / ListInterfaces;
+* UDP I/O port (2222): O->T packets in; T->O packets out, sent on time by the
+  :class:`~.producer.Producer` thread; a loop timer runs the watchdogs.  The
+  connection table is shared under one lock.
+
+``port=0`` / ``io_port=0`` pick free ports (tests); the UDP list port then takes the
+TCP port's number.  Binds 127.0.0.1 unless told otherwise.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+import threading
+import time
+from typing import Any
+
+from ...errors import TransportError
+from ..transports.base import Port, Transport
+from .adapter import Cm1Module
+from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
+from .encapsulation import INVALID_LENGTH, Frame
+from .io import DEFAULT_IO_PORT, ConnectionTable
+from .objects import ObjectModel
+from .producer import Producer
+from .router import Router
+
+log = logging.getLogger(__name__)
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 44818
+READ_SIZE = 65536
+IDLE_TICK = 0.1          # seconds between watchdog checks when nothing is due
+PORT_ATTEMPTS = 5        # port 0: tries for a TCP port whose UDP twin is free
+
+
+class _Datagrams(asyncio.DatagramProtocol):
+    def __init__(self, handler: Any) -> None:
+        self.handler = handler
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        try:
+            self.handler(data, addr)
+        except Exception:  # one bad datagram never stops the endpoint
+            log.exception("enip: datagram from %s failed", addr)
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("enip: udp error %s", exc)
+
+
+class EnipTransport(Transport):
+    """Serve the CM1 EtherNet/IP module of motor ``motor`` (see module docstring)."""
+
+    name = "enip"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+                 io_port: int = DEFAULT_IO_PORT, *, motor: int = 1,
+                 priority: int | None = None) -> None:
+        super().__init__()
+        self.priority = priority
+        self.host = host
+        self.requested_port = port
+        self.requested_io_port = io_port
+        self.motor = motor
+        self.module: Cm1Module | None = None
+        self.table: ConnectionTable | None = None
+        self.router: Router | None = None
+        self.sessions = Sessions()
+        self.bound: tuple[str, int] | None = None
+        self.io_port = io_port
+        self._server: asyncio.base_events.Server | None = None
+        self._udp: list[asyncio.DatagramTransport] = []
+        self._io: asyncio.DatagramTransport | None = None
+        self._handle: asyncio.TimerHandle | asyncio.Handle | None = None
+        self._closed = True
+        self._writers: set[asyncio.StreamWriter] = set()
+        self.lock = threading.Lock()
+        self.producer: Producer | None = None
+        self._io_sock: socket.socket | None = None
+
+    # -- life cycle -------------------------------------------------------------------------
+    async def start(self, port: Port) -> None:
+        self.port = port
+        device = port.device
+        if device is None:
+            raise TransportError("enip: no device behind this port")
+        self.module = Cm1Module(device, self.motor)
+        self.table = ConnectionTable(self.module, self.host, 0, port.call)
+        objects = ObjectModel(self.module, host=self.host,
+                              output_owned=lambda: self.table is not None
+                              and self.table.owner is not None, reset=self._reset)
+        try:
+            await self._listen()
+        except OSError as exc:
+            await self.close()
+            raise TransportError(f"enip: cannot listen on {self.host} (TCP/UDP "
+                                 f"{self.requested_port}, I/O UDP {self.requested_io_port}): "
+                                 f"{exc.strerror or exc}") from exc
+        self.table.io_port = self.io_port
+        self.router = Router(objects, self.table, self.bound[1] if self.bound else 0,
+                             call=port.call)
+        self._closed = False
+        assert self._io_sock is not None
+        loop = asyncio.get_running_loop()
+        self.producer = Producer(self.table, self._io_sock, self.lock,
+                                 lambda: self._threadsafe(loop, self._refresh),
+                                 self.priority)
+        self.producer.start()
+        self._schedule()
+
+    async def _listen(self) -> None:
+        for attempt in range(PORT_ATTEMPTS):
+            try:
+                await self._listen_tcp_udp()
+                break
+            except OSError:
+                # a free TCP port whose UDP twin is taken: with port 0, try another
+                if self.requested_port != 0 or attempt == PORT_ATTEMPTS - 1:
+                    raise
+        loop = asyncio.get_running_loop()
+        io_sock = self._io_socket()
+        io, _ = await loop.create_datagram_endpoint(lambda: _Datagrams(self._io_datagram),
+                                                    sock=io_sock)
+        self._io = io
+        self._io_sock = io_sock
+        self.io_port = io_sock.getsockname()[1]
+
+    async def _listen_tcp_udp(self) -> None:
+        """TCP and UDP on the same port number (44818)."""
+        loop = asyncio.get_running_loop()
+        server = await asyncio.start_server(self._serve, self.host, self.requested_port)
+        sockname = server.sockets[0].getsockname()
+        try:
+            udp, _ = await loop.create_datagram_endpoint(
+                lambda: _Datagrams(self._list_datagram), local_addr=(self.host, sockname[1]))
+        except OSError:
+            server.close()
+            await server.wait_closed()
+            raise
+        self._server, self.bound = server, (sockname[0], sockname[1])
+        self._udp.append(udp)
+
+    def _io_socket(self) -> socket.socket:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 1)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton(self.host))
+        except OSError:
+            log.debug("enip: no multicast options on %s", self.host)
+        try:
+            sock.bind((self.host, self.requested_io_port))
+        except OSError:
+            sock.close()
+            raise
+        sock.setblocking(False)
+        return sock
+
+    def describe(self) -> str:
+        host, port = self.bound or (self.host, self.requested_port)
+        return f"enip: {host}:{port} (I/O udp {self.io_port})"
+
+    def info(self) -> dict[str, Any]:
+        host, port = self.bound or (self.host, self.requested_port)
+        return {"host": host, "port": port, "io_port": self.io_port}
+
+    async def close(self) -> None:
+        self._closed = True
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
+        if self.producer is not None:
+            await asyncio.get_running_loop().run_in_executor(None, self.producer.stop)
+            self.producer = None
+        if self.table is not None:
+            with self.lock:
+                self.table.close_all()
+        if self._server is not None:
+            self._server.close()
+        for writer in list(self._writers):
+            writer.transport.abort()
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+        for udp in self._udp:
+            udp.close()
+        self._udp.clear()
+        if self._io is not None:
+            self._io.close()
+            self._io = None
+        self.finished.set()
+
+    # -- TCP ---------------------------------------------------------------------------------
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        assert self.router is not None
+        self._writers.add(writer)
+        peer = writer.get_extra_info("peername") or ("0.0.0.0", 0)
+        local = writer.get_extra_info("sockname") or (self.host, 0)
+        conn = Connection(self.router, self.sessions, (peer[0], peer[1]), (local[0], local[1]))
+        frames = FrameReader()
+        try:
+            while not conn.closing:
+                data = await reader.read(READ_SIZE)
+                if not data:
+                    break
+                frames.receive_data(data)
+                if not self._answer_frames(conn, frames, writer):
+                    break
+                await writer.drain()
+        except (ConnectionError, OSError) as exc:
+            log.info("enip: client %s: %s", peer, exc)
+        except asyncio.CancelledError:
+            pass
+        except Exception:  # one client's trouble never escapes as a task error
+            log.exception("enip: client %s failed", peer)
+        finally:
+            with self.lock:
+                conn.close()
+            self._writers.discard(writer)
+            if not writer.transport.is_closing():
+                writer.transport.close()
+
+    def _answer_frames(self, conn: Connection, frames: FrameReader,
+                       writer: asyncio.StreamWriter) -> bool:
+        """Answer every complete frame; ``False`` when the connection must close."""
+        while not conn.closing:
+            try:
+                frame = frames.next_frame()
+            except FramingError as exc:
+                command, _, session, _, context, _ = exc.header
+                writer.write(Frame(command, session, INVALID_LENGTH, context).encode())
+                return False
+            if frame is None:
+                return True
+            assert self.table is not None
+            with self.lock:
+                before = len(self.table.by_triad)
+                reply = conn.handle(frame)
+                changed = len(self.table.by_triad) != before
+            if reply is not None:
+                writer.write(reply)
+            if changed:
+                self.wake()
+        return False
+
+    # -- UDP -----------------------------------------------------------------------------------
+    def _list_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        assert self.router is not None
+        reply = answer_datagram(data, self.router, self.bound or (self.host, 0))
+        if reply is not None and self._udp:
+            self._udp[0].sendto(reply, addr)
+
+    def _io_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        assert self.table is not None
+        with self.lock:
+            self.table.consume(data, addr[0], time.monotonic_ns())
+
+    def _tick(self) -> None:
+        """Send what is due, time out the silent, then sleep until the next instant."""
+        self._handle = None
+        if self.table is None or self._closed:
+            return
+        try:
+            with self.lock:
+                gone = self.table.expire(time.monotonic_ns())
+            if gone and self.producer is not None:
+                self.producer.wake()
+        except Exception:  # the watchdogs must go on whatever one connection did
+            log.exception("enip: I/O watchdog failed")
+        self._schedule()
+
+    def _schedule(self) -> None:
+        assert self.table is not None
+        loop = asyncio.get_running_loop()
+        nxt = self.table.next_watchdog()
+        when = loop.time() + IDLE_TICK if nxt is None else min(nxt / 1e9,
+                                                                loop.time() + IDLE_TICK)
+        self._handle = loop.call_at(when, self._tick)
+
+    def wake(self) -> None:
+        """Re-plan the timer and the producer now (a connection was opened or closed)."""
+        if self._handle is not None:
+            self._handle.cancel()
+        self._handle = asyncio.get_running_loop().call_soon(self._tick)
+        if self.producer is not None:
+            self.producer.wake()
+
+    def _reset(self) -> None:
+        """Identity Reset: the module restarts (called under the lock, loop thread)."""
+        assert self.table is not None and self.module is not None
+        self.table.close_all()
+        self.module.reset_outputs()
+        self.wake()
+
+    def _refresh(self) -> None:
+        """Read the input image for the next T->O packets (loop thread)."""
+        if self.table is None or self._closed:
+            return
+        try:
+            self.table.refresh()
+        except Exception:
+            log.exception("enip: reading the input image failed")
+
+    @staticmethod
+    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Any) -> None:
+        try:
+            loop.call_soon_threadsafe(fn)
+        except RuntimeError:     # the loop is closing
+            pass
