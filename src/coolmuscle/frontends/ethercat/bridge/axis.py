@@ -145,7 +145,8 @@ class AxisDrive:
         target = self.pending_mode
         if target is None or now - self.last_switch < modes.SWITCH_INTERVAL_NS:
             return
-        self.pending_mode = None
+        if self.pending_mode == target:          # a newer request stays for the next cycle
+            self.pending_mode = None
         if target == self.mode:
             return
         self.follower.stop()
