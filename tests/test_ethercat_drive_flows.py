@@ -309,7 +309,8 @@ def test_7_2_2_string_over_64_bytes_is_refused_and_an_error_line_comes_back():
     b.cycles(5)
     b.write(0xF581, 0, "K99.1=5")
     b.cycles(5)
-    assert b.read(0xF591).startswith("error")
+    own = b.chain.execute("K99.1=5", origin="web")                 # the motor's own answer
+    assert own and own[0].startswith("error") and b.read(0xF591) == own[0] + "\r\n"
     assert b.abort(0xF581, 0, "?99.1") == 0
 
 
@@ -351,6 +352,21 @@ def test_appendix_4_homing_on_a_stopper_ends_with_bits_10_and_12(bench, method, 
     k45 = b.chain.get_param(1, 45)
     assert (b.chain.get_param(1, 42), k45 % 10, b.chain.get_param(1, 43)) == \
         (60, 0 if method == 1 else 1, 200)
+
+
+def test_appendix_4_homing_on_the_origin_switch_method_4():
+    b = Bench("EB02", machine=Path(__file__).parent / "data" / "ethercat_origin_sensor.toml")
+    b.switch_mode(6)
+    b.enable((1,))
+    b.write(0x6098, 0, 4)                                          # switch CCW
+    b.write(0x6099, 1, 50)                                         # speed for the switch
+    b.cycles(100)
+    b.pdo(1, 0x1F)
+    b.until(lambda: b.status(1) & 0x3000, 20000)
+    assert b.status(1) & 0x3400 == 0x1400
+    assert (b.chain.get_param(1, 46), b.chain.get_param(1, 42)) == (2, 50)
+    b.cycles(50)
+    assert b.position(1) == 0 and b.chain.snapshot(1).inputs & 1     # at the switch
 
 
 def test_6_4_1_homing_objects_refuse_values_the_motor_refuses():
