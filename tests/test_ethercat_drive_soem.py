@@ -118,3 +118,22 @@ def test_readme_pysoem_example_moves_a_virtual_motor():
     assert "controlword 0x000f: statusword 0x1227" in done.stdout
     assert done.stdout.strip().splitlines()[-1].startswith("target 4000, 6064h 4000")
     assert position == 4000
+
+
+def test_kickcat_reads_the_drive_objects_and_moves_all_axes_6_1_6_3_7_3():
+    """A second, independent master: KickCAT (its binding reads SDOs, writes PDOs)."""
+    from ethercat_support import run_master as run_in_namespace
+    with veth_pair("cmec2k", inside="master") as lab:
+        with ServiceThread(lambda: Chain(None, 4, firmware="cm2"),
+                           lambda: [EthercatTransport(lab.slave_if, "EB02")]):
+            r = run_in_namespace(lab, "kickcat_drive_master.py", timeout=90)
+    assert r["6502"] == 0xA0 and r["6061"] == [8] * 4             # 6.2.1, 6.2.2 note 1
+    assert r["60e3"] == [1, 2, 3, 4]                              # 6.4.1
+    assert r["f511"] == [2, 6, 1]                                 # 7.3: CM2, 176,800, 1 ms
+    assert r["f591"] == "Null\r\n"                                # 7.2.2: nothing yet
+    assert "OPERATIONAL" in r["op"].upper()
+    assert all(w & 0x6F == 0x21 for w in r["sw_06"]), r
+    assert all(w & 0x6F == 0x23 for w in r["sw_07"]), r
+    assert all(w & 0x6F == 0x27 and w & 0x1000 for w in r["sw_0f"]), r
+    assert all(abs(e - (s + 1000)) <= IN_POSITION_WINDOW for s, e in zip(r["start"], r["end"]))
+    assert r["f530_tx"] > 500
