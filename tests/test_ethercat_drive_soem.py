@@ -3,8 +3,10 @@
 ethercat-bridge-users-guide.txt 6.1 (06h/07h/0Fh to Operation enabled, fault and
 fault reset), 6.3 (csp ramp on four axes), Appendix 4 (homing on a stopper),
 Appendix 1.1 (CMD mode F307h), 7.1 (CPIO outputs, seen by ``?50`` on the motor's own
-line).  The veth pair and namespace (prefix ``cmec2``) are made and always deleted
-by the test; the master runs in the namespace, the slave in this process in real time.
+line); the README's pysoem example; KickCAT, a second master, reading the drive's
+objects and moving all axes.  The veth pairs and namespaces (prefix ``cmec2``) are made
+and always deleted by each test; the master runs in the namespace, the slave in this
+process in real time.
 """
 
 from __future__ import annotations
