@@ -101,6 +101,10 @@ def test_soem_drives_cia402_csp_homing_cmd_cpio_and_fault_reset_6_1_6_3_6_4_7_1(
     assert r["cpio_switch"] >= 0 and r["cpio_sw"] >> 12 == 0xC    # 7.1.3 CPIO statusword
     assert out4 == ["OUT.4=03"]                                   # ?50 on the motor's line
     assert r["f530_tx"] > 1000                                    # 7.4 CM port counters
+    assert r["csp_again"] >= 0 and r["cml_switch"] >= 0           # Appendix 3.3, 3.2
+    assert r["q99"] == ["Ux.1=8\r\n"]                            # Appendix 2.3
+    assert len(r["q90"]) == 18 and r["q90"][0].startswith("K20.1=")   # Appendix 2.5
+    assert r["too_long"] == 0x06070012                            # 7.2.2: over 64 bytes
     assert r["fault_cycles"] >= 0 and r["fault_sw"] & 0x4F == 0x08 and r["fault_sw"] & 0x4000
     assert r["reset_sw"] & 0x4F == 0x40                           # 15: switch on disabled
     assert r["reenabled_sw"] == 0x1227                            # state B cleared the alarm

@@ -66,13 +66,57 @@ class Io:
         return value
 
     def switch_mode(self, axis: int, mode: int) -> int:
-        """Appendix 3: 6060h, then 6061h every 5 ms until it shows (ms waited or -1)."""
-        self.sdo_write(0x6060 + OFF * axis, 0, "b", mode)
+        """Appendix 3: 6060h, then 6061h every 5 ms until it shows (ms waited or -1).
+        A refusal (08000022h: not in position yet) is retried every 10 ms."""
+        for _ in range(50):
+            try:
+                self.sdo_write(0x6060 + OFF * axis, 0, "b", mode)
+                break
+            except pysoem.SdoError:
+                self.run(10)
         for waited in range(0, 200, 5):
             if self.sdo_read(0x6061 + OFF * axis, 0, "b") == mode:
                 return waited
             self.run(5)
         return -1
+
+
+def cml(io: Io) -> dict:
+    """Appendix 3.3 + 3.2 (hm -> csp -> CML), then Appendix 2.3 and 2.5 on ID1."""
+    io.target[0] = io.pos[0]              # 3.3: "actual position follows target position"
+    out = {"csp_again": io.switch_mode(0, 8)}
+    io.run(20)
+    out["cml_switch"] = io.switch_mode(0, 101)
+    io.cw[0] = 0x0000                                               # "Set 0000h"
+    io.run(5)
+
+    def poll(limit: int, every: int) -> list[str]:
+        lines: list[str] = []
+        for _ in range(limit):
+            line = io.s.sdo_read(0xF591, 0).decode("latin-1")
+            if line != "Null\r\n":
+                lines.append(line)
+            elif lines:
+                break
+            io.run(every)
+        return lines
+
+    drained = 0                           # earlier reports (Ux, Origin): Appendix 2.1 "another
+    while io.s.sdo_read(0xF591, 0) != b"Null\r\n" and drained < 5000:   # data received"
+        drained += 1
+        io.run(1)                         # process data goes on (the SM watchdog)
+    out["drained"] = drained
+    io.s.sdo_write(0xF581, 0, b"?99.1")
+    out["q99"] = poll(50, 2)
+    io.s.sdo_write(0xF581, 0, b"?90.1")
+    io.run(3)
+    out["q90"] = poll(100, 10)
+    try:
+        io.s.sdo_write(0xF581, 0, b"?99.1," * 11)                  # 66 bytes
+        out["too_long"] = 0
+    except pysoem.SdoError as exc:
+        out["too_long"] = exc.abort_code
+    return out
 
 
 def to_op(master, slave) -> int:
@@ -142,16 +186,18 @@ def scenario(master) -> dict:
     io.run(20)
     res["cpio_sw"] = io.sw[3]
     res["f530_tx"] = io.sdo_read(0xF530, 0x09, "I")
+    res.update(cml(io))                                              # Appendix 2, ID1
     print("STEP fault", flush=True)                                 # the test injects it
     res["fault_cycles"] = io.until(lambda: io.sw[1] & 0x4F == 0x08, 5000)
     res["fault_sw"] = io.sw[1]
     io.cw[1] = 0x80                                                 # 15: fault reset
-    io.run(10)
+    io.until(lambda: io.sw[1] & 0x4F != 0x08, 1000)
     res["reset_sw"] = io.sw[1]
     io.target[1] = io.pos[1]
-    for cw in (0x06, 0x07, 0x0F):
+    for cw, bits in ((0x06, 0x21), (0x07, 0x23), (0x0F, 0x27)):
         io.cw[1] = cw
-        io.run(10)
+        io.until(lambda b=bits: io.sw[1] & 0x6F == b, 1000)
+        io.run(5)
     res["reenabled_sw"] = io.sw[1]
     res["wkc_bad"] = io.wkc_bad
     master.state = pysoem.INIT_STATE
