@@ -121,8 +121,11 @@ class AxisDrive:
         self.inputs = snap.inputs
         if self.outputs_word is None:
             self.outputs_word = snap.outputs & 0x0F
-        self.moving = bool(self.origin.running or abs(snap.speed_pps) > 1.0
-                           or (snap.enabled and not snap.status & (Ux.IN_POSITION | ALARM_BITS)))
+        # Appendix 3 "Confirm Motor is Inposition": an enabled motor moves until Ux says
+        # in position; a free one while it still coasts.
+        self.moving = bool(self.origin.running
+                           or (snap.enabled and not snap.status & (Ux.IN_POSITION | ALARM_BITS))
+                           or (not snap.enabled and abs(snap.speed_pps) > 1.0))
 
     def _publish(self, snap: Any) -> None:
         od = self.od
