@@ -460,3 +460,25 @@ def test_7_5_k_parameters_through_60f6_and_servo_stiffness_60fb():
     assert b.chain.get_register(3, "H", 0) == 1234 and b.read(0x70FB, 1) == 1234
     assert b.abort(0x70FB, 1, 40000) == VALUE_HIGH
     assert b.abort(0x70F6, 0x2C, 99) in (VALUE_HIGH, VALUE_RANGE)             # CM2 K64
+
+
+def test_7_1_2_cpio_on_cm1_drives_out2_only_and_reports_input2_4():
+    b = Bench("EB12")                                              # ID1: CM1
+    sent: list[str] = []
+    axis = b.axis(1)
+    real_send = axis.send
+    axis.send = lambda text: (sent.append(text), real_send(text))[1]
+    b.switch_mode(121)
+    for cw in (0xC006, 0xC007, 0xC00F):
+        b.pdo(1, cw, b.position(1))
+        b.cycles(2)
+    b.pdo(1, 0xC0FF)                                               # OUT1-OUT4 asked ...
+    b.cycles(2)
+    b.pdo(1, 0xC00F)                                               # ... and all off
+    b.cycles(2)
+    outputs = [t for t in sent if t[0] in "OF"]
+    assert outputs and all(part[:2] in ("O2", "F2") for t in outputs for part in t.split(","))
+    b.chain.set_input(1, 1, True)                                  # INPUT1: the serial line
+    b.chain.set_input(1, 2, True)
+    b.cycles(2)
+    assert (b.status(1) >> 4) & 0x0F == 0b0010                     # INPUT2 only
