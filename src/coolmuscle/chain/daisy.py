@@ -508,7 +508,9 @@ class Chain:
             inputs=m.io.input_word(), outputs=m.io.output_word(),
             temperature=m.temperature, voltage=m.voltage, analog=m.analog,
             encoder_count=m.encoder_count, enabled=m.axis.enabled,
-            extra={"analog_output": m.analog_output()})   # K35 (Modbus K78+54)
+            extra={"analog_output": m.analog_output(),   # K35 (Modbus K78+54)
+                   "origin_search": int(m.origin.active),  # 5.3 running (fieldbus homing)
+                   "origin_done": int(m.origin_done)})     # 5.3 completed since the last |
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         self._require(motor).set_input_level(number, on)

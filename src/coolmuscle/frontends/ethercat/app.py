@@ -3,10 +3,10 @@
 :class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
 object dictionary built from the table, the SII image, and the 1 ms cycle
 (:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
-the output image into each axis's :class:`~.drive.Drive` (CiA402 6.1, csp 6.3) and
-the device API's snapshots into the input image (6041h, 6064h + 0x800 n).  Further
-modes attach here through :class:`~.dictionary.Dictionary` hooks and
-:meth:`outputs` / :meth:`cycle`, without touching the ESC.
+the output image into the drive of :mod:`.bridge` (CiA402 6.1, every mode of ch. 6
+and 7) and the device API's snapshots into the input image (6041h, 6064h + 0x800 n),
+through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
+without touching the ESC.
 
 Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
 :meth:`safe_outputs` and the dictionary hooks run in the frame thread and must
@@ -21,7 +21,6 @@ from typing import Any
 from . import esm
 from . import identity as ident
 from .dictionary import Dictionary
-from .drive import Drive
 from .objects import Table, build_table
 from .sii import build_sii
 from .slave import SlaveStack
@@ -32,7 +31,6 @@ AXIS_OFFSET = 0x800
 #: 6.2 operation modes: hm 6, csp 8, CML 101, CMD 120, CPIO 121.
 MODES = frozenset({6, 8, 101, 120, 121})
 MODE_CSP = 8
-INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
 
 
 class BridgeApp:
@@ -47,10 +45,13 @@ class BridgeApp:
         self.stack = SlaveStack(self, self.sii)
         ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
-        self.drives = {n: Drive(device, n) for n in self.axes}
         self.operational = False
         for axis in range(ident.AXES):
             self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
+        self.drive: Any = None                  # every mode of ch. 6 and 7 (bridge/)
+        if device is not None:
+            from .bridge.drive import BridgeDrive
+            self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     @staticmethod
     def _mode_written(axis: int) -> Any:
@@ -70,22 +71,19 @@ class BridgeApp:
 
     def outputs(self, image: bytes) -> None:
         """An output image in OP: already in the dictionary (6040h/607Ah per axis)."""
+        if self.drive is not None:
+            self.drive.outputs_received()
 
     def safe_outputs(self) -> None:
         """OP left: the commands of the output image are no longer valid (6.3)."""
         self.operational = False
+        if self.drive is not None:
+            self.drive.safe_outputs()
 
     # -- model thread ---------------------------------------------------------------
     def cycle(self) -> None:
         """One bridge cycle: each axis's drive steps (6.1, 6.3), then the inputs go out."""
         od = self.dictionary
-        operational = self.operational
-        for axis in self.axes:
-            d = AXIS_OFFSET * (axis - 1)
-            snap = self.device.snapshot(axis)
-            word = self.drives[axis].step(int(od.get(0x6040 + d)), int(od.get(0x607A + d)),
-                                          int(od.get(0x6060 + d)), snap, operational)
-            od.set(0x6041 + d, 0, word)
-            od.set(0x6064 + d, 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
-            od.set(0x6061 + d, 0, od.get(0x6060 + d))
+        if self.drive is not None:              # the modes of bridge/ run each axis
+            self.drive.cycle()
         self.stack.set_inputs(od.pack_inputs())
