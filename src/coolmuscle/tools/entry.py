@@ -32,15 +32,17 @@ def main(argv: list[str] | None = None) -> None:
     install_startup_handlers()
     args = sys.argv[1:] if argv is None else list(argv)
     kwargs: dict | None = None
+    full_main = None
 
-    def parse() -> None:
-        nonlocal kwargs
+    def parse() -> None:      # imports included: a stop signal may land in any of them
+        nonlocal kwargs, full_main
         from .runcmd import parse_run_args
         kwargs = parse_run_args(args)
+        if kwargs is None:
+            from .cli import main as full_main
         check_stop()
     guarded(parse)
-    if kwargs is None:
-        from .cli import main as full_main
+    if full_main is not None:
         full_main(argv)       # None: the process's own command line and signal handlers
         return
 
