@@ -19,7 +19,7 @@ and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from ..motion import expoly as xp
 from ..motion.dynamics import Piece
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: xp.F, limit: float) -> tuple:
+def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple:
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
@@ -48,7 +48,7 @@ class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
     bit = Ux(0)
-    mask = int(bit)
+    mask = int(Ux(0))
 
     def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
@@ -65,7 +65,7 @@ class PositionErrorWatch(_AlarmWatch):
     """Ux=1: |Pe| > K56 × 100 pulses (ch. 3 K56)."""
 
     bit = Ux.POSITION_ERROR_OVERFLOW
-    mask = int(bit)
+    mask = int(Ux.POSITION_ERROR_OVERFLOW)
 
     def limit(self) -> float:
         unit = 1000 if self.motor.firmware.name == "cm1" else 100
@@ -85,7 +85,7 @@ class OverSpeedWatch(_AlarmWatch):
     """Ux=2: |speed| > 1.2 × K40 min⁻¹."""
 
     bit = Ux.OVER_SPEED
-    mask = int(bit)
+    mask = int(Ux.OVER_SPEED)
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
@@ -112,7 +112,7 @@ class OverloadWatch(_AlarmWatch):
     start on (:meth:`_since_at`)."""
 
     bit = Ux.OVERLOAD
-    mask = int(bit)
+    mask = int(Ux.OVERLOAD)
 
     def __init__(self, motor: "MotorCore") -> None:
         super().__init__(motor)
@@ -172,7 +172,7 @@ class TemperatureWatch(_AlarmWatch):
     """Ux=128: the driver temperature above its alarm level (6.6 ?71, ?99)."""
 
     bit = Ux.TEMPERATURE
-    mask = int(bit)
+    mask = int(Ux.TEMPERATURE)
 
     def active(self, axis: "Axis") -> bool:
         return not self.motor.alarm & self.mask
