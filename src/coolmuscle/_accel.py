@@ -40,8 +40,6 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.sim.kernel",
     "coolmuscle.motor.motion.trajectory",
     "coolmuscle.motor.programs.bankexec",
-    "coolmuscle.motor.state.param_table",
-    "coolmuscle.motor.state.memory",
     "coolmuscle.motor.supervision.limits",
     "coolmuscle.device.hostline",
 )
