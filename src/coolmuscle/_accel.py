@@ -42,6 +42,12 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.programs.bankexec",
     "coolmuscle.motor.supervision.limits",
     "coolmuscle.device.hostline",
+    "coolmuscle.motor.signals.io",
+    "coolmuscle.motor.signals.analog",
+    "coolmuscle.motor.signals.analog_output",
+    "coolmuscle.frontends.ethercat.cia402",
+    "coolmuscle.frontends.ethercat.bridge.axis",
+    "coolmuscle.frontends.ethercat.bridge.drive",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent
