@@ -21,6 +21,8 @@ import logging
 from dataclasses import dataclass, field
 from typing import Callable
 
+from mypy_extensions import mypyc_attr
+
 log = logging.getLogger(__name__)
 
 NS_PER_S = 1_000_000_000
@@ -69,6 +71,7 @@ class Timer:
         return not self.cancelled
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py); subclassable
 class Kernel:
     """Virtual-time event kernel: ``now``, ``schedule``, ``peek``, ``step``, ``run``."""
 
