@@ -3,9 +3,11 @@
 Run: ``PYTHONPATH=src python bench/bench_speed.py [--baseline REF] [--repeat N] [--quick]``
 (about two minutes; ``--quick`` divides the simulated times by ten).
 
-Each row is measured on this tree and, side by side in the same run, on a baseline
+Each row is measured on this tree twice, running its sources (``COOLMUSCLE_PURE=1``)
+and its compiled hot modules (coolmuscle/_accel.py; build them first with ``python -m
+coolmuscle.tools.accel build``), and, side by side in the same run, on a baseline
 tree (``--baseline REF``, default :data:`BASELINE`: main before the issue-18 work),
-extracted with ``git archive`` into a temporary directory; the two are run in turn,
+extracted with ``git archive`` into a temporary directory; the trees are run in turn,
 ``--repeat`` times each, and the best (least disturbed) run of each is shown, next to
 the goal.  Without git or the commit (``--baseline none``) the baseline column shows
 the figure the issue recorded.  Every figure comes from a fresh interpreter
@@ -71,12 +73,15 @@ def chain_script(motors: int) -> str:
 class Tree:
     """A source tree to measure (its ``src`` on PYTHONPATH, byte code allowed)."""
 
-    def __init__(self, name: str, root: Path) -> None:
+    def __init__(self, name: str, root: Path, *, pure: bool = False) -> None:
         self.name = name
         self.root = root
         self.env = dict(os.environ)
         self.env.pop("PYTHONDONTWRITEBYTECODE", None)
+        self.env.pop("COOLMUSCLE_PURE", None)
         self.env["PYTHONPATH"] = str(root / "src")
+        if pure:                      # the sources, not the compiled modules (_accel.py)
+            self.env["COOLMUSCLE_PURE"] = "1"
 
     def cli(self, *args: str) -> dict[str, float]:
         """Wall and CPU seconds of ``python -m coolmuscle ARGS`` (stdout discarded)."""
@@ -149,7 +154,7 @@ ISSUE = {
 
 
 def run(opts: argparse.Namespace, scale: float, work: Path) -> int:
-    trees = [Tree("this tree", ROOT)]
+    trees = [Tree("sources", ROOT, pure=True), Tree("compiled", ROOT)]
     (work / "baseline").mkdir()
     base_root = baseline_tree(opts.baseline, work / "baseline")
     if base_root is not None:
@@ -197,23 +202,28 @@ def run(opts: argparse.Namespace, scale: float, work: Path) -> int:
                        f"lag <= {x['max_lag']:.2f} pulses" for x in r]
 
     names = [t.name for t in trees]
-    if len(trees) == 1:
+    if len(trees) == 2:
         names.insert(0, "today (issue)")
     print(f"best of {rep} runs each; simulated times x{scale:g}")
-    print(f"{'row':44} {names[0]:>18} {names[-1]:>12} {'goal':>9}  verdict")
+    print(f"{'row':44} {names[0]:>18} {names[1]:>12} {names[2]:>12} {'goal':>9}  verdict")
     failed = 0
     for key, (label, today, goal, unit, higher) in ISSUE.items():
         values = results[key]
-        before = values[0] if len(values) == 2 else today
+        if len(values) == 2:
+            values = [today] + values
         now = values[-1]
         ok = now >= goal if higher else now <= goal
         failed += not ok
         fmt = (lambda v: f"{v:,.0f}{unit}") if unit in ("x", "us") else (lambda v: f"{v:.3f} s")
-        print(f"{label:44} {fmt(before):>18} {fmt(now):>12} {fmt(goal):>9}  "
-              f"{'met' if ok else 'NOT met'}")
+        print(f"{label:44} {fmt(values[0]):>18} {fmt(values[1]):>12} {fmt(now):>12} "
+              f"{fmt(goal):>9}  {'met' if ok else 'NOT met'}")
         by_cpu = cpu[key]
-        print(f"{'    the same from CPU time (a loaded machine waits)':44} "
-              f"{fmt(by_cpu[0]) if len(by_cpu) == 2 else '':>18} {fmt(by_cpu[-1]):>12}")
+        if len(by_cpu) == 2:
+            print(f"{'    the same from CPU time (a loaded machine waits)':44} {'':>18} "
+                  f"{fmt(by_cpu[0]):>12} {fmt(by_cpu[1]):>12}")
+        else:
+            print(f"{'    the same from CPU time (a loaded machine waits)':44} "
+                  f"{fmt(by_cpu[0]):>18} {fmt(by_cpu[1]):>12} {fmt(by_cpu[2]):>12}")
         for name, text in zip(names[-len(extra.get(key, [])):], extra.get(key, [])):
             print(f"{'':46}{name}: {text}")
     return 1 if failed else 0

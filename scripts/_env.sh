@@ -43,3 +43,17 @@ venv_install() {  # venv_install EXTRAS   (e.g. "" or "test")
         echo "$digest" > "$stamp"
     fi
 }
+
+accel_build() {  # compile the model's hot modules with mypyc (docs/performance.md)
+    # a C compiler and the interpreter's headers; the build skips itself when current
+    command -v gcc >/dev/null 2>&1 || apt_install gcc:gcc
+    local inc
+    inc="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_path("include"))')"
+    if [ ! -f "$inc/Python.h" ]; then
+        local ver
+        ver="$("$VENV/bin/python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+        apt_install "python${ver}-config:python${ver}-dev"
+    fi
+    "$VENV/bin/python" -m coolmuscle.tools.accel build --quiet || \
+        echo "note: the compiled hot modules could not be built; the sources run (slower)" >&2
+}

@@ -9,6 +9,7 @@ The bench runs four virtual motors in virtual time; nothing here touches a netwo
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from ethercat_drive_support import Bench, idx
@@ -464,10 +465,14 @@ def test_7_5_k_parameters_through_60f6_and_servo_stiffness_60fb():
 
 def test_7_1_2_cpio_on_cm1_drives_out2_only_and_reports_input2_4():
     b = Bench("EB12")                                              # ID1: CM1
-    sent: list[str] = []
-    axis = b.axis(1)
-    real_send = axis.send
-    axis.send = lambda text: (sent.append(text), real_send(text))[1]
+    sent: list[str] = []                       # the bridge's own lines to ID1 (Axis.send)
+    real_execute = b.chain.execute
+
+    def execute(text: str, *args: Any, **kwargs: Any) -> Any:
+        if kwargs.get("origin") == "api" and kwargs.get("motor") == 1:
+            sent.append(text)
+        return real_execute(text, *args, **kwargs)
+    b.chain.execute = execute  # type: ignore[method-assign]
     b.switch_mode(121)
     for cw in (0xC006, 0xC007, 0xC00F):
         b.pdo(1, cw, b.position(1))

@@ -9,6 +9,10 @@ from __future__ import annotations
 import os as _os
 import sys as _sys
 
+from . import _accel
+
+_accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
+
 
 def _run_as_the_command() -> bool:
     """``python -m coolmuscle ...`` (argv[0] is "-m" while the package loads) or the

@@ -637,12 +637,25 @@ class Motor(Supervision):
         return self.encoder.count()
 
     def analog_output_volts(self) -> float:
-        """The analog output now (ch. 3 K35), volts."""
-        target = self.axis.target()
-        return output_volts(self.k(35), target=target if abs(target) != float("inf")
-                            else self.axis.command_position(),
-                            position=self.axis.position(), error=self.axis.position_error(),
-                            speed_pps=self.axis.velocity(), torque=float(self.torque()),
+        """The analog output now (ch. 3 K35), volts.  Only the quantity K35 selects is
+        read (a snapshot asks for it every cycle)."""
+        k35, axis = self.k(35), self.axis
+        kind = k35 - k35 % 2
+        target = position = error = speed = torque = 0.0
+        if kind == 0:
+            target = axis.target()
+            if abs(target) == float("inf"):
+                target = axis.command_position()
+        elif kind == 2:
+            position = axis.position()
+        elif kind == 4:
+            error = axis.position_error()
+        elif kind == 6:
+            speed = axis.velocity()
+        elif kind == 8:
+            torque = float(self.torque())
+        return output_volts(k35, target=target, position=position, error=error,
+                            speed_pps=speed, torque=torque,
                             pulses_per_rev=self.resolution.pulses_per_rev)
 
     def analog_output(self) -> int:

@@ -21,6 +21,8 @@ import logging
 from dataclasses import dataclass, field
 from typing import Callable
 
+from mypy_extensions import mypyc_attr
+
 log = logging.getLogger(__name__)
 
 NS_PER_S = 1_000_000_000
@@ -69,13 +71,14 @@ class Timer:
         return not self.cancelled
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py); subclassable
 class Kernel:
     """Virtual-time event kernel: ``now``, ``schedule``, ``peek``, ``step``, ``run``."""
 
-    def __init__(self, start: int = 0) -> None:
+    def __init__(self, start: float = 0) -> None:
         #: Current virtual time in nanoseconds (read it; only the kernel moves it).  A
         #: plain attribute, not a property: the model reads it dozens of times a move.
-        self.now = start
+        self.now: int = int(start)
         self._queue: list[tuple[int, int, int, Timer]] = []
         self._counter = itertools.count()
         self._events_run = 0
@@ -93,19 +96,19 @@ class Kernel:
         return self._events_run
 
     # -- scheduling -----------------------------------------------------
-    def schedule(self, delay: int, callback: Callback, *, priority: int = PRIO_MOTION,
+    def schedule(self, delay: float, callback: Callback, *, priority: int = PRIO_MOTION,
                  name: str = "") -> Timer:
         """Run ``callback`` ``delay`` nanoseconds from now (``delay`` >= 0)."""
         if delay < 0:
             raise ValueError(f"negative delay {delay}")
         return self.schedule_at(self.now + int(delay), callback, priority=priority, name=name)
 
-    def schedule_at(self, at: int, callback: Callback, *, priority: int = PRIO_MOTION,
+    def schedule_at(self, at: float, callback: Callback, *, priority: int = PRIO_MOTION,
                     name: str = "") -> Timer:
         """Run ``callback`` at absolute time ``at`` (not before now)."""
-        at = max(int(at), self.now)
-        timer = Timer(at, callback, name)
-        heapq.heappush(self._queue, (at, priority, next(self._counter), timer))
+        when = max(int(at), self.now)
+        timer = Timer(when, callback, name)
+        heapq.heappush(self._queue, (when, priority, next(self._counter), timer))
         return timer
 
     def call_soon(self, callback: Callback, *, priority: int = PRIO_LOGIC, name: str = "") -> Timer:
@@ -145,7 +148,7 @@ class Kernel:
             observer()
         return True
 
-    def run(self, until: int | None = None, *, max_events: int | None = None) -> int:
+    def run(self, until: float | None = None, *, max_events: int | None = None) -> int:
         """Run events up to and including time ``until`` and leave ``now == until``.
 
         With ``until=None`` it runs until the queue is empty (beware endless
@@ -153,6 +156,8 @@ class Kernel:
         events run.
         """
         count = 0
+        if until is not None:
+            until = int(until)             # whole nanoseconds (a float is floored)
         queue, pop, observers = self._queue, heapq.heappop, self._observers
         while queue:                       # peek() and step() written out: the hot loop
             at, _prio, _count, timer = queue[0]
@@ -172,14 +177,14 @@ class Kernel:
                 observer()
             count += 1
         if until is not None and until > self.now:
-            self.now = until
+            self.now = int(until)
         return count
 
-    def advance(self, delay: int) -> int:
+    def advance(self, delay: float) -> int:
         """Run everything due within the next ``delay`` nanoseconds."""
         return self.run(self.now + int(delay))
 
-    def run_until(self, predicate: Callable[[], bool], timeout: int) -> bool:
+    def run_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
         """Run events until ``predicate()`` is true or ``timeout`` ns pass.
 
         The predicate is checked after every event.  Returns whether it became

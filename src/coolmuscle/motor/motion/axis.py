@@ -20,6 +20,7 @@ target, on the command's final approach: possibly before the command has ended
 from __future__ import annotations
 
 import logging
+from functools import partial
 from typing import Callable, Protocol, Sequence
 
 from ...sim.kernel import PRIO_MOTION, Kernel, Timer
@@ -283,7 +284,7 @@ class Axis:
         at = watcher.next_time(self, after_ns)
         if at is not None:
             self._watch_timers[id(watcher)] = self.kernel.schedule_at(
-                at, lambda w=watcher: self._fire(w), priority=PRIO_MOTION,
+                at, partial(self._fire, watcher), priority=PRIO_MOTION,
                 name=type(watcher).__name__)
 
     def _fire(self, watcher: Watcher) -> None:
@@ -337,7 +338,7 @@ class Axis:
             at = watcher.next_time(self, now)
             if at is not None:
                 timers[id(watcher)] = schedule_at(
-                    at, lambda w=watcher: self._fire(w), priority=PRIO_MOTION,
+                    at, partial(self._fire, watcher), priority=PRIO_MOTION,
                     name=type(watcher).__name__)
 
     def _current_drive(self) -> Drive:
@@ -357,7 +358,7 @@ class Axis:
         for t_ns, index in self.profile.passing_times_ns():
             if t_ns >= now:
                 self._timers.append(self.kernel.schedule_at(
-                    t_ns, lambda i=index: self._on_passing_point(i),
+                    t_ns, partial(self._on_passing_point, index),
                     priority=PRIO_MOTION, name="passing-point"))
         done = self.in_position_time(now)
         if done is not None:

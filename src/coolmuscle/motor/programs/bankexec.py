@@ -244,7 +244,8 @@ def holds(motor: "MotorCore", condition: ast.Expr) -> bool:
 
 def timer_ns(motor: "MotorCore", reg: ast.Reg) -> int:
     """T# of the motor the register names, in ns (2.2.1 "T": msec, 0 = no action)."""
-    target = motor if reg.motor in (None, motor.id) else motor.bus.motor(reg.motor)
+    target = (motor if reg.motor is None or reg.motor == motor.id
+              else motor.bus.motor(reg.motor))
     if target is None:
         return 0
     try:

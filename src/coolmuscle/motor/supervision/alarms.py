@@ -19,7 +19,9 @@ and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, ClassVar
+
+from mypy_extensions import mypyc_attr
 
 from ..motion import expoly as xp
 from ..motion.dynamics import Piece
@@ -33,7 +35,7 @@ if TYPE_CHECKING:
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: xp.F, limit: float) -> tuple:
+def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple:
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
@@ -44,11 +46,12 @@ def _constant_beyond(f: xp.F, limit: float) -> bool:
     return f[1] == f[2] == f[3] == f[4] == 0.0 and abs(f[0]) > limit
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py): tests subclass it
 class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
-    bit = Ux(0)
-    mask = int(bit)
+    bit: ClassVar[Ux] = Ux(0)
+    mask: ClassVar[int] = int(Ux(0))
 
     def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
@@ -64,8 +67,8 @@ class _AlarmWatch:
 class PositionErrorWatch(_AlarmWatch):
     """Ux=1: |Pe| > K56 × 100 pulses (ch. 3 K56)."""
 
-    bit = Ux.POSITION_ERROR_OVERFLOW
-    mask = int(bit)
+    bit: ClassVar[Ux] = Ux.POSITION_ERROR_OVERFLOW
+    mask: ClassVar[int] = int(Ux.POSITION_ERROR_OVERFLOW)
 
     def limit(self) -> float:
         unit = 1000 if self.motor.firmware.name == "cm1" else 100
@@ -84,8 +87,8 @@ class PositionErrorWatch(_AlarmWatch):
 class OverSpeedWatch(_AlarmWatch):
     """Ux=2: |speed| > 1.2 × K40 min⁻¹."""
 
-    bit = Ux.OVER_SPEED
-    mask = int(bit)
+    bit: ClassVar[Ux] = Ux.OVER_SPEED
+    mask: ClassVar[int] = int(Ux.OVER_SPEED)
 
     def next_time(self, axis: "Axis", after_ns: int) -> int | None:
         if not self.active(axis):
@@ -111,8 +114,8 @@ class OverloadWatch(_AlarmWatch):
     The stretches found are kept, so that a re-solve in the middle of one carries its
     start on (:meth:`_since_at`)."""
 
-    bit = Ux.OVERLOAD
-    mask = int(bit)
+    bit: ClassVar[Ux] = Ux.OVERLOAD
+    mask: ClassVar[int] = int(Ux.OVERLOAD)
 
     def __init__(self, motor: "MotorCore") -> None:
         super().__init__(motor)
@@ -171,8 +174,8 @@ class OverloadWatch(_AlarmWatch):
 class TemperatureWatch(_AlarmWatch):
     """Ux=128: the driver temperature above its alarm level (6.6 ?71, ?99)."""
 
-    bit = Ux.TEMPERATURE
-    mask = int(bit)
+    bit: ClassVar[Ux] = Ux.TEMPERATURE
+    mask: ClassVar[int] = int(Ux.TEMPERATURE)
 
     def active(self, axis: "Axis") -> bool:
         return not self.motor.alarm & self.mask

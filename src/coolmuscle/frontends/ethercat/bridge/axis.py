@@ -28,6 +28,10 @@ from collections import deque
 from typing import Any, Callable
 
 from ....motor.status import ALARM_BITS, Ux
+
+#: The status bits as plain ints (a flag enum's & and | cost a call each, every cycle).
+_ALARM_MASK = int(ALARM_BITS)
+_STILL_MASK = int(Ux.IN_POSITION) | int(ALARM_BITS)
 from .. import cia402
 from ..cia402 import State
 from . import cpio, csp, homing, modes
@@ -93,7 +97,7 @@ class AxisDrive:
 
     @property
     def alarm(self) -> bool:
-        return bool(self.ux & ALARM_BITS)
+        return bool(self.ux & _ALARM_MASK)
 
     # -- the cycle ----------------------------------------------------------------------
     def cycle(self, now: int) -> None:
@@ -124,7 +128,7 @@ class AxisDrive:
         # Appendix 3 "Confirm Motor is Inposition": an enabled motor moves until Ux says
         # in position; a free one while it still coasts.
         self.moving = bool(self.origin.running
-                           or (snap.enabled and not snap.status & (Ux.IN_POSITION | ALARM_BITS))
+                           or (snap.enabled and not snap.status & _STILL_MASK)
                            or (not snap.enabled and abs(snap.speed_pps) > 1.0))
 
     def _publish(self, snap: Any) -> None:

@@ -1,0 +1,83 @@
+"""Run scripts and csp streams and print a digest of everything they produce.
+
+Run by tests/test_accel.py twice, once with the compiled hot modules and once with
+``COOLMUSCLE_PURE=1`` (coolmuscle/_accel.py): the two outputs must be byte-identical.
+For each script (examples/*.cml, tests/transcripts/*.cml): the bytes the motors send,
+and a 1 ms trace of every motor (positions, speeds, torques, status, I/O) as CSV;
+then a 4-axis csp stream (Chain.target_stream) sampled every cycle, and a PTP bank
+looping on 15 motors.  One line per item: name, length and SHA-256 of its bytes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import coolmuscle._accel as accel
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.tools.runcmd import header_defaults, make_chain
+from coolmuscle.tools.script import run_script
+
+
+def digest(data: bytes) -> str:
+    return f"{len(data)} {hashlib.sha256(data).hexdigest()}"
+
+
+def script_item(path: Path, work: Path) -> str:
+    motors, firmware, machine = header_defaults(path, None, None, None)
+    chain = make_chain(Chain, motors, firmware, None, False, machine)
+    trace = work / (path.stem + ".csv")
+    try:
+        result = run_script(path, chain, until=None, trace=trace, trace_step=0.001)
+        out = result.received + b"\n--\n" + result.format().encode()
+    finally:
+        chain.close()
+    return f"{path.name}: out {digest(out)} trace {digest(trace.read_bytes())}"
+
+
+def stream_item(cycles: int) -> str:
+    chain = Chain(motors=4)
+    streams = [chain.target_stream(n) for n in range(1, 5)]
+    rows = []
+    for i in range(cycles):
+        for n, stream in enumerate(streams, 1):
+            half = 2000.0 + 50.0 * n
+            stream.push(round(half - half * math.cos(2.0 * math.pi * i / 4000.0)))
+        chain.kernel.advance(1_000_000)
+        rows.append(",".join(f"{m.axis.raw_actual()!r}:{m.axis.position_error()!r}"
+                             for m in chain.motors.values()))
+    return f"csp stream: {digest(chr(10).join(rows).encode())}"
+
+
+def bank_item(seconds: int) -> str:
+    chain = Chain(motors=15)
+    got: list[str] = []
+    chain.subscribe(lambda e: got.append(f"{e.time} {e.text}"))
+    for n in range(1, 16):
+        for line in (f"S1.{n}={100 + n}, A1.{n}=100, P1.{n}=10000, P2.{n}=0", f"B1.{n}",
+                     "X0", f"S1.{n}, A1.{n}, P1.{n}", f"P2.{n}", "X-", "END"):
+            chain.execute(line)
+    for n in range(1, 16):
+        chain.execute(f"[1.{n}")
+    chain.kernel.run(until=seconds * 1_000_000_000)
+    tail = ",".join(repr(m.axis.raw_actual()) for m in chain.motors.values())
+    return f"15-motor bank: {digest(chr(10).join(got).encode() + tail.encode())}"
+
+
+def main(root: str) -> None:
+    base = Path(root)
+    scripts = sorted(base.glob("examples/*.cml")) + sorted(base.glob("tests/transcripts/*.cml"))
+    print(json.dumps({"compiled": accel.active(), "reason": accel.state["reason"]}))
+    with tempfile.TemporaryDirectory() as work:
+        for path in scripts:
+            print(script_item(path, Path(work)))
+    print(stream_item(3000))
+    print(bank_item(120))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

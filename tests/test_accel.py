@@ -1,0 +1,126 @@
+"""The compiled hot modules (coolmuscle/_accel.py, docs/performance.md "Compiled hot
+modules"): in use when current, never when stale, and giving the same bytes as the
+sources.
+
+Issue 18 ("the motion is unchanged: traces identical") and issue 12 item 9 ("the
+motion identical to the exact model"): tests/accel_worker.py runs every example and
+golden transcript with a 1 ms trace, a 4-axis csp stream and a 15-motor PTP bank, once
+compiled and once with ``COOLMUSCLE_PURE=1``; the two digests must be equal line by line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import coolmuscle._accel as accel
+from coolmuscle.tools import accel as accel_tool
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKER = Path(__file__).with_name("accel_worker.py")
+
+
+def run_worker(pure: bool) -> subprocess.Popen[str]:
+    env = dict(os.environ)
+    env.pop("COOLMUSCLE_PURE", None)
+    if pure:
+        env["COOLMUSCLE_PURE"] = "1"
+    return subprocess.Popen([sys.executable, str(WORKER), str(ROOT)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_the_compiled_modules_are_in_use() -> None:
+    assert accel.active(), (
+        f"compiled hot modules not in use: {accel.state['reason']} "
+        "(scripts/test builds them; by hand: python -m coolmuscle.tools.accel build)")
+    from coolmuscle.motor.motion import dynamics, expoly
+    assert not dynamics.__file__.endswith(".py") and not expoly.__file__.endswith(".py")
+
+
+def test_compiled_and_pure_give_the_same_bytes_for_every_script_trace_and_stream() -> None:
+    compiled, pure = run_worker(False), run_worker(True)
+    out_c, err_c = compiled.communicate(timeout=300)
+    out_p, err_p = pure.communicate(timeout=300)
+    assert compiled.returncode == 0, err_c
+    assert pure.returncode == 0, err_p
+    head_c, *lines_c = out_c.splitlines()
+    head_p, *lines_p = out_p.splitlines()
+    assert json.loads(head_c)["compiled"] is True, head_c
+    assert json.loads(head_p)["compiled"] is False, head_p
+    assert len(lines_c) >= 80                  # every example and transcript, csp, bank
+    for a, b in zip(lines_c, lines_p, strict=True):
+        assert a == b
+
+
+def test_a_pure_run_imports_the_sources() -> None:
+    code = "import coolmuscle.motor.motion.dynamics as d; print(d.__file__)"
+    env = dict(os.environ, COOLMUSCLE_PURE="1")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True).stdout.strip()
+    assert out.endswith("dynamics.py")
+
+
+@pytest.fixture
+def fake_build(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A copy of the real manifest in a temporary build directory."""
+    manifest = json.loads(accel.MANIFEST.read_text(encoding="utf-8"))
+    for rel in manifest["files"].values():
+        dest = tmp_path / rel
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_bytes(b"")
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    monkeypatch.setattr(accel, "BUILD_DIR", tmp_path)
+    monkeypatch.setattr(accel, "MANIFEST", tmp_path / "manifest.json")
+    return tmp_path
+
+
+def edit_manifest(build: Path, **changes: object) -> None:
+    data = json.loads((build / "manifest.json").read_text(encoding="utf-8"))
+    data.update(changes)
+    (build / "manifest.json").write_text(json.dumps(data), encoding="utf-8")
+
+
+def test_a_current_build_is_accepted(fake_build: Path) -> None:
+    files, reason = accel._read_manifest()
+    assert files is not None and set(files) >= set(accel.MODULES), reason
+
+
+def test_an_edited_source_turns_the_whole_build_off(fake_build: Path) -> None:
+    edit_manifest(fake_build, digest="0" * 64)
+    files, reason = accel._read_manifest()
+    assert files is None and "sources changed" in reason
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"cache_tag": "cpython-399"}, "built for cpython-399"),
+    ({"modules": ["coolmuscle.motor.motion.expoly"]}, "another module list"),
+    ({"files": None}, "malformed"),
+])
+def test_a_build_for_something_else_is_refused(fake_build: Path, change: dict[str, object],
+                                               words: str) -> None:
+    edit_manifest(fake_build, **change)
+    files, reason = accel._read_manifest()
+    assert files is None and words in reason
+
+
+def test_a_missing_or_damaged_build_is_refused(fake_build: Path) -> None:
+    (fake_build / "manifest.json").write_text("{not json", encoding="utf-8")
+    assert accel._read_manifest()[0] is None
+    (fake_build / "manifest.json").unlink()
+    files, reason = accel._read_manifest()
+    assert files is None and "not built" in reason
+
+
+def test_the_build_tool_answers_status_and_bad_usage(capsys: pytest.CaptureFixture[str]) -> None:
+    assert accel_tool.main(["status"]) == 0
+    assert "in use" in capsys.readouterr().out
+    assert accel_tool.main(["build"]) == 0               # current: nothing to do
+    assert "current" in capsys.readouterr().out
+    assert accel_tool.main(["frobnicate"]) == 2
+    assert accel_tool.main(["build", "--fast"]) == 2
+    assert "unknown option --fast" in capsys.readouterr().err
