@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ethercat_drive_support import Bench, idx
+from ethercat_drive_support import Bench
 
 from coolmuscle.frontends.ethercat.dictionary import (DEVICE_STATE, LENGTH_HIGH, NO_SUBINDEX,
                                                        VALUE_HIGH, VALUE_LOW, VALUE_RANGE)

@@ -10,7 +10,7 @@ loaded instead of the sources only when all of these hold:
 * the digest of the sources it was built from equals the digest of the sources now
   (one edited module turns the whole set off: compiled modules call each other
   directly, so a stale one would still run inside a fresh one);
-* ``COOLMUSCLE_PURE`` is not set (``COOLMUSCLE_PURE=1`` runs the sources).
+* ``COOLMUSCLE_PURE`` is unset, empty or ``0`` (``COOLMUSCLE_PURE=1`` runs the sources).
 
 Otherwise nothing changes: the sources run.  The compiled code is the same source, so
 the numbers are the same (tests/test_accel.py runs both and compares them byte for byte).
@@ -119,7 +119,7 @@ def _read_manifest() -> tuple[dict[str, Path] | None, str]:
 
 def install() -> None:
     """Put the compiled modules in front of the sources when they are current."""
-    if os.environ.get("COOLMUSCLE_PURE"):
+    if os.environ.get("COOLMUSCLE_PURE", "") not in ("", "0"):
         state.update(active=False, reason="COOLMUSCLE_PURE is set")
         return
     if any(name in sys.modules for name in MODULES):

@@ -28,10 +28,6 @@ from collections import deque
 from typing import Any, Callable
 
 from ....motor.status import ALARM_BITS, Ux
-
-#: The status bits as plain ints (a flag enum's & and | cost a call each, every cycle).
-_ALARM_MASK = int(ALARM_BITS)
-_STILL_MASK = int(Ux.IN_POSITION) | int(ALARM_BITS)
 from .. import cia402
 from ..cia402 import State
 from . import cpio, csp, homing, modes
@@ -40,6 +36,9 @@ log = logging.getLogger(__name__)
 
 AXIS_OFFSET = 0x800
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+#: The status bits as plain ints (a flag enum's & and | cost a call each, every cycle).
+_ALARM_MASK = int(ALARM_BITS)
+_STILL_MASK = int(Ux.IN_POSITION) | int(ALARM_BITS)
 #: CMD mode: controlword bits 8-11 -> (CML, acknowledgement high byte), 7.1.2 / 7.1.3.
 CMD_WORDS = {0x1: (")", 0xF1), 0x2: ("(", 0xF2), 0x3: ("|", 0xF3), 0x4: ("|2", 0xF4),
              0x6: ("]1", 0xF6)}
