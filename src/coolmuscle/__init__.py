@@ -9,10 +9,6 @@ from __future__ import annotations
 import os as _os
 import sys as _sys
 
-from . import _accel
-
-_accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
-
 
 def _run_as_the_command() -> bool:
     """``python -m coolmuscle ...`` (argv[0] is "-m" while the package loads) or the
@@ -30,6 +26,10 @@ if _run_as_the_command():
     from .tools.stopsignals import install_startup_handlers as _install
 
     _install()
+
+from . import _accel  # noqa: E402
+
+_accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
 
 __version__ = "0.1.0"
 
