@@ -124,3 +124,27 @@ def test_the_build_tool_answers_status_and_bad_usage(capsys: pytest.CaptureFixtu
     assert accel_tool.main(["frobnicate"]) == 2
     assert accel_tool.main(["build", "--fast"]) == 2
     assert "unknown option --fast" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", [bytes, bytearray, memoryview])
+def test_the_host_line_takes_any_byte_buffer_as_the_sources_did(kind: type) -> None:
+    """A compiled function checks its argument types; the host line's entry points take
+    bytes, bytearray and memoryview, as the sources always did (2.1 ``?96`` query)."""
+    from coolmuscle.chain.daisy import Chain
+    chain = Chain(motors=1)
+    out: list[bytes] = []
+    chain.host_line.add_listener(out.append)
+    chain.host_line.feed(kind(b"?96.1\r"))
+    chain.kernel.advance(10_000_000)
+    assert b"".join(out).endswith(b"Px.1=0\r\n")
+
+
+@pytest.mark.parametrize("until", [1.5e9, 2_000_000_000, 7.9])
+def test_the_kernel_takes_float_times_and_floors_them(until: float) -> None:
+    from coolmuscle.sim.kernel import Kernel
+    kernel = Kernel(0.0)
+    ran: list[int] = []
+    kernel.schedule(until / 2, lambda: ran.append(kernel.now))
+    kernel.run(until=until)
+    assert kernel.now == int(until) and isinstance(kernel.now, int)
+    assert ran == [int(until / 2)]

@@ -105,10 +105,11 @@ class HostLine:
                 self._listeners.remove(listener)
         return remove
 
-    def write(self, data: bytes) -> None:
+    def write(self, data: bytes | bytearray | memoryview) -> None:
         """Send raw bytes to the host (paced when pacing is on)."""
         if not data:
             return
+        data = bytes(data)                 # a buffer the caller may reuse: copied
         if not self.pacing:
             self._deliver(data)
             return
@@ -133,10 +134,11 @@ class HostLine:
                 log.exception("host line listener failed")
 
     # -- input ----------------------------------------------------------
-    def feed(self, data: bytes, source: object = None) -> None:
+    def feed(self, data: bytes | bytearray | memoryview, source: object = None) -> None:
         """Bytes from the host ``source``; with pacing they arrive at the K20 rate."""
         if not data:
             return
+        data = bytes(data)                 # a buffer the caller may reuse: copied
         if not self.pacing:
             self._receive(data, source)
             return
@@ -163,7 +165,8 @@ class HostLine:
             found = self._assembly[source] = _Assembly()
         return found
 
-    def receive_text(self, data: bytes, source: object = None) -> None:
+    def receive_text(self, data: bytes | bytearray | memoryview,
+                     source: object = None) -> None:
         """Bytes for the RS-232 text line (also what follows a Modbus escape, 5.6.9)."""
         settings = self._settings()
         asm = self._assembly_of(source)
