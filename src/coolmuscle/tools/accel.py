@@ -15,6 +15,7 @@ or current, 1 the build failed (the sources keep running), 2 bad usage.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -43,7 +44,18 @@ def _current() -> bool:
 
 
 def build(force: bool = False, quiet: bool = False) -> int:
-    """Compile the modules unless the build is current; 0 on success."""
+    """Compile the modules unless the build is current; 0 on success.  Builds take
+    turns (a lock file beside the package): a second one waits, then finds it current."""
+    _accel.PACKAGE_DIR.joinpath(".accel-build.lock").touch(exist_ok=True)
+    with open(_accel.PACKAGE_DIR / ".accel-build.lock", "rb") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            return _build(force, quiet)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _build(force: bool, quiet: bool) -> int:
     if not force and _current():
         if not quiet:
             print("compiled modules are current")
