@@ -158,3 +158,24 @@ def test_the_kernel_takes_float_times_and_floors_them(until: float) -> None:
     kernel.run(until=until)
     assert kernel.now == int(until) and isinstance(kernel.now, int)
     assert ran == [int(until / 2)]
+
+
+def test_a_build_without_mypy_says_so_and_keeps_the_sources(
+        fake_build: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import importlib.util
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "mypyc" else real(name, *a))
+    assert accel_tool.main(["build", "--force"]) == 1
+    assert "needs mypy" in capsys.readouterr().err
+    assert (fake_build / "manifest.json").is_file()          # nothing removed
+
+
+def test_a_read_only_install_gets_one_line_not_a_traceback(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(accel, "PACKAGE_DIR", tmp_path / "no" / "such" / "dir")
+    assert accel_tool.main(["build"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("coolmuscle.tools.accel build: ") and "Traceback" not in err

@@ -16,6 +16,7 @@ or current, 1 the build failed (the sources keep running), 2 bad usage.
 from __future__ import annotations
 
 import fcntl
+import importlib.util
 import json
 import os
 import shutil
@@ -60,6 +61,10 @@ def _build(force: bool, quiet: bool) -> int:
         if not quiet:
             print("compiled modules are current")
         return 0
+    if importlib.util.find_spec("mypyc") is None:
+        print("compiling the hot modules needs mypy (pip install -e '.[accel]'); "
+              "the sources run as they are", file=sys.stderr)
+        return 1
     src = _accel.PACKAGE_DIR.parent
     paths = [str(_accel.source_path(m).relative_to(src)) for m in _accel.MODULES]
     digest = _accel.source_digest()
@@ -124,12 +129,16 @@ def main(argv: list[str] | None = None) -> int:
     if not flags <= {"--force", "--quiet"}:
         print(f"unknown option {sorted(flags - {'--force', '--quiet'})[0]}", file=sys.stderr)
         return 2
-    if command == "build":
-        return build(force="--force" in flags, quiet="--quiet" in flags)
-    if command == "clean":
-        clean()
-        return 0
-    return status()
+    try:
+        if command == "build":
+            return build(force="--force" in flags, quiet="--quiet" in flags)
+        if command == "clean":
+            clean()
+            return 0
+        return status()
+    except OSError as exc:            # a read-only install, a full disk
+        print(f"coolmuscle.tools.accel {command}: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
