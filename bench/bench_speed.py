@@ -1,7 +1,7 @@
 """Speed where users feel it (issue 18): every row of the issue's table in one run.
 
 Run: ``PYTHONPATH=src python bench/bench_speed.py [--baseline REF] [--repeat N] [--quick]``
-(about two minutes; ``--quick`` divides the simulated times by ten).
+(about five minutes; ``--quick`` divides the simulated times by ten).
 
 Each row is measured on this tree twice, running its sources (``COOLMUSCLE_PURE=1``)
 and its compiled hot modules (coolmuscle/_accel.py; build them first with ``python -m
