@@ -26,7 +26,7 @@ import time
 from typing import Any
 
 from ...errors import TransportError
-from ..transports.base import Port, Transport
+from ..transports.base import Port, Transport, close_stream_server
 from .adapter import Cm1Module
 from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
 from .encapsulation import INVALID_LENGTH, Frame
@@ -185,13 +185,8 @@ class EnipTransport(Transport):
         if self.table is not None:
             with self.lock:
                 self.table.close_all()
-        if self._server is not None:
-            self._server.close()
-        for writer in list(self._writers):
-            writer.transport.abort()
-        if self._server is not None:
-            await self._server.wait_closed()
-            self._server = None
+        await close_stream_server(self._server, self._writers)
+        self._server = None
         for udp in self._udp:
             udp.close()
         self._udp.clear()

@@ -26,7 +26,7 @@ import re
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from ...device.hostline import HostLine
 from ...sim.realtime import RealtimeDriver
@@ -280,6 +280,18 @@ def split_after_line_ends(data: bytes) -> list[bytes]:
 def ends_mid_line(data: bytes) -> bool:
     """True when ``data`` leaves a line unfinished (its last byte is no CR/LF)."""
     return bool(data) and data[-1] not in LINE_ENDS
+
+
+async def close_stream_server(server: asyncio.AbstractServer | None,
+                              writers: Iterable[asyncio.StreamWriter]) -> None:
+    """Stop accepting, drop every connection at once, then wait for the server to close
+    (the TCP line, Modbus TCP and EtherNet/IP servers end the same way)."""
+    if server is not None:
+        server.close()
+    for writer in list(writers):
+        writer.transport.abort()
+    if server is not None:
+        await server.wait_closed()
 
 
 class Transport(ABC):

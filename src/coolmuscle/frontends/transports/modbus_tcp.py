@@ -32,7 +32,7 @@ import time
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport
+from .base import DEFAULT_MAX_BUFFER, Port, Transport, close_stream_server
 
 log = logging.getLogger(__name__)
 
@@ -97,13 +97,8 @@ class ModbusTcpTransport(Transport):
         return {"host": host, "port": port}
 
     async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
-        for writer in list(self._writers):
-            writer.transport.abort()
-        if self._server is not None:
-            await self._server.wait_closed()
-            self._server = None
+        await close_stream_server(self._server, self._writers)
+        self._server = None
         self.finished.set()
 
     # -- one connection ---------------------------------------------------------------

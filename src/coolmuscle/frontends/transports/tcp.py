@@ -27,7 +27,7 @@ import logging
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport
+from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport, close_stream_server
 
 log = logging.getLogger(__name__)
 
@@ -128,13 +128,8 @@ class TcpTransport(Transport):
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
-        if self._server is not None:
-            self._server.close()
-        for client in list(self._clients):
-            client.writer.transport.abort()
-        if self._server is not None:
-            await self._server.wait_closed()
-            self._server = None
+        await close_stream_server(self._server, [client.writer for client in self._clients])
+        self._server = None
         self.finished.set()
 
     # -- input ----------------------------------------------------------
