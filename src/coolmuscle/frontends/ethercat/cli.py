@@ -40,12 +40,17 @@ def sim_transport(iface: str, bridge: str) -> object:
     return EthercatTransport(iface, ident.variant(bridge).code)
 
 
+#: The lab's options, shared by ``up`` and ``down`` (the same names remove what up made).
+_NAMESPACE = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace.")
+_MASTER_IF = typer.Option("cmlab-master", "--master-if", help="The master's end.")
+_SLAVE_IF = typer.Option("cmlab-slave", "--slave-if", help="The slave's end (inside the namespace).")
+
+
 @lab_app.command("up")
 def lab_up(
-    namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
-    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
-    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
-                                 help="The slave's end (inside the namespace)."),
+    namespace: str = _NAMESPACE,
+    master_if: str = _MASTER_IF,
+    slave_if: str = _SLAVE_IF,
 ) -> None:
     """Make the veth pair and print which end to give the master."""
     from .lab import LabError, up
@@ -59,10 +64,9 @@ def lab_up(
 
 @lab_app.command("down")
 def lab_down(
-    namespace: str = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace."),
-    master_if: str = typer.Option("cmlab-master", "--master-if", help="The master's end."),
-    slave_if: str = typer.Option("cmlab-slave", "--slave-if",
-                                 help="The slave's end (inside the namespace)."),
+    namespace: str = _NAMESPACE,
+    master_if: str = _MASTER_IF,
+    slave_if: str = _SLAVE_IF,
 ) -> None:
     """Remove the pair and the namespace that ``up`` made (nothing else)."""
     from .lab import LabError, down
