@@ -205,7 +205,8 @@ def run(opts: argparse.Namespace, scale: float, work: Path) -> int:
     if len(trees) == 2:
         names.insert(0, "today (issue)")
     print(f"best of {rep} runs each; simulated times x{scale:g}")
-    print(f"{'row':44} {names[0]:>18} {names[1]:>12} {names[2]:>12} {'goal':>9}  verdict")
+    print(f"{'row':44} {names[0]:>18} {names[1]:>12} {names[2]:>12} {'goal':>9}  "
+          f"{'gain':>6}  verdict")
     failed = 0
     for key, (label, today, goal, unit, higher) in ISSUE.items():
         values = results[key]
@@ -215,8 +216,9 @@ def run(opts: argparse.Namespace, scale: float, work: Path) -> int:
         ok = now >= goal if higher else now <= goal
         failed += not ok
         fmt = (lambda v: f"{v:,.0f}{unit}") if unit in ("x", "us") else (lambda v: f"{v:.3f} s")
+        gain = now / values[0] if higher else values[0] / now     # compiled vs the first
         print(f"{label:44} {fmt(values[0]):>18} {fmt(values[1]):>12} {fmt(now):>12} "
-              f"{fmt(goal):>9}  {'met' if ok else 'NOT met'}")
+              f"{fmt(goal):>9}  {gain:>5.2f}x  {'met' if ok else 'NOT met'}")
         by_cpu = cpu[key]
         if len(by_cpu) == 2:
             print(f"{'    the same from CPU time (a loaded machine waits)':44} {'':>18} "
