@@ -161,6 +161,15 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
                                                                  "P2.1"]
 
 
+def logged(log: Path, text: str, timeout: float = 10.0) -> None:
+    """Wait until the session log holds ``text``."""
+    deadline = time.monotonic() + timeout
+    while text not in (log.read_text() if log.exists() else ""):
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{text!r} not in the log:\n{log.read_text()}")
+        time.sleep(0.02)
+
+
 def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None:
     log = tmp_path / "session.cml"
     pane = Pane([sys.executable, "-m", "coolmuscle", "term", "coolmuscle://",
@@ -168,7 +177,8 @@ def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None
     try:
         pane.prompt()
         for line in ("K23.1=17", "S.1=200", "A.1=1000", "P.1=2500", "^.1"):
-            pane.type(line)
+            pane.type(line)       # the echo logged before the next line (as a person types;
+            logged(log, f"<< {line}\\r\\n")     # on a loaded machine lines overtook it)
         pane.wait(r"Ux\.1=8")
         time.sleep(0.4)                                   # a person reads, then asks
         pane.prompt()
