@@ -203,10 +203,16 @@ def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float
 
 
 class Motion:
-    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
+    """The shaft's motion from ``origin_ns``: pieces up to an endless one.
+
+    Built at once, or, with ``horizon_ns``, only as far as the first piece that ends at
+    or after it (a csp target that the next cycle replaces: the rest would be thrown
+    away).  Such a motion is :attr:`complete` only after :meth:`extend`, which builds the
+    rest, the very pieces a build without a horizon gives; until then every question
+    about it is answered within :attr:`built_until_ns` (the axis extends it then)."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
-                 drive: Drive) -> None:
+                 drive: Drive, horizon_ns: int | None = None) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
@@ -215,8 +221,48 @@ class Motion:
         #: same place: read only).
         self.pieces: Sequence[Piece]
         self._cmd = command_pieces(profile, self.origin_ns)
-        self.pieces, self._starts, self._peaks, self._memo = _placed(
-            drive, float(position), float(velocity), tuple(self._cmd))
+        self._grower: _Solver | None = None
+        if horizon_ns is None:
+            self.pieces, self._starts, self._peaks, self._memo = _placed(
+                drive, float(position), float(velocity), tuple(self._cmd))
+            return
+        ref = self._cmd[0][2][0]
+        rel_drive = _relative_drive(drive, ref)
+        solver = _Solver(rel_drive, [(a, b, (c[0] - ref,) + c[1:]) for a, b, c in self._cmd])
+        solver._build(float(position) - ref, float(velocity),
+                      max(0.0, (horizon_ns - self.origin_ns) / NS_PER_S))
+        pieces = _place(drive, rel_drive, self._cmd, ref, solver.pieces)
+        self.pieces, self._starts, self._peaks, self._memo = (
+            pieces, [p.start for p in pieces], _peaks(pieces), {})
+        if solver.paused is not None:
+            self._grower = solver
+
+    @property
+    def complete(self) -> bool:
+        """Whether the pieces reach an endless one (a horizon's motion: after :meth:`extend`)."""
+        return self._grower is None
+
+    @property
+    def built_until_ns(self) -> int | None:
+        """Where the pieces of a motion built to a horizon end (``None``: complete)."""
+        if self._grower is None:
+            return None
+        return self.origin_ns + math.ceil(self.pieces[-1].end * NS_PER_S)
+
+    def extend(self) -> bool:
+        """Build the rest of a motion built to a horizon (False: it was complete)."""
+        solver = self._grower
+        if solver is None:
+            return False
+        self._grower = None
+        known = len(solver.pieces)
+        solver.resume()
+        ref = self._cmd[0][2][0]
+        added = _place(self.drive, solver.drive, self._cmd, ref, solver.pieces[known:])
+        pieces = list(self.pieces) + added
+        self.pieces, self._starts, self._peaks = pieces, [p.start for p in pieces], _peaks(pieces)
+        self._memo = {}                  # "never in this motion" no longer holds
+        return True
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
@@ -367,11 +413,24 @@ def _placed(drive: Drive, position: float, velocity: float,
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (cached too: a cycle repeats its moves in place)."""
     ref = cmd[0][2][0]
-    rel_drive = drive
-    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
-        rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+    rel_drive = _relative_drive(drive, ref)
     rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
     solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
+    pieces = _place(drive, rel_drive, cmd, ref, solved)
+    return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
+
+
+def _relative_drive(drive: Drive, ref: float) -> Drive:
+    """``drive`` seen from a command that starts at ``ref`` (its stoppers moved)."""
+    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+        return replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+    return drive
+
+
+def _place(drive: Drive, rel_drive: Drive, cmd: Sequence[tuple[float, float, F]],
+           ref: float, solved: Sequence[Piece]) -> list[Piece]:
+    """Solved pieces (relative to ``ref``, the command's position at the origin) where
+    they are, under the absolute command ``cmd``."""
     pieces: list[Piece] = []
     ci = 0
     for piece in solved:
@@ -395,7 +454,12 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif piece.pos is piece.cmd:                     # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    pieces[0].reach("err")                            # Motion.peak: as max() over pieces
+    return pieces
+
+
+def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
+    """:meth:`Motion.peak` of every kind, as max() over the pieces, in one pass."""
+    pieces[0].reach("err")
     top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
     for piece in pieces:
         piece.reach("err")                            # computes the piece's three bounds
@@ -406,8 +470,7 @@ def _placed(drive: Drive, position: float, velocity: float,
             top_vel = b_vel
         if b_torque > top_torque:
             top_torque = b_torque
-    peaks = {"err": top_err, "vel": top_vel, "torque": top_torque}
-    return tuple(pieces), [p.start for p in pieces], peaks, {}
+    return {"err": top_err, "vel": top_vel, "torque": top_torque}
 
 
 def clear_solutions() -> None:
@@ -433,11 +496,28 @@ class _Solver:
         self._is_stepper = drive.stepper
         self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = cmd
+        #: Where a build stopped at its horizon: (t, p, v, exit, mode, s, tiny) of the
+        #: next piece; ``None`` once the motion ends in an endless piece.
+        self.paused: tuple[float, float, float, str, str, int, int] | None = None
 
     # -- building ---------------------------------------------------------------
-    def _build(self, p: float, v: float) -> None:
-        t, ci = 0.0, 0
-        kind_prev, mode_prev, s_prev, tiny = "", "", 0, 0
+    def _build(self, p: float, v: float, horizon: float = math.inf) -> None:
+        """Pieces from state (p, v) at 0 on; with a finite ``horizon`` (s), stop after
+        the first piece that ends at or beyond it (:meth:`_grow` goes on from there, with
+        the very pieces a build without a horizon gives)."""
+        self._grow(0.0, p, v, "", "", 0, 0, horizon)
+
+    def resume(self) -> None:
+        """Build the rest of a motion :meth:`_build` stopped at its horizon."""
+        state = self.paused
+        if state is not None:
+            self.paused = None
+            t, p, v, kind_prev, mode_prev, s_prev, tiny = state
+            self._grow(t, p, v, kind_prev, mode_prev, s_prev, tiny, math.inf)
+
+    def _grow(self, t: float, p: float, v: float, kind_prev: str, mode_prev: str,
+              s_prev: int, tiny: int, horizon: float) -> None:
+        ci = 0
         while len(self.pieces) < MAX_PIECES:
             while self._cmd[ci][1] <= t:
                 ci += 1
@@ -471,6 +551,9 @@ class _Solver:
             p, v = self._after(piece, end, kind)
             t = piece.end
             kind_prev, mode_prev, s_prev = kind, piece.mode, piece.s
+            if t >= horizon:
+                self.paused = (t, p, v, kind_prev, mode_prev, s_prev, tiny)
+                return
         self._append(_rest_piece(t, p, self._cmd[-1][2], self.drive))
 
     def _append(self, piece: Piece) -> None:
@@ -701,7 +784,13 @@ class _Solver:
 
 def _strict(f: F) -> F:
     """``f - tol``: a mode ends only when its condition holds beyond float noise."""
-    return xp.plus(f, -REL_TOL * max(1.0, max(f), -min(f)))
+    top = 1.0                        # max(1.0, max(f), -min(f)), without boxing
+    for c in f:
+        if c > top:
+            top = c
+        if -c > top:
+            top = -c
+    return (f[0] - REL_TOL * top,) + f[1:]
 
 
 def _wall_side(p: float, d: Drive) -> int:
