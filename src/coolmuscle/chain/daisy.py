@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Callable, Iterable
 
 from ..cml import ast
 from ..cml.parser import parse
-from ..device.api import Event, EventListener, MotorSnapshot, TargetStream
+from ..device.api import CyclicState, Event, EventListener, MotorSnapshot, TargetStream
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
                       NoSuchMotorError, OutOfRangeError, StoreError)
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
@@ -511,6 +511,14 @@ class Chain:
             extra={"analog_output": m.analog_output(),   # K35 (Modbus K78+54)
                    "origin_search": int(m.origin.active),  # 5.3 running (fieldbus homing)
                    "origin_done": int(m.origin_done)})     # 5.3 completed since the last |
+
+    def cyclic_state(self, motor: int) -> CyclicState:
+        m = self._require(motor)
+        return CyclicState(
+            motor=m.id, time=self.kernel.now, position=m.position(),
+            speed_pps=m.axis.velocity(), status=m.status, inputs=m.io.input_word(),
+            outputs=m.io.output_word(), enabled=m.axis.enabled,
+            origin_search=bool(m.origin.active), origin_done=bool(m.origin_done))
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         self._require(motor).set_input_level(number, on)

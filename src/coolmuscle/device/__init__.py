@@ -3,8 +3,8 @@
 ``from coolmuscle.device import Device, Event, MotorSnapshot`` is the stable import.
 """
 
-from .api import (Device, Event, EventKind, EventListener, MotorSnapshot, Origin,
-                  TargetStream)
+from .api import (CyclicState, Device, Event, EventKind, EventListener, MotorSnapshot,
+                  Origin, TargetStream)
 
-__all__ = ["Device", "Event", "EventKind", "EventListener", "MotorSnapshot", "Origin",
-           "TargetStream"]
+__all__ = ["CyclicState", "Device", "Event", "EventKind", "EventListener", "MotorSnapshot",
+           "Origin", "TargetStream"]

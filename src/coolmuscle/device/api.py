@@ -62,6 +62,24 @@ class MotorSnapshot:
     extra: dict[str, int] = field(default_factory=dict)
 
 
+@dataclass(frozen=True, slots=True)
+class CyclicState:
+    """What a fieldbus cycle reads of one motor every cycle: the cheap part of
+    :class:`MotorSnapshot` (the EtherCAT bridge's TxPDO 6064h and statusword 6041h,
+    ethercat-bridge-users-guide.txt 6.1-6.5, and its homing and CMD-mode watch)."""
+
+    motor: int
+    time: int
+    position: int          # ?96 Px, pulses
+    speed_pps: float       # pulses per second
+    status: int            # ?99 Ux
+    inputs: int            # ?70 word, bit0 = input 1
+    outputs: int           # ?50 word, bit0 = output 1
+    enabled: bool
+    origin_search: bool    # 5.3 running
+    origin_done: bool      # 5.3 completed since the last |
+
+
 EventListener = Callable[[Event], None]
 
 
@@ -112,6 +130,9 @@ class Device(Protocol):
 
     def snapshot(self, motor: int) -> MotorSnapshot:
         """Live typed values of one motor."""
+
+    def cyclic_state(self, motor: int) -> CyclicState:
+        """The few live values a fieldbus reads every cycle (cheaper than a snapshot)."""
 
     def set_input(self, motor: int, number: int, on: bool) -> None:
         """Drive the electrical level of input ``number`` (1..6)."""

@@ -4,7 +4,7 @@
 object dictionary built from the table, the SII image, and the 1 ms cycle
 (:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
 the output image into the drive of :mod:`.bridge` (CiA402 6.1, every mode of ch. 6
-and 7) and the device API's snapshots into the input image (6041h, 6064h + 0x800 n),
+and 7) and the device API's cyclic state into the input image (6041h, 6064h + 0x800 n),
 through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
 without touching the ESC.
 

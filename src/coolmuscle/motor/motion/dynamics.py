@@ -221,47 +221,41 @@ class Motion:
         #: same place: read only).
         self.pieces: Sequence[Piece]
         self._cmd = command_pieces(profile, self.origin_ns)
-        self._grower: _Solver | None = None
+        self._growth: _Growth | None = None
         if horizon_ns is None:
             self.pieces, self._starts, self._peaks, self._memo = _placed(
                 drive, float(position), float(velocity), tuple(self._cmd))
             return
-        ref = self._cmd[0][2][0]
-        rel_drive = _relative_drive(drive, ref)
-        solver = _Solver(rel_drive, [(a, b, (c[0] - ref,) + c[1:]) for a, b, c in self._cmd])
-        solver._build(float(position) - ref, float(velocity),
-                      max(0.0, (horizon_ns - self.origin_ns) / NS_PER_S))
-        pieces = _place(drive, rel_drive, self._cmd, ref, solver.pieces)
-        self.pieces, self._starts, self._peaks, self._memo = (
-            pieces, [p.start for p in pieces], _peaks(pieces), {})
-        if solver.paused is not None:
-            self._grower = solver
+        growth = _growth(drive, float(position), float(velocity), tuple(self._cmd))
+        n = growth.upto(max(0.0, (horizon_ns - self.origin_ns) / NS_PER_S))
+        self._take(growth, n)
+
+    def _take(self, growth: "_Growth", n: int) -> None:
+        """The first ``n`` pieces of a growing solution (:func:`_growth`)."""
+        self.pieces = growth.placed[:n]
+        self._starts = growth.starts[:n]
+        self._peaks = growth.peaks[n - 1]
+        self._memo = growth.memos.setdefault(n, {})   # answers for these n pieces
+        self._growth = growth if growth.paused_at(n) else None
 
     @property
     def complete(self) -> bool:
         """Whether the pieces reach an endless one (a horizon's motion: after :meth:`extend`)."""
-        return self._grower is None
+        return self._growth is None
 
     @property
     def built_until_ns(self) -> int | None:
         """Where the pieces of a motion built to a horizon end (``None``: complete)."""
-        if self._grower is None:
+        if self._growth is None:
             return None
         return self.origin_ns + math.ceil(self.pieces[-1].end * NS_PER_S)
 
     def extend(self) -> bool:
         """Build the rest of a motion built to a horizon (False: it was complete)."""
-        solver = self._grower
-        if solver is None:
+        growth = self._growth
+        if growth is None:
             return False
-        self._grower = None
-        known = len(solver.pieces)
-        solver.resume()
-        ref = self._cmd[0][2][0]
-        added = _place(self.drive, solver.drive, self._cmd, ref, solver.pieces[known:])
-        pieces = list(self.pieces) + added
-        self.pieces, self._starts, self._peaks = pieces, [p.start for p in pieces], _peaks(pieces)
-        self._memo = {}                  # "never in this motion" no longer holds
+        self._take(growth, growth.upto(math.inf))
         return True
 
     # -- evaluation -----------------------------------------------------------
@@ -420,6 +414,87 @@ def _placed(drive: Drive, position: float, velocity: float,
     return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
 
 
+class _Solution:
+    """A motion solved piece by piece, relative to where its command starts (as
+    :func:`_solved`), as far as motions built to a horizon ask: a repeated csp step
+    (a steady ramp) solves nothing again."""
+
+    def __init__(self, rel_drive: Drive, position: float, velocity: float,
+                 rel_cmd: tuple[tuple[float, float, F], ...]) -> None:
+        self.solver = _Solver(rel_drive, list(rel_cmd))
+        self.solver._build(position, velocity, 0.0)
+
+    def upto(self, horizon: float) -> int:
+        """How many pieces reach the first that ends at or beyond ``horizon`` (s from the
+        origin; all of them when the motion ends before), building them if need be."""
+        pieces = self.solver.pieces
+        for i, piece in enumerate(pieces):
+            if piece.end >= horizon:
+                return i + 1
+        if self.solver.paused is None:
+            return len(pieces)
+        self.solver.resume(horizon)
+        return self.upto(horizon)
+
+
+@lru_cache(maxsize=256)
+def _solution(rel_drive: Drive, position: float, velocity: float,
+              rel_cmd: tuple[tuple[float, float, F], ...]) -> _Solution:
+    return _Solution(rel_drive, position, velocity, rel_cmd)
+
+
+class _Growth:
+    """A :class:`_Solution` placed where the motion is, as far as it is built (shared,
+    like :func:`_placed`, by the motions that are the same motion at the same place:
+    axes following one csp target).  ``peaks[i]`` are :meth:`Motion.peak` over the
+    first i + 1 pieces."""
+
+    def __init__(self, drive: Drive, position: float, velocity: float,
+                 cmd: tuple[tuple[float, float, F], ...]) -> None:
+        self.drive = drive
+        self.cmd = cmd
+        self.ref = ref = cmd[0][2][0]
+        self.rel_drive = _relative_drive(drive, ref)
+        self.solution = _solution(self.rel_drive, position - ref, velocity,
+                                  tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd))
+        self.placed: list[Piece] = []
+        self.starts: list[float] = []
+        self.peaks: list[dict[str, float]] = []
+        #: Motion.settled / within answers of the motions of the first n pieces.
+        self.memos: dict[int, dict] = {}
+
+    def upto(self, horizon: float) -> int:
+        """:meth:`_Solution.upto`, the pieces placed."""
+        n = self.solution.upto(horizon)
+        known = len(self.placed)
+        if n > known:
+            added = _place(self.drive, self.rel_drive, self.cmd, self.ref,
+                           self.solution.solver.pieces[known:n])
+            for piece in added:
+                self.placed.append(piece)
+                self.starts.append(piece.start)
+                top = _peaks([piece])
+                if self.peaks:
+                    last = self.peaks[-1]
+                    top = {"err": max(last["err"], top["err"]),
+                           "vel": max(last["vel"], top["vel"]),
+                           "torque": max(last["torque"], top["torque"])}
+                self.peaks.append(top)
+        return n
+
+    def paused_at(self, n: int) -> bool:
+        """Whether a motion of the first ``n`` pieces lacks pieces after them."""
+        solver = self.solution.solver
+        return n < len(solver.pieces) or solver.paused is not None
+
+
+@lru_cache(maxsize=256)
+def _growth(drive: Drive, position: float, velocity: float,
+            cmd: tuple[tuple[float, float, F], ...]) -> _Growth:
+    """The shared growing solution of a motion built to a horizon (:class:`_Growth`)."""
+    return _Growth(drive, position, velocity, cmd)
+
+
 def _relative_drive(drive: Drive, ref: float) -> Drive:
     """``drive`` seen from a command that starts at ``ref`` (its stoppers moved)."""
     if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
@@ -477,6 +552,8 @@ def clear_solutions() -> None:
     """Forget every solved motion (benchmarks: to time every move solved afresh)."""
     _placed.cache_clear()
     _solved.cache_clear()
+    _growth.cache_clear()
+    _solution.cache_clear()
 
 
 def solution_reuse() -> tuple[int, int]:
@@ -507,13 +584,13 @@ class _Solver:
         the very pieces a build without a horizon gives)."""
         self._grow(0.0, p, v, "", "", 0, 0, horizon)
 
-    def resume(self) -> None:
-        """Build the rest of a motion :meth:`_build` stopped at its horizon."""
+    def resume(self, horizon: float = math.inf) -> None:
+        """Go on where :meth:`_build` stopped at its horizon, to ``horizon``."""
         state = self.paused
         if state is not None:
             self.paused = None
             t, p, v, kind_prev, mode_prev, s_prev, tiny = state
-            self._grow(t, p, v, kind_prev, mode_prev, s_prev, tiny, math.inf)
+            self._grow(t, p, v, kind_prev, mode_prev, s_prev, tiny, horizon)
 
     def _grow(self, t: float, p: float, v: float, kind_prev: str, mode_prev: str,
               s_prev: int, tiny: int, horizon: float) -> None:

@@ -3,7 +3,7 @@
 
 :class:`AxisDrive` runs in the model's thread once a bridge cycle (1 ms): it takes
 the requests the SDO hooks queued (K writes, outputs), reads the motor through the
-device API's ``snapshot``, applies a pending mode switch (6.2.2: at rest, 5 ms
+device API's ``cyclic_state``, applies a pending mode switch (6.2.2: at rest, 5 ms
 apart), runs the mode's controlword logic and publishes 6041h, 6061h, 6064h.
 
 * csp / hm / CPIO (CiA402): part 1's table :func:`..cia402.next_state`; into
@@ -106,7 +106,7 @@ class AxisDrive:
                 request()
             except Exception:
                 log.exception("ID%d: an SDO request failed in the model", self.motor)
-        snap = self.device.snapshot(self.motor)
+        snap = self.device.cyclic_state(self.motor)
         self._observe(snap)
         self._switch_mode(now)
         cw = int(self.od.get(self.idx(0x6040)))

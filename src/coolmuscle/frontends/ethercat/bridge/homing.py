@@ -5,8 +5,8 @@ The motor's own origin search does the work (cml-users-guide.txt 5.3): the bridg
 sets its K parameters from the objects and sends ``|``.  :func:`homing_params`
 maps 6098h (1 stopper CW, 2 stopper CCW, 3 switch CW, 4 switch CCW), 6099h.1/.2
 (K42 for the switch / stopper search), 609Ah (K43) and 607Ch (K48) to K values;
-:class:`OriginWatch` follows one search through the device API's snapshot
-(``extra["origin_search"]`` / ``["origin_done"]``) to its end: attained, or an
+:class:`OriginWatch` follows one search through the device API's cyclic state
+(``CyclicState.origin_search`` / ``origin_done``) to its end: attained, or an
 error (an alarm, the search stopped without its origin, or :data:`TIMEOUT_NS`).
 """
 
@@ -72,14 +72,14 @@ class OriginWatch:
             self.phase = phase
 
     def update(self, snap: Any, now: int) -> str:
-        """Follow the search on this cycle's snapshot; the phase after it."""
+        """Follow the search on this cycle's cyclic state; the phase after it."""
         if self.phase != RUNNING or now == self._started:   # ``snap`` is from before ``|``
             return self.phase
-        searching = snap.extra.get("origin_search", 0)
+        searching = snap.origin_search
         if snap.status & ALARM_BITS:
             self.phase = ERROR
         elif not searching:
-            self.phase = ATTAINED if snap.extra.get("origin_done", 0) else ERROR
+            self.phase = ATTAINED if snap.origin_done else ERROR
         elif now - self._started > TIMEOUT_NS:
             self.abort(ERROR)
         return self.phase
