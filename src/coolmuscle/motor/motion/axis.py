@@ -31,13 +31,6 @@ from .profile import Profile, Segment, hold
 
 log = logging.getLogger(__name__)
 
-#: A followed target's motion is built at least this far ahead (ns; :meth:`Axis.follow`).
-FOLLOW_HORIZON_NS = 2_000_000
-#: ... and at most this far (targets further apart than half of it: about a full build).
-FOLLOW_HORIZON_MAX_NS = 200_000_000
-#: The motion is extended before anything else looks at it at that instant.
-PRIO_EXTEND = -10
-
 
 class Watcher(Protocol):
     """Something that wants a kernel event when the motion reaches a condition."""
@@ -77,10 +70,6 @@ class Axis:
         #: Called with (the motion ending, now) before each re-solve (thermal model).
         self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
-        self._in_position_timer: Timer | None = None
-        self._followed_ns = kernel.now - FOLLOW_HORIZON_MAX_NS
-        #: The least horizon of a followed target's motion (ns); ``None``: built whole.
-        self.follow_horizon_ns: int | None = FOLLOW_HORIZON_NS
         self._watch_timers: dict[int, Timer] = {}
         #: (time_ns, profile, motion, zero, sign) kept while a trace records.
         self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
@@ -227,25 +216,10 @@ class Axis:
         self._resolve()
 
     def follow(self, user_target: float) -> None:
-        """Step the command to a new target; the servo follows with its lag (csp, Dx).
-
-        A stream of targets (csp: one a cycle) replaces the motion before long, so the
-        motion is built only to a horizon twice the time since the last target (at least
-        FOLLOW_HORIZON_NS, at most FOLLOW_HORIZON_MAX_NS) and extended there if no new
-        target came (:meth:`_extend`): the same pieces, without building the stretch
-        that the next cycle throws away."""
+        """Step the command to a new target; the servo follows with its lag (csp, Dx)."""
         raw = self.to_raw(user_target)
         self.target_raw = raw
-        now = self.kernel.now
-        gap = now - self._followed_ns
-        self._followed_ns = now
-        self.profile = hold(raw, now)
-        self.moving = True
-        least = self.follow_horizon_ns
-        if least is None:                  # the whole motion at once (the exact oracle)
-            self._resolve()
-        else:
-            self._resolve(now + max(least, min(2 * gap, FOLLOW_HORIZON_MAX_NS)))
+        self._start(hold(raw, self.kernel.now))
 
     def nudge(self, user_target: float, window: float) -> bool:
         """Shift the target of a motor at rest by no more than the in-position window,
@@ -338,44 +312,24 @@ class Axis:
         for timer in self._timers:
             timer.cancel()
         self._timers.clear()
-        self._in_position_timer = None
         for timer in self._watch_timers.values():
             timer.cancel()
         self._watch_timers.clear()
 
-    def _resolve(self, horizon_ns: int | None = None) -> None:
-        """Re-solve the shaft motion from the actual state now and re-arm everything
-        (built to ``horizon_ns`` only, when given: :meth:`follow`)."""
+    def _resolve(self) -> None:
+        """Re-solve the shaft motion from the actual state now and re-arm everything."""
         now = self.kernel.now
         p, v = self.raw_actual(), self.raw_velocity()
         for hook in self.before_resolve:
             hook(self.motion, now)
         self._cancel()
         self.generation += 1
-        self.motion = Motion(self.profile, now, p, v, self._current_drive(), horizon_ns)
+        self.motion = Motion(self.profile, now, p, v, self._current_drive())
         if len(self.motion.pieces) >= 2000:
             log.warning("axis: motion solver hit its piece limit at %d ns", now)
         self._remember()
-        until = self.motion.built_until_ns
-        if until is not None:
-            self._timers.append(self.kernel.schedule_at(
-                until, self._extend, priority=PRIO_EXTEND, name="motion-horizon"))
         if self.moving:
             self._schedule_milestones()
-        self._arm_all(now)
-
-    def _extend(self) -> None:
-        """The motion built to a horizon has reached it with no new command: build the
-        rest and ask again what was "never" within the pieces built so far."""
-        if not self.motion.extend():
-            return
-        now = self.kernel.now
-        self._remember()
-        if self.moving and self._in_position_timer is None:
-            self._schedule_in_position(now)
-        self._arm_all(now)
-
-    def _arm_all(self, now: int) -> None:
         timers, schedule_at = self._watch_timers, self.kernel.schedule_at
         for watcher in list(self.watchers):      # _arm written out: the hot path of a move
             old = timers.pop(id(watcher), None)
@@ -406,14 +360,11 @@ class Axis:
                 self._timers.append(self.kernel.schedule_at(
                     t_ns, partial(self._on_passing_point, index),
                     priority=PRIO_MOTION, name="passing-point"))
-        self._schedule_in_position(now)
-
-    def _schedule_in_position(self, now: int) -> None:
         done = self.in_position_time(now)
         if done is not None:
-            self._in_position_timer = timer = self.kernel.schedule_at(
-                done, self._arrived, priority=PRIO_MOTION, name="in-position")
-            self._timers.append(timer)
+            self._timers.append(self.kernel.schedule_at(done, self._arrived,
+                                                        priority=PRIO_MOTION,
+                                                        name="in-position"))
 
     def in_position_time(self, after_ns: int) -> int | None:
         """When the actual position comes within K55 of the target (``None``: not in

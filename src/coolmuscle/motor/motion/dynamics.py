@@ -203,16 +203,10 @@ def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float
 
 
 class Motion:
-    """The shaft's motion from ``origin_ns``: pieces up to an endless one.
-
-    Built at once, or, with ``horizon_ns``, only as far as the first piece that ends at
-    or after it (a csp target that the next cycle replaces: the rest would be thrown
-    away).  Such a motion is :attr:`complete` only after :meth:`extend`, which builds the
-    rest, the very pieces a build without a horizon gives; until then every question
-    about it is answered within :attr:`built_until_ns` (the axis extends it then)."""
+    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
-                 drive: Drive, horizon_ns: int | None = None) -> None:
+                 drive: Drive) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
@@ -221,42 +215,8 @@ class Motion:
         #: same place: read only).
         self.pieces: Sequence[Piece]
         self._cmd = command_pieces(profile, self.origin_ns)
-        self._growth: _Growth | None = None
-        if horizon_ns is None:
-            self.pieces, self._starts, self._peaks, self._memo = _placed(
-                drive, float(position), float(velocity), tuple(self._cmd))
-            return
-        growth = _growth(drive, float(position), float(velocity), tuple(self._cmd))
-        n = growth.upto(max(0.0, (horizon_ns - self.origin_ns) / NS_PER_S))
-        self._take(growth, n)
-
-    def _take(self, growth: "_Growth", n: int) -> None:
-        """The first ``n`` pieces of a growing solution (:func:`_growth`)."""
-        self.pieces = growth.placed[:n]
-        self._starts = growth.starts[:n]
-        self._peaks = growth.peaks[n - 1]
-        self._memo = growth.memos.setdefault(n, {})   # answers for these n pieces
-        self._growth = growth if growth.paused_at(n) else None
-
-    @property
-    def complete(self) -> bool:
-        """Whether the pieces reach an endless one (a horizon's motion: after :meth:`extend`)."""
-        return self._growth is None
-
-    @property
-    def built_until_ns(self) -> int | None:
-        """Where the pieces of a motion built to a horizon end (``None``: complete)."""
-        if self._growth is None:
-            return None
-        return self.origin_ns + math.ceil(self.pieces[-1].end * NS_PER_S)
-
-    def extend(self) -> bool:
-        """Build the rest of a motion built to a horizon (False: it was complete)."""
-        growth = self._growth
-        if growth is None:
-            return False
-        self._take(growth, growth.upto(math.inf))
-        return True
+        self.pieces, self._starts, self._peaks, self._memo = _placed(
+            drive, float(position), float(velocity), tuple(self._cmd))
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
@@ -407,105 +367,11 @@ def _placed(drive: Drive, position: float, velocity: float,
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (cached too: a cycle repeats its moves in place)."""
     ref = cmd[0][2][0]
-    rel_drive = _relative_drive(drive, ref)
+    rel_drive = drive
+    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+        rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
     rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
     solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
-    pieces = _place(drive, rel_drive, cmd, ref, solved)
-    return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
-
-
-class _Solution:
-    """A motion solved piece by piece, relative to where its command starts (as
-    :func:`_solved`), as far as motions built to a horizon ask: a repeated csp step
-    (a steady ramp) solves nothing again."""
-
-    def __init__(self, rel_drive: Drive, position: float, velocity: float,
-                 rel_cmd: tuple[tuple[float, float, F], ...]) -> None:
-        self.solver = _Solver(rel_drive, list(rel_cmd))
-        self.solver._build(position, velocity, 0.0)
-
-    def upto(self, horizon: float) -> int:
-        """How many pieces reach the first that ends at or beyond ``horizon`` (s from the
-        origin; all of them when the motion ends before), building them if need be."""
-        pieces = self.solver.pieces
-        for i, piece in enumerate(pieces):
-            if piece.end >= horizon:
-                return i + 1
-        if self.solver.paused is None:
-            return len(pieces)
-        self.solver.resume(horizon)
-        return self.upto(horizon)
-
-
-@lru_cache(maxsize=256)
-def _solution(rel_drive: Drive, position: float, velocity: float,
-              rel_cmd: tuple[tuple[float, float, F], ...]) -> _Solution:
-    return _Solution(rel_drive, position, velocity, rel_cmd)
-
-
-class _Growth:
-    """A :class:`_Solution` placed where the motion is, as far as it is built (shared,
-    like :func:`_placed`, by the motions that are the same motion at the same place:
-    axes following one csp target).  ``peaks[i]`` are :meth:`Motion.peak` over the
-    first i + 1 pieces."""
-
-    def __init__(self, drive: Drive, position: float, velocity: float,
-                 cmd: tuple[tuple[float, float, F], ...]) -> None:
-        self.drive = drive
-        self.cmd = cmd
-        self.ref = ref = cmd[0][2][0]
-        self.rel_drive = _relative_drive(drive, ref)
-        self.solution = _solution(self.rel_drive, position - ref, velocity,
-                                  tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd))
-        self.placed: list[Piece] = []
-        self.starts: list[float] = []
-        self.peaks: list[dict[str, float]] = []
-        #: Motion.settled / within answers of the motions of the first n pieces.
-        self.memos: dict[int, dict] = {}
-
-    def upto(self, horizon: float) -> int:
-        """:meth:`_Solution.upto`, the pieces placed."""
-        n = self.solution.upto(horizon)
-        known = len(self.placed)
-        if n > known:
-            added = _place(self.drive, self.rel_drive, self.cmd, self.ref,
-                           self.solution.solver.pieces[known:n])
-            for piece in added:
-                self.placed.append(piece)
-                self.starts.append(piece.start)
-                top = _peaks([piece])
-                if self.peaks:
-                    last = self.peaks[-1]
-                    top = {"err": max(last["err"], top["err"]),
-                           "vel": max(last["vel"], top["vel"]),
-                           "torque": max(last["torque"], top["torque"])}
-                self.peaks.append(top)
-        return n
-
-    def paused_at(self, n: int) -> bool:
-        """Whether a motion of the first ``n`` pieces lacks pieces after them."""
-        solver = self.solution.solver
-        return n < len(solver.pieces) or solver.paused is not None
-
-
-@lru_cache(maxsize=256)
-def _growth(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...]) -> _Growth:
-    """The shared growing solution of a motion built to a horizon (:class:`_Growth`)."""
-    return _Growth(drive, position, velocity, cmd)
-
-
-def _relative_drive(drive: Drive, ref: float) -> Drive:
-    """``drive`` seen from a command that starts at ``ref`` (its stoppers moved)."""
-    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
-        return replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
-    return drive
-
-
-def _place(drive: Drive, rel_drive: Drive, cmd: Sequence[tuple[float, float, F]],
-           ref: float, solved: Sequence[Piece]) -> list[Piece]:
-    """Solved pieces (relative to ``ref``, the command's position at the origin) where
-    they are, under the absolute command ``cmd``."""
     pieces: list[Piece] = []
     ci = 0
     for piece in solved:
@@ -529,12 +395,7 @@ def _place(drive: Drive, rel_drive: Drive, cmd: Sequence[tuple[float, float, F]]
         elif piece.pos is piece.cmd:                     # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    return pieces
-
-
-def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
-    """:meth:`Motion.peak` of every kind, as max() over the pieces, in one pass."""
-    pieces[0].reach("err")
+    pieces[0].reach("err")                            # Motion.peak: as max() over pieces
     top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
     for piece in pieces:
         piece.reach("err")                            # computes the piece's three bounds
@@ -545,15 +406,14 @@ def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
             top_vel = b_vel
         if b_torque > top_torque:
             top_torque = b_torque
-    return {"err": top_err, "vel": top_vel, "torque": top_torque}
+    peaks = {"err": top_err, "vel": top_vel, "torque": top_torque}
+    return tuple(pieces), [p.start for p in pieces], peaks, {}
 
 
 def clear_solutions() -> None:
     """Forget every solved motion (benchmarks: to time every move solved afresh)."""
     _placed.cache_clear()
     _solved.cache_clear()
-    _growth.cache_clear()
-    _solution.cache_clear()
 
 
 def solution_reuse() -> tuple[int, int]:
@@ -573,28 +433,11 @@ class _Solver:
         self._is_stepper = drive.stepper
         self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = cmd
-        #: Where a build stopped at its horizon: (t, p, v, exit, mode, s, tiny) of the
-        #: next piece; ``None`` once the motion ends in an endless piece.
-        self.paused: tuple[float, float, float, str, str, int, int] | None = None
 
     # -- building ---------------------------------------------------------------
-    def _build(self, p: float, v: float, horizon: float = math.inf) -> None:
-        """Pieces from state (p, v) at 0 on; with a finite ``horizon`` (s), stop after
-        the first piece that ends at or beyond it (:meth:`_grow` goes on from there, with
-        the very pieces a build without a horizon gives)."""
-        self._grow(0.0, p, v, "", "", 0, 0, horizon)
-
-    def resume(self, horizon: float = math.inf) -> None:
-        """Go on where :meth:`_build` stopped at its horizon, to ``horizon``."""
-        state = self.paused
-        if state is not None:
-            self.paused = None
-            t, p, v, kind_prev, mode_prev, s_prev, tiny = state
-            self._grow(t, p, v, kind_prev, mode_prev, s_prev, tiny, horizon)
-
-    def _grow(self, t: float, p: float, v: float, kind_prev: str, mode_prev: str,
-              s_prev: int, tiny: int, horizon: float) -> None:
-        ci = 0
+    def _build(self, p: float, v: float) -> None:
+        t, ci = 0.0, 0
+        kind_prev, mode_prev, s_prev, tiny = "", "", 0, 0
         while len(self.pieces) < MAX_PIECES:
             while self._cmd[ci][1] <= t:
                 ci += 1
@@ -628,9 +471,6 @@ class _Solver:
             p, v = self._after(piece, end, kind)
             t = piece.end
             kind_prev, mode_prev, s_prev = kind, piece.mode, piece.s
-            if t >= horizon:
-                self.paused = (t, p, v, kind_prev, mode_prev, s_prev, tiny)
-                return
         self._append(_rest_piece(t, p, self._cmd[-1][2], self.drive))
 
     def _append(self, piece: Piece) -> None:
