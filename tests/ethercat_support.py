@@ -35,11 +35,16 @@ def link(name: str) -> Iterator[Lab]:
         yield lab
 
 
+def master_command(lab: Lab, script: str, *args: str) -> list[str]:
+    """The command that runs ``ethercat_masters/<script>`` on the lab's master side."""
+    rt = ["chrt", "-f", "30"] if shutil.which("chrt") else []   # masters run real-time
+    return ["ip", "netns", "exec", lab.namespace, *rt, sys.executable, str(MASTERS / script),
+            lab.master_if, *args]
+
+
 def run_master(lab: Lab, script: str, *args: str, timeout: float = 90.0) -> dict[str, Any]:
     """Run ``ethercat_masters/<script>`` in the lab's namespace; its JSON result."""
-    rt = ["chrt", "-f", "30"] if shutil.which("chrt") else []   # masters run real-time
-    cmd = ["ip", "netns", "exec", lab.namespace, *rt, sys.executable, str(MASTERS / script),
-           lab.master_if, *args]
+    cmd = master_command(lab, script, *args)
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
     if done.returncode != 0:
         raise AssertionError(f"{script} failed ({done.returncode}):\n{done.stderr[-3000:]}")

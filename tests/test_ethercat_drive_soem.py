@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from ethercat_drive_support import Bench
-from ethercat_support import MASTERS, needs_net_admin
+from ethercat_support import master_command, needs_net_admin, run_master
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.lab import veth_pair
@@ -46,11 +45,9 @@ def servo_lag() -> int:
     return lag
 
 
-def run_master(lab, st) -> dict:
+def run_drive_master(lab, st) -> dict:
     """The master in the namespace; injects the alarm when it asks (machine file)."""
-    rt = ["chrt", "-f", "30"] if shutil.which("chrt") else []   # as part 1's masters run
-    cmd = ["ip", "netns", "exec", lab.namespace, *rt, sys.executable,
-           str(MASTERS / "drive_master.py"), lab.master_if]
+    cmd = master_command(lab, "drive_master.py")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
@@ -75,7 +72,7 @@ def test_soem_drives_cia402_csp_homing_cmd_cpio_and_fault_reset_6_1_6_3_6_4_7_1(
     with veth_pair("cmec2a", inside="master") as lab:
         with ServiceThread(lambda: Chain(None, 4, firmware="cm2", machine=STOPPERS),
                            lambda: [EthercatTransport(lab.slave_if, "EB02")]) as st:
-            r = run_master(lab, st)
+            r = run_drive_master(lab, st)
             drive = st.transports[0].app.drive
             gap_ms = -(-drive.max_gap_ns // 1_000_000)
             print(r, "bridge cycles", drive.cycles, "late", drive.late_cycles, "gap ms", gap_ms)
@@ -128,11 +125,10 @@ def test_readme_pysoem_example_moves_a_virtual_motor():
 
 def test_kickcat_reads_the_drive_objects_and_moves_all_axes_6_1_6_3_7_3():
     """A second, independent master: KickCAT (its binding reads SDOs, writes PDOs)."""
-    from ethercat_support import run_master as run_in_namespace
     with veth_pair("cmec2k", inside="master") as lab:
         with ServiceThread(lambda: Chain(None, 4, firmware="cm2"),
                            lambda: [EthercatTransport(lab.slave_if, "EB02")]):
-            r = run_in_namespace(lab, "kickcat_drive_master.py", timeout=90)
+            r = run_master(lab, "kickcat_drive_master.py", timeout=90)
     assert r["6502"] == 0xA0 and r["6061"] == [8] * 4             # 6.2.1, 6.2.2 note 1
     assert r["60e3"] == [1, 2, 3, 4]                              # 6.4.1
     assert r["f511"] == [2, 6, 1]                                 # 7.3: CM2, 176,800, 1 ms

@@ -15,13 +15,11 @@ import time
 from datetime import timedelta
 
 import kickcat
+from kickcat_states import connect, init, operational, safe_op
 
 
 def main() -> None:
-    link = kickcat.create_link(sys.argv[1], "")
-    link.set_timeout(timedelta(milliseconds=50))   # a loaded CI machine: answers may take more than 10 ms
-    bus = kickcat.Bus(link)
-    bus.init(timedelta(seconds=2))
+    bus = connect(sys.argv[1])
     s = bus.slaves()[0]
 
     def sdo(index: int, sub: int, size: int) -> bytes:
@@ -32,17 +30,8 @@ def main() -> None:
            "60e3": [struct.unpack("<H", sdo(0x60E3, k, 2))[0] for k in range(1, 5)],
            "f511": [struct.unpack("<I", sdo(0xF511, k, 4))[0] for k in range(1, 4)],
            "f591": sdo(0xF591, 0, 64).decode("latin-1")}
-    bus.create_mapping(4096)
-    bus.request_state(kickcat.State.SAFE_OP)
-    bus.wait_for_state(kickcat.State.SAFE_OP, timedelta(seconds=2))
-
-    def exchange(*_a: object) -> None:
-        bus.process_data_no_check()
-
-    s.set_output_bytes(bytes(24))
-    bus.request_state(kickcat.State.OPERATIONAL)
-    bus.wait_for_state(kickcat.State.OPERATIONAL, timedelta(seconds=2), exchange)
-    res["op"] = str(bus.get_state(s))
+    safe_op(bus, s)
+    res["op"] = operational(bus, s)
     cw, target = [0] * 4, [0] * 4
     words, pos = [0] * 4, [0] * 4
 
@@ -72,8 +61,7 @@ def main() -> None:
     cycle(400)
     res["start"], res["end"], res["sw_end"] = start, list(pos), list(words)
     res["f530_tx"] = struct.unpack("<I", sdo(0xF530, 9, 4))[0]
-    bus.request_state(kickcat.State.INIT)
-    bus.wait_for_state(kickcat.State.INIT, timedelta(seconds=2))
+    init(bus, s)
     print(json.dumps(res))
 
 

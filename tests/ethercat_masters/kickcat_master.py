@@ -13,13 +13,11 @@ import time
 from datetime import timedelta
 
 import kickcat
+from kickcat_states import connect, init, operational, safe_op
 
 
 def main() -> None:
-    link = kickcat.create_link(sys.argv[1], "")
-    link.set_timeout(timedelta(milliseconds=50))   # a loaded CI machine: answers may take more than 10 ms
-    bus = kickcat.Bus(link)
-    bus.init(timedelta(seconds=2))
+    bus = connect(sys.argv[1])
     slaves = bus.slaves()
     s = slaves[0]
     res = {"found": len(slaves), "address": s.address,
@@ -27,19 +25,9 @@ def main() -> None:
                                     timedelta(seconds=1)).decode("latin-1"),
            "vendor": struct.unpack("<I", bus.read_sdo(s, 0x1018, 1, kickcat.Access.PARTIAL, 4,
                                                       timedelta(seconds=1)))[0]}
-    bus.create_mapping(4096)
+    res["safeop"] = safe_op(bus, s)
     res["in_size"], res["out_size"] = s.input_size, s.output_size
-    bus.request_state(kickcat.State.SAFE_OP)
-    bus.wait_for_state(kickcat.State.SAFE_OP, timedelta(seconds=2))
-    res["safeop"] = str(bus.get_state(s))
-
-    def exchange(*_a: object) -> None:
-        bus.process_data_no_check()
-
-    s.set_output_bytes(bytes(24))
-    bus.request_state(kickcat.State.OPERATIONAL)
-    bus.wait_for_state(kickcat.State.OPERATIONAL, timedelta(seconds=2), exchange)
-    res["op"] = str(bus.get_state(s))
+    res["op"] = operational(bus, s)
     errors = 0
     inputs = []
     for i in range(int(sys.argv[2])):
@@ -53,9 +41,7 @@ def main() -> None:
     res["errors"] = errors
     res["last_input"] = inputs[-1]
     res["last_target"] = 1000 + int(sys.argv[2]) - 1
-    bus.request_state(kickcat.State.INIT)
-    bus.wait_for_state(kickcat.State.INIT, timedelta(seconds=2))
-    res["init"] = str(bus.get_state(s))
+    res["init"] = init(bus, s)
     print(json.dumps(res))
 
 
