@@ -2,7 +2,7 @@
 
 The real module is a gateway: it holds the two assembly images and talks to the
 motor over the motor's serial line.  :class:`Cm1Module` does the same through the
-device API (``snapshot``, ``set_register``, ``execute``, ``set_param``); it never
+device API (``cyclic_state``, ``set_register``, ``execute``, ``set_param``); it never
 moves a motor itself.
 
 * Input image (3.1): bytes 0-1 communication error code, 2-3 motor status code (the
@@ -72,8 +72,8 @@ class Cm1Module:
     def input_image(self) -> bytes:
         """The 8 bytes of assembly 0x65 now (3.1)."""
         if self.serial == "ok":
-            snap = self.device.snapshot(self.motor)
-            self._last = (snap.status & 0xFFFF, snap.position & 0xFFFFFFFF)
+            state = self.device.cyclic_state(self.motor)
+            self._last = (state.status & 0xFFFF, state.position & 0xFFFFFFFF)
         return INPUT.pack(self.comm_error(), *self._last)
 
     def output_image(self) -> bytes:
