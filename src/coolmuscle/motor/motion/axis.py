@@ -27,7 +27,7 @@ from ...sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
 from .dynamics import LOST, Drive, Motion
 from .planner import Limits, Waypoint
-from .profile import Profile, Segment, hold
+from .profile import Profile, Segment, hold, stops_then_restarts
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +70,9 @@ class Axis:
         #: Called with (the motion ending, now) before each re-solve (thermal model).
         self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
+        #: A reversal after an early in-position is solved from the command's end
+        #: (:meth:`move`; False: from the decelerating command now, the exact oracle).
+        self.restart_at_rest = True
         self._watch_timers: dict[int, Timer] = {}
         #: (time_ns, profile, motion, zero, sign) kept while a trace records.
         self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
@@ -173,6 +176,21 @@ class Axis:
         state = self.profile.state_at(start) if start > now else self._raw_state()
         profile = planner.plan_moves(state, raw, start)
         self.target_raw = raw[-1].target
+        end = self.profile.end_ns
+        if (self.restart_at_rest and end is not None and start == now and not self.moving
+                and len(raw) == 1 and now >= self.profile.origin_ns
+                and self._current_drive() is self.motion.drive
+                and stops_then_restarts(self.profile, profile)):
+            # In position before the command ended (ch. 3 K55) and the new move reverses:
+            # the planner runs the command on to its end, then starts from rest.  The
+            # shaft follows the old command as solved until that end, and the new move
+            # is solved from there, from rest (the same numbers for each repeat of a
+            # cycle: docs/performance.md "Why every chain move was solved afresh").
+            rest = planner.plan_moves(self.profile.state_at(end), raw, end)
+            self.profile = profile
+            self.moving = True
+            self._resolve(Motion.continued(self.motion, now, rest))
+            return
         self._start(profile)
 
     def run_profile(self, profile: Profile) -> None:
@@ -316,15 +334,18 @@ class Axis:
             timer.cancel()
         self._watch_timers.clear()
 
-    def _resolve(self) -> None:
-        """Re-solve the shaft motion from the actual state now and re-arm everything."""
+    def _resolve(self, motion: Motion | None = None) -> None:
+        """Re-solve the shaft motion from the actual state now (or take ``motion``,
+        solved from it) and re-arm everything."""
         now = self.kernel.now
-        p, v = self.raw_actual(), self.raw_velocity()
         for hook in self.before_resolve:
             hook(self.motion, now)
         self._cancel()
         self.generation += 1
-        self.motion = Motion(self.profile, now, p, v, self._current_drive())
+        if motion is None:
+            motion = Motion(self.profile, now, self.raw_actual(), self.raw_velocity(),
+                            self._current_drive())
+        self.motion = motion
         if len(self.motion.pieces) >= 2000:
             log.warning("axis: motion solver hit its piece limit at %d ns", now)
         self._remember()

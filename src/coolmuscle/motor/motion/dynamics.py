@@ -130,6 +130,14 @@ class Piece:
         out._vel = self.vel()
         return out
 
+    def moved(self, shift: float, end: float) -> "Piece":
+        """This piece seen from an origin ``shift`` seconds later, ending at ``end`` at
+        the latest (the same functions of its own τ)."""
+        out = Piece(self.start - shift, min(self.end - shift, end), self.mode, self.pos,
+                    self.cmd, self.torque, self.k, self.s, self.exit)
+        out._vel, out._err = self._vel, self._err
+        return out
+
     def vel(self) -> F:
         """The actual speed (d pos / dτ)."""
         found = self._vel
@@ -217,6 +225,44 @@ class Motion:
         self._cmd = command_pieces(profile, self.origin_ns)
         self.pieces, self._starts, self._peaks, self._memo = _placed(
             drive, float(position), float(velocity), tuple(self._cmd))
+        #: (instant, pieces, starts) of the solution the pieces after ``instant`` come
+        #: from, in its own coordinates: :meth:`exact_state`.
+        self._anchor: tuple[int, Sequence[Piece], list[float]] = (
+            self.origin_ns, self.pieces, self._starts)
+
+    @staticmethod
+    def continued(old: "Motion", origin_ns: int, profile: Profile) -> "Motion":
+        """``old`` from ``origin_ns`` until ``profile`` begins (its command unchanged until
+        then), then the motion under ``profile`` from ``old``'s state at that instant.
+
+        The second part is solved at ``profile``'s origin, in its coordinates (the same
+        solution :func:`_placed` gives, reused as such by a repeated cycle); the first
+        part is ``old``'s own pieces.  A reversal that the planner starts from rest at
+        the end of a decelerating command (``Axis.move``) is solved this way."""
+        at = profile.origin_ns
+        position, velocity = old.exact_state(at)
+        motion = Motion(profile, at, position, velocity, old.drive)   # its _anchor stays
+        motion.origin_ns = int(origin_ns)
+        shift_old = (motion.origin_ns - old.origin_ns) / NS_PER_S
+        cut = (at - motion.origin_ns) / NS_PER_S
+        pieces = [piece.moved(shift_old, cut) for piece in old.pieces
+                  if piece.end - shift_old > 0.0 and piece.start - shift_old < cut]
+        pieces += [piece.moved(-cut, math.inf) for piece in motion.pieces]
+        motion.pieces, motion._starts = pieces, [p.start for p in pieces]
+        motion._peaks, motion._memo = _peaks(pieces), {}
+        return motion
+
+    def exact_state(self, t_ns: int) -> tuple[float, float]:
+        """(position, speed) at ``t_ns`` in the coordinates of the solution it is on:
+        the same numbers for the same instant of a repeated motion, wherever the motion
+        was spliced (:meth:`continued`)."""
+        at, pieces, starts = self._anchor
+        if t_ns < at:
+            return self.position_at(t_ns), self.velocity_at(t_ns)
+        rel = (t_ns - at) / NS_PER_S
+        piece = pieces[max(0, bisect_right(starts, rel) - 1)]
+        tau = rel - piece.start
+        return xp.value(piece.pos, piece.k, tau), xp.value(piece.vel(), piece.k, tau)
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
@@ -395,7 +441,12 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif piece.pos is piece.cmd:                     # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    pieces[0].reach("err")                            # Motion.peak: as max() over pieces
+    return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
+
+
+def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
+    """:meth:`Motion.peak` of each kind, as max() over the pieces, in one pass."""
+    pieces[0].reach("err")
     top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
     for piece in pieces:
         piece.reach("err")                            # computes the piece's three bounds
@@ -406,8 +457,7 @@ def _placed(drive: Drive, position: float, velocity: float,
             top_vel = b_vel
         if b_torque > top_torque:
             top_torque = b_torque
-    peaks = {"err": top_err, "vel": top_vel, "torque": top_torque}
-    return tuple(pieces), [p.start for p in pieces], peaks, {}
+    return {"err": top_err, "vel": top_vel, "torque": top_torque}
 
 
 def clear_solutions() -> None:

@@ -246,6 +246,32 @@ class Profile:
         return max(after_ns, self.end_ns)
 
 
+def stops_then_restarts(old: Profile, new: Profile) -> bool:
+    """Whether ``new``, planned at its origin from ``old``'s command state there, runs
+    the rest of ``old`` to its end at rest on ``old``'s final position, and only then
+    starts again (a reversal: the planner stops, then starts, and never passes
+    through zero speed).  Then ``new`` is ``old`` followed by a plan from rest at
+    ``old``'s end, within float noise (:meth:`Axis.move` starts it there)."""
+    if old.end_ns is None or new.end_ns is None or old.end_ns <= new.origin_ns:
+        return False
+    base = (new.origin_ns - old.origin_ns) / NS_PER_S        # new's origin in old's time
+    rest = [seg for seg in old.segments if seg.end > base]
+    if not rest or len(new.segments) <= len(rest):
+        return False
+    for was, now in zip(rest, new.segments):
+        at = now.start + base - was.start                    # new's start in was's time
+        if not (_near(was.end - base, now.end, 1e-9) and _near(was.j, now.j, 1e-9)
+                and _near(was.acceleration(at), now.a, 1e-9)):
+            return False
+    restart = new.segments[len(rest)]
+    return (_near(restart.start, old.duration - base, 1e-9) and abs(restart.v) <= 1e-6
+            and _near(restart.p, old.final_position, 1e-9))
+
+
+def _near(a: float, b: float, tol: float) -> bool:
+    return abs(a - b) <= tol * max(1.0, abs(a), abs(b))
+
+
 def hold(position: float, origin_ns: int) -> Profile:
     """A standstill at ``position`` from ``origin_ns`` on (no segments)."""
     return Profile(origin_ns, (), start_state=(float(position), 0.0, 0.0),
