@@ -1,0 +1,114 @@
+"""A reversal after an early in-position, solved from the command's end (issue 18).
+
+Ch. 3 K55: in position may come before the command ends; a bank's next move then
+starts while the command still decelerates.  The planner stops that command and starts
+the reversal from rest at its end (planner: "a change of direction is a stop followed
+by a new start"), so ``Axis.move`` keeps the shaft's solved motion until then and
+solves the new move from there (``Motion.continued``).  Against the exact oracle
+(``restart_at_rest = False``: the whole motion solved from the decelerating command at
+once), on twin chains: the same reports within a nanosecond, the shaft within
+1e-4 pulse at every sample, and every repeat of a cycle reusing its solved motions.
+"""
+
+from __future__ import annotations
+
+from hypothesis import given, settings, strategies as st
+
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.motion import dynamics
+from coolmuscle.motor.motion.planner import Limits, plan_moves
+from coolmuscle.motor.motion.profile import stops_then_restarts
+from coolmuscle.sim.kernel import NS_PER_MS, seconds
+
+
+def twin(exact: bool, lines: list[str]) -> tuple[Chain, list[tuple[int, str]]]:
+    chain = Chain()
+    chain.motors[1].axis.restart_at_rest = not exact
+    events: list[tuple[int, str]] = []
+    chain.subscribe(lambda e: events.append((e.time, e.text)))
+    chain.execute("K23.1=1")                  # Ux reports: in position (Ux.1=8)
+    for line in lines:
+        chain.execute(line)
+    return chain, events
+
+
+def sample(chain: Chain) -> tuple[float, float, float]:
+    axis = chain.motors[1].axis
+    return axis.raw_actual(), axis.raw_velocity(), axis.position_error()
+
+
+def close(a: list[tuple[float, float, float]], b: list[tuple[float, float, float]]) -> bool:
+    """Position and Pe within 1e-4 pulse, speed within 0.01 pps: the reversal starts at
+    the command's end rounded to the nanosecond, up to 1 ns from where the planner's
+    float end puts it (at most 10^4 pps x 1 ns and 3 x 10^5 pps² x 1 ns apart)."""
+    return len(a) == len(b) and all(
+        abs(p - q) <= 1e-4 and abs(v - w) <= 1e-2 and abs(e - f) <= 1e-4
+        for (p, v, e), (q, w, f) in zip(a, b))
+
+
+@settings(max_examples=30, deadline=None)
+@given(p1=st.integers(500, 30_000), p2=st.integers(-30_000, 400), s=st.integers(20, 300),
+       a=st.integers(5, 300), k55=st.integers(1, 60), limit=st.integers(20, 100),
+       load=st.integers(0, 100))
+def test_ch3_k55_a_bank_reversing_at_in_position_moves_as_the_exact_model(
+        p1: int, p2: int, s: int, a: int, k55: int, limit: int, load: int) -> None:
+    """A PTP bank looping between two points (2.1, 4.1.1), an in-position window that
+    comes early, a torque limit and a load torque."""
+    bank = [f"K55.1={k55}, M.1={limit}", f"S1.1={s}, A1.1={a}, P1.1={p1}, P2.1={p2}",
+            "B1.1", "X0", "S1.1, A1.1, P1.1", "P2.1", "X-", "END"]
+    runs = []
+    for exact in (True, False):
+        chain, events = twin(exact, bank)
+        if load:
+            chain.inject_fault(1, "overload", torque=load)
+        chain.execute("[1.1")
+        shaft = []
+        for _ in range(400):
+            chain.kernel.advance(25 * NS_PER_MS)
+            shaft.append(sample(chain))
+        runs.append(([text for _, text in events], [t for t, _ in events], shaft))
+    (texts0, times0, shaft0), (texts1, times1, shaft1) = runs
+    assert texts1 == texts0
+    assert all(abs(x - y) <= 1 for x, y in zip(times1, times0))     # within 1 ns
+    assert close(shaft1, shaft0)
+
+
+def test_a_repeated_cycle_reuses_its_solved_moves() -> None:
+    """Motor ID1 at S = 101 (bench/speed_worker.py): every move solved afresh in the
+    exact model, every repeat reused once the cycle repeats."""
+    bank = ["S1.1=101, A1.1=100, P1.1=10000, P2.1=0", "B1.1", "X0", "S1.1, A1.1, P1.1",
+            "P2.1", "X-", "END"]
+    counts = []
+    for exact in (True, False):
+        chain, events = twin(exact, bank)
+        chain.execute("[1.1")
+        chain.kernel.run(until=seconds(5))
+        dynamics.clear_solutions()
+        before = len(events)
+        chain.kernel.run(until=seconds(125))
+        counts.append((dynamics.solution_reuse(), len(events) - before))
+    ((reused0, solved0), moves0), ((reused1, solved1), moves1) = counts
+    assert moves0 == moves1 > 100
+    assert solved0 >= moves0 - 2 and reused0 <= 2                # each move solved afresh
+    assert solved1 <= 8 and reused1 >= moves1 - 8                # each repeat reused
+
+
+def test_stops_then_restarts_only_for_the_planners_stop_then_start() -> None:
+    """The splice is taken only where the new plan runs the old command to its end."""
+    lim = Limits(10_000.0, 100_000.0, 100_000.0)
+    old = plan_moves((0.0, 0.0, 0.0), [_wp(10_000.0, lim)], 0)
+    mid = old.end_ns - 5 * NS_PER_MS                              # decelerating
+    back = plan_moves(old.state_at(mid), [_wp(0.0, lim)], mid)
+    on = plan_moves(old.state_at(mid), [_wp(20_000.0, lim)], mid)
+    softer = plan_moves(old.state_at(mid), [_wp(0.0, Limits(10_000.0, 100_000.0, 50_000.0))],
+                        mid)
+    assert stops_then_restarts(old, back)                         # reversal, same decel
+    assert not stops_then_restarts(old, on)                       # goes on: no stop
+    assert not stops_then_restarts(old, softer)                   # stops more gently
+    after = plan_moves(old.state_at(old.end_ns), [_wp(0.0, lim)], old.end_ns)
+    assert not stops_then_restarts(old, after)                    # the old one has ended
+
+
+def _wp(target: float, lim: Limits):  # noqa: ANN202
+    from coolmuscle.motor.motion.planner import Waypoint
+    return Waypoint(target, lim)
