@@ -133,9 +133,12 @@ class Piece:
     def moved(self, shift: float, end: float) -> "Piece":
         """This piece seen from an origin ``shift`` seconds later, ending at ``end`` at
         the latest (the same functions of its own τ)."""
-        out = Piece(self.start - shift, min(self.end - shift, end), self.mode, self.pos,
+        last = self.end - shift
+        out = Piece(self.start - shift, min(last, end), self.mode, self.pos,
                     self.cmd, self.torque, self.k, self.s, self.exit)
         out._vel, out._err = self._vel, self._err
+        if last <= end:
+            out._bounds = self._bounds          # the same stretch: the same bounds
         return out
 
     def vel(self) -> F:
@@ -225,10 +228,9 @@ class Motion:
         self._cmd = command_pieces(profile, self.origin_ns)
         self.pieces, self._starts, self._peaks, self._memo = _placed(
             drive, float(position), float(velocity), tuple(self._cmd))
-        #: (instant, pieces, starts) of the solution the pieces after ``instant`` come
-        #: from, in its own coordinates: :meth:`exact_state`.
-        self._anchor: tuple[int, Sequence[Piece], list[float]] = (
-            self.origin_ns, self.pieces, self._starts)
+        #: The motion the pieces from its origin on come from, in its own coordinates
+        #: (:meth:`continued`; ``None``: this one).
+        self._tail: Motion | None = None
 
     @staticmethod
     def continued(old: "Motion", origin_ns: int, profile: Profile) -> "Motion":
@@ -241,13 +243,15 @@ class Motion:
         the end of a decelerating command (``Axis.move``) is solved this way."""
         at = profile.origin_ns
         position, velocity = old.exact_state(at)
-        motion = Motion(profile, at, position, velocity, old.drive)   # its _anchor stays
+        tail = Motion(profile, at, position, velocity, old.drive)
+        motion = Motion(profile, at, position, velocity, old.drive)   # the same, reused
         motion.origin_ns = int(origin_ns)
+        motion._tail = tail
         shift_old = (motion.origin_ns - old.origin_ns) / NS_PER_S
         cut = (at - motion.origin_ns) / NS_PER_S
         pieces = [piece.moved(shift_old, cut) for piece in old.pieces
                   if piece.end - shift_old > 0.0 and piece.start - shift_old < cut]
-        pieces += [piece.moved(-cut, math.inf) for piece in motion.pieces]
+        pieces += [piece.moved(-cut, math.inf) for piece in tail.pieces]
         motion.pieces, motion._starts = pieces, [p.start for p in pieces]
         motion._peaks, motion._memo = _peaks(pieces), {}
         return motion
@@ -256,13 +260,10 @@ class Motion:
         """(position, speed) at ``t_ns`` in the coordinates of the solution it is on:
         the same numbers for the same instant of a repeated motion, wherever the motion
         was spliced (:meth:`continued`)."""
-        at, pieces, starts = self._anchor
-        if t_ns < at:
-            return self.position_at(t_ns), self.velocity_at(t_ns)
-        rel = (t_ns - at) / NS_PER_S
-        piece = pieces[max(0, bisect_right(starts, rel) - 1)]
-        tau = rel - piece.start
-        return xp.value(piece.pos, piece.k, tau), xp.value(piece.vel(), piece.k, tau)
+        tail = self._tail
+        if tail is not None and t_ns >= tail.origin_ns:
+            return tail.exact_state(t_ns)
+        return self.position_at(t_ns), self.velocity_at(t_ns)
 
     # -- evaluation -----------------------------------------------------------
     def _rel(self, t_ns: int) -> float:
@@ -333,6 +334,9 @@ class Motion:
     def settled(self, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
         this motion).  Remembered with the solution: a repeated move asks it again."""
+        tail = self._tail
+        if tail is not None and after_ns >= tail.origin_ns:
+            return tail.settled(window, after_ns)
         key = (window, after_ns - self.origin_ns)
         found = self._memo.get(key, self)
         if found is self:
@@ -346,6 +350,9 @@ class Motion:
     def within(self, center: float, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where the actual position is within
         ``window`` of ``center`` (ch. 3 K55 in-position; ``None``: never in this motion)."""
+        tail = self._tail
+        if tail is not None and after_ns >= tail.origin_ns:
+            return tail.within(center, window, after_ns)
         key = ("within", center, window, after_ns - self.origin_ns)
         found = self._memo.get(key, self)
         if found is self:
