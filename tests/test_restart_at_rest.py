@@ -77,6 +77,35 @@ def test_ch3_k55_a_bank_reversing_at_in_position_moves_as_the_exact_model(
     assert close(shaft1, shaft0)
 
 
+@settings(max_examples=25, deadline=None)
+@given(p1=st.integers(200, 20_000), p2=st.integers(-20_000, 100), s=st.integers(20, 300),
+       a=st.integers(5, 300), a2=st.integers(5, 300), k55=st.integers(1, 80),
+       k69=st.sampled_from([0, 0, 100, 1024]), k51=st.sampled_from([0, 0, 1, 5]),
+       k44=st.sampled_from([100, 100, 50, 300]))
+def test_ch3_k69_k51_k44_s_curves_creep_and_other_decelerations_move_as_the_exact_model(
+        p1: int, p2: int, s: int, a: int, a2: int, k55: int, k69: int, k51: int,
+        k44: int) -> None:
+    """S-curves (K69), the creep end jump (K51), a deceleration rate of its own (K44)
+    and a second A for the way back (4.1.3): the splice is taken only where the plan
+    stops the command as it was going to stop, and the motion is the exact one."""
+    bank = [f"K55.1={k55}, K69.1={k69}, K51.1={k51}, K44.1={k44}",
+            f"S1.1={s}, A1.1={a}, P1.1={p1}, A2.1={a2}, P2.1={p2}",
+            "B1.1", "X0", "S1.1, A1.1, P1.1", "A2.1, P2.1", "X-", "END"]
+    runs = []
+    for exact in (True, False):
+        chain, events = twin(exact, bank)
+        chain.execute("[1.1")
+        shaft = []
+        for _ in range(300):
+            chain.kernel.advance(30 * NS_PER_MS)
+            shaft.append(sample(chain))
+        runs.append(([text for _, text in events], [t for t, _ in events], shaft))
+    (texts0, times0, shaft0), (texts1, times1, shaft1) = runs
+    assert texts1 == texts0
+    assert all(abs(x - y) <= 1 for x, y in zip(times1, times0))
+    assert close(shaft1, shaft0)
+
+
 def test_a_repeated_cycle_reuses_its_solved_moves() -> None:
     """Motor ID1 at S = 101 (bench/speed_worker.py): every move solved afresh in the
     exact model, every repeat reused once the cycle repeats."""
