@@ -78,3 +78,25 @@ def test_shift_mul_and_bounds() -> None:
     for t in np.linspace(0.0, 2.0, 50):
         assert abs(xp.value(f, 2.0, float(t))) <= xp.abs_bound(f, 2.0)
         assert xp.value(f, 2.0, float(t)) <= xp.upper_bound(f, 2.0, 0.0, 2.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(u0=st.floats(-1e4, 1e4), u1=st.floats(-1e6, 1e6), e0=st.floats(-50.0, 50.0),
+       e1=st.floats(-1e4, 1e4), e2=st.floats(-1e6, 1e6), ab=st.floats(1e3, 1e7),
+       s=st.sampled_from([-1.0, 1.0]), end=st.one_of(st.floats(1e-6, 0.1), st.just(math.inf)))
+def test_a_braking_curve_of_degree_two_is_the_same_on_the_5_tuple_path(
+        u0: float, u1: float, e0: float, e1: float, e2: float, ab: float, s: float,
+        end: float) -> None:
+    """mul() drops zero coefficients above the cubic; the braking curve of a standing
+    command (dynamics._brake_exit: u linear, so u² quadratic) then takes the 5-tuple
+    path with the very roots and first instants of the padded any-degree form."""
+    u, eps = (u0, u1, 0.0, 0.0, 0.0), (e0, e1, e2, 0.0, 0.0)
+    short = xp.sub(xp.mul(u, u), xp.scale(eps, 2.0 * ab * s))
+    padded = short[:4] + (0.0,) * 3 + short[4:]
+    assert len(short) == 5
+    assert xp.roots(short, 300.0, 1e-9, end) == xp.roots(padded, 300.0, 1e-9, end)
+    cond = xp.scale(u, s)
+    assert xp.first_true([cond, short], 300.0, 1e-9, end) == \
+        xp.first_true([cond, padded], 300.0, 1e-9, end)
+    assert (xp.upper_bound(short, 300.0, 1e-9, end) <= 0.0) == \
+        (xp.upper_bound(padded, 300.0, 1e-9, end) <= 0.0)

@@ -116,7 +116,10 @@ def abs_bound(f: F, b: float) -> float:
 
 
 def mul(f: F, g: F) -> F:
-    """Product of two polynomials (no exponential part)."""
+    """Product of two polynomials (no exponential part).  Zero coefficients above the
+    cubic are dropped: a product of degree 3 or less is the 5-tuple every piece uses
+    (the braking curve of a standing command: its roots on the 5-tuple path, the same
+    numbers, tests/test_expoly.py)."""
     if f[-1] or g[-1]:
         raise ValueError("mul() takes polynomials only")
     out = [0.0] * (len(f) + len(g) - 3)
@@ -124,6 +127,8 @@ def mul(f: F, g: F) -> F:
         if a:
             for j, b in enumerate(g[:-1]):
                 out[i + j] += a * b
+    while len(out) > 4 and out[-1] == 0.0:
+        out.pop()
     return _pad(tuple(out)) + (0.0,)
 
 
