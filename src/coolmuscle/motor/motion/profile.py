@@ -258,10 +258,10 @@ def stops_then_restarts(old: Profile, new: Profile) -> bool:
     rest = [seg for seg in old.segments if seg.end > base]
     if not rest or len(new.segments) <= len(rest):
         return False
-    for was, now in zip(rest, new.segments):
-        at = now.start + base - was.start                    # new's start in was's time
-        if not (_near(was.end - base, now.end, 1e-9) and _near(was.j, now.j, 1e-9)
-                and _near(was.acceleration(at), now.a, 1e-9)):
+    for was, will in zip(rest, new.segments):
+        at = will.start + base - was.start                   # will's start in was's time
+        if not (_near(was.end - base, will.end, 1e-9) and _near(was.j, will.j, 1e-9)
+                and _near(was.acceleration(at), will.a, 1e-9)):
             return False
     restart = new.segments[len(rest)]
     return (_near(restart.start, old.duration - base, 1e-9) and abs(restart.v) <= 1e-6
