@@ -21,7 +21,7 @@ from enip_support import enip_process, enip_service, ports
 pycomm3 = pytest.importorskip("pycomm3")
 from pycomm3 import CIPDriver  # noqa: E402
 
-pytestmark = pytest.mark.peer
+pytestmark = [pytest.mark.peer, pytest.mark.realtime]
 
 EXAMPLE_VALUES = struct.pack("<HiiHBB", 1, 100000, 100, 10, 1, 0)   # 3.2, its stated values
 

@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from ethercat_support import MASTERS, link, needs_net_admin, run_master
 
 from coolmuscle.chain import Chain
@@ -17,6 +18,8 @@ from coolmuscle.frontends.ethercat import cia402
 from coolmuscle.frontends.ethercat.cia402 import State
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
+
+pytestmark = pytest.mark.realtime
 
 
 def test_cia402_table_6_1_1_transitions():

@@ -17,6 +17,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from ethercat_drive_support import Bench
 from ethercat_support import master_command, needs_net_admin, run_master
 
@@ -25,7 +26,7 @@ from coolmuscle.frontends.ethercat.lab import veth_pair
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 
-pytestmark = needs_net_admin
+pytestmark = [needs_net_admin, pytest.mark.realtime]
 
 DATA = Path(__file__).parent / "data"
 STOPPERS = DATA / "ethercat_stoppers.toml"

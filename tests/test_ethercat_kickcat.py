@@ -14,7 +14,7 @@ from coolmuscle.frontends.ethercat import esm
 from coolmuscle.frontends.ethercat.app import BridgeApp
 
 pytest.importorskip("kickcat")
-pytestmark = needs_net_admin
+pytestmark = [needs_net_admin, pytest.mark.realtime]
 
 
 def test_kickcat_reaches_op_and_exchanges_process_data_5_2_6_3_1():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import struct
 
+import pytest
 from ethercat_support import link, needs_net_admin, run_master, serving
 
 from coolmuscle.chain import Chain
@@ -16,7 +17,7 @@ from coolmuscle.frontends.ethercat.app import BridgeApp
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 
-pytestmark = needs_net_admin
+pytestmark = [needs_net_admin, pytest.mark.realtime]
 
 
 def test_soem_scans_reads_maps_and_runs_10000_cycles_5_2_5_4_6_3():

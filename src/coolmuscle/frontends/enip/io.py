@@ -204,38 +204,53 @@ class ConnectionTable:
 
     # -- class 1 consumption and production ----------------------------------------------
     def consume(self, datagram: bytes, source_ip: str, now: int) -> bool:
-        """One O->T datagram; ``True`` when it was accepted."""
+        """One O->T datagram; ``True`` when it was accepted.  New data goes to the module."""
+        accepted, output = self.accept(datagram, source_ip, now)
+        if output is not None:
+            self.write(output)
+        return accepted
+
+    def accept(self, datagram: bytes, source_ip: str,
+               now: int) -> tuple[bool, tuple[bytes, bool] | None]:
+        """Check one O->T datagram against the table and restart its watchdog: whether
+        it was accepted, and the new output image with its run flag (``None`` when the
+        data is not new).  Touches the table only, so the server holds the table's
+        lock for this and writes the image to the module after letting it go."""
         try:
             items = parse_cpf(datagram)
         except CpfError:
             self.dropped += 1
-            return False
+            return False, None
         if (len(items) != 2 or items[0].type_id != ITEM_SEQUENCED_ADDRESS
                 or len(items[0].data) != 8 or items[1].type_id != ITEM_CONNECTED_DATA):
             self.dropped += 1
-            return False
+            return False, None
         conn_id, seq = struct.unpack("<II", items[0].data)
         conn = self.by_ot.get(conn_id)
         if conn is None or not conn.io or source_ip != conn.peer_ip \
                 or len(items[1].data) != conn.req.ot.size:
             self.dropped += 1
-            return False
+            return False, None
         if conn.ot_seq is not None and not 0 < (seq - conn.ot_seq) & 0xFFFFFFFF < 0x80000000:
-            return False                          # old or repeated packet
+            return False, None                    # old or repeated packet
         conn.ot_seq, conn.last_rx = seq, now
         conn.packets_in += 1
-        self._apply(conn, items[1].data)
-        return True
+        return True, self._new_output(conn, items[1].data)
 
-    def _apply(self, conn: Connection, data: bytes) -> None:
+    def _new_output(self, conn: Connection, data: bytes) -> tuple[bytes, bool] | None:
         count = struct.unpack_from("<H", data)[0]
         if count == conn.ot_count:
-            return                                  # same data again (3-4.4.2)
+            return None                             # same data again (3-4.4.2)
         conn.ot_count = count
         run, body = True, data[2:]
         if conn.header:
             run = bool(struct.unpack_from("<I", body)[0] & RUN_BIT)
             body = body[4:]
+        return body, run
+
+    def write(self, output: tuple[bytes, bool]) -> None:
+        """Give the module an output image from :meth:`accept` (the model's thread)."""
+        body, run = output
         self.module.io_state = "run" if run else "idle"
         self.call(self.module.write_output, body, run)
 

@@ -258,7 +258,9 @@ class EnipTransport(Transport):
     def _io_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         assert self.table is not None
         with self.lock:
-            self.table.consume(data, addr[0], time.monotonic_ns())
+            _accepted, output = self.table.accept(data, addr[0], time.monotonic_ns())
+        if output is not None:          # the model's work, without the producer's lock
+            self.table.write(output)
 
     def _tick(self) -> None:
         """Send what is due, time out the silent, then sleep until the next instant."""
