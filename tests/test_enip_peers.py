@@ -397,3 +397,75 @@ def test_ch4_rpi_2ms_accepted_and_produced_on_time(monkeypatch):
             assert scanner.conn.sendFwdCloseReq(101, 102, 128) == 0
         finally:
             scanner.close()
+
+
+def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
+    """The model's thread writes an O->T image to the motor and reads the input image
+    without the connection table's lock, so the T->O producer thread (CIP Vol 1 3-4.4)
+    never waits for the model; the switch interval is cut while the producer runs and
+    set back when it stops."""
+    import sys
+
+    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip.adapter import Cm1Module
+    from coolmuscle.frontends.enip.producer import SWITCH_INTERVAL
+    from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
+    held: dict[str, list[bool]] = {"write_output": [], "input_image": []}
+    box: list = []
+    for name in held:
+        original = getattr(Cm1Module, name)
+
+        def spy(self, *args, _original=original, _name=name):
+            held[_name].append(box[0].lock.locked())
+            return _original(self, *args)
+        monkeypatch.setattr(Cm1Module, name, spy)
+    before = sys.getswitchinterval()
+    with enip_service() as st:
+        box.append(st.transports[0])
+        assert abs(sys.getswitchinterval() - min(before, SWITCH_INTERVAL)) < 1e-9   # us
+        tcp_port, io_port = ports(st)
+        with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp, \
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            tcp.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+            handle = decode(tcp.recv(1024)).session
+            request = forward_open(rpi=2_000, multiplier=7)
+            tcp.sendall(frame(enc.SEND_RR_DATA, rr_data(request), handle).encode())
+            reply = enc.parse_cpf(decode(tcp.recv(1024)).data[6:])[1].data
+            assert reply[2] == 0, reply.hex()
+            ot_id = struct.unpack_from("<I", reply, 4)[0]
+            for count in range(1, 6):
+                out.sendto(o_t(ot_id, count, count,
+                               struct.pack("<HiiHBB", 1, 100 * count, 100, 100, 0, 0)),
+                           ("127.0.0.1", io_port))
+                time.sleep(0.02)
+            assert _wait(lambda: len(held["write_output"]) >= 5
+                         and len(held["input_image"]) >= 20, 3), held
+    assert sys.getswitchinterval() == before
+    # the first image is read by Forward_Open itself, before the connection produces
+    assert not any(held["write_output"]) and not any(held["input_image"][1:])
+
+
+def test_adapter_closes_completely_with_class1_running(caplog):
+    """Stopping the service while T->O packets flow ends the producer thread, closes the
+    connections and frees the TCP, UDP 44818 and I/O ports; nothing is logged as failed."""
+    from coolmuscle.frontends.enip import encapsulation as enc
+    from test_enip_encapsulation import decode, forward_open, frame, rr_data
+    with enip_service() as st:
+        transport = st.transports[0]
+        tcp_port, io_port = ports(st)
+        with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp:
+            tcp.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+            handle = decode(tcp.recv(1024)).session
+            tcp.sendall(frame(enc.SEND_RR_DATA, rr_data(forward_open(rpi=2_000, multiplier=7)),
+                              handle).encode())
+            assert enc.parse_cpf(decode(tcp.recv(1024)).data[6:])[1].data[2] == 0
+            producer = transport.producer
+            assert _wait(lambda: producer.sent > 10, 2)
+    assert not producer.is_alive() and transport.producer is None
+    assert transport.table.by_triad == {}
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")]
+    for kind, port in ((socket.SOCK_STREAM, tcp_port), (socket.SOCK_DGRAM, tcp_port),
+                       (socket.SOCK_DGRAM, io_port)):
+        with socket.socket(socket.AF_INET, kind) as again:
+            again.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            again.bind(("127.0.0.1", port))

@@ -41,7 +41,7 @@ class Producer(threading.Thread):
         self.lock = lock
         self.refresh = refresh
         self._wake = threading.Event()
-        self._stop = False
+        self._stopping = False
         self.sent = 0
         self.send_errors = 0
         self.priority = priority
@@ -57,7 +57,7 @@ class Producer(threading.Thread):
         self._wake.set()
 
     def stop(self) -> None:
-        self._stop = True
+        self._stopping = True
         self._wake.set()
         if self.is_alive():
             self.join(2.0)
@@ -75,7 +75,7 @@ class Producer(threading.Thread):
 
     def run(self) -> None:
         self._set_priority()
-        while not self._stop:
+        while not self._stopping:
             with self.lock:
                 nxt = self.table.next_production()
             delay = IDLE_WAIT if nxt is None else (nxt - time.monotonic_ns()) / 1e9

@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import logging
 import threading
 from typing import Any, Callable, Sequence, TypeVar
 
 from ...sim.realtime import BehindCallback, RealtimeDriver
 from .base import Port, Transport
+
+log = logging.getLogger(__name__)
 
 T = TypeVar("T")
 
@@ -67,8 +70,8 @@ class Service:
         for transport in reversed(self._started):
             try:
                 await transport.close()
-            except Exception:  # closing must go on for the others
-                pass
+            except Exception:  # closing must go on for the others, but never silently
+                log.exception("%s: closing failed", transport.name)
         self._started.clear()
         self.driver.stop()
         if self._driver_task is not None:
