@@ -422,7 +422,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
     before = sys.getswitchinterval()
     with enip_service() as st:
         box.append(st.transports[0])
-        assert abs(sys.getswitchinterval() - min(before, SWITCH_INTERVAL)) < 1e-9   # us
+        assert sys.getswitchinterval() <= SWITCH_INTERVAL + 2e-6   # kept in whole us
         tcp_port, io_port = ports(st)
         with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp, \
                 socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
@@ -440,7 +440,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
                 time.sleep(0.02)
             assert _wait(lambda: len(held["write_output"]) >= 5
                          and len(held["input_image"]) >= 20, 3), held
-    assert sys.getswitchinterval() == before
+    assert abs(sys.getswitchinterval() - before) <= 2e-6
     # the first image is read by Forward_Open itself, before the connection produces
     assert not any(held["write_output"]) and not any(held["input_image"][1:])
 

@@ -33,7 +33,8 @@ from .. import __version__
 from ..errors import TransportError
 from .usage import UsageError
 from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
-                          clear_stop, install_startup_handlers, stop_line, stop_requested)
+                          clear_stop, install_startup_handlers, serve_until_signal,
+                          stop_line, stop_requested)
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .runcmd import header_defaults, make_chain, run_command, setup_logging
 from .script import load_script
@@ -199,9 +200,10 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
 
     service = Service(chain, chosen, scale=scale)
     loop = asyncio.get_running_loop()
-    handled: list[int] = []
     try:          # a stop signal may land anywhere from here on: close what was started
         await service.start()
+        stop = asyncio.Event()
+        serve_until_signal(loop, stop)   # from "ready" on, a signal is a served stop
         err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} "
                   "ready", markup=False)
         where = "   ".join(t.describe() for t in chosen)
@@ -211,17 +213,11 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         if station:
             asked = any(t.name == "modbus-rtu" for t in chosen)
             err.print(_modbus_notice(station, state, asked), markup=False)
-        stop = asyncio.Event()
-        for sig in STOP_SIGNALS:
-            loop.add_signal_handler(sig, stop.set)
-            handled.append(sig)
         if stop_requested():          # a signal whose exception was swallowed on the way
             clear_stop()
             stop.set()
         await service.wait(stop)
     finally:
-        for sig in handled:
-            loop.remove_signal_handler(sig)
         ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 from types import FrameType
+from typing import Any
 
 #: The signals that stop the program.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -57,6 +58,24 @@ def install_startup_handlers() -> None:
     """Every stop signal raises :class:`SignalStop` (caught by ``cli.main``)."""
     for sig in STOP_SIGNALS:
         signal.signal(sig, _raise_stop)
+
+
+def serve_until_signal(loop: Any, stop: Any) -> None:
+    """While an asyncio loop serves: every stop signal sets the event ``stop`` in it.
+
+    Python-level handlers, not ``loop.add_signal_handler``: taking the loop's handlers
+    off again puts the default ones back first (``SIG_DFL``, ``default_int_handler``),
+    and a second signal in that instant killed the process with no clean-up or cut the
+    clean-up short with a ``KeyboardInterrupt``.  These are replaced in one step by
+    :func:`ignore_stop_signals`.  The handler runs in the main thread, between the
+    loop's own steps (its ``select`` returns EINTR), and only schedules ``stop.set``."""
+    def handler(_signum: int, _frame: FrameType | None) -> None:
+        try:
+            loop.call_soon_threadsafe(stop.set)
+        except RuntimeError:      # the loop is closed: the program is stopping anyway
+            pass
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, handler)
 
 
 def ignore_stop_signals() -> None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
-import signal
 import sys
 from typing import Any, Callable, TextIO
 
@@ -23,6 +22,7 @@ from ..frontends.web.access import parse_web_address
 from ..frontends.web.server import WebTransport
 from ..sim.kernel import seconds
 from .script import Script, Step, TranscriptEntry
+from .stopsignals import ignore_stop_signals, serve_until_signal
 from .web import WebDashboard
 
 log = logging.getLogger(__name__)
@@ -129,8 +129,7 @@ async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float
     await service.start()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    serve_until_signal(loop, stop)
     try:
         say(f"coolmuscle: {web.describe()}   (the script starts when a page connects)")
         while not web.hub or not web.hub.clients:
@@ -145,8 +144,7 @@ async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float
         say(f"coolmuscle: {why or 'script done'}; the page stays live until Ctrl-C")
         await stop.wait()
     finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.remove_signal_handler(sig)
+        ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
 
 
