@@ -37,17 +37,33 @@ def sample(chain: Chain) -> tuple[float, float, float]:
     return axis.raw_actual(), axis.raw_velocity(), axis.position_error()
 
 
-def close(a: list[tuple[float, float, float]], b: list[tuple[float, float, float]]) -> bool:
-    """The same motion up to a shift of 2 ns: the reversal starts at the command's end
-    rounded to the nanosecond, up to 1 ns from where the planner's float end puts it,
-    and an instant found on the motion after it (an alarm) may round 1 ns the other
-    way.  Position and Pe within 1e-4 pulse plus 2 ns at the speed, speed within
-    0.01 pps and 1e-7 of itself (a free shaft under a load may run at 10^5 pps)."""
+def close(a: list[tuple[float, float, float]], b: list[tuple[float, float, float]],
+          shift_ns: float = 2.0) -> bool:
+    """The same motion up to a time shift of ``shift_ns``: position and Pe within 1e-4
+    pulse plus the shift at the speed, speed within 0.01 pps and 1e-7 of itself (a free
+    shaft under a load may run at 10^5 pps)."""
+    shift = shift_ns * 1e-9
     return len(a) == len(b) and all(
-        abs(p - q) <= 1e-4 + 2e-9 * max(abs(v), abs(w))
-        and abs(e - f) <= 1e-4 + 2e-9 * max(abs(v), abs(w))
+        abs(p - q) <= 1e-4 + shift * max(abs(v), abs(w))
+        and abs(e - f) <= 1e-4 + shift * max(abs(v), abs(w))
         and abs(v - w) <= 1e-2 + 1e-7 * max(abs(v), abs(w))
         for (p, v, e), (q, w, f) in zip(a, b))
+
+
+def assert_same_run(runs: list[tuple[list[str], list[int], list[tuple[float, float, float]]]]
+                    ) -> None:
+    """The spliced run is the exact one: the same report texts; each report within
+    2 ns plus 1 ns for every report before it, the shaft within the run's whole shift.
+    A reversal starts at the command's end rounded to the nanosecond (up to 0.5 ns from
+    the planner's float end), and an instant found on the motion after it (in position,
+    an alarm) rounds up to the next nanosecond; in a repeated cycle the end's rounding
+    has the same sign every time, so the shift adds up along the run (hypothesis found
+    5 ns after 9 reversals at K69=100, S=54, A=5 over 200 pulses; docs/fidelity.md)."""
+    (texts0, times0, shaft0), (texts1, times1, shaft1) = runs
+    assert texts1 == texts0
+    assert all(abs(x - y) <= 2 + i for i, (x, y) in enumerate(zip(times1, times0))), \
+        [x - y for x, y in zip(times1, times0)]
+    assert close(shaft1, shaft0, 2 + len(times0))
 
 
 @settings(max_examples=30, deadline=None)
@@ -71,10 +87,7 @@ def test_ch3_k55_a_bank_reversing_at_in_position_moves_as_the_exact_model(
             chain.kernel.advance(25 * NS_PER_MS)
             shaft.append(sample(chain))
         runs.append(([text for _, text in events], [t for t, _ in events], shaft))
-    (texts0, times0, shaft0), (texts1, times1, shaft1) = runs
-    assert texts1 == texts0
-    assert all(abs(x - y) <= 1 for x, y in zip(times1, times0))     # within 1 ns
-    assert close(shaft1, shaft0)
+    assert_same_run(runs)
 
 
 @settings(max_examples=25, deadline=None)
@@ -100,10 +113,7 @@ def test_ch3_k69_k51_k44_s_curves_creep_and_other_decelerations_move_as_the_exac
             chain.kernel.advance(30 * NS_PER_MS)
             shaft.append(sample(chain))
         runs.append(([text for _, text in events], [t for t, _ in events], shaft))
-    (texts0, times0, shaft0), (texts1, times1, shaft1) = runs
-    assert texts1 == texts0
-    assert all(abs(x - y) <= 1 for x, y in zip(times1, times0))
-    assert close(shaft1, shaft0)
+    assert_same_run(runs)
 
 
 def test_a_repeated_cycle_reuses_its_solved_moves() -> None:

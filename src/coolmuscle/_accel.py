@@ -40,6 +40,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.sim.kernel",
     "coolmuscle.motor.motion.trajectory",
     "coolmuscle.motor.programs.bankexec",
+    "coolmuscle.motor.programs.program",
     "coolmuscle.motor.supervision.limits",
     "coolmuscle.device.hostline",
     "coolmuscle.motor.signals.io",

@@ -54,6 +54,9 @@ class MotorBus(Protocol):
     def bank_query(self, motor: "MotorCore", query: ast.Query) -> list[str] | None:
         """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6)."""
 
+    def relay(self, src: int, dst: int, nbytes: int) -> int:
+        """When ``nbytes`` that ID ``src`` sends now reach ID ``dst`` (ch. 3 K65)."""
+
     def save(self, motor: "MotorCore") -> None:
         """``$``: store parameters, data and banks of ``motor`` (2.1.2)."""
 

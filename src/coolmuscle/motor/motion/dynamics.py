@@ -217,7 +217,7 @@ class Motion:
     """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
-                 drive: Drive) -> None:
+                 drive: Drive, pieces_of: "Motion | None" = None) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
@@ -225,9 +225,13 @@ class Motion:
         #: The pieces, in order (shared with other motions that are the same move at the
         #: same place: read only).
         self.pieces: Sequence[Piece]
-        self._cmd = command_pieces(profile, self.origin_ns)
-        self.pieces, self._starts, self._peaks, self._memo = _placed(
-            drive, float(position), float(velocity), tuple(self._cmd))
+        if pieces_of is None:
+            self.pieces, self._starts, self._peaks, self._memo = _placed(
+                drive, float(position), float(velocity),
+                tuple(command_pieces(profile, self.origin_ns)))
+        else:                               # the same motion, solved already
+            self.pieces, self._starts = pieces_of.pieces, pieces_of._starts
+            self._peaks, self._memo = pieces_of._peaks, pieces_of._memo
         #: The motion the pieces from its origin on come from, in its own coordinates
         #: (:meth:`continued`; ``None``: this one).
         self._tail: Motion | None = None
@@ -244,7 +248,7 @@ class Motion:
         at = profile.origin_ns
         position, velocity = old.exact_state(at)
         tail = Motion(profile, at, position, velocity, old.drive)
-        motion = Motion(profile, at, position, velocity, old.drive)   # the same, reused
+        motion = Motion(profile, at, position, velocity, old.drive, tail)   # pieces below
         motion.origin_ns = int(origin_ns)
         motion._tail = tail
         shift_old = (motion.origin_ns - old.origin_ns) / NS_PER_S

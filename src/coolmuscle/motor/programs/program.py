@@ -35,8 +35,9 @@ from ..motion.planner import Limits
 from ..motion.profile import Profile
 from .queries import display_reply
 
+from ..core import MotorCore      # at run time: the compiled dataclasses resolve it
+
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
 
 IDLE, RUNNING, PAUSED, STEPPING, ESTOP = "idle", "running", "paused", "stepping", "estop"
@@ -45,6 +46,7 @@ MAX_LOOP_DEPTH = 10   # 2.2.2 "X": "The repeatable layer (nesting) is up to 10"
 CANCELLED = object()
 _MOTION_EXECS = frozenset({"origin", "go_origin", "go"})
 Step = Generator[Request, object, object]
+Steps = Generator[Request, object, None]    # a statement that never ends the line
 
 
 @dataclass
@@ -63,12 +65,12 @@ class _Motion:
     """The motion a line gives one motor: waypoints (merge), push, whether the line waits."""
 
     motor: "MotorCore"
-    waypoints: list[tuple[float, Limits]] = field(default_factory=list)
+    waypoints: list[tuple[float, Limits | None]] = field(default_factory=list)
     issued_at: int = -1
     push: bool = False
     wait: bool = True
-    continuous: tuple[int, Limits] | None = None
-    remaining: list[tuple[float, Limits]] | None = None  # what a pause interrupted
+    continuous: tuple[int, Limits | None] | None = None
+    remaining: list[tuple[float, Limits | None]] | None = None  # what a pause interrupted
     profile: Profile | None = None                       # the plan that was issued
     path: PairMotion | None = None                       # an interpolation (4.4)
     delay: int = 0           # ns until the command reaches the motor (K65 chain timing)
@@ -404,7 +406,7 @@ class ProgramExecutor:
                 return flow
         return None
 
-    def _ref(self, stmt: ast.Ref, run: _Run) -> Step:
+    def _ref(self, stmt: ast.Ref, run: _Run) -> Steps:
         reg = stmt.reg
         target = target_motor(self.motor, stmt)
         if target is None:
@@ -424,7 +426,7 @@ class ProgramExecutor:
                                                                       stmt.modifier)
         elif reg.kind == "M":
             _guard(target, lambda: setattr(target, "torque_limit",
-                                           int(target.memory.get("M", reg.number))))
+                                           target.memory.number("M", reg.number)))
         elif reg.kind in ("V", "K", "H"):
             _guard(target, lambda: target.say(self.ctx, display_reply(target, reg)))
 
@@ -438,9 +440,9 @@ class ProgramExecutor:
             run.decel[target.id] = index
 
     def _motion(self, kind: str, index: int, motor_id: int | None, modifier: str | None,
-                run: _Run) -> Step:
+                run: _Run) -> Steps:
         """``P`` ``Y`` ``Q`` ``Z``: start (or extend, merge) the motion of one motor."""
-        target = (self.motor if motor_id in (None, self.motor.id)
+        target = (self.motor if motor_id is None or motor_id == self.motor.id
                   else self.motor.bus.motor(motor_id))
         if target is None:
             return
@@ -459,7 +461,7 @@ class ProgramExecutor:
         if kind in ("Y", "Z"):
             self.unwaited.add(target.id)
 
-    def _interp(self, stmt: ast.Interp, run: _Run) -> Step:
+    def _interp(self, stmt: ast.Interp, run: _Run) -> Steps:
         """``@#.n`` (2.1.2, 4.4, :mod:`.coordinated`): pairs with the ``@`` of an adjacent
         ID on the line; the pair's running motions complete first, unless it continues
         a path of this line (merged legs, RT3 1.1 ";")."""
@@ -518,10 +520,10 @@ def _has_flow(unit: Unit) -> bool:
 
 def _limits(target: "MotorCore", run: _Run) -> Limits | None:
     prog = target.program
-    s_value = int(target.memory.get("S", prog.sel_s))
-    a_value = int(target.memory.get("A", prog.sel_a))
+    s_value = target.memory.number("S", prog.sel_s)
+    a_value = target.memory.number("A", prog.sel_a)
     decel = run.decel.get(target.id)
-    decel_a = None if decel is None else int(target.memory.get("A", decel))
+    decel_a = None if decel is None else target.memory.number("A", decel)
     return target.limits(s_value, a_value, decel_a)
 
 
@@ -529,14 +531,14 @@ def _add_motion(target: "MotorCore", run: _Run, kind: str, index: int, modifier:
                 now: int, delay: int = 0) -> None:
     if modifier is not None and not target.resolution.incremental_allowed:
         raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
-    value = int(target.memory.get("P", index))
+    value = target.memory.number("P", index)
     motion = run.motions.get(target.id)
     if motion is None or motion.issued_at != now:
         motion = run.motions[target.id] = _Motion(target, issued_at=now, delay=delay)
     limits = _limits(target, run)
     motion.push, motion.wait = kind in ("Q", "Z"), kind in ("P", "Q")
     if value == units_mod.CONTINUOUS and modifier is None:
-        s_value = int(target.memory.get("S", target.program.sel_s))
+        s_value = target.memory.number("S", target.program.sel_s)
         motion.waypoints, motion.continuous = [], (s_value, limits)
         target.run_continuous(s_value, limits)
         return
@@ -554,7 +556,7 @@ def _base(target: "MotorCore") -> float:
     return aim if abs(aim) != float("inf") else float(target.position())
 
 
-def _issue(motion: _Motion, waypoints: list[tuple[float, Limits]]) -> None:
+def _issue(motion: _Motion, waypoints: list[tuple[float, Limits | None]]) -> None:
     if motion.push:
         *via, (aim, limits) = waypoints
         motion.motor.push_to(aim, limits, via=via)
@@ -564,7 +566,7 @@ def _issue(motion: _Motion, waypoints: list[tuple[float, Limits]]) -> None:
     motion.waypoints = list(waypoints)
 
 
-def _unfinished(motion: _Motion, now: int) -> list[tuple[float, Limits]] | None:
+def _unfinished(motion: _Motion, now: int) -> list[tuple[float, Limits | None]] | None:
     """Waypoints a pause (or an alarm) left unreached: those not yet passed (4.1.2)."""
     motor = motion.motor
     if motion.continuous is not None or not motion.waypoints:

@@ -178,6 +178,13 @@ class Memory:
         self._check_index(kind, index)
         return self._data[kind][index]
 
+    def number(self, kind: str, index: int) -> int:
+        """The value of a numeric memory (``S``, ``A``, ``P``, ``M``, ``T`` ...; not V)."""
+        value = self.get(kind, index)
+        if not isinstance(value, int):
+            raise TypeError(f"{kind}{index} holds {value!r}, not a number")
+        return value
+
     def cells(self, kind: str) -> list[Any]:
         """The live cells of ``kind`` (index = memory number), for fast reads by the
         ladder scanner; read only.  The list is replaced when the allocation changes."""
