@@ -121,3 +121,32 @@ def test_a_second_signal_at_any_moment_of_the_stop_changes_nothing(tmp_path: Pat
         proc.send_signal(signal.SIGINT)
         stderr = finish(proc, link)
         assert proc.returncode == 0, (delay, stderr)
+
+
+def test_a_stop_signal_that_python_wraps_is_still_one_stop_line(capsys) -> None:
+    """A stop signal's exception raised inside ``__set_name__`` while a class is created
+    (a dataclass field, at start-up) reaches the program as a RuntimeError from it: still
+    the stop line and 128 + N, not an internal error (seen once under load in the suite:
+    SIGTERM at 0.25 s, 'Error calling __set_name__ on Field instance')."""
+    from coolmuscle.tools.exits import guarded
+    from coolmuscle.tools.stopsignals import STOP_SIGNALS, SignalStop, clear_stop
+
+    class Named:
+        def __set_name__(self, owner: type, name: str) -> None:
+            raise SignalStop(signal.SIGTERM)
+
+    def start_up() -> None:
+        type("Owner", (), {"field": Named()})
+
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    try:
+        with pytest.raises(RuntimeError):       # what Python makes of it
+            start_up()
+        with pytest.raises(SystemExit) as stopped:
+            guarded(start_up)
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+        clear_stop()
+    assert stopped.value.code == 128 + signal.SIGTERM
+    assert capsys.readouterr().err == "coolmuscle: stopped (SIGTERM)\n"

@@ -12,7 +12,7 @@ import os
 import sys
 from typing import Callable
 
-from .stopsignals import SignalStop, ignore_stop_signals, stop_line
+from .stopsignals import SignalStop, ignore_stop_signals, stop_line, stop_requested
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
@@ -35,6 +35,12 @@ def guarded(call: Callable[[], object]) -> None:
         os.dup2(devnull, sys.stdout.fileno())
         raise SystemExit(EXIT_FAILED) from None
     except Exception as exc:  # classified here so that the quick path imports nothing more
+        stop = _stop_behind(exc)
+        if stop is not None:     # a stop signal that Python wrapped (class creation ...)
+            ignore_stop_signals()
+            text, code = stop_line(stop)
+            _line(text)
+            raise SystemExit(code) from None
         from ..chain.machine import MachineFileError
         from ..errors import CoolMuscleError
         from .script import ScriptError
@@ -45,6 +51,22 @@ def guarded(call: Callable[[], object]) -> None:
             _report(exc, EXIT_FAILED)
         else:  # a bug: still one line unless asked for more
             _report(exc, EXIT_INTERNAL, prefix="internal error: ")
+
+
+def _stop_behind(exc: BaseException) -> BaseException | None:
+    """The stop signal behind ``exc``: Python turns an exception raised by a signal
+    handler in some places into another one (``__set_name__`` during class creation
+    gives a ``RuntimeError`` from it); its chain, or the request kept by
+    :func:`.stopsignals.stop_requested`, tells."""
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        if isinstance(link, (SignalStop, KeyboardInterrupt)):
+            return link
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    signum = stop_requested()
+    return SignalStop(signum) if signum is not None else None
 
 
 def _line(text: str) -> None:
