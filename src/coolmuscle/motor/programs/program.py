@@ -34,8 +34,7 @@ from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
 from ..motion.planner import Limits
 from ..motion.profile import Profile
 from .queries import display_reply
-
-from ..core import MotorCore      # at run time: the compiled dataclasses resolve it
+from ..core import MotorCore      # imported at run time: the compiled dataclasses need it
 
 if TYPE_CHECKING:
     from ..context import Context
