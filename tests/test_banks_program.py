@@ -230,6 +230,42 @@ def test_estop_inside_the_bank_and_release() -> None:
     assert r.texts()[-1] == "V2.1=0"
 
 
+def test_2_1_2_estop_twice_stops_the_bank_and_bracket_runs_it_from_the_beginning() -> None:
+    """2.1.2 "*": "Program Bank stops when this command is transmitted twice, and Program
+    Bank operates from the beginning with command [ after canceling the emergency stop
+    by command *1" (the motor audit's example: moves to 2000, 0, 1000 at S=10)."""
+    r = rig("S1.1=10", "A1.1=100", "P1.1=2000", "P2.1=0", "P3.1=1000",
+            "B1.1", "S1.1, A1.1, P1.1", "P2.1", "P3.1", "END", "[1.1")
+    r.until(0.5)
+    r.type("*", "*")
+    r.until(0.6)
+    assert r.motor().program.state == "idle"
+    stopped = r.motor().position()
+    r.type("[")                       # still in emergency stop: nothing moves
+    r.until(1.0)
+    assert r.motor().program.state == "idle" and r.motor().position() == stopped
+    r.type("*1")                      # released: the stopped bank stays stopped ...
+    r.until(1.5)
+    assert r.motor().program.state == "idle" and r.motor().position() == stopped
+    r.type("[")                       # ... until [ runs it from its first line
+    r.until(2.5)
+    assert r.motor().program.state == "running"
+    assert r.motor().axis.target() == 2000 and r.motor().position() > stopped
+
+
+def test_2_1_2_pause_twice_terminates_and_bracket_does_not_resume() -> None:
+    """2.1.2 "]": "When this command is entered twice, Program Bank is terminated and
+    cannot be resumed" (unlike ``*`` twice)."""
+    r = rig("S1.1=10", "A1.1=100", "P1.1=2000", "B1.1", "S1.1, A1.1, P1.1", "END", "[1.1")
+    r.until(0.5)
+    r.type("]", "]")
+    r.until(1.0)
+    stopped = r.motor().position()
+    r.type("[")
+    r.until(2.0)
+    assert r.motor().program.state == "idle" and r.motor().position() == stopped
+
+
 def test_queries_from_a_bank_are_bank_replies() -> None:
     r = rig("B1.1", "?96.1", "END")
     seen = []

@@ -127,6 +127,7 @@ class MotorCore(Protocol):
     timeline: Timeline
     thermal: Thermal
     alarm: int
+    estopped: bool      # ``*`` until ``*1`` (2.1.2)
     voltage: int
     origin_done: bool
     direct_interp_kind: str

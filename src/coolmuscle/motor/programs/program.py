@@ -109,6 +109,10 @@ class ProgramExecutor:
         self._timer: Timer | None = None
         self._stop_pending = False
         self._terminate_pending = False
+        self._started: int | None = None     # the bank ``[#`` started last
+        #: The bank a bare ``[`` runs from its first line: after ``*`` twice stopped it
+        #: (2.1.2 "*": "Program Bank operates from the beginning with command [").
+        self.restart_bank: int | None = None
         self.ctx = _bank_context(motor)
 
     @property
@@ -127,11 +131,16 @@ class ProgramExecutor:
             return
         self.terminate()
         self.stack = [Frame(number, program_units(bank))]
+        self._started = number
         self.state = RUNNING
         self._next()
 
     def resume(self) -> None:
-        """``[``: continue a paused bank where it stopped (2.1.2 "[")."""
+        """``[``: continue a paused bank where it stopped (2.1.2 "["); after ``*`` twice
+        and ``*1``, run the stopped bank again from its first line (2.1.2 "*")."""
+        if self.state == IDLE and self.restart_bank is not None and not self.motor.estopped:
+            self.start(self.restart_bank)
+            return
         if self.state != PAUSED:
             return
         self.state = RUNNING
@@ -161,9 +170,12 @@ class ProgramExecutor:
             self._stop_pending = True
 
     def emergency(self) -> None:
-        """``*``: abandon the line; ``*1`` resumes with the next line; twice: stop."""
+        """``*``: abandon the line; ``*1`` resumes with the next line; twice: stop, and
+        ``[`` (after ``*1``) runs the bank from the beginning (2.1.2 "*")."""
         if self.state == ESTOP:
+            started = self._started
             self.terminate()
+            self.restart_bank = started
             return
         if self.state == IDLE:
             return
@@ -225,6 +237,7 @@ class ProgramExecutor:
         self.unwaited.clear()
         self.state = IDLE
         self._stop_pending = self._terminate_pending = False
+        self.restart_bank = None
 
     # -- sequencing ---------------------------------------------------------------
     def _cancel_timer(self) -> None:
