@@ -94,6 +94,31 @@ def test_ch3_k23_ccw_limit_sensor_error08_and_the_device_api() -> None:
     assert events[-1][1] == "error08.1: CCW Limit!!"
 
 
+@pytest.mark.parametrize("target, direction, wait", [
+    (595, 1, 1.0), (595, 1, 3.0), (-595, -1, 1.0), (-595, -1, 3.0), (-100, -1, 1.5)])
+def test_ch3_k27_a_limit_sensor_coming_on_at_rest_is_no_error(target: int, direction: int,
+                                                                wait: float) -> None:
+    """A sensor that comes on after the move ended (Ux=8, Sx=0, Pe=0) stops nothing and
+    reports nothing, however long ago the move ended: only a motion toward it does
+    (ch. 3 K23 error07/08).  The servo's settling tail (a fraction of a pulse a second)
+    once counted as moving toward it, up to a few seconds after the move (an audit of
+    the manual's examples found it)."""
+    chain, events = _chain("[[axis]]\nparams = { K27 = 96, K23 = 17 }\n")
+    chain.execute("S.1=10, A.1=100")
+    chain.execute(f"P.1={target}")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(wait))
+    assert [t for _, t in events] == ["Ux.1=8"]
+    assert chain.execute("?97.1") == ["Sx.1=0"] and chain.execute("?95.1") == ["Pe.1=0"]
+    chain.motors[1].limit_sensor(direction, True)
+    chain.kernel.run(until=seconds(wait + 0.5))
+    assert [t for _, t in events] == ["Ux.1=8"]
+    chain.execute(f"P.1={target + 1000 * direction}")          # toward it: refused
+    chain.execute("^.1")
+    assert events[-1][1] == ("error07.1: CW Limit!!" if direction > 0
+                             else "error08.1: CCW Limit!!")
+
+
 def test_limit_messages_need_k23_16() -> None:
     chain, events = _chain(LIMITS)
     chain.execute("K23.1=1, S.1=100, A.1=100, P.1=10000")

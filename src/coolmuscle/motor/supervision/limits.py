@@ -8,7 +8,10 @@
 * Limit sensors (ch. 3 K27 input functions 6 "CW direction limit sensor" and 9 "CCW";
   K23 messages ``error07.n: CW Limit!!`` / ``error08.n: CCW Limit!!``): when one comes on
   while the shaft moves toward it the motor stops at maximum deceleration and reports
-  the error; while it is on, a motion toward it is refused with the same error.  CW is
+  the error; while it is on, a motion toward it is refused with the same error.  "Moves
+  toward it": a motion commanded that way, or the shaft turning that way at
+  :data:`AT_REST_PPS` or more (a servo settles exponentially: the last fraction of a
+  pulse a second of a finished move is a shaft at rest, Ux=8, Sx=0).  CW is
   the raw (machine) positive direction.  :meth:`TravelLimits.sensor` is what the input
   function engineer and the machine file call (``Motor.limit_sensor``); it is idempotent.
 """
@@ -26,6 +29,7 @@ if TYPE_CHECKING:
     from ..core import MotorCore
 
 _UNIT = {0: 100, 1: 10, 2: 1}
+AT_REST_PPS = 1.0   # below 1 pulse/s the shaft counts as standing (no pulse in a second)
 
 
 class TravelLimits:
@@ -62,7 +66,7 @@ class TravelLimits:
         m = self.motor
         if not on or m.origin.on_limit(direction):
             return
-        if m.axis.raw_velocity() * direction > 0.0 or self._heading(direction):
+        if m.axis.raw_velocity() * direction >= AT_REST_PPS or self._heading(direction):
             m.abandon_motion()
             m.axis.stop(planner.ESTOP_DECEL)
             m.report_error(None, self.error(direction))
