@@ -115,3 +115,32 @@ def test_rt3_7_2_analog_input_controls_the_speed() -> None:
         r.chain.set_analog(1, counts)
         r.wait(1)
         assert trace.sample(1, r.kernel.now).speed == __import__("pytest").approx(pps, abs=1)
+
+
+def test_rt3_1_1_c_in_a_logic_bank_calls_that_logic_bank() -> None:
+    """RT3 1.1 "I": "Use in a bank: L1.1 I1.1, C2.1, C3.1 END.1 ... If I1=true than C2
+    else C3" and "W0": "I1.1,W0,C2.1": RT3 loads C# in a logic bank and calls logic bank
+    # there (as CL#); CM2 refuses it (6.5: C is P only)."""
+    r = rig("v1=1, v2=2", "L1.1", "I1.1,C2.1,C3.1", "END.1",
+            "L2.1", "V5=v1", "END.1", "L3.1", "V5=v2", "END.1", firmware="rt3")
+    assert "error" not in " ".join(r.texts()), r.texts()
+    assert r.chain.execute("?L1.1") == ["I1.1, C2.1, C3.1"]
+    r.clear()
+    r.type("[L1.1")
+    r.until(0.01)
+    assert r.texts()[-1] == "V5.1=2"             # I1 off: the else part, logic bank 3
+    r.chain.set_input(1, 1, True)
+    r.until(0.3)
+    assert r.texts()[-1] == "V5.1=1"             # I1 on: logic bank 2
+    cm2 = rig("L1.1", "I1.1,C2.1,C3.1", "END.1")
+    assert "error03.1: C is not allowed in bank.1" in cm2.texts()
+
+
+def test_rt3_1_1_j_in_a_logic_bank_jumps_to_that_logic_bank() -> None:
+    """J# in an RT3 logic bank is JL#: the other bank is scanned from then on."""
+    r = rig("v1=1", "L1.1", "J2.1", "END.1", "L2.1", "V6=v1", "END.1", firmware="rt3")
+    assert "error" not in " ".join(r.texts()), r.texts()
+    r.clear()
+    r.type("[L1.1")
+    r.until(0.2)
+    assert r.texts() and set(r.texts()) == {"V6.1=1"}

@@ -242,7 +242,9 @@ def _check_allowed(stmt: ast.Statement, *, ladder: bool, rt3: bool) -> None:
             isinstance(stmt, ast.StartBank) and stmt.kind != "B"):
         bad = not ladder                       # 6.5 "[L", "]L": P ×, L ○
     elif isinstance(stmt, ast.Call):
-        bad = ladder != stmt.kind.endswith("L")  # C/J program only, CL/JL ladder only
+        # C/J program only, CL/JL ladder only; RT3 1.1 calls with C# in its logic-bank
+        # examples ("L1.1 I1.1, C2.1, C3.1 END.1"): there they are CL#/JL#
+        bad = ladder != stmt.kind.endswith("L") and not (ladder and rt3)
     elif isinstance(stmt, (ast.Loop, ast.LoopEnd)):
         bad = ladder                           # 4.5.1 "X command can not be available"
     elif isinstance(stmt, ast.Move):

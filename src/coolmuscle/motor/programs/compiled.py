@@ -228,7 +228,7 @@ def _body(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
     if isinstance(stmt, ast.Ref):
         return _ref(stmt, motor, ctx, last)
     if isinstance(stmt, ast.Call):
-        return (lambda: stmt) if last and stmt.kind in ("CL", "JL") else None
+        return (lambda: stmt) if last else None     # CL JL (RT3: C J too, ladder._call)
     if isinstance(stmt, (ast.Wait, ast.StartBank, ast.StopBank, ast.ClearBanks,
                          ast.BankBegin, ast.BankEnd)):
         return None

@@ -356,13 +356,15 @@ class LadderRunner:
             target.report_error(self.ctx, OutOfRangeError())
 
     def _call(self, call: ast.Call, callers: tuple[int, ...]) -> Step:
-        if call.kind == "JL":
+        """``CL#`` / ``JL#``; ``C#`` / ``J#``, which only RT3 loads into a logic bank
+        (its 1.1 examples), are the same (docs/fidelity.md "CL / JL")."""
+        if call.kind in ("J", "JL"):
             if self.motor.banks.get(True, call.index) is None:
                 self.motor.report_error(self.ctx, NoLadderBankError())
                 return None
             self.bank = call.index   # RT3 3.2 "JL": it will not return
             return _JUMP
-        if call.kind != "CL" or len(callers) >= MAX_CALL_DEPTH or call.index in callers:
+        if len(callers) >= MAX_CALL_DEPTH or call.index in callers:
             return None  # 6.4 "impossible to ... re-call itself": the call is not made
         return (yield from self._bank(call.index, callers))
 
