@@ -377,7 +377,7 @@ class _Checker:
 
     def _calls(self) -> None:
         from .check_calls import check_calls
-        check_calls(self.program, self.defined, self.report)
+        check_calls(self.program, self.defined, self.report, self.rt3)
 
 
 def _split_commas(code: str) -> list[str]:

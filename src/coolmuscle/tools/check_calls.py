@@ -32,7 +32,7 @@ MAX_DEPTH = 10
 
 
 def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
-           report: "CheckReport") -> list[Edge]:
+           report: "CheckReport", rt3: bool) -> list[Edge]:
     from .check_tree import column as _column, flat as _flat
     edges: list[Edge] = []
     for line in block.body:
@@ -40,7 +40,8 @@ def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
             for each in _flat(statement):
                 if not isinstance(each, ast.Call):
                     continue
-                ladder = each.kind in ("CL", "JL")
+                # RT3 calls logic banks with C#/J# too (its 1.1 examples; fidelity.md)
+                ladder = each.kind in ("CL", "JL") or (rt3 and block.ladder)
                 motor = each.motor or block.motor_id
                 text = f"{each.kind}{each.index}"
                 column = _column(line.raw, text)
@@ -66,13 +67,14 @@ def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
 
 
 def check_calls(program: ProgramFile, defined: dict[BankKey, BankBlock],
-                report: "CheckReport") -> None:
-    """Add the call/jump diagnostics of ``program`` to ``report``."""
+                report: "CheckReport", rt3: bool = False) -> None:
+    """Add the call/jump diagnostics of ``program`` to ``report`` (``rt3``: the RT3 and
+    CM1 bank rules, where a logic bank calls with ``C#`` and ``J#`` as well)."""
     graph: dict[BankKey, list[Edge]] = {}
     for block in program.banks:
         key = (block.ladder, block.number, block.motor_id)
         if defined.get(key) is block:
-            graph[key] = _edges(block, defined, report)
+            graph[key] = _edges(block, defined, report, rt3)
     _recursion(graph, report)
     _depth(graph, report)
 
