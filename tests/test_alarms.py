@@ -248,3 +248,34 @@ def test_unknown_fault_or_parameter_is_refused() -> None:
     with pytest.raises(ValueError):
         chain.inject_fault(1, "stuck_input", input=9, on=True)
     assert chain.execute("?99.1") == ["Ux.1=8"]
+
+
+@pytest.mark.parametrize("fault, params", [
+    ("overload", {"torque": 1e308}), ("overload", {"torque": -1e6}),
+    ("overload", {"torque": math.inf}), ("overload", {"torque": math.nan}),
+    ("over_temperature", {"temperature": 1e308}),
+    ("over_temperature", {"temperature": -300.0}),
+    ("supply_voltage", {"volts": math.nan}), ("supply_voltage", {"volts": 1001}),
+])
+def test_a_fault_value_out_of_its_bounds_is_refused_and_the_motor_stays_sane(
+        fault: str, params: dict[str, float]) -> None:
+    """An injected value beyond what it can mean (10x the rated torque, -40..200 °C,
+    0..1000 V) or not finite is refused (ValueError: the web page's and the API's
+    error answer) and changes nothing; once a 1e308 % overload turned every position
+    into NaN for good (an attack on the web dashboard found it)."""
+    chain, _ = _chain()
+    chain.execute("S.1=100, A.1=100, P.1=5000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(0.2))
+    with pytest.raises(ValueError, match="must be"):
+        chain.inject_fault(1, fault, **params)
+    chain.kernel.run(until=seconds(2))
+    assert chain.execute("?96.1") == ["Px.1=5000"]
+    assert chain.execute("?99.1") == ["Ux.1=8"]
+    temp = chain.execute("?74.1")[0]
+    assert -40 <= float(temp.split("=")[1]) <= 200, temp
+    chain.inject_fault(1, "overload", torque=1000)               # the bounds themselves
+    chain.inject_fault(1, "over_temperature", temperature=-40)
+    chain.kernel.run(until=seconds(4))
+    assert all(math.isfinite(float(chain.execute(q)[0].split("=")[1]))
+               for q in ("?96.1", "?95.1", "?97.1"))

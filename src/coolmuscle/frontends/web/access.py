@@ -107,7 +107,12 @@ class Access:
         """The token check (constant time); always true on loopback."""
         if self.token is None:
             return True
-        return given is not None and hmac.compare_digest(given.encode(), self.token.encode())
+        if given is None:
+            return False
+        # surrogates (undecodable header bytes) or any odd text: compared as bytes, never
+        # raising ("surrogateescape" keeps every byte it was given)
+        return hmac.compare_digest(given.encode("utf-8", "surrogateescape"),
+                                   self.token.encode())
 
     def host_ok(self, host_header: str | None) -> bool:
         """On loopback the ``Host`` header must name a loopback host (DNS rebinding)."""
@@ -121,7 +126,10 @@ class Access:
         """A browser's ``Origin`` must be the page's own scheme-less ``host:port``."""
         if origin is None:          # not a browser (a script, a test client)
             return True
-        netloc = urlsplit(origin).netloc.lower()
+        try:
+            netloc = urlsplit(origin).netloc.lower()
+        except ValueError:          # "http://[::1" and other unparsable origins: refused
+            return False
         return bool(host_header) and netloc == str(host_header).lower()
 
 

@@ -7,10 +7,11 @@ Each fault acts on the model, so the motor answers as it would (docs/machine-fil
 fault               what it does                                     parameters
 ==================  ===============================================  ==================
 overload            an extra constant load torque on the shaft       torque (% rated,
-                    (a jam); the motor answers with its own          default 200),
-                    overload / position error alarms                 clear
+                    (a jam); the motor answers with its own          -1000..1000,
+                    overload / position error alarms                 default 200), clear
 over_temperature    the driver case is at this temperature now;      temperature (°C,
-                    it cools by the I²t model                        default alarm + 5)
+                    it cools by the I²t model                        -40..200, default
+                                                                     alarm + 5)
 over_current        power module over current: alarm Ux=64 now       —
 regeneration        regenerative over voltage: alarm Ux=2 now        —
 over_speed          alias of regeneration (6.6 "over speed/          —
@@ -30,6 +31,7 @@ broken_cable        ``io``: every input reads off electrically;      cable ("io"
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Callable
 
 from ..status import Ux
@@ -39,6 +41,11 @@ if TYPE_CHECKING:
 
 #: Nominal supply, ?72 units of 0.1 V (docs/fidelity.md).
 NOMINAL_VSEN = 240
+#: Bounds of the injected values: ten times the rated torque either way (a jam, a load
+#: driving the shaft); a driver case between a freezer and far past its alarm.  Beyond
+#: them a value means nothing physical and would overflow the load model's numbers.
+TORQUE_PERCENT = (-1000.0, 1000.0)
+TEMPERATURE_C = (-40.0, 200.0)
 
 
 class Faults:
@@ -87,19 +94,18 @@ class Faults:
         self.motor.raise_alarm(int(bit))
 
     def _overload(self, p: dict[str, object]) -> None:
-        self.extra_load_percent = 0.0 if _flag(p, "clear") else _number(p, "torque", 200.0)
+        self.extra_load_percent = 0.0 if _flag(p, "clear") else _number(
+            p, "torque", 200.0, TORQUE_PERCENT)
         self.motor.axis.refresh()
 
     def _temperature(self, p: dict[str, object]) -> None:
         thermal = self.motor.thermal
-        temp = _number(p, "temperature", thermal.alarm + 5.0)
+        temp = _number(p, "temperature", thermal.alarm + 5.0, TEMPERATURE_C)
         self.motor.set_temperature(temp)
 
     def _supply(self, p: dict[str, object]) -> None:
         volts = NOMINAL_VSEN / 10.0 if _flag(p, "clear") else _number(
-            p, "volts", NOMINAL_VSEN / 20.0)
-        if not 0.0 <= volts <= 1000.0:
-            raise ValueError("supply_voltage: volts must be 0..1000")
+            p, "volts", NOMINAL_VSEN / 20.0, (0.0, 1000.0))
         self.motor.voltage = round(volts * 10)
         self.motor.axis.refresh()
 
@@ -139,10 +145,16 @@ class Faults:
         return max(0.0, self.motor.voltage / NOMINAL_VSEN)
 
 
-def _number(p: dict[str, object], key: str, default: float) -> float:
+def _number(p: dict[str, object], key: str, default: float,
+            bounds: tuple[float, float] = (-math.inf, math.inf)) -> float:
+    """Parameter ``key`` as a finite float within ``bounds``; ``ValueError`` if not."""
     value = p.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{key} must be a number, not {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value):
+        raise ValueError(f"{key} must be a finite number, not {value!r}")
+    lo, hi = bounds
+    if not lo <= value <= hi:
+        raise ValueError(f"{key} must be {lo:g}..{hi:g}, not {value!r}")
     return float(value)
 
 
