@@ -272,7 +272,7 @@ def test_a_fault_value_out_of_its_bounds_is_refused_and_the_motor_stays_sane(
     chain.kernel.run(until=seconds(2))
     assert chain.execute("?96.1") == ["Px.1=5000"]
     assert chain.execute("?99.1") == ["Ux.1=8"]
-    temp = chain.execute("?74.1")[0]
+    temp = chain.execute("?71.1")[0]
     assert -40 <= float(temp.split("=")[1]) <= 200, temp
     chain.inject_fault(1, "overload", torque=1000)               # the bounds themselves
     chain.inject_fault(1, "over_temperature", temperature=-40)
