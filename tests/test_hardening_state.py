@@ -108,3 +108,60 @@ def test_a_relative_xdg_data_home_is_ignored(monkeypatch: pytest.MonkeyPatch,
     assert cli.default_state_dir() == tmp_path / ".local/share/coolmuscle/state"
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "abs"))
     assert cli.default_state_dir() == tmp_path / "abs/coolmuscle/state"
+
+
+def test_one_chain_per_state_directory_in_one_process(tmp_path: Path) -> None:
+    """Two chains saving into one store would overwrite each other's snapshots (each `$`
+    writes the whole motor): the second is refused while the first is open, with the
+    holder's pid, and gets the state once the first has closed."""
+    first = Chain(state_dir=tmp_path)
+    first.execute("K42.1=111")
+    first.execute("P5.1=555")
+    assert first.execute("$.1") == ["saved.1"]
+    with pytest.raises(StoreError, match=rf"in use: another coolmuscle \(pid {os.getpid()}\)"):
+        Chain(state_dir=tmp_path)
+    first.close()
+    second = Chain(state_dir=tmp_path)
+    assert second.execute("K42.1") == ["K42.1=111"] and second.execute("P5.1") == ["P5.1=555"]
+    second.close()
+    with Store(tmp_path / "coolmuscle.sqlite3") as reader:    # readers are never refused
+        assert reader.integrity_check() == "ok"
+
+
+def test_a_second_sim_on_the_same_state_is_refused_and_the_first_keeps_saving(
+        tmp_path: Path) -> None:
+    """Two ``coolmuscle sim --state DIR``: the second ends at once with one line and
+    exit 1; what the first saved (an automatic K save and a ``$``) is there after it
+    stops.  (An attack found both answering ``saved.1`` and the first's saves lost.)"""
+    import socket
+    cmd = [sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0", "--state", str(tmp_path)]
+    first = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                             stdin=subprocess.DEVNULL, text=True, env=ENV)
+    try:
+        assert first.stderr is not None
+        port = None
+        for _ in range(50):
+            line = first.stderr.readline()
+            if "tcp: 127.0.0.1:" in line:
+                port = int(line.split("tcp: 127.0.0.1:")[1].split()[0])
+                break
+        assert port is not None
+        second = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=60,
+                                stdin=subprocess.DEVNULL)
+        assert second.returncode == 1, second.stderr
+        lines = second.stderr.strip().splitlines()
+        assert len(lines) == 1 and "is in use: another coolmuscle" in lines[0], lines
+        assert f"pid {first.pid}" in lines[0] and "Traceback" not in second.stderr
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+            sock.sendall(b"K42.1=111\r\nP5.1=555\r\n$.1\r\n")
+            got = b""
+            while b"saved.1" not in got:
+                chunk = sock.recv(1024)
+                assert chunk, got
+                got += chunk
+    finally:
+        first.terminate()
+        first.wait(30)
+    chain = Chain(state_dir=tmp_path)
+    assert chain.execute("K42.1") == ["K42.1=111"] and chain.execute("P5.1") == ["P5.1=555"]
+    chain.close()

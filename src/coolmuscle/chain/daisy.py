@@ -91,7 +91,16 @@ class Chain:
         per_motor = firmware.split(",")   # "cm1,cm1,cm2,cm2": one profile per motor (EB12)
         self.firmware = get_firmware(per_motor[0])
         self.state_dir = Path(state_dir) if state_dir else None
-        self.store = Store(self.state_dir / "coolmuscle.sqlite3") if self.state_dir else None
+        self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
+                      if self.state_dir else None)
+        try:
+            self._build(motors, per_motor, pacing, machine)
+        except BaseException:      # a damaged store, a bad machine file: let the state go
+            self.close()
+            raise
+
+    def _build(self, motors: int, per_motor: list[str], pacing: bool,
+               machine: "Path | str | Machine | None") -> None:
         self._listeners: list[EventListener] = []
         self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
         self._observers: list[Callable[[], None]] = []

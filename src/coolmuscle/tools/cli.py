@@ -247,7 +247,7 @@ def _reset_state(state: Path | None) -> None:
     path = state / DEFAULT_FILENAME
     if not path.exists():
         return
-    with Store(path) as store:
+    with Store(path, writer=True) as store:     # not under a running sim
         for motor_id in store.motors():
             store.delete(motor_id)
     err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",

@@ -38,6 +38,11 @@ from typing import Any, Iterator, Mapping
 
 from ...errors import StoreError
 
+try:
+    import fcntl
+except ImportError:       # not POSIX: no writer lock (the project runs on Linux)
+    fcntl = None  # type: ignore[assignment]
+
 #: ``PRAGMA application_id`` of a coolmuscle store ("CMST").
 APPLICATION_ID = 0x434D5354
 #: ``PRAGMA user_version``: schema version this code writes and reads.
@@ -71,14 +76,23 @@ class Store:
     or is damaged, raises :class:`StoreError`; so does every failed operation.
     """
 
-    def __init__(self, path: str | os.PathLike[str] | None = None) -> None:
+    def __init__(self, path: str | os.PathLike[str] | None = None, *,
+                 writer: bool = False) -> None:
+        """``writer``: this store belongs to a running chain, the one process that
+        writes it; a second writer on the same file is refused (:class:`StoreError`)
+        until the first closes or exits (docs/fidelity.md "Saving")."""
         if path is None:
             try:
                 path = default_state_dir() / DEFAULT_FILENAME
             except RuntimeError as exc:  # no home directory
                 raise StoreError(f"no state directory: {exc}") from exc
         self._path = str(path)
-        self._conn: sqlite3.Connection | None = _open(self._path)
+        self._lock: int | None = _writer_lock(self._path) if writer else None
+        try:
+            self._conn: sqlite3.Connection | None = _open(self._path)
+        except BaseException:
+            self._unlock()
+            raise
 
     @property
     def path(self) -> str:
@@ -169,10 +183,16 @@ class Store:
     # -- lifetime --------------------------------------------------------------
 
     def close(self) -> None:
-        """Close the file (idempotent)."""
+        """Close the file (idempotent); a writer lets the file go."""
         if self._conn is not None:
             self._conn.close()
             self._conn = None
+        self._unlock()
+
+    def _unlock(self) -> None:
+        if self._lock is not None:
+            os.close(self._lock)           # the flock goes with its file description
+            self._lock = None
 
     def __enter__(self) -> Store:
         return self
@@ -219,6 +239,37 @@ def bad_state_message(path: str, motor_id: int, problem: str) -> str:
     """One message naming the file, the entry and how to recover."""
     return (f"{path}: saved state of motor {motor_id}: {problem}; move the file aside "
             f"(mv {path} {path}.bad) to start with defaults, or start with --no-state")
+
+
+def _writer_lock(path: str) -> int | None:
+    """An exclusive ``flock`` on ``PATH.lock`` for this writer (held until closed, or
+    until the process ends however it ends), or :class:`StoreError` naming the holder.
+    Two chains saving into one store would each overwrite the other's snapshots."""
+    if fcntl is None or path == ":memory:":
+        return None
+    lock_path = path + ".lock"
+    try:
+        Path(lock_path).parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise StoreError(f"cannot lock {path}: {exc.strerror or exc}") from exc
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        try:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+        except OSError:
+            holder = "?"
+        os.close(fd)
+        raise StoreError(f"{Path(path).parent} is in use: another coolmuscle (pid {holder}) "
+                         "runs a chain on this state; one chain per state directory "
+                         "(give this one another --state DIR, or --no-state)") from None
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except OSError:
+        pass                       # the lock holds; only the pid shown to others is lost
+    return fd
 
 
 def _open(path: str) -> sqlite3.Connection:
