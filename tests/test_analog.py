@@ -303,6 +303,24 @@ def test_5_5_torque_feedback_ends_at_p0_when_nothing_pushes_back() -> None:
     assert chain.kernel.peek() is None             # the loop sleeps again
 
 
+def test_5_5_torque_feedback_that_holds_the_motor_still_reports_nothing_more() -> None:
+    """K38=10 with in-range but extreme gains (K74=1000, K75=500, K76=0, K77=-1000):
+    the feedback's command stands still, and stays one command: no report repeats
+    (an attack found ``Ux.1=8`` a thousand times a second while the motor stood)."""
+    chain = _chain()
+    events: list[tuple[int, str]] = []
+    chain.subscribe(lambda e: events.append((e.time, e.text)) if e.kind == "status" else None)
+    for line in ("K38.1=10", "K74.1=1000", "K75.1=500", "K76.1=0", "K77.1=-1000",
+                 "S.1=100", "A.1=100", "P.1=421815", "^.1"):
+        chain.execute(line)
+    chain.kernel.run(until=seconds(1))
+    before = len(events)
+    assert before <= 1
+    chain.kernel.run(until=seconds(4))
+    assert len(events) == before
+    assert chain.execute("?96.1") == ["Px.1=0"] and chain.execute("?97.1") == ["Sx.1=0"]
+
+
 def test_5_5_a_stop_command_ends_torque_feedback() -> None:
     chain, _ = _torque_feedback(contact=50000)
     chain.kernel.run(until=seconds(0.3))

@@ -127,6 +127,7 @@ class AnalogControl:
         self._sleeping = True
         self._in_tick = False
         self.ticks = 0                    # loop samples so far (tests, benchmarks)
+        self._driven_speed: float | None = None   # the torque feedback's last command
         analog_input.listeners.append(self.wake)
         motor.timeline.listeners.append(self._trajectory_changed)
         motor.params.on_change(self._param_changed)
@@ -476,7 +477,14 @@ class AnalogControl:
         self._drive_at(speed)
 
     def _drive_at(self, speed: float) -> None:
+        """The command runs at ``speed`` (user pps) from where it is now.  The same speed
+        as the command of this feedback already has changes nothing: the command is not
+        issued again (a standing command re-issued every tick was a new motion, so the
+        motor reported ``Ux=8`` a thousand times a second while the sensor held it)."""
         ax = self.motor.axis
+        if self._owns() and self._driven_speed == speed:
+            return
+        self._driven_speed = speed
         p = ax.to_raw(ax.command_position())
         if speed == 0.0:
             seg: list[Segment] = []
