@@ -469,3 +469,30 @@ def test_adapter_closes_completely_with_class1_running(caplog):
         with socket.socket(socket.AF_INET, kind) as again:
             again.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             again.bind(("127.0.0.1", port))
+
+
+def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypatch):
+    """At most MAX_TCP_CLIENTS encapsulation clients at once (docs/reliability.md
+    "Bounds"): one more is closed as it arrives, the others keep their sessions."""
+    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip import server as enip_server
+    from test_enip_encapsulation import decode, frame
+    monkeypatch.setattr(enip_server, "MAX_TCP_CLIENTS", 4)
+    with enip_service() as st:
+        tcp_port, _ = ports(st)
+        held = [socket.create_connection(("127.0.0.1", tcp_port), timeout=3) for _ in range(4)]
+        try:
+            for sock in held:
+                sock.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+                assert decode(sock.recv(1024)).status == 0
+            with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as extra:
+                extra.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+                try:
+                    assert extra.recv(1024) == b""
+                except ConnectionResetError:
+                    pass
+            held[0].sendall(frame(enc.LIST_IDENTITY, b"").encode())    # still served
+            assert decode(held[0].recv(1024)).status == 0
+        finally:
+            for sock in held:
+                sock.close()

@@ -351,3 +351,90 @@ def test_no_polling_storm_while_nothing_moves(served):
     frames = _run(_with_ws(_url(served), body))    # 3.5 s since the hello in all
     kinds = [f["t"] for f in frames]
     assert "snap" not in kinds and kinds.count("tick") <= 5 and len(kinds) <= 5, kinds
+
+
+def test_odd_origin_and_token_are_refused_not_raised():
+    """An Origin urlsplit cannot parse ("http://[::1") and a token of undecodable bytes
+    (header bytes FF FE arrive as surrogates) are refusals, never exceptions (an attack
+    found a 500 and a traceback for each)."""
+    access = Access("0.0.0.0", token="s3cret")
+    assert not access.origin_ok("http://[::1", "127.0.0.1:8080")
+    assert not access.token_ok("\udcff\udcfe") and not access.token_ok("s3cret\udcff")
+    assert access.token_ok("s3cret")
+
+
+def _raw(port: int, data: bytes, wait: float = 2.0) -> bytes:
+    with socket.create_connection(("127.0.0.1", port), timeout=wait) as sock:
+        sock.sendall(data)
+        out = b""
+        try:
+            while True:
+                chunk = sock.recv(65536)
+                if not chunk:
+                    break
+                out += chunk
+        except socket.timeout:
+            pass
+        return out
+
+
+BAD_REQUESTS = [b"GET / HTTP/9.9\r\nHost: 127.0.0.1\r\n\r\n",
+                b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: -1\r\n\r\n",
+                b"GET /\x00 HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n",
+                b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX: " + b"a" * 20000 + b"\r\n\r\n"]
+
+
+def test_malformed_http_gets_400_and_one_log_line_without_traceback(served, caplog):
+    """Malformed requests: the client gets 400; the server logs one INFO line each, no
+    traceback (an attack counted 100 tracebacks for 100 requests); a WebSocket upgrade
+    with an unparsable Origin gets 403."""
+    port = served.transports[1].info()["port"]
+    caplog.set_level("INFO")
+    for request in BAD_REQUESTS:
+        assert _raw(port, request).split(b" ")[1] == b"400", request[:40]
+    upgrade = (b"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nOrigin: http://[::1\r\n"
+               b"Upgrade: websocket\r\nConnection: Upgrade\r\n"
+               b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+               % port)
+    assert _raw(port, upgrade).startswith(b"HTTP/1.1 403")
+    time.sleep(0.2)
+    web = [r for r in caplog.records if r.name.startswith("coolmuscle.web")]
+    assert not any(r.exc_info for r in caplog.records)
+    assert not [r for r in web if r.levelno >= 40], [r.getMessage() for r in web]
+    assert sum("Error handling request" in r.getMessage() for r in web) >= len(BAD_REQUESTS)
+
+
+def test_a_connection_flood_is_capped_and_trickled_headers_time_out(monkeypatch):
+    """At most MAX_CONNECTIONS connections at once (more are closed as they come: a
+    flood once used up the file descriptors the motor's TCP and Modbus ports share); a
+    connection whose request never completes is closed after IDLE_TIMEOUT."""
+    from coolmuscle.frontends.web import server as web_server
+    monkeypatch.setattr(web_server, "MAX_CONNECTIONS", 20)
+    monkeypatch.setattr(web_server, "IDLE_TIMEOUT", 0.5)
+    st = serve()
+    try:
+        web = st.transports[1]
+        port = web.info()["port"]
+        held = []
+        for _ in range(60):
+            sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+            sock.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n")     # never finished
+            held.append(sock)
+        time.sleep(0.2)
+        assert len(st.call(lambda: web._runner.server.connections)) <= 20
+        host = HostLine(st.transports[0].info()["port"])           # the motor still answers
+        assert host.query("?96.1", r"Px\.1=-?\d+") == "Px.1=0"
+        host.close()
+        deadline = time.monotonic() + 5
+        for sock in held:                            # all closed by the server (FIN or RST)
+            sock.settimeout(max(0.1, deadline - time.monotonic()))
+            try:
+                assert sock.recv(100) == b""
+            except ConnectionResetError:
+                pass
+            sock.close()
+        assert _raw(port, b"GET /api/info HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                          b"Connection: close\r\n\r\n").startswith(b"HTTP/1.1 200")
+    finally:
+        st.stop()

@@ -42,6 +42,10 @@ DEFAULT_PORT = 44818
 READ_SIZE = 65536
 IDLE_TICK = 0.1          # seconds between watchdog checks when nothing is due
 PORT_ATTEMPTS = 5        # port 0: tries for a TCP port whose UDP twin is free
+#: TCP clients served at once (encapsulation sessions need one each); one more is closed
+#: as it arrives, so a flood cannot use up the file descriptors the motor's other
+#: front ends share (docs/reliability.md "Bounds", as the text and Modbus TCP ports).
+MAX_TCP_CLIENTS = 64
 
 
 class _Datagrams(asyncio.DatagramProtocol):
@@ -198,8 +202,12 @@ class EnipTransport(Transport):
     # -- TCP ---------------------------------------------------------------------------------
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         assert self.router is not None
-        self._writers.add(writer)
         peer = writer.get_extra_info("peername") or ("0.0.0.0", 0)
+        if len(self._writers) >= MAX_TCP_CLIENTS:
+            log.info("enip: client %s refused: %d clients already", peer, MAX_TCP_CLIENTS)
+            writer.transport.abort()
+            return
+        self._writers.add(writer)
         local = writer.get_extra_info("sockname") or (self.host, 0)
         conn = Connection(self.router, self.sessions, (peer[0], peer[1]), (local[0], local[1]))
         frames = FrameReader()

@@ -35,6 +35,37 @@ from .toolbox import Toolbox
 
 log = logging.getLogger(__name__)
 
+#: Connections the dashboard's server keeps at once (pages, downloads, scripts): one
+#: more is closed as it arrives, so a flood of connections cannot use up the process's
+#: file descriptors, which the motor's other front ends share (docs/reliability.md).
+MAX_CONNECTIONS = 128
+#: Seconds a connection may stay without a whole request (also between requests on
+#: a kept-alive one): a client trickling a request's headers is closed after it.
+IDLE_TIMEOUT = 15.0
+
+
+class _OneLine(logging.Filter):
+    """aiohttp's request errors as one line each: a malformed request from a client
+    (bad request line, header, length ...; the client gets its 400) at INFO, anything
+    else at ERROR; the traceback only with ``COOLMUSCLE_DEBUG=1``."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        import os
+
+        from aiohttp.http_exceptions import HttpProcessingError
+        if record.exc_info and not os.environ.get("COOLMUSCLE_DEBUG"):
+            exc = record.exc_info[1]
+            record.msg = f"web: {record.getMessage()}: {type(exc).__name__}: {exc}"
+            record.args = ()
+            record.exc_info = record.exc_text = None
+            if isinstance(exc, HttpProcessingError):
+                record.levelno, record.levelname = logging.INFO, "INFO"
+        return record.levelno >= logging.getLogger("coolmuscle").getEffectiveLevel()
+
+
+_HTTP_LOG = logging.getLogger("coolmuscle.web.http")
+_HTTP_LOG.addFilter(_OneLine())
+
 STATIC = Path(__file__).with_name("static")
 #: Largest WebSocket message a page may send (a bank upload is at most 48 Ki characters,
 #: up to three bytes each in UTF-8, plus JSON escapes).
@@ -79,8 +110,10 @@ class WebTransport(Transport):
         if self.record:
             self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
-                                     shutdown_timeout=1.0)
+                                     shutdown_timeout=1.0, logger=_HTTP_LOG,
+                                     keepalive_timeout=IDLE_TIMEOUT)
         await self._runner.setup()
+        _cap_connections(self._runner.server, MAX_CONNECTIONS)
         site = web.TCPSite(self._runner, self.host, self.requested_port)
         try:
             await site.start()
@@ -256,3 +289,23 @@ def _loads(text: str) -> Any:
 
 def _error(status: int, message: str) -> web.Response:
     return web.json_response({"error": message}, status=status)
+
+
+def _cap_connections(server: Any, limit: int) -> None:
+    """Close a connection beyond ``limit`` as soon as it is made: aiohttp's server
+    tells itself of every new connection through ``connection_made``; the handler is
+    closed once it has started (its own ``force_close``), so aiohttp ends it as any
+    connection it drops.  Logged once a burst (at INFO)."""
+    made = server.connection_made
+    over = [False]
+
+    def connection_made(handler: Any, transport: Any) -> None:
+        made(handler, transport)
+        if len(server.connections) <= limit:
+            over[0] = False
+            return
+        if not over[0]:
+            over[0] = True
+            log.info("web: more than %d connections: the newest are closed", limit)
+        asyncio.get_running_loop().call_soon(handler.force_close)
+    server.connection_made = connection_made
