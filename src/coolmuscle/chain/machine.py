@@ -50,6 +50,15 @@ _MOTOR = {"rotor_inertia": "rotor_inertia", "rated_torque": "rated_torque",
           "peak_torque": "peak_torque", "max_speed": "max_speed", "kp": "kp"}
 _THERMAL = {"idle": "idle", "rise": "rise_at_rated", "time_constant": "time_constant",
             "alarm": "alarm"}
+#: What each physical quantity may be (docs/machine-file.md): wide enough for any
+#: machine a Cool Muscle can drive, narrow enough that the load model's arithmetic
+#: stays finite (a 1e308 N·m load once made every position NaN).
+_BOUNDS: dict[str, tuple[float, float]] = {
+    "inertia": (0.0, 10.0), "friction": (0.0, 1000.0), "torque": (-1000.0, 1000.0),
+    "rotor_inertia": (1e-9, 10.0), "rated_torque": (1e-4, 1000.0),
+    "peak_torque": (1.0, 10000.0), "max_speed": (1.0, 100000.0), "kp": (0.0, math.inf),
+    "idle": (-40.0, 200.0), "rise": (0.0, 500.0), "time_constant": (0.001, 1e7),
+    "alarm": (-40.0, 500.0)}
 _NAMED_SENSORS = ("origin_sensor", "cw_limit", "ccw_limit")
 _AXIS_KEYS = frozenset({"motor", "ppr", "start", "params", "load", "drive", "thermal",
                         "stoppers", "sensor", "input", "fault", "analog", "encoder",
@@ -209,7 +218,7 @@ def _table(value: object, keys: dict[str, str], where: str) -> dict[str, float]:
     if unknown:
         raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r} "
                                f"(known: {', '.join(keys)})")
-    return {keys[k]: _num(v, f"{where}.{k}", 0.0 if k != "torque" else -math.inf)
+    return {keys[k]: _num(v, f"{where}.{k}", *_BOUNDS.get(k, (-math.inf, math.inf)))
             for k, v in value.items()}
 
 
