@@ -375,10 +375,26 @@ def test_6_4_1_homing_objects_refuse_values_the_motor_refuses():
     assert b.abort(0x6098, 0, 5) == VALUE_HIGH and b.abort(0x6098, 0, 0) == VALUE_LOW
     assert b.abort(0x6099, 1, 5001) == VALUE_HIGH                  # CM1 K42 1..5000
     assert b.abort(0x609A, 0, 0) == VALUE_LOW                      # K43 1..5000
-    assert b.abort(0x607C, 0, -40000) == VALUE_LOW                 # K48 -32767..32767
-    assert b.abort(0x607C, 0, -300) == 0
+    # 607Ch is "U32" (6.4.1) carrying the signed K48 (-32767..32767), as 60F6h does
+    assert b.abort(0x607C, 0, -40000 & 0xFFFFFFFF) == VALUE_LOW
+    assert b.abort(0x607C, 0, 40000) == VALUE_HIGH
+    assert b.abort(0x607C, 0, -300 & 0xFFFFFFFF) == 0
     b.cycles(1)
-    assert b.chain.get_param(1, 48) == -300 and b.read(0x607C) == -300
+    assert b.chain.get_param(1, 48) == -300 and b.read(0x607C) == 0xFFFFFED4
+    assert b.read(0x60F6, 0x1C) == 0xFFFFFED4                     # the same K48
+
+
+def test_appendix_6_table_details():
+    """7.3 F511h-F514h: "Number of Entries 4: Fixed" (4h reserved, N/A); 6.4.1 60E3h
+    INT16 entries (the methods 1-4 of 6098h); 7.2.2 F591h-F594h "Max String Size
+    64bytes" (a longer reply is read in 64-byte pieces)."""
+    from coolmuscle.frontends.ethercat.objects import INT16
+    b = Bench("EB12")
+    assert [b.read(0xF511 + i, 0) for i in range(4)] == [4, 4, 4, 4]
+    assert [b.read(0x60E3, s) for s in range(1, 5)] == [1, 2, 3, 4]
+    assert all(b.od.lookup(0x60E3 + 0x800 * a, s)[1].dtype == INT16
+               for a in range(4) for s in range(1, 5))
+    assert all(b.od.table.get(0xF591 + i).entries[0].bits == 64 * 8 for i in range(4))
 
 
 # -- 6.5 digital I/O, 7.1 CPIO ----------------------------------------------------------------------
@@ -448,7 +464,8 @@ def test_7_4_f530_counts_the_cm_port_and_the_pdo_cycle():
 
 def test_7_5_k_parameters_through_60f6_and_servo_stiffness_60fb():
     b = Bench("EB12")
-    assert b.read(0x60F6, 0) == 0x4F and b.read(0x60F6, 0x16) == 10          # K42
+    assert b.read(0x60F6, 0) == 0x4F and b.read(0x60F6, 0x16) == 100         # CM1 K42
+    assert b.read(0x70F6, 0x16) == 10           # CM2 K42 (6.4.1 Note1: 100 / 10 default)
     assert b.abort(0x60F6, 0x01, 0) == NO_SUBINDEX                            # K21: N/A
     assert b.abort(0x60F6, 0x16, 0) == VALUE_LOW
     assert b.abort(0x70F6, 0x30, 2) == VALUE_HIGH                            # CM2 K68 0..1

@@ -210,7 +210,7 @@ _AXIS_VARS: tuple[tuple[int, str, DataType, str, str, bool, str, int], ...] = (
     (0x6071, "Target torque", INT16, "ro", "", False, "Appendix 6", 0),
     (0x6077, "Torque actual value", INT16, "ro", "", False, "Appendix 6", 0),
     (0x607A, "Target position", INT32, "rw", "rx", True, "6.3.2", 0),
-    (0x607C, "Home offset", INT32, "rw", "", True, "6.4.1", 0),
+    (0x607C, "Home offset", UINT32, "rw", "", True, "6.4.1", 0),   # "U32": K48 signed in it
     (0x6085, "Quick stop deceleration", UINT32, "rw", "", False, "Appendix 6", 0),
     (0x6098, "Homing method", UINT8, "rw", "", True, "6.4.1", 1),
     (0x609A, "Homing acceleration", UINT32, "rw", "", True, "6.4.1", 0),
@@ -253,7 +253,7 @@ def _axis(axis: int, firmware: str) -> list[Obj]:
             Entry(1, "Interpolation period", UINT8, "rw", available=False),
             Entry(2, "Interpolation index", INT8, "rw", available=False)], available=False),
         record(0x60E3 + d, f"ID{axis + 1} Supported homing method", [
-            Entry(i + 1, name, UINT16, default=i + 1) for i, name in enumerate(
+            Entry(i + 1, name, INT16, default=i + 1) for i, name in enumerate(
                 ("Stopper CW", "Stopper CCW", "Switch CW", "Switch CCW"))],
             code=ARRAY, section="6.4.1"),
         record(0x60F6 + d, f"ID{axis + 1} Cool Muscle K parameter", [
@@ -293,7 +293,8 @@ def _manufacturer(v: ident.Variant) -> list[Obj]:
             Entry(1, "Type", u32, default=1 if v.firmware[i] == "cm1" else 2),
             Entry(2, "CommSpeed", u32, default=178_000),
             Entry(3, "CommTime", u32, default=1),
-            Entry(4, "Reserved", u32, available=False)], section="2.2"))
+            Entry(4, "Reserved", u32, available=False)], section="2.2",
+            count=4))                             # 7.3: "Number of Entries 4: Fixed"
     info = ([f"Axis{n} receive error (ID{n})" for n in range(1, 5)]
             + [f"Axis{n} motor error code (ID{n})" for n in range(1, 5)]
             + [f"Axis{n} serial send counter (ID{n})" for n in range(1, 5)]
@@ -319,7 +320,7 @@ def _manufacturer(v: ident.Variant) -> list[Obj]:
                                 "rw", "", section="7.2", max_len=64), axis=i + 1))
     for i in range(ident.AXES):
         objs.append(replace(var(0xF591 + i, f"Axis{i + 1} CML command response (ID{i + 1})",
-                                STRING, "ro", "Null\r\n", section="7.2", max_len=128),
+                                STRING, "ro", "Null\r\n", section="7.2", max_len=64),
                             axis=i + 1))
     return objs
 

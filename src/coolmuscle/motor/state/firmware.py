@@ -278,7 +278,7 @@ def _cm1_params() -> dict[int, ParamSpec]:
         ranged(39, "Voltage filter gain", 0, 1028, 128, "5rad/s"),
         ranged(40, "Max speed for analog control", 1, 4000, 3000, "rpm"),
         ranged(41, "Travel range for analog control", -32767, 32767, 200, "pulses"),
-        ranged(42, "Go origin speed", 1, 5000, 10, "100pps"),
+        ranged(42, "Go origin speed", 1, 5000, 100, "100pps"),   # bridge guide 6.4.1 Note1
         ranged(43, "Go origin/manual feed acceleration", 1, 5000, 100, "kpps2"),
         ranged(44, "Deceleration ratio", 10, 500, 100, "%"),
         ranged(45, "Origin direction", 0, 3, 1),

@@ -97,9 +97,10 @@ def _method(value: int) -> None:
 
 
 def _k_object(od: Dictionary, index: int, axis: "AxisDrive", k: int) -> None:
-    """609Ah (K43), 607Ch (K48): the object is the motor's K parameter (6.4.1)."""
-    od.on_read(index, lambda sub: axis.k.get(k, 0))
-    od.on_write(index, lambda sub, v: _k_write(axis, k, int(v)))
+    """609Ah (K43), 607Ch (K48): the object is the motor's K parameter (6.4.1), a U32
+    that carries a signed K as 60F6h does (K48 = -5 reads FFFFFFFBh)."""
+    od.on_read(index, lambda sub: axis.k.get(k, 0) & 0xFFFFFFFF)   # a U32 carrying K
+    od.on_write(index, lambda sub, v: _k_write(axis, k, signed32(int(v))))
 
 
 def _k_read(axis: "AxisDrive", sub: int) -> int:
