@@ -99,3 +99,48 @@ def test_k34_6_merge_pulses_of_k73_at_passing_points_only() -> None:
 def test_k34_0_and_5_have_no_function(function: int) -> None:
     r = rig(f"K34.1=000{function}", "O1.1")
     assert outputs(r) == "OUT.1=00"
+
+
+def test_cm1_k34_digit_3_follows_o1_f1_and_4_follows_o2_f2() -> None:
+    """CM1 manual, K34 (N2 output 2, N1 output 1): "3:CML O1/F1 4:CML O2/F2": the digit
+    names the command an output follows, whichever output it is (on CM2, 3 is general
+    use of the output's own number and 4 the origin-search output)."""
+    from coolmuscle.chain.daisy import Chain
+    chain = Chain(firmware="cm1")
+    chain.execute("K33.1=1")                        # high active (CM1: one digit): port = signal
+    chain.execute("K34.1=43")                       # output 2: O2/F2, output 1: O1/F1
+    assert chain.execute("?50.1") == ["OUT.1=00"]
+    chain.execute("O2.1")
+    assert chain.execute("?50.1") == ["OUT.1=02"]
+    chain.execute("O1.1")
+    assert chain.execute("?50.1") == ["OUT.1=03"]
+    chain.execute("F2.1")
+    assert chain.execute("?50.1") == ["OUT.1=01"]
+    chain.execute("K34.1=33")                       # both outputs follow O1/F1
+    assert chain.execute("?50.1") == ["OUT.1=03"]
+    chain.execute("F1.1")
+    assert chain.execute("?50.1") == ["OUT.1=00"]
+    chain.execute("O2.1")                           # no output follows O2 now: ignored
+    assert chain.execute("?50.1") == ["OUT.1=00"]
+    cm2 = Chain()
+    cm2.execute("K33.1=1111")
+    cm2.execute("K34.1=0043")                       # CM2: output 1 general, 2 origin done
+    cm2.execute("O1.1")
+    cm2.execute("O2.1")
+    assert cm2.execute("?50.1") == ["OUT.1=01"]
+
+
+def test_cm1_k26_and_k33_are_one_logic_for_every_input_and_output() -> None:
+    """CM1 manual: "K26 Invert input signal 0/1", "K33 Output Logic 0:Normally open
+    1: Normally closed": one value, not a digit per channel as on CM2."""
+    from coolmuscle.chain.daisy import Chain
+    chain = Chain(firmware="cm1")
+    assert chain.execute("?70.1") == ["IN.1=00"]
+    chain.execute("K26.1=1")
+    assert chain.execute("?70.1") == ["IN.1=0F"]                # all four inverted
+    chain.set_input(1, 3, True)
+    assert chain.execute("?70.1") == ["IN.1=0B"]
+    chain.execute("K34.1=43")
+    assert chain.execute("?50.1") == ["OUT.1=03"]               # K33=0: both low active
+    chain.execute("K33.1=1")
+    assert chain.execute("?50.1") == ["OUT.1=00"]               # both high active

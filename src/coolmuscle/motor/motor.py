@@ -65,7 +65,9 @@ class Motor(Supervision):
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
-                            self._output_function_signal)
+                            self._output_function_signal,
+                            {3: 1, 4: 2} if firmware.name == "cm1" else None,
+                            one_logic=firmware.name == "cm1")
         self.torque_limit = 100
         self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
         self.alarm = 0

@@ -28,11 +28,19 @@ class DigitalIO:
     """Input levels, general output states, and the words reported by ?70 / ?50."""
 
     def __init__(self, inputs: int, outputs: int, param: Callable[[int], int],
-                 function_signal: Callable[[int, int], bool] = lambda fn, n: False) -> None:
+                 function_signal: Callable[[int, int], bool] = lambda fn, n: False,
+                 commanded: dict[int, int] | None = None, one_logic: bool = False) -> None:
+        """``commanded``: K34 digit -> the ``O#``/``F#`` number an output with that
+        digit follows (0: its own number).  CM2: {3: 0} (3 = general use); CM1:
+        {3: 1, 4: 2} (CM1 manual, K34: "3:CML O1/F1 4:CML O2/F2").  ``one_logic``: K26
+        and K33 are one value for every input / output (CM1: "K33 Output Logic
+        0:Normally open 1: Normally closed"), not a digit each."""
         self.input_count = inputs
         self.output_count = outputs
         self._param = param
         self._function_signal = function_signal
+        self._commanded: dict[int, int] = {OUT_GENERAL: 0} if commanded is None else commanded
+        self._one_logic = one_logic
         self.levels = [False] * (inputs + 1)        # index 1..inputs (electrical)
         self.general = [False] * (outputs + 1)      # O/F state, index 1..outputs
 
@@ -49,7 +57,7 @@ class DigitalIO:
         """Logical input signal after K26 (ch. 3 K26: 0/2 on when port on, 1/3 inverted)."""
         if not 1 <= number <= self.input_count:
             return False
-        inverted = digit(self._param(26), number) % 2 == 1
+        inverted = digit(self._param(26), 1 if self._one_logic else number) % 2 == 1
         return self.levels[number] != inverted
 
     def input_word(self) -> int:
@@ -61,30 +69,40 @@ class DigitalIO:
     def output_function(self, number: int) -> int:
         return digit(self._param(34), number)
 
-    def set_general(self, number: int, on: bool) -> bool:
-        """``O#``/``F#``: only an output whose K34 function is general use (3) follows.
+    def command_of(self, number: int) -> int | None:
+        """The ``O#``/``F#`` number output ``number`` follows now (K34), or ``None``."""
+        follows = self._commanded.get(self.output_function(number))
+        if follows is None:
+            return None
+        return number if follows == 0 else follows
 
-        Returns whether the output port changed.
+    def set_general(self, number: int, on: bool) -> bool:
+        """``O#``/``F#``: only outputs whose K34 digit follows command ``number`` change
+        (CM2: output ``number`` at general use, 3); the command is ignored otherwise.
+
+        Returns whether an output port changed.
         """
         if not 1 <= number <= self.output_count:
             return False
-        if self.output_function(number) != OUT_GENERAL:
+        followers = [n for n in range(1, self.output_count + 1) if self.command_of(n) == number]
+        if not followers:
             return False
-        before = self.output_port(number)
+        before = [self.output_port(n) for n in followers]
         self.general[number] = bool(on)
-        return before != self.output_port(number)
+        return before != [self.output_port(n) for n in followers]
 
     def output_signal(self, number: int) -> bool:
+        follows = self.command_of(number)
+        if follows is not None:
+            return self.general[follows]
         fn = self.output_function(number)
-        if fn == OUT_GENERAL:
-            return self.general[number]
         if fn == OUT_NONE:
             return False
         return self._function_signal(fn, number)
 
     def output_port(self, number: int) -> bool:
         """The port state: K33 digit 1 = high active, 0 = low active (ch. 3 K33)."""
-        high_active = digit(self._param(33), number) == 1
+        high_active = digit(self._param(33), 1 if self._one_logic else number) == 1
         signal = self.output_signal(number)
         return signal if high_active else not signal
 
@@ -96,4 +114,4 @@ class DigitalIO:
     def general_word(self) -> int:
         """Ports of the general-use outputs only (the K23 function 4 report)."""
         return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
-                   if self.output_function(n) == OUT_GENERAL and self.output_port(n))
+                   if self.command_of(n) is not None and self.output_port(n))
