@@ -73,3 +73,35 @@ def test_parse_run_args_leaves_anything_unusual_to_typer() -> None:
                  ["run", "a", "--motors", "0"], ["run", "a", "--firmware", "cm9"],
                  ["run", "a", "--trace", "-"], ["sim"], []):
         assert parse_run_args(argv) is None, argv
+
+
+@pytest.mark.parametrize("extra, words", [
+    (("--until", "nan"), "--until must be 0..1e+09 seconds, not nan"),
+    (("--until", "inf"), "--until must be 0..1e+09 seconds, not inf"),
+    (("--until", "1e308"), "--until must be 0..1e+09 seconds"),
+    (("--trace-step", "1e-12", "--trace", "{tmp}/t.csv"), "--trace-step must be 1e-05..86400"),
+    (("--trace-step", "inf", "--trace", "{tmp}/t.csv"), "--trace-step must be 1e-05..86400"),
+])
+def test_run_times_that_cannot_be_run_are_usage_errors(tmp_path: Path, extra: tuple[str, ...],
+                                                       words: str) -> None:
+    """A NaN, infinite or huge ``--until`` and a ``--trace-step`` too fine to end (1e-12 s
+    never advanced: the run hung) or infinite: one line, exit 2, on both entry points
+    (an attack found internal errors and hangs)."""
+    path = tmp_path / "s.cml"
+    path.write_text("S.1=10\n")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in extra]
+    for code in (QUICK, TYPER):
+        done = run(code, "run", str(path), *args)
+        lines = done.stderr.decode().strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and words in lines[0], lines
+
+
+def test_check_with_an_unknown_firmware_header_is_a_usage_error(tmp_path: Path) -> None:
+    """``# coolmuscle: firmware=zz``: one line naming the header, exit 2 (was an
+    internal error)."""
+    path = tmp_path / "b.cml"
+    path.write_text("# coolmuscle: firmware=zz\nB1.1\nP1.1\nEND\n")
+    done = run(TYPER, "check", str(path))
+    lines = done.stderr.decode().strip().splitlines()
+    assert done.returncode == 2 and lines == [
+        f"coolmuscle: error: {path}: '# coolmuscle: firmware=zz' is not cm2, rt3 or cm1"]

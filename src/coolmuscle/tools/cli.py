@@ -426,7 +426,9 @@ def _web_transport(address: str) -> Transport:
 def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
              make_chain: Callable[[], Any]) -> None:
     """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
+    from .runcmd import check_run_times
     from .web_run import run_script_web
+    check_run_times(until)
     if any(o not in (None, False) for o in others):
         raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
                          "are for fast runs (the page downloads the trace and the plot)")

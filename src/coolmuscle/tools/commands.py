@@ -53,8 +53,12 @@ def check(
             program = load_program(path)
         except (OSError, UnicodeDecodeError) as exc:
             raise UsageError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}")
-        report = check_program(program, firmware=firmware.value if firmware else None,
-                               motors=motors)
+        try:
+            report = check_program(program, firmware=firmware.value if firmware else None,
+                                   motors=motors)
+        except LookupError:           # the file's own header names no firmware we know
+            raise UsageError(f"{path}: '# coolmuscle: firmware={program.firmware}' is not "
+                             "cm2, rt3 or cm1") from None
         _check_script_lines(path, report)
         reports.append(report)
     if output is Format.json:

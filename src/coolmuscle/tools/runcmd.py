@@ -173,6 +173,25 @@ def header_defaults(file: Path, motors: int | None, firmware: str | None,
     return motors, firmware, machine
 
 
+#: The longest virtual time a run goes on to (``--until``): 30 years of a machine.
+MAX_UNTIL_S = 1e9
+#: The trace grid (``--trace-step``): from 10 µs (a row every 10 µs is finer than any
+#: signal the motor reports) to a day.
+TRACE_STEP_RANGE = (1e-5, 86400.0)
+
+
+def check_run_times(until: float | None, trace_step: float = 0.001) -> None:
+    """``--until`` and ``--trace-step`` as a usage error (exit 2) when they cannot be
+    run: not a finite number, negative, a step too fine to end (a 1e-12 s step never
+    advanced) or a time beyond what the kernel's nanoseconds hold."""
+    import math
+    if until is not None and not (math.isfinite(until) and 0 <= until <= MAX_UNTIL_S):
+        raise UsageError(f"--until must be 0..{MAX_UNTIL_S:g} seconds, not {until!r}")
+    lo, hi = TRACE_STEP_RANGE
+    if not (math.isfinite(trace_step) and lo <= trace_step <= hi):
+        raise UsageError(f"--trace-step must be {lo:g}..{hi:g} seconds, not {trace_step!r}")
+
+
 def run_command(file: Path, until: float | None = None, trace: Path | None = None,
                 trace_step: float = 0.001, plot: Path | None = None, xy: str | None = None, motors: int | None = None,
                 firmware: str | None = None, state: Path | None = None, check: bool = False,
@@ -187,10 +206,7 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
     motors, firmware, machine = header_defaults(file, motors, firmware, machine)
     if check and not script.expectations:
         raise UsageError(f"{file}: --check needs a script with '<<' expectations")
-    if until is not None and until < 0:
-        raise UsageError("--until must be >= 0")
-    if not trace_step > 0:
-        raise UsageError("--trace-step must be > 0")
+    check_run_times(until, trace_step)
     pairs = xy_pairs(xy, motors)
     if trace is not None:
         from .trace import TraceFormatError, check_trace_path
