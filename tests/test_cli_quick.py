@@ -105,3 +105,15 @@ def test_check_with_an_unknown_firmware_header_is_a_usage_error(tmp_path: Path) 
     lines = done.stderr.decode().strip().splitlines()
     assert done.returncode == 2 and lines == [
         f"coolmuscle: error: {path}: '# coolmuscle: firmware=zz' is not cm2, rt3 or cm1"]
+
+
+@pytest.mark.parametrize("scale", ["inf", "nan", "0", "1e300"])
+def test_sim_time_scale_out_of_range_is_a_usage_error(scale: str) -> None:
+    """``sim --time-scale inf`` was an internal error; anything not in (0, 1e6] is one
+    line and exit 2 before anything starts."""
+    done = subprocess.run([sys.executable, "-m", "coolmuscle", "sim", "--no-state", "--tcp",
+                           "127.0.0.1:0", "--time-scale", scale], capture_output=True,
+                          env=ENV, timeout=60, stdin=subprocess.DEVNULL)
+    lines = done.stderr.decode().strip().splitlines()
+    assert done.returncode == 2 and lines == [
+        "coolmuscle: error: --time-scale must be above 0 and at most 1e+06"], lines

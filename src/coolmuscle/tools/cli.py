@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import enum
 import logging
+import math
 import os
 import signal
 import sys
@@ -194,6 +195,11 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
         raise UsageError(str(exc)) from None
 
 
+#: ``sim --time-scale``: virtual seconds per wall second, at most a million (beyond,
+#: a wall second would be more virtual time than the motor's clock counts usefully).
+MAX_TIME_SCALE = 1e6
+
+
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
                  state: Path | None, scale: float, label: str | None = None) -> None:
     from ..frontends.transports.service import Service
@@ -318,8 +324,8 @@ def sim(
     _setup_logging(verbose)
     if state is not None and no_state:
         raise UsageError("--state and --no-state exclude each other")
-    if not time_scale > 0:
-        raise UsageError("--time-scale must be > 0")
+    if not (math.isfinite(time_scale) and 0 < time_scale <= MAX_TIME_SCALE):
+        raise UsageError(f"--time-scale must be above 0 and at most {MAX_TIME_SCALE:g}")
     state_dir = None if no_state else (state or default_state_dir()).expanduser()
     if (modbus_rtu or modbus_tcp) and firmware == Firmware.cm1:
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
