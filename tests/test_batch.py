@@ -343,3 +343,24 @@ def test_the_chain_header_chooses_motors_firmware_and_a_state_directory(
     import csv
     rows = list(csv.DictReader((tmp_path / "r.csv").open()))
     assert rows[0]["m2.final_position"] == "0"  # the figures of motor 2 are there
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--until", "inf"), "--until must be 0..1e+09 seconds, not inf"),
+    (("--until", "1e300"), "--until must be 0..1e+09 seconds"),
+    (("--scheduler", "tls://127.0.0.1:1"), "--scheduler tls://127.0.0.1:1: write tcp://HOST:PORT"),
+    (("--scheduler", "inproc://x"), "--scheduler inproc://x: write tcp://HOST:PORT"),
+    (("--results", "/dev/full"), "cannot write /dev/full: No space left on device"),
+])
+def test_batch_options_that_cannot_work_are_one_line(capsys: pytest.CaptureFixture[str],
+                                                     tmp_path: Path, args: tuple[str, ...],
+                                                     words: str) -> None:
+    """An attack found: --until inf accepted and every run an error; tls:// and inproc://
+    schedulers an internal error or a traceback after a 10 s stall; a full disk reported
+    as "cannot write None".  Each is now one line and exit 2."""
+    script = tmp_path / "s.cml"
+    script.write_text("S.1=1\n")
+    jobs = () if "--scheduler" in args else ("-j", "1")
+    code, _out, err = cli(capsys, "batch", *jobs, *args, str(script))
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and words in lines[-1] and "Traceback" not in err, err

@@ -165,3 +165,19 @@ def test_a_second_sim_on_the_same_state_is_refused_and_the_first_keeps_saving(
     chain = Chain(state_dir=tmp_path)
     assert chain.execute("K42.1") == ["K42.1=111"] and chain.execute("P5.1") == ["P5.1=555"]
     chain.close()
+
+
+def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(tmp_path: Path) -> None:
+    """A `$` snapshot replaced by 100,000 nested arrays: the documented one-line
+    "unreadable ... move the file aside" StoreError (it was an internal error:
+    RecursionError), and the file is left as it was."""
+    chain = Chain(state_dir=tmp_path)
+    assert chain.execute("$.1") == ["saved.1"]
+    chain.close()
+    path = tmp_path / "coolmuscle.sqlite3"
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE snapshot SET data = ?", ("[" * 100_000 + "]" * 100_000,))
+    before = path.read_bytes()
+    with pytest.raises(StoreError, match=r"unreadable \(nested too deeply\); move the file"):
+        Chain(state_dir=tmp_path)
+    assert path.read_bytes() == before

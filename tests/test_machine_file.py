@@ -34,6 +34,10 @@ def test_examples_load(path: Path) -> None:
     ("[[axis]]\n[axis.drive]\nrated_torque = 0\n", "outside"),
     ("[[axis]]\n[axis.thermal]\nidle = -300\n", "outside -40..200"),
     ("[[axis]]\n[axis.load]\nfriction = nan\n", "expected a number"),
+    ("[[axis]]\n[axis.drive]\nkp = 0\n", "kp: 0 is outside 0.001..inf"),
+    ("[[axis]]\nstart = inf\n", "start: inf is outside"),
+    ("[[axis]]\n[[axis.input]]\nat = inf\ninput = 1\non = true\n", "at: inf is outside 0..1e.09"),
+    ("a = " + "[" * 3000 + "]" * 3000 + "\n", "nested too deeply"),
     ("[[axis]]\n[axis.load]\nmass = 1\n", "unknown key 'mass'"),
     ("[[axis]]\n[axis.stoppers]\nccw = 10\ncw = 0\n", "ccw must be below cw"),
     ("[[axis]]\n[axis.cw_limit]\ninput = 2\non = [5]\n", "expected [from, to]"),
@@ -57,6 +61,18 @@ def test_schema_mistakes_name_the_key(text: str, message: str) -> None:
     ("[[axis]]\nparams = { K27 = 7777777 }\n", "motor 1"),
     ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'gremlins'\n", "unknown fault"),
     ("[[axis]]\n[axis.origin_sensor]\ninput = 6\non = [0, 1]\n", "this firmware has 1..4"),
+    # the fault schedule's values are checked when the file is installed (an attack
+    # found them failing only when the fault came, as "the motor model raised")
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'overload'\ntorque = nan\n",
+     "torque must be a finite number"),
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'over_temperature'\ntemperature = 1e9\n",
+     "temperature must be -40..200"),
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'stuck_input'\ninput = 99\non = true\n",
+     "input must be 1..6"),
+    ("[[axis]]\n[[axis.fault]]\nat = 1\nfault = 'broken_cable'\ncable = 'x'\n",
+     "cable must be"),
+    ("[[axis]]\n[axis.analog]\nkind = 'sine'\nfrequency = 1e300\n",
+     r"frequency must be 0..1e\+06"),
 ])
 def test_install_mistakes(text: str, message: str) -> None:
     chain = Chain(firmware="cm2" if "input = 6" not in text else "rt3")
@@ -156,3 +172,12 @@ def test_cli_run_with_a_machine_file(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert exit_info.value.code == 2
     assert err.strip().startswith("coolmuscle: error:") and "bogus" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_machine_file_that_is_not_utf8_is_refused_in_one_line(tmp_path: Path) -> None:
+    from coolmuscle.chain.machine import load_machine
+    path = tmp_path / "m.toml"
+    path.write_bytes(b'name = "\xff"\n')
+    with pytest.raises(MachineFileError, match="not UTF-8 text"):
+        load_machine(path)
+

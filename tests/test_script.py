@@ -257,3 +257,11 @@ def test_a_failing_display_is_not_blamed_on_the_motor() -> None:
     with pytest.raises(BrokenPipeError):
         run_script("?96.1\n?96.1\n", chain, on_entry=broken)
     assert chain.counter == 2
+
+
+@pytest.mark.parametrize("line", ["@wait 1e308", "@until x 1e300", "@wait 1000000001"])
+def test_a_wait_beyond_the_kernels_clock_is_a_script_error(line: str) -> None:
+    """Waits up to 1e9 s (30 years); beyond, a bad script (exit 2), not the model's
+    OverflowError in the middle of the run (an attack found that)."""
+    with pytest.raises(ScriptError, match=r"seconds must be 0..1e\+09"):
+        parse_script(line + "\n")

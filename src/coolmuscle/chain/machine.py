@@ -56,9 +56,13 @@ _THERMAL = {"idle": "idle", "rise": "rise_at_rated", "time_constant": "time_cons
 _BOUNDS: dict[str, tuple[float, float]] = {
     "inertia": (0.0, 10.0), "friction": (0.0, 1000.0), "torque": (-1000.0, 1000.0),
     "rotor_inertia": (1e-9, 10.0), "rated_torque": (1e-4, 1000.0),
-    "peak_torque": (1.0, 10000.0), "max_speed": (1.0, 100000.0), "kp": (0.0, math.inf),
+    "peak_torque": (1.0, 10000.0), "max_speed": (1.0, 100000.0), "kp": (1e-3, math.inf),
     "idle": (-40.0, 200.0), "rise": (0.0, 500.0), "time_constant": (0.001, 1e7),
     "alarm": (-40.0, 500.0)}
+#: Scheduled inputs and faults happen within this many seconds (as ``run --until``).
+MAX_TIME_S = 1e9
+#: A machine position (pulses) far beyond any travel, still exact in a float.
+MAX_POSITION = 1e12
 _NAMED_SENSORS = ("origin_sensor", "cw_limit", "ccw_limit")
 _AXIS_KEYS = frozenset({"motor", "ppr", "start", "params", "load", "drive", "thermal",
                         "stoppers", "sensor", "input", "fault", "analog", "encoder",
@@ -127,6 +131,9 @@ def load_machine(path: str | Path) -> Machine:
     except OSError as exc:
         raise MachineFileError(f"cannot read machine file {path}: {exc.strerror or exc}") \
             from None
+    except UnicodeDecodeError as exc:
+        raise MachineFileError(f"{path}: not UTF-8 text (byte {exc.start}): a machine file "
+                               "is TOML") from None
     return parse_machine(text, str(path))
 
 
@@ -136,6 +143,8 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MachineFileError(f"{source}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
     unknown = set(data) - {"axis", "name", "description"}
     if unknown:
         raise MachineFileError(f"{source}: unknown top-level key {sorted(unknown)[0]!r}")
@@ -144,7 +153,10 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         tables = [tables]
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
         raise MachineFileError(f"{source}: 'axis' must be [[axis]] tables")
-    axes = [_axis(t, i, source) for i, t in enumerate(tables)]
+    try:
+        axes = [_axis(t, i, source) for i, t in enumerate(tables)]
+    except RecursionError:
+        raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
     ids = [a.motor for a in axes]
     if len(set(ids)) != len(ids):
         raise MachineFileError(f"{source}: two [[axis]] tables for the same motor")
@@ -159,7 +171,7 @@ def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
     spec = AxisSpec(motor=_int(t.get("motor", index + 1), f"{where}.motor", 1, 15))
     where = f"{source}: axis motor={spec.motor}"
     spec.ppr = _int(t.get("ppr", 1000), f"{where}.ppr", 1, 10_000_000)
-    spec.start = _num(t.get("start", 0.0), f"{where}.start")
+    spec.start = _num(t.get("start", 0.0), f"{where}.start", -MAX_POSITION, MAX_POSITION)
     spec.params = _params(t.get("params", {}), f"{where}.params")
     spec.load = _table(t.get("load", {}), _LOAD, f"{where}.load")
     drive = t.get("drive", {})
@@ -270,7 +282,7 @@ def _scheduled_input(value: dict[str, Any], where: str) -> ScheduledInput:
     on = value.get("on")
     if not isinstance(on, bool):
         raise MachineFileError(f"{where}.on: expected true or false")
-    return ScheduledInput(_num(value.get("at"), f"{where}.at", 0.0),
+    return ScheduledInput(_num(value.get("at"), f"{where}.at", 0.0, MAX_TIME_S),
                           _int(value.get("input"), f"{where}.input", 1, 6), on)
 
 
@@ -280,9 +292,9 @@ def _scheduled_fault(value: dict[str, Any], where: str) -> ScheduledFault:
     if not isinstance(fault, str):
         raise MachineFileError(f"{where}.fault: expected a fault name")
     until = value.get("until")
-    at = _num(value.get("at"), f"{where}.at", 0.0)
+    at = _num(value.get("at"), f"{where}.at", 0.0, MAX_TIME_S)
     if until is not None:
-        until = _num(until, f"{where}.until", at)
+        until = _num(until, f"{where}.until", at, MAX_TIME_S)
         if fault not in _CLEARABLE:
             raise MachineFileError(f"{where}.until: {fault!r} is not a lasting fault")
     return ScheduledFault(at, fault, params, until)

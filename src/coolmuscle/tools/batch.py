@@ -12,6 +12,8 @@ written).
 
 from __future__ import annotations
 
+import math
+
 import logging
 import sys
 import time
@@ -107,8 +109,10 @@ def check_options(motors: int, firmware: str, until: float | None) -> None:
         raise usage_error(f"--motors must be 1..15, not {motors}")
     if firmware not in FIRMWARES:
         raise usage_error(f"--firmware must be cm2, rt3 or cm1, not {firmware!r}")
-    if until is not None and not until >= 0:
-        raise usage_error("--until must be >= 0")
+    if until is not None:
+        from .runcmd import MAX_UNTIL_S
+        if not (math.isfinite(until) and 0 <= until <= MAX_UNTIL_S):
+            raise usage_error(f"--until must be 0..{MAX_UNTIL_S:g} seconds, not {until!r}")
 
 
 def prepare(build: Callable[[], list[Job]]) -> list[Job]:
@@ -234,13 +238,15 @@ def _escape(text: object) -> str:
 
 def write_outputs(run: BatchRun, junit: Path | None, results: Path | None,
                   suite: str) -> None:
-    try:
-        if junit is not None:
-            write_junit(junit, run.jobs, run.outcomes, suite=suite)
-        if results is not None:
-            write_results(results, run.jobs, run.outcomes)
-    except OSError as exc:
-        raise usage_error(f"cannot write {exc.filename}: {exc.strerror or exc}") from None
+    for path, write in ((junit, lambda p: write_junit(p, run.jobs, run.outcomes, suite=suite)),
+                        (results, lambda p: write_results(p, run.jobs, run.outcomes))):
+        if path is None:
+            continue
+        try:
+            write(path)
+        except OSError as exc:    # a full disk fails at close: exc.filename is None there
+            raise usage_error(f"cannot write {exc.filename or path}: "
+                              f"{exc.strerror or exc}") from None
 
 
 def batch(

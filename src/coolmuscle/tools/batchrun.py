@@ -164,11 +164,11 @@ class DaskEngine(Engine):
 
 def probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
     """Fail at once (not after the client's retries) when nothing listens at a
-    ``tcp://HOST:PORT`` address; other protocols are left to the client."""
+    ``tcp://HOST:PORT`` address.  Only TCP is taken: ``tls://`` needs certificates the
+    command line cannot give, ``inproc://`` is a scheduler inside one process, and
+    either left the Dask client to fail after a 10 s stall with a traceback."""
     match = re.fullmatch(r"(?:tcp://)?(\[[^\]]+\]|[^:/\[\]]+)(?::(\d+))?/?", address)
     if match is None:
-        if "://" in address and not address.startswith("tcp://"):
-            return
         raise EngineError(f"--scheduler {address}: write tcp://HOST:PORT")
     host = match.group(1).strip("[]")
     port = int(match.group(2) or DEFAULT_SCHEDULER_PORT)

@@ -134,13 +134,17 @@ class Script:
         return sum(1 for s in self.lines if s.kind == "expect")
 
 
+#: The longest wait a script line may ask for (as ``run --until``): 30 years.
+MAX_SECONDS = 1e9
+
+
 def _seconds_arg(text: str, what: str, line_no: int) -> float:
     try:
         value = float(text)
     except ValueError:
         raise ScriptError(f"{what}: {text!r} is not a number of seconds", line_no) from None
-    if not math.isfinite(value) or value < 0:
-        raise ScriptError(f"{what}: seconds must be finite and >= 0, not {text}", line_no)
+    if not math.isfinite(value) or not 0 <= value <= MAX_SECONDS:
+        raise ScriptError(f"{what}: seconds must be 0..{MAX_SECONDS:g}, not {text}", line_no)
     return value
 
 

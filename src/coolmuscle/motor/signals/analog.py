@@ -295,10 +295,15 @@ def _volts(table: Mapping[str, Any], key: str, default: float | None = None) -> 
     return counts_to_volts(value) if unit == "counts" else float(value)
 
 
-def _number(table: Mapping[str, Any], key: str, default: float) -> float:
+def _number(table: Mapping[str, Any], key: str, default: float,
+            lo: float = -1e9, hi: float = 1e9) -> float:
+    """A finite number within ``lo..hi`` (times in seconds, phases in degrees: beyond
+    1e9 the sampling arithmetic loses every digit)."""
     value = table.get(key, default)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"[axis.analog] {key} must be a finite number")
+    if not lo <= value <= hi:
+        raise ValueError(f"[axis.analog] {key} must be {lo:g}..{hi:g}, not {value!r}")
     return float(value)
 
 
@@ -340,7 +345,7 @@ def source_from_config(table: Mapping[str, Any], *, base_dir: Path | str | None 
                     round(_number(table, "start", 0.0) * NS_PER_S), round(duration * NS_PER_S))
     if kind == "sine":
         return Sine(_volts(table, "offset", 2.5), _volts(table, "amplitude", 1.0),
-                    _number(table, "frequency", 1.0), _number(table, "phase", 0.0))
+                    _number(table, "frequency", 1.0, 0.0, 1e6), _number(table, "phase", 0.0))
     if kind == "csv":
         if "file" not in table:
             raise ValueError("[axis.analog] csv needs 'file'")

@@ -380,6 +380,9 @@ def _decode(text: str, motor_id: int, path: str = "") -> dict[str, Any]:
     except (ValueError, TypeError) as exc:
         raise StoreError(bad_state_message(path, motor_id,
                                            f"the $ snapshot is unreadable ({exc})")) from exc
+    except RecursionError:           # JSON nested deeper than Python decodes
+        raise StoreError(bad_state_message(path, motor_id, "the $ snapshot is unreadable "
+                                           "(nested too deeply)")) from None
     return data
 
 

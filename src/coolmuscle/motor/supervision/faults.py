@@ -83,7 +83,20 @@ class Faults:
         unknown = set(params) - allowed
         if unknown:
             raise ValueError(f"fault {fault!r} takes no parameter {sorted(unknown)[0]!r}")
+        self._check_values(params)
         return handler
+
+    def _check_values(self, p: dict[str, object]) -> None:
+        """The values' bounds, before anything changes (a machine file's fault schedule
+        is checked when the file is installed, not when the fault comes)."""
+        for key, bounds in (("torque", TORQUE_PERCENT), ("temperature", TEMPERATURE_C),
+                            ("volts", (0.0, 1000.0))):
+            if key in p:
+                _number(p, key, 0.0, bounds)
+        if "input" in p:
+            _number(p, "input", 0.0, (1.0, float(self.motor.io.input_count)))
+        if "cable" in p and str(p["cable"]).lower() not in ("io", "power"):
+            raise ValueError("broken_cable: cable must be 'io' or 'power'")
 
     def inject(self, fault: str, **params: object) -> None:
         """Inject ``fault`` now; ``ValueError`` for an unknown fault or parameter."""
