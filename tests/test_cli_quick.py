@@ -117,3 +117,32 @@ def test_sim_time_scale_out_of_range_is_a_usage_error(scale: str) -> None:
     lines = done.stderr.decode().strip().splitlines()
     assert done.returncode == 2 and lines == [
         "coolmuscle: error: --time-scale must be above 0 and at most 1e+06"], lines
+
+
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_a_device_is_not_read_as_a_script(command: str) -> None:
+    """``run /dev/zero`` read until the memory ran out (killed); a device is one line and
+    exit 2.  A pipe (``run <(...)``) is still read."""
+    done = run(TYPER, command, "/dev/zero")
+    lines = done.stderr.decode().strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and "a device, not a file" in lines[0]
+
+
+def test_check_looks_at_each_bank_statement_a_bounded_number_of_times(monkeypatch) -> None:
+    """3,000 bank definitions: the registers the file's banks write are worked out once a
+    file (once a bank, the work was quadratic: 13.5 s for a 39 KB file; an attack found
+    it).  Counted, not timed: ``writes`` is asked once per statement of the file."""
+    from coolmuscle.client.program import parse_program
+    from coolmuscle.tools import check as check_mod
+    from coolmuscle.tools.check import check_program
+    calls = [0]
+    writes = check_mod.tree.writes
+
+    def counted(statement):
+        calls[0] += 1
+        return writes(statement)
+    monkeypatch.setattr(check_mod.tree, "writes", counted)
+    program = parse_program("B1.1\nP.1=1\n\n" * 3000)
+    report = check_program(program)
+    assert len(report.banks) == 3000
+    assert calls[0] <= 2 * 3000, calls[0]

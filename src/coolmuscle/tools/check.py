@@ -221,13 +221,18 @@ class _Checker:
                                              block.header.number, steps, commands))
 
     def _set_in_banks(self) -> set[RegKey]:
-        """Registers some bank of the file writes (ladder banks set them for programs)."""
+        """Registers some bank of the file writes (ladder banks set them for programs);
+        worked out once a file (it was once a bank: quadratic in the banks)."""
+        cached = getattr(self, "_banks_write", None)
+        if cached is not None:
+            return cached
         found: set[RegKey] = set()
         for block in self.program.banks:
             for line in block.body:
                 for statement in line.statements:
                     for each in tree.flat(statement):
                         found |= {tree.key(r, block.motor_id) for r in tree.writes(each)}
+        self._banks_write: set[RegKey] | None = found
         return found
 
     def _length(self, line: SourceLine) -> None:

@@ -49,6 +49,8 @@ def check(
 
     reports = []
     for path in files:
+        if path.is_char_device() or path.is_block_device():  # /dev/zero fills the memory
+            raise UsageError(f"cannot read {path}: a device, not a file")
         try:
             program = load_program(path)
         except (OSError, UnicodeDecodeError) as exc:

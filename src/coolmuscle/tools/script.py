@@ -238,6 +238,8 @@ def load_script(source: str | os.PathLike[str]) -> Script:
     (it is a mistyped path, not a line of CML)."""
     if isinstance(source, os.PathLike) or ("\n" not in source and os.path.isfile(source)):
         path = Path(source)
+        if path.is_char_device() or path.is_block_device():   # /dev/zero never ends
+            raise ScriptError(f"cannot read script {path}: a device, not a file")
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
