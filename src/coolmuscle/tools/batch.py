@@ -12,9 +12,8 @@ written).
 
 from __future__ import annotations
 
-import math
-
 import logging
+import math
 import sys
 import time
 from dataclasses import dataclass
