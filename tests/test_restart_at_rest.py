@@ -50,8 +50,27 @@ def close(a: list[tuple[float, float, float]], b: list[tuple[float, float, float
         for (p, v, e), (q, w, f) in zip(a, b))
 
 
-def assert_same_run(runs: list[tuple[list[str], list[int], list[tuple[float, float, float]]]]
-                    ) -> None:
+Run = tuple[list[str], list[int], list[tuple[float, float, float]]]
+
+
+def run_twins(bank: list[str], samples: int, step_ms: int, load: int = 0) -> list[Run]:
+    """``bank`` started on the exact chain, then on the spliced one (an overload of
+    ``load`` % on each): what each printed, when, and the shaft every ``step_ms``."""
+    runs = []
+    for exact in (True, False):
+        chain, events = twin(exact, bank)
+        if load:
+            chain.inject_fault(1, "overload", torque=load)
+        chain.execute("[1.1")
+        shaft = []
+        for _ in range(samples):
+            chain.kernel.advance(step_ms * NS_PER_MS)
+            shaft.append(sample(chain))
+        runs.append(([text for _, text in events], [t for t, _ in events], shaft))
+    return runs
+
+
+def assert_same_run(runs: list[Run]) -> None:
     """The spliced run is the exact one: the same report texts; each report within
     2 ns plus 1 ns for every report before it, the shaft within the run's whole shift.
     A reversal starts at the command's end rounded to the nanosecond (up to 0.5 ns from
@@ -76,18 +95,7 @@ def test_ch3_k55_a_bank_reversing_at_in_position_moves_as_the_exact_model(
     comes early, a torque limit and a load torque."""
     bank = [f"K55.1={k55}, M.1={limit}", f"S1.1={s}, A1.1={a}, P1.1={p1}, P2.1={p2}",
             "B1.1", "X0", "S1.1, A1.1, P1.1", "P2.1", "X-", "END"]
-    runs = []
-    for exact in (True, False):
-        chain, events = twin(exact, bank)
-        if load:
-            chain.inject_fault(1, "overload", torque=load)
-        chain.execute("[1.1")
-        shaft = []
-        for _ in range(400):
-            chain.kernel.advance(25 * NS_PER_MS)
-            shaft.append(sample(chain))
-        runs.append(([text for _, text in events], [t for t, _ in events], shaft))
-    assert_same_run(runs)
+    assert_same_run(run_twins(bank, 400, 25, load))
 
 
 @settings(max_examples=25, deadline=None)
@@ -104,16 +112,7 @@ def test_ch3_k69_k51_k44_s_curves_creep_and_other_decelerations_move_as_the_exac
     bank = [f"K55.1={k55}, K69.1={k69}, K51.1={k51}, K44.1={k44}",
             f"S1.1={s}, A1.1={a}, P1.1={p1}, A2.1={a2}, P2.1={p2}",
             "B1.1", "X0", "S1.1, A1.1, P1.1", "A2.1, P2.1", "X-", "END"]
-    runs = []
-    for exact in (True, False):
-        chain, events = twin(exact, bank)
-        chain.execute("[1.1")
-        shaft = []
-        for _ in range(300):
-            chain.kernel.advance(30 * NS_PER_MS)
-            shaft.append(sample(chain))
-        runs.append(([text for _, text in events], [t for t, _ in events], shaft))
-    assert_same_run(runs)
+    assert_same_run(run_twins(bank, 300, 30))
 
 
 def test_a_repeated_cycle_reuses_its_solved_moves() -> None:
