@@ -44,13 +44,22 @@ MAX_LINE = 512
 ByteListener = Callable[[bytes], None]
 
 
-@dataclass(frozen=True)
+@dataclass(init=False, unsafe_hash=True)
 class LineSettings:
-    """What the host line needs from the motor's parameters, read live."""
+    """What the host line needs from the motor's parameters, read live (immutable by
+    convention)."""
 
-    echo: bool = True           # K23 without 8
-    delimiter: bytes = b"\r\n"  # K70: 0 -> CR, 1 -> CRLF
-    baud: int = 38400           # K20
+    echo: bool                  # K23 without 8
+    delimiter: bytes            # K70: 0 -> CR, 1 -> CRLF
+    baud: int                   # K20
+
+    def __init__(self, echo: bool = True, delimiter: bytes = b"\r\n",
+                 baud: int = 38400) -> None:
+        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
+        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        self.echo = echo
+        self.delimiter = delimiter
+        self.baud = baud
 
 
 class LineMode(Protocol):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 from mypy_extensions import mypyc_attr
@@ -53,14 +53,23 @@ def to_seconds(ns: int) -> float:
     return ns / NS_PER_S
 
 
-@dataclass(eq=False, slots=True)
+@dataclass(init=False, eq=False, slots=True)
 class Timer:
     """A scheduled callback; :meth:`cancel` keeps it from running."""
 
     at: int
     callback: Callback
-    name: str = ""
-    cancelled: bool = field(default=False)
+    name: str
+    cancelled: bool
+
+    def __init__(self, at: int, callback: Callback, name: str = "",
+                 cancelled: bool = False) -> None:
+        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
+        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        self.at = at
+        self.callback = callback
+        self.name = name
+        self.cancelled = cancelled
 
     def cancel(self) -> None:
         """Cancel the timer; cancelling twice or after it ran is harmless."""

@@ -37,18 +37,28 @@ Piece = tuple[float, float, float]  # (duration s, acceleration at its start, je
 _REL_TOL = 1e-12
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Limits:
     """Speed (pps), acceleration and deceleration (pulses/s²), creep speed (pps, K51)
-    and S-curve gain (K69, 0..1024) of one motion."""
+    and S-curve gain (K69, 0..1024) of one motion.  Immutable by convention."""
 
     speed: float
     accel: float
     decel: float
-    creep: float = 0.0
-    scurve: int = 0
+    creep: float
+    scurve: int
 
-    def __post_init__(self) -> None:
+    def __init__(self, speed: float, accel: float, decel: float, creep: float = 0.0,
+                 scurve: int = 0) -> None:
+        # Written out (compiled, a generated __init__ runs interpreted; Segment).
+        self.speed = speed
+        self.accel = accel
+        self.decel = decel
+        self.creep = creep
+        self.scurve = scurve
+        self._check()
+
+    def _check(self) -> None:
         if not (self.speed > 0.0 and self.accel > 0.0 and self.decel > 0.0):
             raise ValueError(f"speed, accel and decel must be > 0: {self!r}")
         if not 0.0 <= self.creep <= self.speed:
@@ -72,12 +82,16 @@ class Limits:
         return max(self.jerk_accel, self.jerk_decel)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Waypoint:
     """A target position (pulses) and the limits of the motion that reaches it."""
 
     target: float
     limits: Limits
+
+    def __init__(self, target: float, limits: Limits) -> None:
+        self.target = target        # written out: see Segment
+        self.limits = limits
 
 
 def scurve_jerk(accel: float, speed: float, scurve: int) -> float:
@@ -259,12 +273,19 @@ def _max_exit(u: float, b: float, dist: float, lim: Limits, cap: float) -> float
     return lo if travel(lo) > dist else _bisect(travel, lo, cap, dist)
 
 
-@dataclass(slots=True)
+@dataclass(init=False, slots=True)
 class _Span:
     dist: float
     direction: float
     limits: Limits
     indices: list[int]
+
+    def __init__(self, dist: float, direction: float, limits: Limits,
+                 indices: list[int]) -> None:
+        self.dist = dist            # written out: see Segment
+        self.direction = direction
+        self.limits = limits
+        self.indices = indices
 
 
 def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float,
@@ -411,7 +432,9 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
     """
     if not waypoints:
         raise ValueError("plan_moves needs at least one waypoint")
-    key = (tuple(start_state), tuple(waypoints))
+    # Plain numbers as the key: hashing and comparing floats stays in C (the
+    # dataclasses' generated __hash__/__eq__ would run interpreted).
+    key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
     found = _PLANNED.get(key)
     if found is None:
         b = _Builder(start_state)
@@ -424,6 +447,11 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
         _PLANNED[key] = found
     return Profile(origin_ns, found[0], start_state=start_state,
                    final_position=float(waypoints[-1].target), passing_times=found[1])
+
+
+def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
+    lim = w.limits
+    return (w.target, lim.speed, lim.accel, lim.decel, lim.creep, lim.scurve)
 
 
 #: Planned moves by (start state, waypoints): the segments are relative to the origin

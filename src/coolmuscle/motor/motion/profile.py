@@ -33,12 +33,13 @@ State = tuple[float, float, float]
 _ITERATIONS = 200
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Segment:
     """A constant-jerk piece: p(τ) = p + vτ + aτ²/2 + jτ³/6 for 0 <= τ <= duration.
 
     ``start`` is in seconds from the profile origin; ``duration`` may be ``math.inf``
     only for the last segment of continuous rotation (then ``a == j == 0``).
+    Immutable by convention (nothing assigns its fields).
     """
 
     start: float
@@ -47,6 +48,17 @@ class Segment:
     v: float
     a: float
     j: float
+
+    def __init__(self, start: float, duration: float, p: float, v: float, a: float,
+                 j: float) -> None:
+        # Written out, not generated: compiled (coolmuscle/_accel.py), a dataclass's
+        # generated __init__ runs interpreted, 20x slower (docs/performance.md).
+        self.start = start
+        self.duration = duration
+        self.p = p
+        self.v = v
+        self.a = a
+        self.j = j
 
     @property
     def end(self) -> float:

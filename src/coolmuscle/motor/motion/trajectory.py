@@ -29,15 +29,26 @@ if TYPE_CHECKING:
 MAX_EDGES = 200_000
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Piece:
-    """One trajectory of the axis from ``start`` (kernel ns) until the next one."""
+    """One trajectory of the axis from ``start`` (kernel ns) until the next one
+    (immutable by convention)."""
 
     start: int
     profile: Profile
     tracking: Any           # the servo model's solution (servo.Tracking or a motion)
     zero: float
     sign: int
+
+    def __init__(self, start: int, profile: Profile, tracking: Any, zero: float,
+                 sign: int) -> None:
+        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
+        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        self.start = start
+        self.profile = profile
+        self.tracking = tracking
+        self.zero = zero
+        self.sign = sign
 
     def position(self, t: int) -> float:
         """Actual position in user pulses at kernel time ``t``."""

@@ -31,18 +31,26 @@ if TYPE_CHECKING:
 STEP_NS = 250_000
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Sleep:
     """Resume after ``ns`` nanoseconds (``T#``)."""
 
     ns: int
 
+    def __init__(self, ns: int) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.ns = ns
 
-@dataclass(frozen=True, slots=True)
+
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class MotionWait:
     """Resume when every motor in ``motors`` has finished its motion (in position)."""
 
     motors: tuple["MotorCore", ...]
+
+    def __init__(self, motors: tuple["MotorCore", ...]) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.motors = motors
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,12 +62,17 @@ class Hold:
 HOLD = Hold()
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Watch:
     """``W#``: resume with ``False`` once ``holds()`` is false, ``True`` at the timeout."""
 
     holds: Callable[[], bool]
     timeout_ns: int | None
+
+    def __init__(self, holds: Callable[[], bool], timeout_ns: int | None) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.holds = holds
+        self.timeout_ns = timeout_ns
 
 
 Request = Union[Sleep, MotionWait, Watch, Hold]
@@ -263,13 +276,20 @@ def wait_branch(motor: "MotorCore", branch: ast.Branch, wait: ast.Wait) -> Watch
 
 # ---------------------------------------------------------------- units
 
-@dataclass(frozen=True, slots=True)
+@dataclass(init=False, unsafe_hash=True, slots=True)
 class Unit:
     """What runs as one line: a stored line, or lines joined by ``;`` (2.2.2 ";")."""
 
     statements: tuple[ast.Statement, ...]
     quiet: bool      # ladder: the line ends with ";", results are not displayed
     first: int       # index of its first stored line
+
+    def __init__(self, statements: tuple[ast.Statement, ...], quiet: bool,
+                 first: int) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.statements = statements
+        self.quiet = quiet
+        self.first = first
 
 
 def _merge_condition(cond: ast.Line, line: ast.Line) -> ast.Line:

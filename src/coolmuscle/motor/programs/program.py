@@ -18,7 +18,7 @@ bank can loop in zero time.  The motion model is in :mod:`.motor` / :mod:`.plann
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Generator
 
 from ...cml import ast
@@ -48,34 +48,62 @@ Step = Generator[Request, object, object]
 Steps = Generator[Request, object, None]    # a statement that never ends the line
 
 
-@dataclass
+@dataclass(init=False)
 class Frame:
     """One bank on the call stack: its units, the next unit, open loops, the last run."""
 
     bank: int
     units: list[Unit]
-    pc: int = 0
-    loops: list[list[int]] = field(default_factory=list)  # [start, remaining or -1]
-    last: int | None = None
+    pc: int
+    loops: list[list[int]]      # [start, remaining or -1]
+    last: int | None
+
+    def __init__(self, bank: int, units: list[Unit], pc: int = 0,
+                 loops: list[list[int]] | None = None, last: int | None = None) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.bank = bank
+        self.units = units
+        self.pc = pc
+        self.loops = [] if loops is None else loops
+        self.last = last
 
 
-@dataclass
+@dataclass(init=False)
 class _Motion:
     """The motion a line gives one motor: waypoints (merge), push, whether the line waits."""
 
     motor: "MotorCore"
-    waypoints: list[tuple[float, Limits | None]] = field(default_factory=list)
-    issued_at: int = -1
-    push: bool = False
-    wait: bool = True
-    continuous: tuple[int, Limits | None] | None = None
-    remaining: list[tuple[float, Limits | None]] | None = None  # what a pause interrupted
-    profile: Profile | None = None                       # the plan that was issued
-    path: PairMotion | None = None                       # an interpolation (4.4)
-    delay: int = 0           # ns until the command reaches the motor (K65 chain timing)
+    waypoints: list[tuple[float, Limits | None]]
+    issued_at: int
+    push: bool
+    wait: bool
+    continuous: tuple[int, Limits | None] | None
+    remaining: list[tuple[float, Limits | None]] | None  # what a pause interrupted
+    profile: Profile | None                     # the plan that was issued
+    path: PairMotion | None                     # an interpolation (4.4)
+    delay: int               # ns until the command reaches the motor (K65 chain timing)
+
+    def __init__(self, motor: "MotorCore",
+                 waypoints: list[tuple[float, Limits | None]] | None = None,
+                 issued_at: int = -1, push: bool = False, wait: bool = True,
+                 continuous: tuple[int, Limits | None] | None = None,
+                 remaining: list[tuple[float, Limits | None]] | None = None,
+                 profile: Profile | None = None, path: PairMotion | None = None,
+                 delay: int = 0) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.motor = motor
+        self.waypoints = [] if waypoints is None else waypoints
+        self.issued_at = issued_at
+        self.push = push
+        self.wait = wait
+        self.continuous = continuous
+        self.remaining = remaining
+        self.profile = profile
+        self.path = path
+        self.delay = delay
 
 
-@dataclass
+@dataclass(init=False)
 class _Run:
     """One unit being executed."""
 
@@ -83,13 +111,27 @@ class _Run:
     index: int
     unit: Unit
     start: int
-    steps: int = 0
-    motions: dict[int, _Motion] = field(default_factory=dict)
-    accel_seen: dict[int, int] = field(default_factory=dict)
-    decel: dict[int, int] = field(default_factory=dict)
-    cancelled: bool = False
-    paths: LinePaths | None = None      # the "@" of this line (4.4, .coordinated)
-    arrivals: dict[int, int] = field(default_factory=dict)  # when it reaches each motor
+    steps: int
+    motions: dict[int, _Motion]
+    accel_seen: dict[int, int]
+    decel: dict[int, int]
+    cancelled: bool
+    paths: LinePaths | None             # the "@" of this line (4.4, .coordinated)
+    arrivals: dict[int, int]            # when it reaches each motor
+
+    def __init__(self, frame: Frame, index: int, unit: Unit, start: int) -> None:
+        # written out: a generated __init__ runs interpreted (profile.Segment)
+        self.frame = frame
+        self.index = index
+        self.unit = unit
+        self.start = start
+        self.steps = 0
+        self.motions = {}
+        self.accel_seen = {}
+        self.decel = {}
+        self.cancelled = False
+        self.paths = None
+        self.arrivals = {}
 
 
 class ProgramExecutor:
