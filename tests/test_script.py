@@ -80,6 +80,19 @@ def test_escape_round_trip(data: bytes) -> None:
     assert unescape(escape(data)) == data
 
 
+def _escape_byte(byte: int) -> str:
+    names = {92: "\\\\", 13: "\\r", 10: "\\n", 9: "\\t"}
+    if byte in names:
+        return names[byte]
+    return chr(byte) if 32 <= byte < 127 else f"\\x{byte:02x}"
+
+
+@given(st.binary() | st.text(st.characters(min_codepoint=32, max_codepoint=126)).map(str.encode))
+def test_escape_is_byte_by_byte_on_every_path(data: bytes) -> None:
+    """The transcript's fast path (printable ASCII shown as is) and the byte loop agree."""
+    assert escape(data) == "".join(_escape_byte(b) for b in data)
+
+
 def test_split_lines() -> None:
     assert split_lines(b"a\r\nb\rc\nd") == [b"a\r\n", b"b\r", b"c\n", b"d"]
     assert split_lines(b"\r\n\r\n") == [b"\r\n", b"\r\n"]

@@ -73,8 +73,14 @@ def unescape(text: str) -> bytes:
     return bytes(out)
 
 
+#: Bytes that :func:`escape` shows as themselves: printable ASCII but the backslash.
+_PLAIN = re.compile(rb"[\x20-\x5b\x5d-\x7e]*")
+
+
 def escape(data: bytes) -> str:
     """Inverse of :func:`unescape`: printable ASCII as is, everything else escaped."""
+    if _PLAIN.fullmatch(data):          # a report or a reply: nothing to escape
+        return data.decode("ascii")
     parts = []
     for byte in data:
         if byte == 92:
@@ -99,9 +105,10 @@ def split_lines(data: bytes) -> list[bytes]:
 
 
 def _strip_end(data: bytes) -> bytes:
-    for end in (b"\r\n", b"\r", b"\n"):
-        if data.endswith(end):
-            return data[:-len(end)]
+    if data.endswith(b"\r\n"):
+        return data[:-2]
+    if data.endswith((b"\r", b"\n")):
+        return data[:-1]
     return data
 
 
