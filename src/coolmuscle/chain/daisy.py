@@ -103,6 +103,10 @@ class Chain:
                machine: "Path | str | Machine | None") -> None:
         self._listeners: list[EventListener] = []
         self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
+        #: The watchers naming each motor, in the order they came (:meth:`poke` about one
+        #: motor looks only there while no watcher listens to every motor).
+        self._watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]] = {}
+        self._everywhere = 0            # watchers without ``motors``
         self._observers: list[Callable[[], None]] = []
         self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
         self.motors: dict[int, Motor] = {}
@@ -291,19 +295,37 @@ class Chain:
         a bank line waiting for motions is not woken by the other motors' milestones."""
         entry = (callback, None if motors is None else frozenset(motors))
         self._watchers.append(entry)
+        if entry[1] is None:
+            self._everywhere += 1
+        else:
+            for m in entry[1]:
+                self._watching.setdefault(m, []).append(entry)
 
         def remove() -> None:
             if entry in self._watchers:
                 self._watchers.remove(entry)
+                if entry[1] is None:
+                    self._everywhere -= 1
+                else:
+                    for m in entry[1]:
+                        self._watching[m].remove(entry)
         return remove
 
     def poke(self, motor: int | None = None) -> None:
         """Something changed (a line, an input, a motion, a ladder scan): look again.
-        ``motor``: only the motion of that motor changed."""
-        if self._watchers:
+        ``motor``: only the motion of that motor changed.  The watchers run in the order
+        they came, each once, those of this poke even if one of them removes another."""
+        if not self._watchers:
+            return
+        if motor is None or self._everywhere:
             for callback, motors in list(self._watchers):
                 if motors is None or motor is None or motor in motors:
                     callback()
+            return
+        naming = self._watching.get(motor)
+        if naming:                      # the same watchers, in the same order
+            for callback, _ in list(naming):
+                callback()
 
     # -- events -------------------------------------------------------------
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
