@@ -62,6 +62,10 @@ class Axis:
         self.sign = 1
         self._enabled = True
         self.profile: Profile = hold(0.0, kernel.now)
+        #: (profile, rest): after a reversal restarted at rest (:meth:`move`), the plan
+        #: from rest that the shaft follows from its origin on, while ``profile`` is
+        #: still the one planned then.
+        self._rest: tuple[Profile, Profile] | None = None
         self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive())
         self.target_raw = 0.0
         self.moving = False
@@ -142,7 +146,25 @@ class Axis:
         now = self.kernel.now
         if not self._enabled or self.motion.mode_at(now) == LOST:
             return self.raw_actual(), self.raw_velocity(), 0.0
-        return self.profile.state_at(now)
+        return self._command_state(now)
+
+    def _command_state(self, t_ns: int) -> tuple[float, float, float]:
+        """The command's state at ``t_ns``.  After a reversal restarted at rest, from the
+        plan from rest once it has begun: the shaft follows that plan (the motion is
+        solved on it), the stored profile equals it within float noise, and a cycle
+        that repeats the reversal then starts each repeat from the same numbers (and
+        finds its plan planned: docs/performance.md "Sixth round")."""
+        rest = self._rest
+        if rest is not None and rest[0] is self.profile and t_ns >= rest[1].origin_ns:
+            return rest[1].state_at(t_ns)
+        return self.profile.state_at(t_ns)
+
+    def _command_end(self, now: int) -> int | None:
+        """Where the command ends, from the plan from rest as :meth:`_command_state`."""
+        rest = self._rest
+        if rest is not None and rest[0] is self.profile and now >= rest[1].origin_ns:
+            return rest[1].end_ns
+        return self.profile.end_ns
 
     # -- servo on / off and the drive --------------------------------------
     @property
@@ -173,10 +195,10 @@ class Axis:
         if start_ns is not None and start_ns > now and (
                 not self.moving or self.profile.origin_ns > now):
             start = start_ns
-        state = self.profile.state_at(start) if start > now else self._raw_state()
+        state = self._command_state(start) if start > now else self._raw_state()
         profile = planner.plan_moves(state, raw, start)
         self.target_raw = raw[-1].target
-        end = self.profile.end_ns
+        end = self._command_end(now)
         if (self.restart_at_rest and end is not None and start == now and not self.moving
                 and len(raw) == 1 and now >= self.profile.origin_ns
                 and self._current_drive() is self.motion.drive
@@ -186,8 +208,9 @@ class Axis:
             # shaft follows the old command as solved until that end, and the new move
             # is solved from there, from rest (the same numbers for each repeat of a
             # cycle: docs/performance.md "Why every chain move was solved afresh").
-            rest = planner.plan_moves(self.profile.state_at(end), raw, end)
+            rest = planner.plan_moves(self._command_state(end), raw, end)
             self.profile = profile
+            self._rest = (profile, rest)
             self.moving = True
             self._resolve(Motion.continued(self.motion, now, rest))
             return
