@@ -111,6 +111,8 @@ def test_vol2_register_session_rules(rig):
     assert decode(conn.handle(frame(enc.REGISTER_SESSION, b"\x01\x00\x00"))).status == 0x0065
     bad = decode(conn.handle(frame(enc.REGISTER_SESSION, struct.pack("<HH", 2, 0))))
     assert bad.status == 0x0069 and bad.data == struct.pack("<HH", 1, 0)
+    flagged = decode(conn.handle(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 1))))
+    assert flagged.status == 0x0069 and flagged.session == 0 and conn.session == 0
     handle = register(conn)
     again = decode(conn.handle(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0))))
     assert again.status == 0x0003 and conn.session == handle
@@ -233,7 +235,7 @@ def opened(rig) -> int:
 
 def test_class1_consume_rules(rig):
     ot_id = opened(rig)
-    data = struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 1)
+    data = struct.pack("<HiihBB", 1, 0, 100, 100, 0, 1)
     assert not rig.table.consume(o_t(ot_id, 1, 1, data), "10.0.0.9", rig.now)   # other host
     assert not rig.table.consume(o_t(ot_id + 1, 1, 1, data), PEER[0], rig.now)  # unknown id
     assert not rig.table.consume(o_t(ot_id, 1, 1, data[:-1]), PEER[0], rig.now)  # size
@@ -247,7 +249,7 @@ def test_class1_consume_rules(rig):
 
 def test_class1_production_sequence_and_timeout(rig):
     ot_id = opened(rig)
-    rig.table.consume(o_t(ot_id, 1, 1, struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 0)),
+    rig.table.consume(o_t(ot_id, 1, 1, struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0)),
                       PEER[0], rig.now)
     packets = []
     for step in range(5):
@@ -401,7 +403,7 @@ def test_fuzz_live_server_other_client_untouched():
 def test_identity_reset_closes_connections_and_clears_outputs(rig):
     """CIP Vol 1 5A-2.3 Reset type 0: the module restarts; the motor is not reset."""
     opened(rig)
-    rig.module.write_output(struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 1), True)
+    rig.module.write_output(struct.pack("<HiihBB", 1, 0, 100, 100, 0, 1), True)
     rig.router.objects.reset = lambda: (rig.table.close_all(), rig.module.reset_outputs())
     conn = rig.connection()
     handle = register(conn)

@@ -25,7 +25,7 @@ def rig():
 
 def out(flag=1, p0=0, s0=100, a0=100, control=0, k52=0) -> bytes:
     """An output image (3.2): flag, P0, S0, A0, control word, K52 byte, little endian."""
-    return struct.pack("<HiiHBB", flag, p0, s0, a0, control, k52)
+    return struct.pack("<HiihBB", flag, p0, s0, a0, control, k52)
 
 
 def inputs(module: Cm1Module) -> tuple[int, int, int]:
@@ -177,3 +177,25 @@ def test_reset_outputs_is_the_power_up_image(rig):
     assert module.output_image() == bytes(14)
     run(kernel, 2)
     assert chain.snapshot(1).position == 2000     # the move already started goes on
+
+
+def test_3_2_2_a0_is_a_signed_short_and_a_negative_one_counts_as_its_size(rig):
+    """3.2.2 "10-11 Short Integer ... Acceleration (A0)" (signed, as bytes 2-5 "Long
+    Integer" are); CML 6.2 "A": "The negative value is treated as absolute value"."""
+    kernel, chain, module = rig
+    module.write_output(bytes.fromhex("01 00 b8 0b 00 00 0a 00 00 00 f6 ff 01 00"))  # A0 = -10
+    assert inputs(module)[0] == 0                 # no motor error (3.1.1 bit 0)
+    run(kernel, 0.5)
+    assert inputs(module)[1] == 0                 # moving toward P0 = 3000
+    run(kernel, 30)
+    assert inputs(module) == (0, 8, 3000)
+    # control word 2 with a negative A0 stops the motion (3.2.3 "2: Stop with A0")
+    module.write_output(out(1, 200000, 100, 10, 0))
+    module.write_output(out(1, 200000, 100, 10, 1))
+    run(kernel, 1)
+    module.write_output(out(1, 200000, 100, -10, 2))
+    assert inputs(module)[0] == 0
+    run(kernel, 5)
+    stopped = chain.snapshot(1).position
+    run(kernel, 1)
+    assert inputs(module) == (0, 8, stopped) and stopped < 200000

@@ -23,7 +23,7 @@ from pycomm3 import CIPDriver  # noqa: E402
 
 pytestmark = [pytest.mark.peer, pytest.mark.realtime]
 
-EXAMPLE_VALUES = struct.pack("<HiiHBB", 1, 100000, 100, 10, 1, 0)   # 3.2, its stated values
+EXAMPLE_VALUES = struct.pack("<HiihBB", 1, 100000, 100, 10, 1, 0)   # 3.2, its stated values
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +71,7 @@ def test_3_1_pycomm3_get_input_assembly_returns_8_bytes(service):
 
 def test_3_2_pycomm3_set_output_example_moves_motor_to_100000(service):
     with driver(service) as d:
-        assert set_(d, 4, 0x66, 3, struct.pack("<HiiHBB", 1, 0, 100, 10, 0, 0)).error is None
+        assert set_(d, 4, 0x66, 3, struct.pack("<HiihBB", 1, 0, 100, 10, 0, 0)).error is None
         assert set_(d, 4, 0x66, 3, EXAMPLE_VALUES).error is None
         assert get(d, 4, 0x66, 3).value == EXAMPLE_VALUES
         deadline = time.monotonic() + 10
@@ -88,12 +88,12 @@ def test_3_2_example_bytes_verbatim_command_1000000(service):
     """The data line of 3.2 is little endian: its P0 bytes 40 42 0F 00 are 1,000,000."""
     example = bytes.fromhex("01 00 40 42 0F 00 64 00 00 00 0A 00 01 00")
     with driver(service) as d:
-        set_(d, 4, 0x66, 3, struct.pack("<HiiHBB", 1, 0, 100, 10, 0, 0))
+        set_(d, 4, 0x66, 3, struct.pack("<HiihBB", 1, 0, 100, 10, 0, 0))
         assert set_(d, 4, 0x66, 3, example).error is None
         time.sleep(0.1)
         assert service.call(service.chain.register_value, 1, "P", 0) == 1_000_000
         assert struct.unpack("<HHi", get(d, 4, 0x65, 3).value)[1] == 0   # running
-        set_(d, 4, 0x66, 3, struct.pack("<HiiHBB", 1, 0, 100, 100, 2, 0))  # stop
+        set_(d, 4, 0x66, 3, struct.pack("<HiihBB", 1, 0, 100, 100, 2, 0))  # stop
 
 
 @pytest.mark.parametrize("request_kw, status", [
@@ -281,7 +281,7 @@ def test_ch4_ethernetip_class1_io_moves_motor_and_times_out(monkeypatch):
         try:
             assert scanner.forward_open() == 0
             assert (scanner.conn.otapi, scanner.conn.toapi) == (10, 10)
-            scanner.set_output(struct.pack("<HiiHBB", 1, 4000, 100, 100, 1, 0))
+            scanner.set_output(struct.pack("<HiihBB", 1, 4000, 100, 100, 1, 0))
             scanner.conn.produce()
             assert _wait(lambda: scanner.input() == (0, 8, 4000), 5), scanner.input()
             assert _owned(tcp_port)
@@ -341,7 +341,7 @@ def test_multicast_t_o_reaches_a_joined_member():
                               socket.inet_aton(group_ip) + socket.inet_aton("127.0.0.1"))
             member.settimeout(2)
             out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            out.sendto(o_t(ot_id, 1, 1, struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 0)),
+            out.sendto(o_t(ot_id, 1, 1, struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0)),
                        ("127.0.0.1", io_port))
             got = [member.recv(100) for _ in range(5)]
             member.close()
@@ -367,7 +367,7 @@ def test_ethernetip_list_identity_over_udp(monkeypatch):
 def test_pycomm3_default_route_path_set_is_accepted(service):
     """pycomm3's defaults append its empty route path (00 00) after the data; an exact
     14-byte image followed by exactly that is accepted, other extra bytes are not."""
-    idle = struct.pack("<HiiHBB", 0, 0, 100, 10, 0, 0)
+    idle = struct.pack("<HiihBB", 0, 0, 100, 10, 0, 0)
     with driver(service) as d:
         tag = d.generic_message(service=0x10, class_code=4, instance=0x66, attribute=3,
                                 request_data=idle, connected=False)
@@ -386,7 +386,7 @@ def test_ch4_rpi_2ms_accepted_and_produced_on_time(monkeypatch):
         try:
             assert scanner.forward_open(rpi_ms=2, multiplier=4) == 0
             assert scanner.conn.toapi == 8         # ethernetip clamps what it reports ...
-            scanner.set_output(struct.pack("<HiiHBB", 1, 0, 100, 100, 0, 0))
+            scanner.set_output(struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0))
             scanner.conn.produce()
             time.sleep(1.5)
             intervals = sorted(b - a for a, b in zip(scanner.times, scanner.times[1:]))
@@ -435,7 +435,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
             ot_id = struct.unpack_from("<I", reply, 4)[0]
             for count in range(1, 6):
                 out.sendto(o_t(ot_id, count, count,
-                               struct.pack("<HiiHBB", 1, 100 * count, 100, 100, 0, 0)),
+                               struct.pack("<HiihBB", 1, 100 * count, 100, 100, 0, 0)),
                            ("127.0.0.1", io_port))
                 time.sleep(0.02)
             assert _wait(lambda: len(held["write_output"]) >= 5

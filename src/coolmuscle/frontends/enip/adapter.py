@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 
 OUTPUT_SIZE = 14
 INPUT = struct.Struct("<HHI")
-OUTPUT = struct.Struct("<HiiHBB")
+OUTPUT = struct.Struct("<HiihBB")      # A0 a signed short (3.2.2 "Short Integer")
 
 ERR_MOTOR_ERROR = 0x0001
 ERR_TIMED_OUT = 0x0002

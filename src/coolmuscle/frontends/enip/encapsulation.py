@@ -304,8 +304,8 @@ class Connection:
     def _register(self, frame: Frame) -> bytes:
         if len(frame.data) != 4:
             return frame.reply(frame.data, INVALID_LENGTH)
-        version, _options = struct.unpack("<HH", frame.data)
-        if version != PROTOCOL_VERSION:
+        version, options = struct.unpack("<HH", frame.data)
+        if version != PROTOCOL_VERSION or options != 0:     # options "shall be zero"
             return frame.reply(struct.pack("<HH", PROTOCOL_VERSION, 0), UNSUPPORTED_PROTOCOL)
         if self.session:
             return frame.reply(frame.data, INCORRECT_DATA, session=self.session)
