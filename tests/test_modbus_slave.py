@@ -208,6 +208,20 @@ def test_5_6_8_fc16_not_writable_is_exception_02(request_hex: str) -> None:
     assert wire.transact(frame(request_hex)) == frame("01 90 02")
 
 
+def test_5_6_8_a_memory_number_not_allocated_is_exception_02_to_read_and_to_write() -> None:
+    """5.6.8 02 "The specified data address does not exist": P150 after ``\\P149``
+    (2.1.2) reads and writes as 02; a write that covers it writes nothing at all."""
+    wire = Wire(K81_1=1)
+    wire.chain.execute("\\P149")
+    assert wire.transact(frame("01 03 01 F4 00 02")) == frame("01 83 02")        # P150
+    assert wire.transact(frame("01 10 01 F4 00 02 04 00 00 00 01")) == frame("01 90 02")
+    assert wire.transact(frame("01 10 01 F2 00 04 08 00 00 00 07 00 00 00 01")) == \
+        frame("01 90 02")                                                       # P149, P150
+    assert wire.chain.get_register(1, "P", 149) == 0
+    assert wire.transact(frame("01 10 01 F2 00 02 04 00 00 00 07")) == frame("01 10 01 F2 00 02")
+    assert wire.chain.get_register(1, "P", 149) == 7
+
+
 def test_5_6_8_fc16_data_that_does_not_fit_gets_no_reply() -> None:
     wire = Wire(K81_1=1)
     assert wire.transact(frame("01 10 00 C8 00 02 04 00 00 30")) == b""        # 3 of 4 bytes

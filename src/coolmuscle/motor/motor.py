@@ -132,7 +132,7 @@ class Motor(Supervision):
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
-        return bool(self.k(23) & flag.value)    # int & int (no IntFlag object made)
+        return bool(self.k(23) & int(flag))     # int & int: no IntFlag made, no enum property
 
     # -- status ---------------------------------------------------------------
     @property

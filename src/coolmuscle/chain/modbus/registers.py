@@ -204,6 +204,10 @@ class MotorMap:
             cell = CELLS.get(offset)
             if cell is None or not cell.writable:
                 raise RegisterError(f"K78+{offset} cannot be written")
+            try:            # 5.6.8 02 "The specified data address does not exist"
+                self.value(cell)
+            except (LookupError, ValueError) as exc:   # a memory number not allocated
+                raise RegisterError(f"{cell.name}: {exc}") from None
             cells.append(cell)
         return cells
 
