@@ -34,6 +34,8 @@ literal-in-bank     warning   --     a number in a bank's assignment or conditio
                                      an error, error01, on RT3 and CM1 firmware)
 bank-not-in-file    warning   --     ``[#``/``[L#`` of a bank this file does not define
 motor-id            warning   --     a motor ID beyond ``--motors``
+no-such-input       warning   --     an ``I#`` beyond the motor's inputs (it reads OFF;
+                                     RT3 1.1 "used with I1-I4"; docs/fidelity.md)
 ==================  ========  =====  =====================================================
 
 Counting (RT3 3.4 "1 step is considered any command other than operands, math symbols
@@ -110,6 +112,7 @@ class _Checker:
         self.report.add(line, "syntax", message, column=error.position + 1)
 
     def _ranges(self, line: SourceLine, statement: ast.Statement) -> None:
+        self._inputs(line, statement)
         motor = getattr(statement, "motor", None)
         if isinstance(statement, ast.Assign):
             motor = statement.target.motor
@@ -130,6 +133,20 @@ class _Checker:
             if ladder is None:
                 ladder = getattr(statement, "kind", "B") in ("L", "LM", "CL", "JL")
             self._bank_number(line, statement.index, ladder)
+
+    def _inputs(self, line: SourceLine, statement: ast.Statement) -> None:
+        """``I#`` conditions beyond the firmware's inputs (they read OFF)."""
+        exprs: list[ast.Expr] = []
+        if isinstance(statement, ast.Branch):
+            exprs.append(statement.condition)
+        elif isinstance(statement, (ast.Assign, ast.OutputWord)):
+            exprs.append(statement.value)
+        for expr in exprs:
+            for ref in tree.expr_regs(expr):
+                if isinstance(ref, ast.Input) and not 1 <= ref.index <= self.fw.inputs:
+                    self.report.add(line, "no-such-input", f"I{ref.index}: the motor has "
+                                    f"inputs I1..I{self.fw.inputs} ({self.fw.name}); it "
+                                    "reads OFF", column=tree.column(line.raw, f"I{ref.index}"))
 
     def _bank_number(self, line: SourceLine, number: int | None, ladder: bool) -> None:
         top = self.fw.ladder_banks if ladder else self.fw.program_banks

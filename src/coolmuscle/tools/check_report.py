@@ -27,6 +27,7 @@ RULES: Final[dict[str, tuple[Severity, int | None]]] = {
     "nesting": ("error", None), "loop-balance": ("error", None), "range": ("error", 0),
     "register-unset": ("warning", None), "literal-in-bank": ("warning", None),
     "bank-not-in-file": ("warning", None), "motor-id": ("warning", None),
+    "no-such-input": ("warning", None),
 }
 
 
