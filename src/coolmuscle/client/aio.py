@@ -17,6 +17,8 @@ they arrive, also between calls.  Timeouts are wall-clock seconds (on
 from __future__ import annotations
 
 import asyncio
+import math
+import weakref
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -24,7 +26,7 @@ import serial
 
 from ..errors import CoolMuscleTimeout, InvalidArgumentError
 from ..motor.status import Ux
-from . import banks, commands, ops
+from . import args, banks, commands, ops
 from .aio_driver import AsyncDriver
 from .driver import Listener
 from .program import ProgramFile
@@ -39,10 +41,8 @@ class AsyncMotor:
     """One motor ID on the chain (asyncio); obtain with :meth:`AsyncCoolMuscle.motor`."""
 
     def __init__(self, driver: AsyncDriver, motor_id: int) -> None:
-        if not 1 <= motor_id <= 15:
-            raise InvalidArgumentError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
         self._driver = driver
-        self.id = motor_id
+        self.id = args.motor_id(motor_id)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} ID{self.id}>"
@@ -129,8 +129,8 @@ class AsyncMotor:
         await self._run(commands.write_register(self._session, self.id, kind, index, value))
 
     async def read_param(self, k: int) -> int:
-        """``K#.n``."""
-        return await self._run(ops.param(self._session, self.id, k))
+        """``K#.n``; a K number the firmware lacks is refused."""
+        return await self._run(commands.read_param(self._session, self.id, k))
 
     async def read_params(self) -> dict[int, int]:
         """``?90``."""
@@ -222,6 +222,7 @@ class AsyncMotor:
 
     async def start_bank(self, number: int) -> None:
         """``[#.n``."""
+        number = await self._run(commands.bank_number(self._session, self.id, number))
         await self.send(f"[{number}.{self.id}")
 
     async def pause_bank(self) -> None:
@@ -235,6 +236,8 @@ class AsyncMotor:
 
     async def start_ladder(self, number: int) -> None:
         """``[L#.n``."""
+        number = await self._run(commands.bank_number(self._session, self.id, number,
+                                                      ladder=True))
         await self.send(f"[L{number}.{self.id}")
 
     async def stop_ladder(self) -> None:
@@ -247,27 +250,48 @@ class AsyncMotor:
 
 
 class EventStream:
-    """An async iterator over events (see :meth:`AsyncCoolMuscle.events`)."""
+    """An async iterator over events (see :meth:`AsyncCoolMuscle.events`).
+
+    It ends (``StopAsyncIteration``) after :meth:`aclose` or when the connection is
+    closed, once the events received before are taken; a port that fails ends it with
+    the :class:`~coolmuscle.errors.TransportError`."""
 
     def __init__(self, client: AsyncCoolMuscle, kinds: Iterable[str] | None,
                  motor: int | None) -> None:
-        self._queue: asyncio.Queue[MotorEvent] = asyncio.Queue()
+        self._queue: asyncio.Queue[MotorEvent | BaseException | None] = asyncio.Queue()
+        self._driver = client._driver
         self._remove: Callable[[], None] | None = client.subscribe(
             self._queue.put_nowait, kinds=kinds, motor=motor)
+        self._ended = False
 
     def __aiter__(self) -> EventStream:
         return self
 
     async def __anext__(self) -> MotorEvent:
-        if self._remove is None and self._queue.empty():
+        if self._ended and self._queue.empty():
             raise StopAsyncIteration
-        return await self._queue.get()
+        if self._queue.empty():
+            with self._driver.waiting(math.inf):    # a fast port's time moves meanwhile
+                item = await self._queue.get()
+        else:
+            item = self._queue.get_nowait()
+        if item is None or isinstance(item, BaseException):
+            self._ended = True
+            if isinstance(item, BaseException):
+                raise item
+            raise StopAsyncIteration
+        return item
 
-    async def aclose(self) -> None:
-        """Stop receiving events."""
+    def end(self, error: BaseException | None = None) -> None:
+        """No more events (the connection closed or failed: ``error``)."""
         if self._remove is not None:
             self._remove()
             self._remove = None
+            self._queue.put_nowait(error)
+
+    async def aclose(self) -> None:
+        """Stop receiving events."""
+        self.end()
 
     async def __aenter__(self) -> EventStream:
         return self
@@ -287,6 +311,8 @@ class AsyncCoolMuscle(AsyncMotor):
         self.port = port
         self._own_port = own_port
         self._motors: dict[int, AsyncMotor] = {motor: self}
+        self._streams: weakref.WeakSet[EventStream] = weakref.WeakSet()
+        self._driver.on_failure.append(self._failed)
         try:
             port.reset_input_buffer()
         except (serial.SerialException, OSError, AttributeError):
@@ -295,6 +321,7 @@ class AsyncCoolMuscle(AsyncMotor):
 
     def motor(self, motor_id: int) -> AsyncMotor:
         """The handle for another motor ID of the chain."""
+        motor_id = args.motor_id(motor_id)
         if motor_id not in self._motors:
             self._motors[motor_id] = AsyncMotor(self._driver, motor_id)
         return self._motors[motor_id]
@@ -348,11 +375,16 @@ class AsyncCoolMuscle(AsyncMotor):
         iteration, so nothing said in between is missed; ``aclose()`` (or leaving an
         ``async with``) ends it.
         """
-        return EventStream(self, kinds, motor)
+        stream = EventStream(self, kinds, motor)
+        self._streams.add(stream)
+        if self._driver.failure is not None:
+            stream.end(self._driver.failure)
+        return stream
 
     async def wait_event(self, *, kind: str | None = None, motor: int | None = None,
                          timeout: float = ops.DEFAULT_WAIT) -> MotorEvent:
         """The next matching event; :class:`CoolMuscleTimeout` after ``timeout``."""
+        timeout = args.seconds("timeout", timeout)  # type: ignore[assignment]
         since = self._session.protocol.seq
         request = ops.Listen(since, lambda e: (kind is None or e.kind == kind) and
                              (motor is None or e.motor == motor), timeout)
@@ -361,8 +393,15 @@ class AsyncCoolMuscle(AsyncMotor):
             raise CoolMuscleTimeout(f"no {kind or 'event'} within {timeout:g} s")
         return event
 
+    def _failed(self, error: BaseException) -> None:
+        for stream in list(self._streams):
+            stream.end(error)
+
     async def close(self) -> None:
-        """Stop the reader and close the port (when this connection opened it)."""
+        """Stop the reader and close the port (when this connection opened it); the
+        event streams end."""
+        for stream in list(self._streams):
+            stream.end()
         await asyncio.to_thread(self._driver.close)
         if self._own_port:
             self.port.close()
@@ -379,6 +418,10 @@ async def connect_async(url: str | Any, *, baudrate: int = 38400, motor: int = 1
                         poll_interval: float = ops.DEFAULT_POLL,
                         **serial_options: Any) -> AsyncCoolMuscle:
     """As :func:`coolmuscle.connect`, for asyncio."""
+    if not isinstance(url, str) and not (hasattr(url, "write") and hasattr(url, "read")):
+        raise InvalidArgumentError(f"connect() takes a URL or an open port, not {url!r}")
+    args.motor_id(motor)                # the arguments, before a port is opened
+    ops.Session(timeout=timeout, firmware=firmware, poll_interval=poll_interval)
     if isinstance(url, str):
         port = await asyncio.to_thread(open_port, url, baudrate=baudrate, **serial_options)
         own = True

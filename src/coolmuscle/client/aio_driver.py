@@ -17,6 +17,7 @@ from typing import Any, Callable
 import serial
 
 from ..errors import CoolMuscleError, CoolMuscleTimeout, TransportError
+from ..sim.kernel import NS_PER_S
 from . import ops
 from .driver import Listener
 from .protocol import Exchange, MotorEvent
@@ -27,7 +28,12 @@ __all__ = ["AsyncDriver"]
 
 
 class _ThreadedReader:
-    """Blocking reads in a thread; bytes are handed to ``on_data`` in the loop."""
+    """Blocking reads in a thread; bytes are handed to ``on_data`` in the loop.
+
+    A port whose virtual time moves inside ``read`` (``coolmuscle://?mode=fast``) is
+    read without a timeout unless a request waits, and then only up to the latest
+    waiting request's end (``horizons``, virtual seconds): time moves while the
+    client waits, as far as it waits, as with the sync driver."""
 
     def __init__(self, port: Any, loop: asyncio.AbstractEventLoop,
                  on_data: Callable[[bytes | BaseException], None]) -> None:
@@ -36,6 +42,9 @@ class _ThreadedReader:
         self._on_data = on_data
         self._stop = threading.Event()
         self._socket = type(port).__module__.endswith("protocol_socket")
+        self.fast = bool(getattr(port, "virtual_time_on_read", False))
+        #: ends (virtual s) of the requests waiting now; fast ports only
+        self.horizons: list[float] = []
         self._thread = threading.Thread(target=self._main, name="coolmuscle-reader",
                                         daemon=True)
 
@@ -43,14 +52,35 @@ class _ThreadedReader:
         self._port.timeout = 0.05
         self._thread.start()
 
+    def virtual_now(self) -> float:
+        kernel = getattr(self._port, "kernel", None)
+        return kernel.now / NS_PER_S if kernel is not None else 0.0
+
+    def _fast_timeout(self) -> float:
+        """How far this read may move virtual time (0: not at all)."""
+        horizon = max(self.horizons, default=None)
+        if horizon is None:
+            return 0.0
+        return max(0.0, min(1.0, horizon - self.virtual_now()))
+
     def _main(self) -> None:
         while not self._stop.is_set():
             try:
+                if self.fast:
+                    self._port.timeout = self._fast_timeout()
                 data = self._port.read(1)
+                if not data and self.fast:
+                    if self._port.timeout:          # virtual time moved: look again
+                        self._loop.call_soon_threadsafe(self._on_data, b"")
+                    self._stop.wait(0.001)
+                    continue
                 if data and self._socket:  # socket:// in_waiting only says 0 or 1
                     self._port.timeout = 0
                     data += self._port.read(65536)
                     self._port.timeout = 0.05
+                elif data and self.fast:
+                    self._port.timeout = 0
+                    data += self._port.read(65536)
                 elif data and self._port.in_waiting:
                     data += self._port.read(self._port.in_waiting)
             except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
@@ -89,6 +119,8 @@ class AsyncDriver:
         self._failure: BaseException | None = None
         self._loop = asyncio.get_running_loop()
         self._reader = _ThreadedReader(port, self._loop, self._received)
+        #: called once when the port fails (the event streams end with the error)
+        self.on_failure: list[Callable[[BaseException], None]] = []
 
     def start(self) -> None:
         self._reader.start()
@@ -97,11 +129,25 @@ class AsyncDriver:
         self._reader.stop()
 
     def now(self) -> float:
-        return self._loop.time()
+        """The clock of timeouts: the loop's, or virtual time on a fast port."""
+        return self._reader.virtual_now() if self._reader.fast else self._loop.time()
+
+    @property
+    def failure(self) -> BaseException | None:
+        """Why the port stopped working (``None``: it works)."""
+        return self._failure
+
+    def waiting(self, seconds: float) -> "_Waiting":
+        """While inside, a fast port's virtual time may move ``seconds`` on."""
+        return _Waiting(self._reader, seconds)
 
     def _received(self, data: bytes | BaseException) -> None:
         if isinstance(data, BaseException):
+            first = self._failure is None
             self._failure = TransportError(f"cannot read from the port: {data}")
+            if first:
+                for callback in list(self.on_failure):
+                    callback(self._failure)
         else:
             self._tap("<", data)
             for event in self.session.protocol.receive(data):
@@ -124,17 +170,20 @@ class AsyncDriver:
 
     async def _until(self, ready: Callable[[], bool], seconds: float) -> bool:
         end = self.now() + seconds
-        async with self._changed:
-            while not ready():
-                if self._failure is not None:
-                    raise self._failure
-                remaining = end - self.now()
-                if remaining <= 0:
-                    return False
-                try:
-                    await asyncio.wait_for(self._changed.wait(), remaining)
-                except asyncio.TimeoutError:
-                    pass
+        with self.waiting(seconds):
+            async with self._changed:
+                while not ready():
+                    if self._failure is not None:
+                        raise self._failure
+                    remaining = end - self.now()
+                    if remaining <= 0:
+                        return False
+                    if self._reader.fast:      # virtual: the reader says when it moved
+                        remaining = min(remaining, 0.05)
+                    try:
+                        await asyncio.wait_for(self._changed.wait(), remaining)
+                    except asyncio.TimeoutError:
+                        pass
         return True
 
     async def run(self, op: ops.Op[ops.T]) -> ops.T:
@@ -193,3 +242,20 @@ class AsyncDriver:
             self.port.write(data)
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"cannot write to the port: {exc}") from exc
+
+
+class _Waiting:
+    """A request waiting: its end is a horizon of a fast port's reader."""
+
+    def __init__(self, reader: _ThreadedReader, seconds: float) -> None:
+        self._reader = reader
+        self._end = reader.virtual_now() + seconds if reader.fast else 0.0
+
+    def __enter__(self) -> "_Waiting":
+        if self._reader.fast:
+            self._reader.horizons.append(self._end)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._reader.fast:
+            self._reader.horizons.remove(self._end)

@@ -24,6 +24,7 @@ from typing import Callable
 from ..cml import ast
 from ..cml.parser import parse
 from ..errors import CmlSyntaxError, CoolMuscleError, MotorError
+from . import args
 from .ops import Exchange, Op, Pause, Session, exchange, fenced, listing
 from .program import BankBlock, ProgramFile, SourceLine, canonical_lines
 
@@ -84,6 +85,8 @@ class UploadResult:
 def read_bank(session: Session, motor: int, number: int, ladder: bool = False,
               timeout: float | None = None) -> Op[list[str]]:
     """``?#.n`` / ``?L#.n``: the bank's lines as the motor prints them (6.6)."""
+    from .commands import bank_number  # noqa: PLC0415  (commands imports this module's kin)
+    number = yield from bank_number(session, motor, number, ladder)
     text = f"?{'L' if ladder else ''}{number}.{motor}"
     lines = yield from listing(session, motor, text, timeout=timeout)
     return lines
@@ -246,6 +249,7 @@ def upload(session: Session, program: ProgramFile, *, verify: bool = True,
 
 def save(session: Session, motor: int, timeout: float = 5.0) -> Op[None]:
     """``$.n``; waits for ``saved.n`` (2.1.2)."""
+    timeout = args.seconds("timeout", timeout)  # type: ignore[assignment]
     wanted = f"saved.{motor}"
     yield from exchange(session, (f"$.{motor}",), lambda l: l.text == wanted, motor,
                         f"'{wanted}'", timeout)
@@ -284,6 +288,8 @@ def send_line(session: Session, motor: int, line: str,
     line, lines are sent alone and paced by their echo, since anything else sent
     would become part of the bank (2.2.2).
     """
+    line = args.line(line)
+    timeout = args.seconds("timeout", timeout, allow_none=True)
     edge = _bank_edge(line)
     if session.defining or edge == "begin":
         session.defining = edge != "end"

@@ -15,6 +15,7 @@ Motion (2.1.1, 2.1.2): ``S.n``/``A.n``/``M.n``/``P.n`` then ``^.n``, followed by
 from __future__ import annotations
 
 from ..errors import InvalidArgumentError, OutOfRangeError
+from . import args
 from ..motor.state.firmware import Firmware, get_firmware
 from ..motor.state.memory import Memory, NoSuchRegisterError
 from ..motor.programs.queries import format_value
@@ -37,8 +38,12 @@ def firmware(session: Session, motor: int) -> Op[Firmware]:
     if name is None:
         line = yield from _version_line(session, motor)
         name = parse_version(line).profile()
+    try:
+        found = get_firmware(name)
+    except LookupError:
+        raise InvalidArgumentError(f"unknown firmware {name!r} (cm2, rt3 or cm1)") from None
     cache.firmware = name
-    return get_firmware(name)
+    return found
 
 
 def _version_line(session: Session, motor: int) -> Op[str]:
@@ -72,6 +77,8 @@ def _expected(fw: Firmware, kind: str, value: int | str, k37: int) -> str:
 
 
 def _kind(kind: str) -> str:
+    if not isinstance(kind, str):
+        raise InvalidArgumentError(f"a register kind is a letter such as 'P', not {kind!r}")
     kind = kind.upper()
     if kind not in REGISTER_KINDS:
         raise InvalidArgumentError(f"unknown register {kind!r} (one of {' '.join(REGISTER_KINDS)}; "
@@ -82,6 +89,7 @@ def _kind(kind: str) -> str:
 def read_register(session: Session, motor: int, kind: str, index: int) -> Op[int | str]:
     """``P15.1`` -> ``P15.1=100`` (6.6): an int, or the text of a V string/state."""
     kind = _kind(kind)
+    index = args.integer("index", index)
     fw = yield from firmware(session, motor)
     _check_index(fw, kind, index)
     name = register_name(kind, index, motor)
@@ -96,6 +104,9 @@ def write_register(session: Session, motor: int, kind: str, index: int,
                    value: int | str) -> Op[None]:
     """``P15.1=100`` then read back; error00 before sending or when not applied."""
     kind = _kind(kind)
+    index = args.integer("index", index)
+    if not isinstance(value, str):
+        value = args.integer("value", value)
     fw = yield from firmware(session, motor)
     _check_index(fw, kind, index)
     k37 = yield from param(session, motor, 37, cached=True)
@@ -128,6 +139,7 @@ def _write_then_read(session: Session, motor: int, assignment: str | None,
 
 def write_param(session: Session, motor: int, k: int, value: int) -> Op[None]:
     """``K#.n=v`` (ch. 3), validated against the firmware's table 6.1 and read back."""
+    k, value = args.integer("k", k), args.integer("value", value)
     if k == 20:
         raise InvalidArgumentError("K20 changes the baud rate of this very line (ch. 3 K20): "
                          "send it with send() and reopen the port at the new rate")
@@ -146,10 +158,36 @@ def write_param(session: Session, motor: int, k: int, value: int) -> Op[None]:
         raise OutOfRangeError(f"K{k}.{motor}={value} was not applied: the motor holds {got}")
 
 
+def read_param(session: Session, motor: int, k: int) -> Op[int]:
+    """``K#.n`` (ch. 3): a K number the firmware's table 6.1 has, else refused unsent."""
+    k = args.integer("k", k)
+    fw = yield from firmware(session, motor)
+    try:
+        fw.spec(k)
+    except KeyError:
+        raise OutOfRangeError(f"K{k} does not exist (K20..K89)") from None
+    return (yield from param(session, motor, k))
+
+
+def bank_number(session: Session, motor: int, number: int, ladder: bool = False) -> Op[int]:
+    """A program (``B``) or ladder (``L``) bank number of the firmware (2.2.2, 2.2.3)."""
+    number = args.integer("bank number", number)
+    fw = yield from firmware(session, motor)
+    top = fw.ladder_banks if ladder else fw.program_banks
+    if not 1 <= number <= top:
+        kind = "ladder" if ladder else "program"
+        raise OutOfRangeError(f"{kind} bank {number} does not exist (1..{top})")
+    return number
+
+
 def move_lines(fw: Firmware, motor: int, k37: int, *, position: int | None = None,
                relative: bool = False, speed: int | None = None,
                accel: int | None = None, torque: int | None = None) -> list[str]:
     """Direct-mode data lines for a move (2.1.1), each value checked (6.2)."""
+    position = args.optional_integer("position", position)
+    speed = args.optional_integer("speed", speed)
+    accel = args.optional_integer("accel", accel)
+    torque = args.optional_integer("torque", torque)
     mem = _memory(fw, k37)
     lines: list[str] = []
     for kind, value in (("S", speed), ("A", accel), ("M", torque)):
@@ -182,6 +220,9 @@ def move(session: Session, motor: int, position: int, *, relative: bool = False,
          speed: int | None = None, accel: int | None = None,
          torque: int | None = None) -> Op[Ux]:
     """Move to (or by) ``position`` pulses: data lines, ``^.n``, ``?99.n`` (2.1, 2.1.2)."""
+    position = args.integer("distance" if relative else "position", position)
+    speed, accel = args.optional_integer("speed", speed), args.optional_integer("accel", accel)
+    torque = args.optional_integer("torque", torque)
     fw = yield from firmware(session, motor)
     k37 = yield from param(session, motor, 37, cached=True)
     lines = move_lines(fw, motor, k37, position=position, relative=relative, speed=speed,
@@ -192,6 +233,7 @@ def move(session: Session, motor: int, position: int, *, relative: bool = False,
 def run_continuous(session: Session, motor: int, speed: int,
                    accel: int | None = None) -> Op[Ux]:
     """Continuous rotation: ``P.n=1000000000``; the sign of S is the direction (2.1.1)."""
+    speed, accel = args.integer("speed", speed), args.optional_integer("accel", accel)
     fw = yield from firmware(session, motor)
     k37 = yield from param(session, motor, 37, cached=True)
     lines = move_lines(fw, motor, k37, speed=speed, accel=accel)
@@ -200,7 +242,8 @@ def run_continuous(session: Session, motor: int, speed: int,
 
 
 def set_output(session: Session, motor: int, number: int, on: bool) -> Op[None]:
-    """``O#.n`` / ``F#.n`` (2.1.2; the output needs K34 digit 4, general use)."""
+    """``O#.n`` / ``F#.n`` (2.1.2; the output's K34 digit must be 3, general use)."""
+    number, on = args.integer("output number", number), args.flag("on", on)
     fw = yield from firmware(session, motor)
     if not 1 <= number <= fw.outputs:
         raise OutOfRangeError(f"output {number} does not exist (1..{fw.outputs})")
@@ -209,6 +252,7 @@ def set_output(session: Session, motor: int, number: int, on: bool) -> Op[None]:
 
 def output(session: Session, motor: int, number: int) -> Op[bool]:
     """``?5#.n`` -> ``OUT#.n=0|1`` (6.6 ?51..?54)."""
+    number = args.integer("output number", number)
     fw = yield from firmware(session, motor)
     if not 1 <= number <= fw.outputs:
         raise OutOfRangeError(f"output {number} does not exist (1..{fw.outputs})")

@@ -24,9 +24,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Generator, TypeVar
 
-from ..errors import (AlarmError, CoolMuscleTimeout, MotionInterruptedError,
+from ..errors import (AlarmError, CoolMuscleTimeout, InvalidArgumentError, MotionInterruptedError,
                       OutOfRangeError, ProtocolError)
 from ..motor.status import ALARM_BITS, Report, Ux
+from . import args
 from .protocol import Exchange, MotorEvent, Protocol
 from .replies import Received, parse_int_reply, parse_io_word, parse_listing
 
@@ -91,6 +92,18 @@ class Session:
     #: a bank definition is open on the host line (``B#`` sent, no ``END`` yet)
     defining: bool = False
 
+    def __post_init__(self) -> None:
+        self.timeout = args.seconds("timeout", self.timeout)  # type: ignore[assignment]
+        self.poll_interval = args.seconds("poll_interval",  # type: ignore[assignment]
+                                          self.poll_interval)
+        if self.firmware is not None:
+            from ..motor.state.firmware import get_firmware  # noqa: PLC0415
+            try:
+                get_firmware(self.firmware)
+            except (LookupError, TypeError):
+                raise InvalidArgumentError(f"unknown firmware {self.firmware!r} "
+                                           "(cm2, rt3 or cm1)") from None
+
     def cache(self, motor: int) -> MotorCache:
         return self.motors.setdefault(motor, MotorCache())
 
@@ -98,10 +111,12 @@ class Session:
 # -- exchanges -----------------------------------------------------------------------
 
 def exchange(session: Session, lines: tuple[str, ...], done: Callable[[Received], bool],
-             motor: int | None, wanted: str, timeout: float | None = None) -> Op[Exchange]:
+             motor: int | None, wanted: str, timeout: float | None = None,
+             keep_echo: str | None = None) -> Op[Exchange]:
     """Send ``lines``; return the completed exchange; raise the first reported error."""
     ex = yield Exchange(tuple(lines), done, motor, wanted,
-                        timeout=session.timeout if timeout is None else timeout)
+                        timeout=session.timeout if timeout is None else timeout,
+                        keep_echo=keep_echo)
     if ex.errors:
         raise ex.errors[0]
     return ex
@@ -127,24 +142,34 @@ def query_int(session: Session, motor: int, number: int, name: str) -> Op[int]:
 
 
 def fenced(session: Session, motor: int, lines: tuple[str, ...], *, status: bool = False,
-           timeout: float | None = None) -> Op[list[Received]]:
+           timeout: float | None = None, listed: bool = False) -> Op[list[Received]]:
     """Send ``lines`` then a fence (``?96`` or, with ``status``, ``?99``); return the
-    lines answered before the fence's reply (the fence's reply last)."""
+    lines answered before the fence's reply (the fence's reply last).
+
+    ``listed``: the answer may hold the fence's own text (a bank listing line, 6.6):
+    the echo of the fence is then the last such line before its reply, and only it is
+    left out."""
     if status:
         fence, done = f"?99.{motor}", lambda l: l.kind == "status" and l.motor == motor
     else:
         fence, done = f"?96.{motor}", named("Px", motor)
     ex = yield from exchange(session, (*lines, fence), done, motor, f"reply to {fence}",
-                             timeout)
+                             timeout, keep_echo=fence if listed else None)
     if status:
         session.motion_seq[motor] = ex.end_seq
-    return ex.lines
+    answer = ex.lines
+    if listed and session.protocol.echo is True:
+        last = max((i for i, line in enumerate(answer[:-1]) if line.text == fence),
+                   default=None)
+        if last is not None:
+            answer = answer[:last] + answer[last + 1:]
+    return answer
 
 
 def listing(session: Session, motor: int, text: str,
             timeout: float | None = None) -> Op[list[str]]:
     """A query answered by several lines (``?90``, ``?A``, ``?1.n``): the lines, in order."""
-    lines = yield from fenced(session, motor, (text,), timeout=timeout)
+    lines = yield from fenced(session, motor, (text,), timeout=timeout, listed=True)
     return [line.text for line in lines[:-1] if line.kind != "error"]
 
 
@@ -222,6 +247,7 @@ def wait_in_position(session: Session, motor: int, timeout: float) -> Op[Ux]:
     listens (a ``?99`` goes out only after :data:`REPORT_GUARD` s of silence);
     otherwise it polls ``?99`` every ``poll_interval`` s (ch. 3 K23, 6.6 ?99).
     """
+    timeout = args.seconds("timeout", timeout)  # type: ignore[assignment]
     start = yield Now()
     deadline = start + timeout
     since = session.motion_seq.get(motor, 0)

@@ -30,7 +30,7 @@ from typing import Final, Iterator, Literal
 from ..cml import ast
 from ..cml.formatter import format_line
 from ..cml.parser import parse
-from ..errors import CmlSyntaxError
+from ..errors import CmlSyntaxError, InvalidArgumentError
 
 __all__ = ["SourceLine", "BankBlock", "ProgramFile", "parse_program", "load_program",
            "canonical_lines"]
@@ -213,7 +213,14 @@ def parse_program(text: str, path: str = "<text>") -> ProgramFile:
 def load_program(path: str | Path) -> ProgramFile:
     """Read and parse a ``.cml`` file (UTF-8; the yen sign reads as ``\\``)."""
     path = Path(path)
-    return parse_program(path.read_text(encoding="utf-8"), str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InvalidArgumentError(f"{path}: not UTF-8 text (byte {exc.start}); a .cml "
+                                   "file is text") from None
+    except IsADirectoryError:
+        raise InvalidArgumentError(f"{path} is a directory, not a .cml file") from None
+    return parse_program(text, str(path))
 
 
 def _fill_expr(expr: ast.Expr, motor: int) -> ast.Expr:

@@ -92,6 +92,10 @@ class Exchange:
     echoed: int = 0
     complete: bool = False
     end_seq: int = 0
+    #: A line sent whose echo a reply line may equal (a bank listing can hold the
+    #: ``?96.n`` fence): its echo is credited but also kept among ``lines``, and the
+    #: caller drops the last one (:func:`coolmuscle.client.ops.listing`).
+    keep_echo: str | None = None
 
     def describe(self) -> str:
         """For timeout messages: what was sent and what was awaited."""
@@ -230,6 +234,9 @@ class Protocol:
         index = next((i for i, (sent, _o) in enumerate(self._sent) if sent == text), None)
         if index is None:
             return False
+        owner = self._sent[index][1]
+        if self.echo is False and owner is not None and owner.keep_echo == text:
+            return False            # no echo comes: a listing line of that text
         for _ in range(index):
             self._sent.popleft()  # older lines whose echo never came
         _text, owner = self._sent.popleft()
@@ -239,6 +246,8 @@ class Protocol:
             if owner.until_echo and owner.echoed >= len(owner.send):
                 owner.complete = True
                 owner.end_seq = self.seq
+            if owner.keep_echo == text:
+                return False        # maybe a listing line: the caller sorts it out
         return True
 
     def _belongs(self, exchange: Exchange, line: Received) -> bool:

@@ -31,7 +31,7 @@ import serial
 from ..errors import CoolMuscleTimeout, InvalidArgumentError, TransportError
 from ..frontends.urlhandler import register as register_url_handler
 from ..motor.status import Ux
-from . import banks, commands, ops
+from . import args, banks, commands, ops
 from .driver import Listener, SyncDriver
 from .program import ProgramFile, load_program, parse_program
 from .protocol import MotorEvent
@@ -66,11 +66,23 @@ def _check_socket_url(url: str) -> None:
 
 
 def program_of(source: str | Path | ProgramFile) -> ProgramFile:
-    """A :class:`ProgramFile` from a path, CML text or an already parsed file."""
+    """A :class:`ProgramFile` from a path, CML text or an already parsed file.
+
+    A one-line str is a path when such a file exists; one that names a ``.cml`` file
+    must name an existing one (a mistyped path is not sent to the motor as CML)."""
     if isinstance(source, ProgramFile):
         return source
-    if isinstance(source, Path) or ("\n" not in source and Path(source).is_file()):
+    if isinstance(source, Path):
         return load_program(source)
+    if not isinstance(source, str):
+        raise InvalidArgumentError(f"upload() takes a path, CML text or a ProgramFile, "
+                                   f"not {source!r}")
+    if "\n" not in source:
+        path = Path(source)
+        if path.is_file():
+            return load_program(path)
+        if source.strip().lower().endswith(".cml"):
+            raise InvalidArgumentError(f"no such program file: {source}")
     return parse_program(source)
 
 
@@ -78,10 +90,8 @@ class Motor:
     """One motor ID on the chain (sync).  Obtain with :meth:`CoolMuscle.motor`."""
 
     def __init__(self, driver: SyncDriver, motor_id: int) -> None:
-        if not 1 <= motor_id <= 15:
-            raise InvalidArgumentError("a motor ID is 1..15 (cml-users-guide.txt 1.1)")
         self._driver = driver
-        self.id = motor_id
+        self.id = args.motor_id(motor_id)
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} ID{self.id}>"
@@ -190,8 +200,8 @@ class Motor:
         self._run(commands.write_register(self._session, self.id, kind, index, value))
 
     def read_param(self, k: int) -> int:
-        """``K#.n``: one K parameter (ch. 3)."""
-        return self._run(ops.param(self._session, self.id, k))
+        """``K#.n``: one K parameter (ch. 3); a K number the firmware lacks is refused."""
+        return self._run(commands.read_param(self._session, self.id, k))
 
     def read_params(self) -> dict[int, int]:
         """``?90``: K20..K89 (6.6)."""
@@ -259,7 +269,7 @@ class Motor:
 
     # -- outputs ---------------------------------------------------------------------
     def set_output(self, number: int, on: bool = True) -> None:
-        """``O#.n`` / ``F#.n`` (K34 digit must be 4, general use)."""
+        """``O#.n`` / ``F#.n`` (the output's K34 digit must be 3, general use)."""
         self._run(commands.set_output(self._session, self.id, number, on))
 
     # -- banks ---------------------------------------------------------------------
@@ -288,6 +298,7 @@ class Motor:
 
     def start_bank(self, number: int) -> None:
         """``[#.n``: run program bank ``number`` (2.1.2)."""
+        number = self._run(commands.bank_number(self._session, self.id, number))
         self.send(f"[{number}.{self.id}")
 
     def pause_bank(self) -> None:
@@ -301,6 +312,7 @@ class Motor:
 
     def start_ladder(self, number: int) -> None:
         """``[L#.n``: run ladder bank ``number`` in the background."""
+        number = self._run(commands.bank_number(self._session, self.id, number, ladder=True))
         self.send(f"[L{number}.{self.id}")
 
     def stop_ladder(self) -> None:
@@ -330,6 +342,7 @@ class CoolMuscle(Motor):
 
     def motor(self, motor_id: int) -> Motor:
         """The handle for another motor ID of the chain (1..15)."""
+        motor_id = args.motor_id(motor_id)
         if motor_id not in self._motors:
             self._motors[motor_id] = Motor(self._driver, motor_id)
         return self._motors[motor_id]
@@ -359,6 +372,7 @@ class CoolMuscle(Motor):
 
     def poll(self, seconds: float = 0.0) -> list[MotorEvent]:
         """Read for ``seconds`` (0: what is there) and return the events that came."""
+        seconds = args.seconds("seconds", seconds)  # type: ignore[assignment]
         with self._driver.lock:
             events = self._driver.pump(0.0)
             if seconds > 0:
@@ -368,6 +382,7 @@ class CoolMuscle(Motor):
     def wait_event(self, *, kind: str | None = None, motor: int | None = None,
                    timeout: float = ops.DEFAULT_WAIT) -> MotorEvent:
         """The next event of ``kind`` (and ``motor``); :class:`CoolMuscleTimeout` if none."""
+        timeout = args.seconds("timeout", timeout)  # type: ignore[assignment]
         since = self._session.protocol.seq
 
         def match(event: MotorEvent) -> bool:
@@ -406,6 +421,10 @@ def connect(url: str | Any, *, baudrate: int = 38400, motor: int = 1,
     ``timeout`` bounds each reply; ``firmware`` (``cm2``, ``rt3``, ``cm1``) skips
     reading ``?85`` to pick the parameter table used for validation.
     """
+    if not isinstance(url, str) and not (hasattr(url, "write") and hasattr(url, "read")):
+        raise InvalidArgumentError(f"connect() takes a URL or an open port, not {url!r}")
+    args.motor_id(motor)                # the arguments, before a port is opened
+    ops.Session(timeout=timeout, firmware=firmware, poll_interval=poll_interval)
     if isinstance(url, str):
         port = open_port(url, baudrate=baudrate, **serial_options)
         own = True

@@ -112,6 +112,8 @@ def upload(
     """Send a .cml file to a real or virtual motor and verify it by readback."""
     from .upload import upload_file
 
+    if file.is_dir():
+        raise UsageError(f"{file} is a directory, not a .cml file")
     if not file.is_file():
         raise UsageError(f"no such file: {file}")
     result = upload_file(file, port, save=save, verify=verify, baudrate=baudrate,

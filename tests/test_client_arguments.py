@@ -1,0 +1,125 @@
+"""The host library refuses bad arguments before anything is sent (principle 4: a
+typed exception, never a TypeError from inside, never a line the motor would take for
+something else), and reads back banks that hold the ``?96`` fence's own text (6.6)."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any, Callable
+
+import pytest
+
+from coolmuscle import connect_async
+from coolmuscle.client import CoolMuscle, connect
+from coolmuscle.errors import InvalidArgumentError, OutOfRangeError
+
+
+@pytest.fixture
+def m() -> Any:
+    motor = connect("coolmuscle://?mode=fast")
+    yield motor
+    motor.close()
+
+
+BAD: dict[str, Callable[[CoolMuscle], Any]] = {
+    "motor('2')": lambda m: m.motor("2"),
+    "motor(None)": lambda m: m.motor(None),
+    "motor(1.5)": lambda m: m.motor(1.5),
+    "motor(True)": lambda m: m.motor(True),
+    "move_by('x')": lambda m: m.move_by("x"),
+    "move_to(None)": lambda m: m.move_to(None),
+    "move_to(1.5)": lambda m: m.move_to(1.5),
+    "move_to(10, speed='fast')": lambda m: m.move_to(10, speed="fast"),
+    "run(None)": lambda m: m.run(None),
+    "read_register(1, 1)": lambda m: m.read_register(1, 1),
+    "read_register('P', '1')": lambda m: m.read_register("P", "1"),
+    "write_register('P', 0, None)": lambda m: m.write_register("P", 0, None),
+    "set_output('x')": lambda m: m.set_output("x"),
+    "set_output(1, 'yes')": lambda m: m.set_output(1, "yes"),
+    "get_output('x')": lambda m: m.get_output("x"),
+    "send(123)": lambda m: m.send(123),
+    "send(b'?96.1')": lambda m: m.send(b"?96.1"),
+    "send('\u20ac')": lambda m: m.send("\u20ac"),
+    "send('a\\rb')": lambda m: m.send("a\rb"),
+    "upload(123)": lambda m: m.upload(123),
+    "upload('program.cml')": lambda m: m.upload("program.cml"),
+    "wait_in_position('x')": lambda m: m.wait_in_position(timeout="x"),
+    "wait_in_position(-1)": lambda m: m.wait_in_position(timeout=-1),
+    "poll('x')": lambda m: m.poll("x"),
+    "wait_event(timeout=None)": lambda m: m.wait_event(timeout=None),
+    "read_param('x')": lambda m: m.read_param("x"),
+    "write_param('x', 1)": lambda m: m.write_param("x", 1),
+    "start_bank('x')": lambda m: m.start_bank("x"),
+    "save('x')": lambda m: m.save("x"),
+}
+
+
+@pytest.mark.parametrize("call", sorted(BAD))
+def test_bad_arguments_raise_invalid_argument_and_send_nothing(m: CoolMuscle, call: str) -> None:
+    sent: list[bytes] = []
+    write = m.port.write
+    m.port.write = lambda data: (sent.append(bytes(data)), write(data))[1]
+    m.get_position()                          # learn the firmware and echo first
+    assert sent                               # (the spy sees what goes out)
+    sent.clear()
+    with pytest.raises(InvalidArgumentError):
+        BAD[call](m)
+    assert sent == []
+
+
+@pytest.mark.parametrize("call", ["read_param(10)", "read_param(999)", "read_bank(0)",
+                                  "read_bank(31)", "read_bank(0, ladder=True)"])
+def test_numbers_the_firmware_lacks_are_out_of_range_before_sending(m: CoolMuscle,
+                                                                     call: str) -> None:
+    with pytest.raises(OutOfRangeError):
+        eval(f"m.{call}", {"m": m})
+
+
+@pytest.mark.parametrize("kwargs", [{"timeout": "x"}, {"firmware": "zz"}, {"motor": "a"},
+                                    {"motor": 16}, {"poll_interval": -1}])
+def test_connect_refuses_bad_options_before_opening(kwargs: dict[str, Any]) -> None:
+    with pytest.raises(InvalidArgumentError):
+        connect("coolmuscle://?mode=fast", **kwargs)
+    with pytest.raises(InvalidArgumentError):
+        asyncio.run(connect_async("coolmuscle://?mode=fast", **kwargs))
+
+
+def test_connect_refuses_what_is_neither_a_url_nor_a_port() -> None:
+    with pytest.raises(InvalidArgumentError):
+        connect(None)
+
+
+def test_async_motor_handles_refuse_bad_ids_too() -> None:
+    async def session() -> None:
+        async with await connect_async("coolmuscle://?mode=fast") as a:
+            with pytest.raises(InvalidArgumentError):
+                a.motor("2")
+            with pytest.raises(InvalidArgumentError):
+                await a.move_to(None)
+    asyncio.run(session())
+
+
+@pytest.mark.parametrize("k23", [None, 9])     # echo on (default), echo off (K23 8)
+def test_6_6_a_bank_holding_the_fence_text_reads_back_in_order(k23: int | None) -> None:
+    m = connect("coolmuscle://?mode=fast")
+    try:
+        if k23 is not None:
+            m.send(f"K23.1={k23}")
+        result = m.upload("B9.1\n?96.1\nP1.1\n?96.1\nEND\n")
+        assert result.ok
+        assert m.read_bank(9) == ["?96.1", "P1.1", "?96.1"]
+        assert m.read_all_banks() == {"B9.1": ["?96.1", "P1.1", "?96.1"]}
+        assert m.get_position() == 0             # the line is in step afterwards
+    finally:
+        m.close()
+
+
+def test_upload_of_a_file_that_is_not_utf8_is_a_typed_error(m: CoolMuscle,
+                                                           tmp_path: Path) -> None:
+    path = tmp_path / "bin.cml"
+    path.write_bytes(b"B1.1\n\xff\xfeP1.1\nEND\n")
+    with pytest.raises(InvalidArgumentError, match="not UTF-8"):
+        m.upload(path)
+    with pytest.raises(InvalidArgumentError, match="directory"):
+        m.upload(tmp_path)

@@ -1,0 +1,113 @@
+"""The asyncio client's waits and event streams (docs/host-library.md "asyncio"):
+virtual time on ``coolmuscle://?mode=fast`` moves while the client waits and only as far
+as it waits, as with the sync client; ``events()`` ends when the connection closes or
+fails instead of waiting for ever."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+from typing import Any
+
+import pytest
+
+from coolmuscle import connect_async
+from coolmuscle.client import MotorEvent
+from coolmuscle.errors import CoolMuscleTimeout, TransportError
+from coolmuscle.sim.kernel import NS_PER_S
+
+
+def run(coro: Any) -> Any:
+    return asyncio.run(asyncio.wait_for(coro, 30))
+
+
+def test_fast_mode_moves_and_reports_in_position_as_the_guide_shows() -> None:
+    """The guide's asyncio example on the in-process motor: 2.1 "Ux.1=8" at the end."""
+    async def session() -> tuple[str, float]:
+        async with await connect_async("coolmuscle://?mode=fast") as m:
+            await m.move_to(10000, speed=100, accel=100)
+            await m.wait_in_position(timeout=5)
+            assert await m.get_position() == 10000
+            stream = m.events(kinds=["status"])
+            await m.move_to(0, speed=100, accel=100)
+            event = await stream.__anext__()
+            await stream.aclose()
+            return event.text, m.port.kernel.now / NS_PER_S
+    text, virtual = run(session())
+    assert text == "Ux.1=8"
+    assert 2.0 < virtual < 10.0          # two 1.1 s moves, not a runaway clock
+
+
+def test_fast_mode_time_stands_still_between_requests() -> None:
+    async def session() -> tuple[float, float]:
+        async with await connect_async("coolmuscle://?mode=fast") as m:
+            await m.get_position()
+            before = m.port.kernel.now
+            await asyncio.sleep(0.3)          # the client waits for nothing of the motor
+            return before, m.port.kernel.now
+    before, after = run(session())
+    assert after == before
+
+
+def test_fast_mode_wait_event_times_out_in_virtual_time() -> None:
+    async def session() -> float:
+        async with await connect_async("coolmuscle://?mode=fast") as m:
+            start = m.port.kernel.now
+            with pytest.raises(CoolMuscleTimeout):
+                await m.wait_event(kind="status", timeout=2.0)
+            return (m.port.kernel.now - start) / NS_PER_S
+    waited = run(session())
+    assert 1.9 <= waited <= 2.1
+
+
+def test_events_end_when_the_connection_closes() -> None:
+    async def session() -> list[MotorEvent]:
+        m = await connect_async("coolmuscle://?scale=4")
+        got: list[MotorEvent] = []
+
+        async def consume() -> str:
+            async for event in m.events():
+                got.append(event)
+            return "ended"
+        task = asyncio.create_task(consume())
+        await m.move_to(100, speed=100, accel=100)
+        await m.wait_in_position(timeout=5)
+        await asyncio.sleep(0.1)
+        await m.close()
+        assert await asyncio.wait_for(task, 3) == "ended"
+        return got
+    got = run(session())                  # (the consumer ended: asserted inside)
+    assert all(isinstance(e, MotorEvent) for e in got)
+
+
+def test_events_end_with_the_transport_error_when_the_peer_goes() -> None:
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    port = server.getsockname()[1]
+
+    def peer() -> None:
+        conn, _ = server.accept()
+        conn.recv(100)
+        conn.close()                      # the motor's line is gone
+    thread = threading.Thread(target=peer, daemon=True)
+    thread.start()
+
+    async def session() -> BaseException | None:
+        m = await connect_async(f"socket://127.0.0.1:{port}", timeout=0.5, firmware="cm2")
+        stream = m.events()
+        with pytest.raises((TransportError, CoolMuscleTimeout)):
+            await m.get_position()
+        try:
+            await asyncio.wait_for(stream.__anext__(), 3)
+        except TransportError as exc:
+            return exc
+        finally:
+            await m.close()
+        return None
+    try:
+        assert isinstance(run(session()), TransportError)
+    finally:
+        thread.join(2)
+        server.close()
