@@ -123,3 +123,44 @@ def test_upload_of_a_file_that_is_not_utf8_is_a_typed_error(m: CoolMuscle,
         m.upload(path)
     with pytest.raises(InvalidArgumentError, match="directory"):
         m.upload(tmp_path)
+
+
+def test_2_2_2_typed_calls_wait_for_the_end_of_an_open_bank_definition(m: CoolMuscle) -> None:
+    m.send("B7.1")
+    with pytest.raises(InvalidArgumentError, match="bank definition is open"):
+        m.get_position()
+    with pytest.raises(InvalidArgumentError):
+        m.read_param(55)
+    m.send("P1.1")
+    m.send("END")
+    assert m.read_bank(7) == ["P1.1"]
+    assert m.get_position() == 0
+
+
+def test_an_emergency_stop_from_another_thread_does_not_wait_for_a_wait() -> None:
+    """2.1.2 "*": sent while another thread waits for in-position, it goes out at once."""
+    import threading
+    import time
+    from coolmuscle.errors import CoolMuscleError
+
+    m = connect("coolmuscle://?scale=1")        # real time: a wait takes wall time
+    try:
+        m.move_to(100000, speed=10, accel=100)   # 1,000 pps: about 100 s
+        outcome: list[object] = []
+
+        def wait() -> None:
+            try:
+                outcome.append(m.wait_in_position(timeout=6))
+            except CoolMuscleError as exc:
+                outcome.append(exc)
+        waiter = threading.Thread(target=wait)
+        waiter.start()
+        time.sleep(0.3)
+        start = time.monotonic()
+        m.emergency_stop()
+        took = time.monotonic() - start
+        waiter.join(8)
+        assert took < 2.0, f"the emergency stop waited {took:.1f} s behind the wait"
+        assert outcome and not waiter.is_alive()
+    finally:
+        m.close()

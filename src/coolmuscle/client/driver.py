@@ -121,24 +121,39 @@ class SyncDriver:
         return exchange
 
     def _listen(self, listen: Listen) -> MotorEvent | None:
-        for event in self.session.protocol.events_since(listen.since):
-            if listen.match(event):
-                return event
         deadline = self._deadline(listen.timeout)
+        seen = listen.since
         while True:
+            for event in self.session.protocol.events_since(seen):
+                seen = max(seen, event.seq)
+                if listen.match(event):
+                    return event
             remaining = deadline.remaining()
             if remaining <= 0:
                 return None
-            for event in self.pump(remaining):
-                if event.seq > listen.since and listen.match(event):
-                    return event
+            self.pump(remaining)
+            self._let_others_in()
 
     def _pump_for(self, seconds: float) -> list[MotorEvent]:
         events: list[MotorEvent] = []
         deadline = self._deadline(seconds)
         while (remaining := deadline.remaining()) > 0:
             events += self.pump(remaining)
+            self._let_others_in()
         return events
+
+    def _let_others_in(self) -> None:
+        """Between the read slices of a wait (no exchange of this thread is pending),
+        another thread's operation may run: an emergency stop must not queue behind
+        a ``wait_in_position`` (docs/user-guide.md, ``connect()``)."""
+        try:
+            self.lock.release()
+        except RuntimeError:                # not held (a direct call): nothing to share
+            return
+        try:
+            time.sleep(0)
+        finally:
+            self.lock.acquire()
 
     # -- bytes ------------------------------------------------------------------------
     def write(self, data: bytes) -> None:

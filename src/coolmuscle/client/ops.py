@@ -113,7 +113,13 @@ class Session:
 def exchange(session: Session, lines: tuple[str, ...], done: Callable[[Received], bool],
              motor: int | None, wanted: str, timeout: float | None = None,
              keep_echo: str | None = None) -> Op[Exchange]:
-    """Send ``lines``; return the completed exchange; raise the first reported error."""
+    """Send ``lines``; return the completed exchange; raise the first reported error.
+
+    Refused while a bank definition is open on the line (``B#``/``L#`` sent with
+    ``send``, no ``END`` yet): the motor would store the lines in the bank (2.2.2)."""
+    if session.defining:
+        raise InvalidArgumentError("a bank definition is open on the line: send its END "
+                                   "(or an empty line) before other commands (2.2.2)")
     ex = yield Exchange(tuple(lines), done, motor, wanted,
                         timeout=session.timeout if timeout is None else timeout,
                         keep_echo=keep_echo)
