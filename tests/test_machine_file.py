@@ -73,6 +73,11 @@ def test_schema_mistakes_name_the_key(text: str, message: str) -> None:
      "cable must be"),
     ("[[axis]]\n[axis.analog]\nkind = 'sine'\nfrequency = 1e300\n",
      r"frequency must be 0..1e\+06"),
+    # a misspelt key of [axis.analog] / [axis.encoder] is an error, as elsewhere
+    ("[[axis]]\n[axis.analog]\nkind = 'constant'\nvalu = 2.5\n", "unknown key 'valu'"),
+    ("[[axis]]\n[axis.analog]\nkind = 'ramp'\nvalue = 2.5\n", "unknown key 'value'"),
+    ("[[axis]]\n[axis.encoder]\nkind = 'load'\nratoi = 0.5\n", "unknown key 'ratoi'"),
+    ("[[axis]]\n[axis.encoder]\nkind = 'load'\nrate = 100\n", "unknown key 'rate'"),
 ])
 def test_install_mistakes(text: str, message: str) -> None:
     chain = Chain(firmware="cm2" if "input = 6" not in text else "rt3")

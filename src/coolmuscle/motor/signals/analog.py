@@ -323,6 +323,25 @@ def _read_csv(path: Path, unit_counts: bool) -> list[tuple[float, float]]:
     return rows
 
 
+#: The keys of each kind of ``[axis.analog]`` (docs/machine-file.md); others are errors.
+_ANALOG_KEYS: dict[str, frozenset[str]] = {
+    "constant": frozenset({"kind", "unit", "value"}),
+    "ramp": frozenset({"kind", "unit", "from", "to", "start", "duration"}),
+    "sine": frozenset({"kind", "unit", "offset", "amplitude", "frequency", "phase"}),
+    "csv": frozenset({"kind", "unit", "file", "interpolate", "repeat"}),
+    "torque-sensor": frozenset({"kind", "offset", "volts_per_nm", "stiffness", "contact",
+                                "direction"}),
+}
+
+
+def _known_keys(table: Mapping[str, Any], known: frozenset[str], what: str) -> None:
+    """A misspelt key is an error, not a silent default (docs/machine-file.md)."""
+    unknown = sorted(str(k) for k in table if k not in known)
+    if unknown:
+        raise ValueError(f"{what}: unknown key {unknown[0]!r} (known: "
+                         f"{', '.join(sorted(known))})")
+
+
 def source_from_config(table: Mapping[str, Any], *, base_dir: Path | str | None = None
                        ) -> AnalogSource:
     """An :class:`AnalogSource` from a machine file's ``[axis.analog]`` table.
@@ -335,6 +354,8 @@ def source_from_config(table: Mapping[str, Any], *, base_dir: Path | str | None 
     "counts"``.  Raises ``ValueError`` with the reason for a bad table.
     """
     kind = str(table.get("kind", "constant")).lower()
+    if kind in _ANALOG_KEYS:
+        _known_keys(table, _ANALOG_KEYS[kind], f"[axis.analog] kind {kind!r}")
     if kind == "constant":
         return Constant(_volts(table, "value", 0.0))
     if kind == "ramp":

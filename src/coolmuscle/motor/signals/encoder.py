@@ -64,11 +64,23 @@ def _num(table: Mapping[str, Any], key: str, default: float) -> float:
     return float(value)
 
 
+#: The keys of each kind of ``[axis.encoder]`` (docs/machine-file.md).
+_ENCODER_KEYS: dict[str, frozenset[str]] = {
+    "load": frozenset({"kind", "ratio", "ppr", "slip", "backlash"}),
+    "independent": frozenset({"kind", "rate", "start", "stop", "ppr"}),
+    "none": frozenset({"kind", "ppr"}),
+}
+
+
 def gearing_from_config(table: Mapping[str, Any]) -> Gearing:
     """A :class:`Gearing` from the machine file's ``[axis.encoder]`` table (ValueError)."""
     kind = str(table.get("kind", "load")).lower()
-    if kind not in ("load", "independent", "none"):
+    if kind not in _ENCODER_KEYS:
         raise ValueError(f"[axis.encoder] kind must be load, independent or none, not {kind!r}")
+    unknown = sorted(str(k) for k in table if k not in _ENCODER_KEYS[kind])
+    if unknown:                 # a misspelt key is an error, not a silent default
+        raise ValueError(f"[axis.encoder] kind {kind!r}: unknown key {unknown[0]!r} "
+                         f"(known: {', '.join(sorted(_ENCODER_KEYS[kind]))})")
     ppr = table.get("ppr")
     if ppr is not None and (isinstance(ppr, bool) or not isinstance(ppr, int) or ppr <= 0):
         raise ValueError("[axis.encoder] ppr must be a positive integer")
