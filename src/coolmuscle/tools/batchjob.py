@@ -34,7 +34,9 @@ log = logging.getLogger(__name__)
 
 Status = Literal["pass", "fail", "ran", "error"]
 
-_HEADER = re.compile(r"^# chain:(.*)$", re.MULTILINE)
+#: The script header: ``# chain:`` (golden transcripts) or ``# coolmuscle:`` (what
+#: ``coolmuscle run`` reads, docs/scripts.md); both are read, in file order.
+_HEADER = re.compile(r"^# (?:chain|coolmuscle):(.*)$", re.MULTILINE | re.IGNORECASE)
 _HEADER_KEYS = ("motors", "firmware", "machine", "state")
 FIRMWARES = ("cm2", "rt3", "cm1")
 
@@ -80,13 +82,14 @@ class Outcome:
 
 
 def chain_header(text: str) -> dict[str, str]:
-    """``# chain: motors=3 firmware=rt3`` -> ``{"motors": "3", "firmware": "rt3"}``."""
-    match = _HEADER.search(text)
+    """``# chain: motors=3 firmware=rt3`` -> ``{"motors": "3", "firmware": "rt3"}``
+    (``# coolmuscle: motors=3`` alike; a later header line adds to or overrides an
+    earlier one)."""
     options: dict[str, str] = {}
-    if match:
+    for match in _HEADER.finditer(text):
         for item in match.group(1).split():
             key, _, value = item.partition("=")
-            options[key] = value
+            options[key.lower()] = value
     return options
 
 

@@ -141,13 +141,14 @@ def default_chain(*args: Any, **kwargs: Any) -> Any:
 def header_defaults(file: Path, motors: int | None, firmware: str | None,
                     machine: Path | None) -> tuple[int, str, Path | None]:
     """``# coolmuscle: motors=2 firmware=rt3 machine=axis.toml`` in a script gives the
-    defaults (``machine`` relative to the script); an option given on the command line
-    wins, with a note when it differs from the header (docs/scripts.md)."""
+    defaults (``machine`` relative to the script); ``# chain:`` (the golden
+    transcripts' header, which ``batch`` reads too) alike.  An option given on the
+    command line wins, with a note when it differs from the header (docs/scripts.md)."""
     header: dict[str, str] = {}
     try:
         with file.open(encoding="utf-8", errors="replace") as fh:
             for line in fh:
-                if line.lower().startswith("# coolmuscle:"):
+                if line.lower().startswith(("# coolmuscle:", "# chain:")):
                     for item in line.split(":", 1)[1].split():
                         key, _, value = item.partition("=")
                         header[key.lower()] = value
