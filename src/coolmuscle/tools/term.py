@@ -111,7 +111,7 @@ class Terminal:
             elif name == "log" and len(args) == 1:
                 self.log(args[0])
             elif name == "motor" and len(args) == 1 and args[0].isdigit():
-                self.motor = int(args[0])
+                self.motor = self.client.motor(int(args[0])).id    # 1..15 (1.1)
                 show(f"motor ID{self.motor}", "info")
             else:
                 show(HELP, "info")
