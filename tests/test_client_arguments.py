@@ -42,6 +42,7 @@ BAD: dict[str, Callable[[CoolMuscle], Any]] = {
     "send(b'?96.1')": lambda m: m.send(b"?96.1"),
     "send('\u20ac')": lambda m: m.send("\u20ac"),
     "send('a\\rb')": lambda m: m.send("a\rb"),
+    "send('?' * 513)": lambda m: m.send("?" * 513),
     "upload(123)": lambda m: m.upload(123),
     "upload('program.cml')": lambda m: m.upload("program.cml"),
     "wait_in_position('x')": lambda m: m.wait_in_position(timeout="x"),

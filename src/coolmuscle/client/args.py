@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from ..device.hostline import MAX_LINE
 from ..errors import InvalidArgumentError
 
 __all__ = ["integer", "optional_integer", "seconds", "motor_id", "line", "flag"]
@@ -57,6 +58,10 @@ def line(value: object) -> str:
     except UnicodeEncodeError:
         raise InvalidArgumentError(f"a CML line holds single-byte characters only: "
                                    f"{value!r}") from None
+    if len(value) > MAX_LINE:
+        raise InvalidArgumentError(f"a CML line of {len(value)} characters: the motor "
+                                   f"discards lines over {MAX_LINE} (docs/fidelity.md "
+                                   "\"Over-long lines\")")
     return value
 
 
