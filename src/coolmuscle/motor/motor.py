@@ -61,6 +61,8 @@ class Motor(Supervision):
         self.firmware = firmware
         self.bus = bus
         self.params = ParamTable(firmware)
+        #: limits() by (S, A, decel data, params.version): K37/K44/K51/K69/K40 as then
+        self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
         self.k = self.params.get       # K lookups are many a move: no extra frame
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
@@ -216,11 +218,18 @@ class Motor(Supervision):
         """
         if s_value == 0 or a_value == 0 or decel_a == 0:
             return None
+        key = (s_value, a_value, decel_a, self.params.version)
+        found = self._limits_memo.get(key)
+        if found is not None:                   # the same data under the same K values
+            return found
         lim = limits_from_data(s_value, a_value, k37=self.k(37), k44=self.k(44),
                                k51=self.k(51), k69=self.k(69), decel_a_value=decel_a)
         top = self.max_speed_pps()
         if lim.speed > top:            # ch. 3 K40: S above the maximum is limited to it
             lim = replace(lim, speed=top, creep=min(lim.creep, top))
+        if len(self._limits_memo) >= 256:
+            self._limits_memo.clear()
+        self._limits_memo[key] = lim
         return lim
 
     def max_speed_pps(self) -> float:

@@ -36,6 +36,9 @@ class ParamTable:
             raise ValueError(f"firmware {firmware.name!r} lacks specs for K{missing}")
         self._values: dict[int, int] = self.defaults()
         self._listeners: list[ChangeListener] = []
+        #: Counts the writes (set, restore, reset): what is derived from the values can
+        #: be kept while it is unchanged (``Motor.limits``, ``TravelLimits``).
+        self.version = 0
 
     @property
     def firmware(self) -> Firmware:
@@ -72,6 +75,7 @@ class ParamTable:
         self.check(k, value)
         old = self._values[k]
         self._values[k] = value
+        self.version += 1
         for listener in tuple(self._listeners):
             listener(k, old, value)
         return old
@@ -114,11 +118,13 @@ class ParamTable:
                 rejected.append(k)
                 continue
             self._values[k] = value
+        self.version += 1
         return sorted(rejected)
 
     def reset(self) -> None:
         """Back to the factory values; no listeners run."""
         self._values = self.defaults()
+        self.version += 1
 
     def format_param(self, k: int, motor_id: int) -> str:
         """One parameter as the motor prints it: ``K20.1=0``."""

@@ -38,14 +38,21 @@ class TravelLimits:
     def __init__(self, motor: "MotorCore") -> None:
         self.motor = motor
         self.on = {1: False, -1: False}
+        self._range: tuple[float, float] = (-math.inf, math.inf)
+        self._range_version = -1            # K45, K58, K59 as of this params version
 
     # -- software limits ----------------------------------------------------------
     def soft_range(self) -> tuple[float, float]:
         """(lowest, highest) user position allowed; ±inf where K58/K59 are 0."""
         m = self.motor
-        unit = 100 if m.firmware.name == "cm1" else _UNIT.get(digit(m.k(45), 3), 100)
-        k58, k59 = m.k(58), m.k(59)
-        return (k59 * unit if k59 < 0 else -math.inf, k58 * unit if k58 > 0 else math.inf)
+        version = m.params.version
+        if version != self._range_version:
+            unit = 100 if m.firmware.name == "cm1" else _UNIT.get(digit(m.k(45), 3), 100)
+            k58, k59 = m.k(58), m.k(59)
+            self._range = (k59 * unit if k59 < 0 else -math.inf,
+                           k58 * unit if k58 > 0 else math.inf)
+            self._range_version = version
+        return self._range
 
     def clamp(self, user_target: float) -> float:
         """A target within the software limits."""
