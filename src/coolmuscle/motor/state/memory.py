@@ -180,6 +180,11 @@ class Memory:
 
     def number(self, kind: str, index: int) -> int:
         """The value of a numeric memory (``S``, ``A``, ``P``, ``M``, ``T`` ...; not V)."""
+        cells = self._data.get(kind)        # fast path: a canonical kind, a valid index
+        if cells is not None and type(index) is int and 0 <= index < len(cells):
+            found = cells[index]
+            if type(found) is int:
+                return found
         value = self.get(kind, index)
         if not isinstance(value, int):
             raise TypeError(f"{kind}{index} holds {value!r}, not a number")
