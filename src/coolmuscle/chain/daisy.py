@@ -109,6 +109,8 @@ class Chain:
         self._everywhere = 0            # watchers without ``motors``
         self._observers: list[Callable[[], None]] = []
         self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
+        self._settings_now = LineSettings()
+        self._settings_version = -1         # ID1's params.version of _settings_now
         self.motors: dict[int, Motor] = {}
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
@@ -153,12 +155,16 @@ class Chain:
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:
         first = self.motors[1]
+        version = first.params.version
+        if version == self._settings_version:       # ID1's K values unchanged since
+            return self._settings_now
         key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
             found = self._settings_cache[key] = LineSettings(
                 echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
                 baud=BAUD_RATES.get(key[2], 38400))
+        self._settings_now, self._settings_version = found, version
         return found
 
     def _on_host_line(self, text: str) -> None:

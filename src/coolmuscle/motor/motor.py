@@ -63,6 +63,8 @@ class Motor(Supervision):
         self.params = ParamTable(firmware)
         #: limits() by (S, A, decel data, params.version): K37/K44/K51/K69/K40 as then
         self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
+        self._resolution = units.resolution(self.params.get(37))
+        self._resolution_version = self.params.version
         self.k = self.params.get       # K lookups are many a move: no extra frame
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
@@ -120,7 +122,11 @@ class Motor(Supervision):
 
     @property
     def resolution(self) -> units.Resolution:
-        return units.resolution(self.k(37))
+        """K37's resolution (ch. 3 K37 table), kept while no K value changes."""
+        if self._resolution_version != self.params.version:
+            self._resolution = units.resolution(self.k(37))
+            self._resolution_version = self.params.version
+        return self._resolution
 
     def max_position(self) -> int:
         """Maximum |P| for the current K37 (ch. 3 K37 table)."""
