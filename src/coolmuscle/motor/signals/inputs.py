@@ -16,6 +16,14 @@ Signal is recognized."  Functions are assigned per input, one digit each:
 Edges run their functions at the instant the signal changes (a kernel event for the
 slow signal); the motor actions are those of :mod:`.motor`, the program ones those of
 :mod:`.program`.  Choices where the manual is silent: docs/fidelity.md "Inputs and outputs".
+
+P type operation (ch. 3 K26 digits 2/3, K36): the command pulse train on inputs 1 and
+2 moves the commanded position one pulse per effective edge (the rising edge of the
+input *signal*: K26 0/2 is the port's rising edge, 1/3 its falling edge, which is the
+signal's rising edge); K36 0/2 CW/CCW (input 1 CW, input 2 CCW), 1/3 pulse/direction
+(input 1 the pulses, input 2 ON for CW).  Always, when input 1 or 2 has digit 2/3;
+while an input 3..6 with digit 2/3 is ON and no program bank runs, otherwise.  A
+command from the host has priority: pulses wait while its motion runs.
 """
 
 from __future__ import annotations
@@ -50,6 +58,7 @@ class InputFunctions:
         self.slow = [False] * (count + 1)
         self._timers: list[Timer | None] = [None] * (count + 1)
         self._ctx: "Context | None" = None
+        self._p_profile: object = None      # the command the last P type pulse gave
 
     @property
     def ctx(self) -> "Context":
@@ -98,6 +107,8 @@ class InputFunctions:
             return
         self.quick[number] = on
         if on:
+            if number <= 2:
+                self._command_pulse(number)
             self._level(QUICK_LEVEL, number, True)
             self._edge(QUICK_RISE, number, rising=True)
             self._timers[number] = self.motor.kernel.schedule(
@@ -113,6 +124,39 @@ class InputFunctions:
             self.slow[number] = False
             self._level(SLOW_LEVEL, number, False)
             self._edge(SLOW_FALL, number, rising=False)
+
+    # -- P type operation (ch. 3 K26 ②, K36) --------------------------------------------
+    def p_type_always(self) -> bool:
+        """K26 digit 2/3 on input 1 or 2: "P type Operation is executed at all times"."""
+        k26 = self.motor.k(26)
+        return digit(k26, 1) in (2, 3) or digit(k26, 2) in (2, 3)
+
+    def p_type_active(self) -> bool:
+        """Whether command pulses on inputs 1 and 2 move the motor now (ch. 3 K26 ②)."""
+        if self.p_type_always():
+            return True
+        if self.motor.program.state != "idle":  # "During the execution of Bank Program,
+            return False    # it can not be switched to P type Operation even if ... ON"
+        k26 = self.motor.k(26)
+        return any(self.quick[n] and digit(k26, n) in (2, 3)
+                   for n in range(3, len(self.quick)))
+
+    def _command_pulse(self, number: int) -> None:
+        """An effective edge on input 1 or 2 (K36 format): one pulse of command."""
+        if not self.p_type_active():
+            return
+        if self.motor.k(36) % 2 == 0:            # CW/CCW pulses
+            step = 1 if number == 1 else -1
+        elif number == 1:                        # pulse/direction: input 2 ON is CW
+            step = 1 if self.quick[2] else -1
+        else:
+            return
+        m = self.motor
+        axis = m.axis
+        if axis.moving and axis.profile is not self._p_profile:
+            return                               # a host command's motion has priority
+        m.follow(axis.target() + step)
+        self._p_profile = axis.profile
 
     def _slow_on(self, number: int) -> None:
         self._timers[number] = None
