@@ -165,3 +165,55 @@ def test_an_emergency_stop_from_another_thread_does_not_wait_for_a_wait() -> Non
         assert outcome and not waiter.is_alive()
     finally:
         m.close()
+
+
+def test_2_2_2_another_threads_call_does_not_land_inside_an_uploaded_bank() -> None:
+    """With echo off an upload paces its lines by time; a call from another thread
+    waits for END instead of going out between the bank's lines."""
+    import threading
+
+    m = connect("coolmuscle://?mode=fast")
+    try:
+        m.write_param(23, 8)                     # no echo (ch. 3 K23 8)
+        program = "B1\n" + "\n".join(f"P{i}=100{i}" for i in range(1, 9)) + "\nEND\n"
+        stop = threading.Event()
+
+        def poll() -> None:
+            while not stop.is_set():
+                m.get_position()
+        poller = threading.Thread(target=poll)
+        poller.start()
+        try:
+            assert m.upload(program).ok
+        finally:
+            stop.set()
+            poller.join(10)
+        assert m.read_bank(1) == [f"P{i}.1=100{i}" for i in range(1, 9)]
+    finally:
+        m.close()
+
+
+def test_6_6_a_bank_holding_its_own_listing_query_reads_back_with_echo_off() -> None:
+    m = connect("coolmuscle://?mode=fast")
+    try:
+        m.send("K23.1=9")
+        assert m.upload("B1.1\n?1.1\nP1.1=5\nEND\n").ok
+        assert m.read_bank(1) == ["?1.1", "P1.1=5"]
+        assert m.get_position() == 0 and m.echo is False
+    finally:
+        m.close()
+
+
+def test_numpy_numbers_and_an_endless_wait_are_accepted() -> None:
+    np = pytest.importorskip("numpy")
+    m = connect("coolmuscle://?mode=fast", timeout=np.int64(1))
+    try:
+        assert m.motor(np.int64(2)).id == 2
+        assert m.read_bank(np.int64(1)) == []
+        m.set_output(1, np.bool_(False))
+        m.move_to(np.int64(100), speed=np.int32(100), accel=100)
+        assert m.wait_in_position(timeout=np.float32(5)) & 8
+        assert abs(m.get_position() - 100) <= 5          # in position: within K55
+    finally:
+        m.close()
+    connect("coolmuscle://?mode=fast", timeout=float("inf")).close()

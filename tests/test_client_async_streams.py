@@ -111,3 +111,20 @@ def test_events_end_with_the_transport_error_when_the_peer_goes() -> None:
     finally:
         thread.join(2)
         server.close()
+
+
+def test_fast_mode_a_wait_pending_at_close_ends_with_the_transport_error() -> None:
+    async def session() -> BaseException | None:
+        m = await connect_async("coolmuscle://?mode=fast")
+
+        async def wait() -> BaseException | None:
+            try:
+                await m.wait_event(kind="input", timeout=100000)
+            except (TransportError, CoolMuscleTimeout) as exc:
+                return exc
+            return None
+        task = asyncio.create_task(wait())
+        await asyncio.sleep(0.3)
+        await m.close()
+        return await asyncio.wait_for(task, 5)
+    assert isinstance(run(session()), TransportError)

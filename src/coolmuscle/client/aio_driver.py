@@ -170,6 +170,9 @@ class AsyncDriver:
 
     async def _until(self, ready: Callable[[], bool], seconds: float) -> bool:
         end = self.now() + seconds
+        # On a fast port virtual time bounds the wait; the wall clock too (as the sync
+        # driver's deadline does): a port closed meanwhile stops its time for good.
+        wall_end = self._loop.time() + seconds + 5.0
         with self.waiting(seconds):
             async with self._changed:
                 while not ready():
@@ -179,6 +182,10 @@ class AsyncDriver:
                     if remaining <= 0:
                         return False
                     if self._reader.fast:      # virtual: the reader says when it moved
+                        if getattr(self.port, "kernel", None) is None:
+                            raise TransportError("the port was closed during the wait")
+                        if self._loop.time() >= wall_end:
+                            return False
                         remaining = min(remaining, 0.05)
                     try:
                         await asyncio.wait_for(self._changed.wait(), remaining)

@@ -10,6 +10,8 @@ the last target).  Ranges stay with the firmware tables (:mod:`.commands`).
 from __future__ import annotations
 
 import math
+import numbers
+import operator
 
 from ..device.hostline import MAX_LINE
 from ..errors import InvalidArgumentError
@@ -18,10 +20,14 @@ __all__ = ["integer", "optional_integer", "seconds", "motor_id", "line", "flag"]
 
 
 def integer(name: str, value: object) -> int:
-    """An ``int`` (not a bool, a float or a numeric string)."""
-    if isinstance(value, bool) or not isinstance(value, int):
+    """An integer (``int`` or one that says it is, as numpy's do: ``__index__``); not
+    a bool, a float or a numeric string."""
+    if isinstance(value, bool):
         raise InvalidArgumentError(f"{name} must be an integer, not {value!r}")
-    return value
+    try:
+        return operator.index(value)    # type: ignore[arg-type]
+    except TypeError:
+        raise InvalidArgumentError(f"{name} must be an integer, not {value!r}") from None
 
 
 def optional_integer(name: str, value: object) -> int | None:
@@ -33,18 +39,22 @@ def seconds(name: str, value: object, *, allow_none: bool = False) -> float | No
     """A finite, non-negative number of seconds."""
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or value < 0:
+    if isinstance(value, (bool, str, bytes)) or not isinstance(value, numbers.Real) \
+            or math.isnan(value) or value < 0:
         raise InvalidArgumentError(f"{name} must be a number of seconds >= 0, not {value!r}")
-    return float(value)
+    return float(value)         # inf: wait for as long as it takes
 
 
 def motor_id(value: object) -> int:
     """A motor ID of the chain, 1..15 (cml-users-guide.txt 1.1)."""
-    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 15:
+    try:
+        number = integer("a motor ID", value)
+    except InvalidArgumentError:
+        number = 0
+    if not 1 <= number <= 15:
         raise InvalidArgumentError(f"a motor ID is 1..15 (cml-users-guide.txt 1.1), "
                                    f"not {value!r}")
-    return value
+    return number
 
 
 def line(value: object) -> str:
@@ -69,6 +79,12 @@ def flag(name: str, value: object) -> bool:
     """A ``bool`` (0 and 1 accepted as such)."""
     if isinstance(value, bool):
         return value
-    if isinstance(value, int) and value in (0, 1):
+    if type(value).__module__ == "numpy" and type(value).__name__ in ("bool", "bool_"):
         return bool(value)
+    try:
+        number = integer(name, value)
+    except InvalidArgumentError:
+        number = -1
+    if number in (0, 1):
+        return bool(number)
     raise InvalidArgumentError(f"{name} must be True or False, not {value!r}")

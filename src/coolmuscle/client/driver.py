@@ -97,7 +97,7 @@ class SyncDriver:
         if isinstance(request, Listen):
             return self._listen(request)
         if isinstance(request, Pause):
-            self._pump_for(request.seconds)
+            self._pump_for(request.seconds, shared=request.shared)
             return None
         if isinstance(request, Now):
             return self.now()
@@ -134,12 +134,13 @@ class SyncDriver:
             self.pump(remaining)
             self._let_others_in()
 
-    def _pump_for(self, seconds: float) -> list[MotorEvent]:
+    def _pump_for(self, seconds: float, shared: bool = False) -> list[MotorEvent]:
         events: list[MotorEvent] = []
         deadline = self._deadline(seconds)
         while (remaining := deadline.remaining()) > 0:
             events += self.pump(remaining)
-            self._let_others_in()
+            if shared:
+                self._let_others_in()
         return events
 
     def _let_others_in(self) -> None:
@@ -151,7 +152,7 @@ class SyncDriver:
         except RuntimeError:                # not held (a direct call): nothing to share
             return
         try:
-            time.sleep(0)
+            time.sleep(0.001)               # a thread waiting for the lock gets it now
         finally:
             self.lock.acquire()
 

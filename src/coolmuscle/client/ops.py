@@ -60,9 +60,13 @@ class Listen:
 
 @dataclass(frozen=True)
 class Pause:
-    """Keep reading (events are delivered) for ``seconds``; never an error."""
+    """Keep reading (events are delivered) for ``seconds``; never an error.
+
+    ``shared``: another thread's request may go out meanwhile (a wait between polls);
+    not inside a bank upload, whose lines would then hold it (2.2.2)."""
 
     seconds: float
+    shared: bool = False
 
 
 @dataclass(frozen=True)
@@ -275,7 +279,7 @@ def wait_in_position(session: Session, motor: int, timeout: float) -> Op[Ux]:
                     return Ux(event.value)
                 continue
         else:
-            yield Pause(min(remaining, session.poll_interval))
+            yield Pause(min(remaining, session.poll_interval), shared=True)
         remaining = deadline - (yield Now())
         if remaining <= 0:
             continue

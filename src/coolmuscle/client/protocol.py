@@ -235,7 +235,7 @@ class Protocol:
         if index is None:
             return False
         owner = self._sent[index][1]
-        if self.echo is False and owner is not None and owner.keep_echo == text:
+        if self.echo is False and owner is not None and owner.keep_echo is not None:
             return False            # no echo comes: a listing line of that text
         for _ in range(index):
             self._sent.popleft()  # older lines whose echo never came
