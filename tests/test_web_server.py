@@ -103,6 +103,9 @@ def test_out_of_range_with_k23_messages_gets_the_motors_error_line(served):
     ({"t": "cml", "line": "P.1=1\rP.1=2"}, "one line"),
     ({"t": "cml", "line": "?" * 600}, "too long"),
     ({"t": "warp"}, "unknown request"),
+    ({"t": []}, "unknown request"),          # unhashable kinds: an answer, not a 500
+    ({"t": {"a": 1}}, "unknown request"),
+    ({"t": None}, "unknown request"),
 ])
 def test_bad_requests_get_a_clear_message(served, request_, words):
     async def body(ws, hello):

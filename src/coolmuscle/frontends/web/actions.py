@@ -69,7 +69,8 @@ class Actions:
             return {"t": "result", "ok": False, "error": "a request is a JSON object"}
         rid = request.get("id")
         rid = rid if isinstance(rid, (int, str)) and not isinstance(rid, bool) else None
-        handler = self._handlers.get(request.get("t"))  # type: ignore[arg-type]
+        kind = request.get("t")
+        handler = self._handlers.get(kind) if isinstance(kind, str) else None
         try:
             if request.get("t") == "invalid":
                 raise RequestError(str(request.get("error")))
