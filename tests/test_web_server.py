@@ -441,3 +441,30 @@ def test_a_connection_flood_is_capped_and_trickled_headers_time_out(monkeypatch)
                           b"Connection: close\r\n\r\n").startswith(b"HTTP/1.1 200")
     finally:
         st.stop()
+
+
+def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
+    """The hello's history holds the queued lines: the batch's flush does not send them
+    again to that page (found as "trace recording started" twice on run --web)."""
+    import asyncio
+
+    from coolmuscle.frontends.web.hub import Client, Hub
+
+    async def body() -> tuple[list[str], list[str]]:
+        hub = Hub(device=None, call=lambda fn, *a: fn(*a))
+        hub._loop = asyncio.get_running_loop()
+        old_page, new_page = Client(lambda _f: None), Client(lambda _f: None)
+        hub.clients.add(old_page)
+        hub.add_log([0, "note", "trace recording started", 0, "web"])
+        greeted = {id(e) for e in hub.history}
+        assert hub.pending() == greeted
+        hub.clients.add(new_page)
+        new_page.seen = hub.pending()
+        hub.add_log([1, "reply", "Ux.1=8", 1, "motor"])
+        hub._flush()
+        texts = [[line[2] for line in json.loads(frame)["lines"]] for frame, _ in
+                 (list(old_page.logs) + list(new_page.logs))]
+        return texts[0], texts[1]
+    old_lines, new_lines = asyncio.run(body())
+    assert old_lines == ["trace recording started", "Ux.1=8"]
+    assert new_lines == ["Ux.1=8"]

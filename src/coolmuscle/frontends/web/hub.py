@@ -60,6 +60,8 @@ class Client:
         self.wake = asyncio.Event()
         self.task: asyncio.Task[None] | None = None
         self.sent = 0
+        #: log entries its ``hello`` history already held, still waiting in the batch
+        self.seen: set[int] = set()
 
     def queue_log(self, frame: str, lines: int) -> None:
         """Queue an encoded ``log`` frame of ``lines`` lines; the oldest go past the bound."""
@@ -143,7 +145,14 @@ class Hub:
         self._task = None
         self.clients.clear()
 
-    def add(self, client: Client) -> None:
+    def pending(self) -> set[int]:
+        """The log entries queued but not yet sent (their ids): a page greeted now has
+        them in its history already (:meth:`add`)."""
+        return {id(entry) for entry in self._batch}
+
+    def add(self, client: Client, seen: set[int] | None = None) -> None:
+        """A page joins; ``seen``: entries of the pending batch its history held."""
+        client.seen = set(seen or ())
         self.clients.add(client)
         client.task = asyncio.create_task(client.run(), name="coolmuscle-web-client")
         self.changed()
@@ -174,6 +183,13 @@ class Hub:
             return
         frame = json.dumps({"t": "log", "lines": batch, "dropped": 0}, separators=(",", ":"))
         for client in self.clients:
+            if client.seen:                 # greeted during this batch: not twice
+                lines = [entry for entry in batch if id(entry) not in client.seen]
+                client.seen = set()
+                if lines:
+                    client.queue_log(json.dumps({"t": "log", "lines": lines, "dropped": 0},
+                                                separators=(",", ":")), len(lines))
+                continue
             client.queue_log(frame, len(batch))
 
     # -- snapshots ----------------------------------------------------------------

@@ -238,8 +238,9 @@ class WebTransport(Transport):
         self._sockets.add(ws)
         client = Client(ws.send_str)
         try:
-            await ws.send_str(json.dumps(self._hello(), separators=(",", ":")))
-            self.hub.add(client)
+            hello, seen = self._hello(), self.hub.pending()     # one instant: no await
+            await ws.send_str(json.dumps(hello, separators=(",", ":")))
+            self.hub.add(client, seen)
             await self._receive(ws, client)
         except (ConnectionError, asyncio.CancelledError):
             pass
