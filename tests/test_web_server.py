@@ -468,3 +468,29 @@ def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
     old_lines, new_lines = asyncio.run(body())
     assert old_lines == ["trace recording started", "Ux.1=8"]
     assert new_lines == ["Ux.1=8"]
+
+
+def test_the_page_beyond_max_pages_is_refused_and_api_info_says_why(monkeypatch):
+    """docs/web.md Robustness: the 101st page's WebSocket gets 503; /api/info tells the
+    page how many are open, so it can say so instead of only "reconnecting"."""
+    from coolmuscle.frontends.web import server as web_server
+    monkeypatch.setattr(web_server, "MAX_PAGES", 2)
+    st = serve()
+    try:
+        url = st.transports[1].url
+
+        async def probe():
+            async with aiohttp.ClientSession() as session:
+                first = await session.ws_connect(url + "ws")
+                second = await session.ws_connect(url + "ws")
+                with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                    await session.ws_connect(url + "ws")
+                async with session.get(url + "api/info") as reply:
+                    info = await reply.json()
+                await first.close()
+                await second.close()
+                return refused.value.status, info
+        status, info = _run(probe())
+        assert status == 503 and (info["pages"], info["max_pages"]) == (2, 2)
+    finally:
+        st.stop()

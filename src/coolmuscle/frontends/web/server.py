@@ -213,7 +213,8 @@ class WebTransport(Transport):
 
     async def _info(self, _request: web.Request) -> web.StreamResponse:
         return web.json_response({"token_required": self.access.token_required,
-                                  "title": self.title})
+                                  "title": self.title, "pages": len(self._sockets),
+                                  "max_pages": MAX_PAGES})
 
     def _hello(self) -> dict[str, Any]:
         assert self.port is not None and self.hub is not None

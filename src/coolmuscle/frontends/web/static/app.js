@@ -104,7 +104,17 @@
         // a wrong token is refused before the socket opens
         fetch("/api/info").then((r) => r.json()).then((info) => {
           if (info.token_required) { sessionStorage.removeItem("coolmuscle-token");
-            state.token = null; askToken(); }
+            state.token = null; askToken();
+            note("cml-note", "the simulator refused the token: enter it again"); }
+        }).catch(() => {});
+      }
+      if (!state.hello && ev.code === 1006) {
+        // refused before opening: say why when the simulator has all the pages it takes
+        fetch("/api/info").then((r) => r.json()).then((info) => {
+          if (info.max_pages && info.pages >= info.max_pages && !state.ws) {
+            setConn("the simulator has " + info.pages + " pages open, its most: close one" +
+                    " (retrying)", false);
+          }
         }).catch(() => {});
       }
       scheduleReconnect();
