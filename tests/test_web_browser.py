@@ -200,6 +200,9 @@ def test_checker_errors_are_shown_on_their_line_and_nothing_is_sent(page, host):
 def test_bad_input_from_the_page_gets_an_error_never_a_stuck_page(page, host):
     page.type_line("P.1=(((")
     expect(page.page.locator("#cml-note")).to_contain_text("not CML")
+    expect(page.by("log")).to_contain_text("not CML", timeout=5000)
+    log = page.by("log").inner_text()          # the note after its line, not before
+    assert log.index("> P.1=(((") < log.index("! not CML")
     page.type_line("K23.1=17")                    # ch. 3 K23 +16: error messages
     page.type_line("P.1=999999999")
     expect(page.by("log")).to_contain_text("error00.1", timeout=5000)

@@ -112,6 +112,8 @@ class Actions:
             hint = self._silence_hint(line, motor)
             if hint:
                 answer["note"] = hint
+                # in the log after the line it is about, at the same instant
+                self._note([self.device.kernel.now, "note", hint, motor, "web"])
         return answer
 
     def _silence_hint(self, line: str, motor: int) -> str | None:

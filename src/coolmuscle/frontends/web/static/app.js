@@ -391,7 +391,7 @@
       note("cml-note", "");
       const r = await request("cml", { line, motor: Number($("cml-motor").value) });
       if (!r.ok) { note("cml-note", r.error); localNote(r.error); }
-      else if (r.note) { note("cml-note", r.note); localNote(r.note); }
+      else if (r.note) { note("cml-note", r.note); }   // the log has it from the simulator
       // the log itself is not read aloud (it can run at dozens of lines a second);
       // the replies to one's own line are
       note("cml-reply", r.ok && r.replies && r.replies.length ? r.replies.join(", ") : "");
