@@ -211,6 +211,11 @@ def test_bad_input_from_the_page_gets_an_error_never_a_stuck_page(page, host):
                        " 'B9.1\\n' + 'T1.1\\n'.repeat(12000) + 'END'; }")   # ~60 KB pasted
     page.by("bank-upload").click()
     expect(page.by("bank-result")).to_contain_text("too long")
+    page.page.evaluate("() => { document.getElementById('bank-text').value ="
+                       " 'B9.1\\n' + '\\u0001'.repeat(47000) + '\\nEND'; }")  # 6 bytes each
+    page.by("bank-upload").click()
+    expect(page.by("bank-result")).to_contain_text("too large to send")
+    expect(page.by("connection")).not_to_contain_text("disconnected")   # the socket lives on
     page.page.evaluate("() => window.__huge = 1")   # the page still runs scripts
     page.page.select_option("#fault-motor", "1")
     page.page.fill("[data-testid=fault-stuck_input-input]", "99")

@@ -8,6 +8,7 @@ window.Coolmuscle = window.Coolmuscle || {};
 
 window.Coolmuscle.panels = function ({ state, $, request, note, localNote }) {
   const MAX_BANK = 48 * 1024;      // characters; the server takes 48 Ki (actions.MAX_BANK_TEXT)
+  const MAX_MESSAGE = 256 * 1024;  // bytes of one WebSocket message (server.MAX_MESSAGE)
   // -- banks ----------------------------------------------------------------------------
   function setupBanks() {
     const list = $("bank-list");
@@ -56,6 +57,11 @@ window.Coolmuscle.panels = function ({ state, $, request, note, localNote }) {
   async function uploadBank() {
     const text = $("bank-text").value;
     if (text.length > MAX_BANK) { showDiag([{ text: "bank text too long (at most " + MAX_BANK + " characters)", error: true }]); return; }
+    // the request as sent (JSON escapes control characters 6 bytes each) within the
+    // simulator's message limit (server.MAX_MESSAGE, 256 KiB)
+    if (new TextEncoder().encode(JSON.stringify({ text })).length > MAX_MESSAGE - 1024) {
+      showDiag([{ text: "bank text too large to send (control characters count six bytes each)", error: true }]); return;
+    }
     showDiag([{ text: "checking and uploading…" }]);
     const r = await request("bank_upload", { motor: Number($("bank-motor").value), text });
     if (!r.ok) { showDiag([{ text: r.error, error: true }]); return; }
