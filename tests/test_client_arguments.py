@@ -217,3 +217,20 @@ def test_numpy_numbers_and_an_endless_wait_are_accepted() -> None:
     finally:
         m.close()
     connect("coolmuscle://?mode=fast", timeout=float("inf")).close()
+
+
+def test_a_lone_wait_on_a_fast_port_takes_no_wall_time() -> None:
+    """docs/user-guide.md: on ``mode=fast`` "a 5 s wait takes no wall time"; a wait with
+    no other thread about does not stop between its reads to make way."""
+    import time
+    from coolmuscle.errors import CoolMuscleTimeout
+
+    m = connect("coolmuscle://?mode=fast")
+    try:
+        start = time.monotonic()
+        with pytest.raises(CoolMuscleTimeout):
+            m.wait_event(kind="input", timeout=1000)      # 4,000 read slices of 0.25 s
+        assert m.port.kernel.now == 1000 * 10 ** 9
+        assert time.monotonic() - start < 2.0           # slices without pauses (~0.02 s)
+    finally:
+        m.close()

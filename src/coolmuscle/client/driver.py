@@ -15,10 +15,12 @@ while the client reads: there a timeout is counted in the motor's virtual second
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import logging
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from serial import SerialException
 
@@ -72,12 +74,27 @@ class SyncDriver:
         self.now, self.virtual = port_clock(port)
         self.listeners: list[tuple[Listener, Callable[[MotorEvent], bool]]] = []
         self.lock = threading.RLock()
+        #: threads waiting for ``lock`` in :meth:`turn` (a wait makes way only for them)
+        self._contenders: collections.deque[None] = collections.deque()
         self._drain_by_timeout = type(port).__module__.endswith("protocol_socket")
 
     # -- running operations ------------------------------------------------------
+    @contextlib.contextmanager
+    def turn(self) -> Iterator[None]:
+        """Hold the connection for one operation (threads take turns)."""
+        self._contenders.append(None)       # deque append/pop: atomic, no lock needed
+        try:
+            self.lock.acquire()
+        finally:
+            self._contenders.pop()
+        try:
+            yield
+        finally:
+            self.lock.release()
+
     def run(self, op: Op[T]) -> T:
         """Drive ``op`` to its end; its exceptions propagate."""
-        with self.lock:
+        with self.turn():
             result: Any = None
             error: BaseException | None = None
             while True:
@@ -146,7 +163,10 @@ class SyncDriver:
     def _let_others_in(self) -> None:
         """Between the read slices of a wait (no exchange of this thread is pending),
         another thread's operation may run: an emergency stop must not queue behind
-        a ``wait_in_position`` (docs/user-guide.md, ``connect()``)."""
+        a ``wait_in_position`` (docs/user-guide.md, ``connect()``).  Only when another
+        thread waits for its turn: a lone wait (a long one on a fast port) reads on."""
+        if not self._contenders:
+            return
         try:
             self.lock.release()
         except RuntimeError:                # not held (a direct call): nothing to share

@@ -373,7 +373,7 @@ class CoolMuscle(Motor):
     def poll(self, seconds: float = 0.0) -> list[MotorEvent]:
         """Read for ``seconds`` (0: what is there) and return the events that came."""
         seconds = args.seconds("seconds", seconds)  # type: ignore[assignment]
-        with self._driver.lock:
+        with self._driver.turn():
             events = self._driver.pump(0.0)
             if seconds > 0:
                 events += self._driver._pump_for(seconds)
