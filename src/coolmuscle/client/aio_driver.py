@@ -17,9 +17,8 @@ from typing import Any, Callable
 import serial
 
 from ..errors import CoolMuscleError, CoolMuscleTimeout, TransportError
-from ..sim.kernel import NS_PER_S
 from . import ops
-from .driver import Listener
+from .driver import Listener, _Deadline, port_clock
 from .protocol import Exchange, MotorEvent
 
 log = logging.getLogger(__name__)
@@ -42,7 +41,7 @@ class _ThreadedReader:
         self._on_data = on_data
         self._stop = threading.Event()
         self._socket = type(port).__module__.endswith("protocol_socket")
-        self.fast = bool(getattr(port, "virtual_time_on_read", False))
+        self.clock, self.fast = port_clock(port)    # virtual seconds on a fast port
         #: ends (virtual s) of the requests waiting now; fast ports only
         self.horizons: list[float] = []
         self._thread = threading.Thread(target=self._main, name="coolmuscle-reader",
@@ -52,16 +51,12 @@ class _ThreadedReader:
         self._port.timeout = 0.05
         self._thread.start()
 
-    def virtual_now(self) -> float:
-        kernel = getattr(self._port, "kernel", None)
-        return kernel.now / NS_PER_S if kernel is not None else 0.0
-
     def _fast_timeout(self) -> float:
         """How far this read may move virtual time (0: not at all)."""
         horizon = max(self.horizons, default=None)
         if horizon is None:
             return 0.0
-        return max(0.0, min(1.0, horizon - self.virtual_now()))
+        return max(0.0, min(1.0, horizon - self.clock()))
 
     def _main(self) -> None:
         while not self._stop.is_set():
@@ -130,7 +125,7 @@ class AsyncDriver:
 
     def now(self) -> float:
         """The clock of timeouts: the loop's, or virtual time on a fast port."""
-        return self._reader.virtual_now() if self._reader.fast else self._loop.time()
+        return self._reader.clock() if self._reader.fast else self._loop.time()
 
     @property
     def failure(self) -> BaseException | None:
@@ -169,23 +164,20 @@ class AsyncDriver:
                     log.exception("event listener failed")
 
     async def _until(self, ready: Callable[[], bool], seconds: float) -> bool:
-        end = self.now() + seconds
-        # On a fast port virtual time bounds the wait; the wall clock too (as the sync
-        # driver's deadline does): a port closed meanwhile stops its time for good.
-        wall_end = self._loop.time() + seconds + 5.0
+        # the sync driver's deadline: the port's clock, on a fast port with the wall
+        # clock as a backstop (a port closed meanwhile stops its time for good)
+        deadline = _Deadline(self.now, self._reader.fast, seconds)
         with self.waiting(seconds):
             async with self._changed:
                 while not ready():
                     if self._failure is not None:
                         raise self._failure
-                    remaining = end - self.now()
+                    remaining = deadline.remaining()
                     if remaining <= 0:
                         return False
                     if self._reader.fast:      # virtual: the reader says when it moved
                         if getattr(self.port, "kernel", None) is None:
                             raise TransportError("the port was closed during the wait")
-                        if self._loop.time() >= wall_end:
-                            return False
                         remaining = min(remaining, 0.05)
                     try:
                         await asyncio.wait_for(self._changed.wait(), remaining)
@@ -256,7 +248,7 @@ class _Waiting:
 
     def __init__(self, reader: _ThreadedReader, seconds: float) -> None:
         self._reader = reader
-        self._end = reader.virtual_now() + seconds if reader.fast else 0.0
+        self._end = reader.clock() + seconds if reader.fast else 0.0
 
     def __enter__(self) -> "_Waiting":
         if self._reader.fast:

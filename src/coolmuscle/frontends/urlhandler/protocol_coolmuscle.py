@@ -197,12 +197,6 @@ class Serial(SerialBase):
         """The chain's kernel (``kernel.now`` is the virtual time in ns)."""
         return self.chain.kernel if self.chain is not None else None
 
-    @property
-    def virtual_time_on_read(self) -> bool:
-        """``mode=fast``: virtual time moves only inside :meth:`read` (a client that
-        reads in a background thread must bound how far: the asyncio driver does)."""
-        return isinstance(self._clock, FastClock)
-
     # -- model side -----------------------------------------------------
     def _on_bytes(self, data: bytes) -> None:
         with self._cond:
