@@ -154,17 +154,20 @@ class Axis:
         solved on it), the stored profile equals it within float noise, and a cycle
         that repeats the reversal then starts each repeat from the same numbers (and
         finds its plan planned: docs/performance.md "Sixth round")."""
-        rest = self._rest
-        if rest is not None and rest[0] is self.profile and t_ns >= rest[1].origin_ns:
-            return rest[1].state_at(t_ns)
-        return self.profile.state_at(t_ns)
+        return self._command_at(t_ns).state_at(t_ns)
 
     def _command_end(self, now: int) -> int | None:
         """Where the command ends, from the plan from rest as :meth:`_command_state`."""
+        return self._command_at(now).end_ns
+
+    def _command_at(self, t_ns: int) -> Profile:
+        """The profile the command follows at ``t_ns``: the plan from rest of the last
+        restarted reversal once it has begun (while ``profile`` is still the one planned
+        then), else ``profile``."""
         rest = self._rest
-        if rest is not None and rest[0] is self.profile and now >= rest[1].origin_ns:
-            return rest[1].end_ns
-        return self.profile.end_ns
+        if rest is not None and rest[0] is self.profile and t_ns >= rest[1].origin_ns:
+            return rest[1]
+        return self.profile
 
     # -- servo on / off and the drive --------------------------------------
     @property
