@@ -2,8 +2,9 @@
 bridge application, and the master's two doors into it (SDO through the dictionary /
 the CoE server, the 24-byte RxPDO image), with no network.
 
-``Bench.cycles(n)`` runs n bridge cycles of 1 ms: the kernel to the next millisecond,
-then the application's cycle (what the transport does in ``sim --ethercat``).
+``Bench.cycles(n)`` runs n bridge cycles of 1 ms: the application's cycle is a kernel
+event every millisecond (``BridgeApp.start_cycles``, what the transport starts in
+``sim --ethercat``), and the kernel runs n milliseconds on.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class Bench:
         self.app.drive.clock = lambda: self.kernel.now
         self.od = self.app.dictionary
         self.rx = bytearray(24)
+        self.app.start_cycles(MS)
         self.cycles(1)
 
     @property
@@ -51,9 +53,7 @@ class Bench:
 
     # -- time ------------------------------------------------------------------------
     def cycles(self, n: int = 1) -> None:
-        for _ in range(n):
-            self.kernel.run(until=self.kernel.now + MS)
-            self.app.cycle()
+        self.kernel.run(until=self.kernel.now + n * MS)
 
     def until(self, predicate: Any, limit_ms: int) -> int:
         """Cycles until ``predicate()``; how many it took (AssertionError past the limit)."""

@@ -12,7 +12,7 @@ to a shift of 2 ns at every sample, and every repeat of a cycle reusing its solv
 
 from __future__ import annotations
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion import dynamics
@@ -32,25 +32,31 @@ def twin(exact: bool, lines: list[str]) -> tuple[Chain, list[tuple[int, str]]]:
     return chain, events
 
 
-def sample(chain: Chain) -> tuple[float, float, float]:
+Sample = tuple[float, float, float, float]
+
+
+def sample(chain: Chain) -> Sample:
+    """Position, speed, Pe and the size of the acceleration (pps/s, from the closed-form
+    speed 1 us either side) of the shaft now."""
     axis = chain.motors[1].axis
-    return axis.raw_actual(), axis.raw_velocity(), axis.position_error()
+    now = chain.kernel.now
+    accel = (axis.motion.velocity_at(now + 1000) - axis.motion.velocity_at(now - 1000)) / 2e-6
+    return axis.raw_actual(), axis.raw_velocity(), axis.position_error(), abs(accel)
 
 
-def close(a: list[tuple[float, float, float]], b: list[tuple[float, float, float]],
-          shift_ns: float = 2.0) -> bool:
+def close(a: list[Sample], b: list[Sample], shift_ns: float = 2.0) -> bool:
     """The same motion up to a time shift of ``shift_ns``: position and Pe within 1e-4
     pulse plus the shift at the speed, speed within 0.01 pps and 1e-7 of itself (a free
-    shaft under a load may run at 10^5 pps)."""
+    shaft under a load may run at 10^5 pps) plus the shift at the acceleration."""
     shift = shift_ns * 1e-9
     return len(a) == len(b) and all(
         abs(p - q) <= 1e-4 + shift * max(abs(v), abs(w))
         and abs(e - f) <= 1e-4 + shift * max(abs(v), abs(w))
-        and abs(v - w) <= 1e-2 + 1e-7 * max(abs(v), abs(w))
-        for (p, v, e), (q, w, f) in zip(a, b))
+        and abs(v - w) <= 1e-2 + 1e-7 * max(abs(v), abs(w)) + shift * max(g, h)
+        for (p, v, e, g), (q, w, f, h) in zip(a, b))
 
 
-Run = tuple[list[str], list[int], list[tuple[float, float, float]]]
+Run = tuple[list[str], list[int], list[Sample]]
 
 
 def run_twins(bank: list[str], samples: int, step_ms: int, load: int = 0) -> list[Run]:
@@ -89,10 +95,13 @@ def assert_same_run(runs: list[Run]) -> None:
 @given(p1=st.integers(500, 30_000), p2=st.integers(-30_000, 400), s=st.integers(20, 300),
        a=st.integers(5, 300), k55=st.integers(1, 60), limit=st.integers(20, 100),
        load=st.integers(0, 100))
+@example(p1=500, p2=46, s=89, a=208, k55=3, limit=20, load=0)
 def test_ch3_k55_a_bank_reversing_at_in_position_moves_as_the_exact_model(
         p1: int, p2: int, s: int, a: int, k55: int, limit: int, load: int) -> None:
     """A PTP bank looping between two points (2.1, 4.1.1), an in-position window that
-    comes early, a torque limit and a load torque."""
+    comes early, a torque limit and a load torque.  (Hypothesis found the speed 0.0104
+    pps apart after 106 reports, 51 ns apart, at about 204,000 pps/s: the shift at the
+    acceleration, which the speed's tolerance now counts.)"""
     bank = [f"K55.1={k55}, M.1={limit}", f"S1.1={s}, A1.1={a}, P1.1={p1}, P2.1={p2}",
             "B1.1", "X0", "S1.1, A1.1, P1.1", "P2.1", "X-", "END"]
     assert_same_run(run_twins(bank, 400, 25, load))

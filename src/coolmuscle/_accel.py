@@ -30,6 +30,7 @@ from typing import Sequence
 
 #: The modules compiled, in the order hashed.  Leaves of the import graph first.
 MODULES: tuple[str, ...] = (
+    "coolmuscle.motor.state.param_table",
     "coolmuscle.motor.motion.expoly",
     "coolmuscle.motor.motion.profile",
     "coolmuscle.motor.motion.planner",
@@ -47,6 +48,11 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.signals.analog",
     "coolmuscle.motor.signals.analog_output",
     "coolmuscle.frontends.ethercat.cia402",
+    "coolmuscle.frontends.ethercat.dictionary",
+    "coolmuscle.frontends.ethercat.bridge.modes",
+    "coolmuscle.frontends.ethercat.bridge.cpio",
+    "coolmuscle.frontends.ethercat.bridge.csp",
+    "coolmuscle.frontends.ethercat.bridge.homing",
     "coolmuscle.frontends.ethercat.bridge.axis",
     "coolmuscle.frontends.ethercat.bridge.drive",
 )

@@ -101,6 +101,10 @@ class RealtimeClock:
         """Wall-clock time at which kernel time ``virtual`` is reached."""
         return self._w0 + (virtual - self._v0) / (self.scale * NS_PER_S)
 
+    def lateness(self, virtual: int) -> float:
+        """Wall seconds since kernel time ``virtual`` was due (negative: still to come)."""
+        return self._clock() - self.wall_at(virtual)
+
     def virtual_now(self) -> int:
         """Kernel time that corresponds to the wall clock now (never before ``kernel.now``)."""
         target = self.virtual_at(self._clock())

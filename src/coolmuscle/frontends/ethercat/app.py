@@ -16,8 +16,9 @@ not call the model; :meth:`cycle` runs in the model's thread.
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import Any, Callable
 
+from ...sim.kernel import PRIO_IO, Timer
 from . import esm
 from . import identity as ident
 from .dictionary import Dictionary
@@ -31,6 +32,8 @@ AXIS_OFFSET = 0x800
 #: 6.2 operation modes: hm 6, csp 8, CML 101, CMD 120, CPIO 121.
 MODES = frozenset({6, 8, 101, 120, 121})
 MODE_CSP = 8
+#: 2.2 / 7.3 F511h.3 "1: 1 msec": the CM port's cycle, the bridge's own.
+CYCLE_NS = 1_000_000
 
 
 class BridgeApp:
@@ -49,6 +52,7 @@ class BridgeApp:
         for axis in range(ident.AXES):
             self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
         self.drive: Any = None                  # every mode of ch. 6 and 7 (bridge/)
+        self._cycle_timer: Timer | None = None
         if device is not None:
             from .bridge.drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
@@ -87,3 +91,37 @@ class BridgeApp:
         if self.drive is not None:              # the modes of bridge/ run each axis
             self.drive.cycle()
         self.stack.set_inputs(od.pack_inputs())
+
+    def start_cycles(self, period_ns: int = CYCLE_NS,
+                     after: Callable[[], None] | None = None) -> None:
+        """Run :meth:`cycle` every ``period_ns`` of virtual time, on the device's kernel.
+
+        The bridge's CM port has its own fixed cycle (2.2, F511h.3: 1 ms): every motor
+        gets a command each millisecond of its own time, whenever the master's frames
+        come (a cycle uses the latest output image).  So the cycles are kernel events on
+        an exact grid; a paced kernel runs them as the wall clock reaches them, several
+        at once if the model fell behind, and none is lost.  ``after`` runs after each
+        cycle (the transport's lateness count).  A cycle that raises is logged; the next
+        one still comes.
+        """
+        self.stop_cycles()
+        kernel = self.device.kernel
+
+        def tick() -> None:
+            self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
+                                                   priority=PRIO_IO, name="bridge cycle")
+            try:
+                self.cycle()
+            except Exception:
+                log.exception("bridge cycle failed at %d ns", kernel.now)
+            if after is not None:
+                after()
+
+        self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
+                                               priority=PRIO_IO, name="bridge cycle")
+
+    def stop_cycles(self) -> None:
+        """No more cycles from :meth:`start_cycles`."""
+        if self._cycle_timer is not None:
+            self._cycle_timer.cancel()
+            self._cycle_timer = None

@@ -4,8 +4,8 @@
 hardware), so the motor model never delays an answer; the model side exchanges
 process data through the slave stack's buffers.  :class:`EthercatTransport` is the
 :class:`~coolmuscle.transports.base.Transport` that ``coolmuscle sim --ethercat``
-starts in the service loop: it owns the frame thread and the bridge's 1 ms cycle
-task (manual 6.3) that runs in the model's thread.
+starts in the service loop: it owns the frame thread and starts the bridge's 1 ms
+cycle (manual 6.3), kernel events in the model's thread.
 
 Needs root or CAP_NET_RAW.  The loopback interface is refused: a frame sent on
 ``lo`` comes back to the sender unchanged, so a master there would read its own
@@ -14,7 +14,6 @@ frames as answers (and the slave its own answers as requests).
 
 from __future__ import annotations
 
-import asyncio
 import gc
 import logging
 import os
@@ -172,8 +171,8 @@ class EthercatTransport(Transport):
         self.cycle_s = cycle_s
         self.app: Any = None
         self.frames: FrameThread | None = None
-        self._task: asyncio.Task[None] | None = None
-        self.late_cycles = 0
+        self.late_cycles = 0           # cycles run more than a cycle after they were due
+        self.max_late_s = 0.0          # the latest a cycle ran after it was due (wall s)
         self.cycles = 0
         self.realtime_model = True
         self._old_policy: tuple[int, os.sched_param] | None = None
@@ -186,27 +185,20 @@ class EthercatTransport(Transport):
         gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
         self._model_realtime(True)
         self.frames.start()
-        self._task = asyncio.create_task(self._cycle(), name="ethercat-cycle")
+        # The bridge's 1 ms cycle (6.3) runs in the model's thread as kernel events on
+        # an exact grid (BridgeApp.start_cycles): the paced kernel reaches them with
+        # the wall clock.
+        port.call(self.app.start_cycles, round(self.cycle_s * 1e9), self._cycle_done)
 
-    async def _cycle(self) -> None:
-        """The bridge's 1 ms cycle in the model's thread (6.3), paced to the wall clock."""
-        assert self.port is not None
-        loop = asyncio.get_running_loop()
-        period = self.cycle_s
-        due = loop.time()
-        while True:
-            due += period
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
-            elif delay < -period:
+    def _cycle_done(self) -> None:
+        """Count the cycle, and as late if it ran more than a cycle after it was due."""
+        self.cycles += 1
+        driver = self.port.driver if self.port is not None else None
+        if driver is not None and self.app is not None:
+            late = driver.clock.lateness(self.app.device.kernel.now)
+            self.max_late_s = max(self.max_late_s, late)
+            if late > self.cycle_s:
                 self.late_cycles += 1
-                due = loop.time()
-            try:
-                self.port.call(self.app.cycle)
-            except Exception:
-                log.exception("bridge cycle failed")
-            self.cycles += 1
 
     def _model_realtime(self, on: bool) -> None:
         """The model's thread under SCHED_FIFO below the frame thread (when allowed).
@@ -234,13 +226,8 @@ class EthercatTransport(Transport):
         return {"iface": self.iface, "bridge": self.bridge}
 
     async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            try:
-                await self._task
-            except asyncio.CancelledError:
-                pass
-            self._task = None
+        if self.app is not None and self.port is not None:
+            self.port.call(self.app.stop_cycles)
         if self.frames is not None:
             self.frames.close()
             self.frames = None

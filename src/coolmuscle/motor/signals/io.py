@@ -62,8 +62,11 @@ class DigitalIO:
 
     def input_word(self) -> int:
         """?70: bit 0 = input 1."""
-        return sum(1 << (n - 1) for n in range(1, self.input_count + 1)
-                   if self.input_signal(n))
+        word = 0
+        for n in range(1, self.input_count + 1):      # a loop: compiled, no generator
+            if self.input_signal(n):
+                word |= 1 << (n - 1)
+        return word
 
     # -- outputs --------------------------------------------------------------
     def output_function(self, number: int) -> int:
@@ -108,8 +111,11 @@ class DigitalIO:
 
     def output_word(self) -> int:
         """?50: bit 0 = output 1."""
-        return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
-                   if self.output_port(n))
+        word = 0
+        for n in range(1, self.output_count + 1):
+            if self.output_port(n):
+                word |= 1 << (n - 1)
+        return word
 
     def general_word(self) -> int:
         """Ports of the general-use outputs only (the K23 function 4 report)."""

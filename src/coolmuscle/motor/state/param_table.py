@@ -62,17 +62,19 @@ class ParamTable:
     def __getitem__(self, k: int) -> int:
         return self.get(k)
 
-    def check(self, k: int, value: int) -> None:
+    def check(self, k: int, value: object) -> None:
         """Validate without applying (raises :class:`OutOfRangeError`)."""
         self.spec(k).check(value)
 
-    def set(self, k: int, value: int) -> int:
+    def set(self, k: int, value: object) -> int:
         """Apply ``value`` to K``k`` and return the old value.
 
-        An out-of-range value raises :class:`OutOfRangeError` and is not
-        reflected (ch. 3).  Listeners run after the value is applied.
+        An out-of-range value (or one that is not an integer) raises
+        :class:`OutOfRangeError` and is not reflected (ch. 3).  Listeners run after
+        the value is applied.
         """
         self.check(k, value)
+        assert isinstance(value, int)             # check() refuses anything else
         old = self._values[k]
         self._values[k] = value
         self.version += 1

@@ -62,7 +62,7 @@ class ParamSpec:
         if not self.accepts(self.default):
             raise ValueError(f"K{self.k}: default {self.default} is not a valid value")
 
-    def accepts(self, value: int) -> bool:
+    def accepts(self, value: object) -> bool:
         """Whether ``value`` is a value this parameter can take."""
         if isinstance(value, bool) or not isinstance(value, int):
             return False
@@ -72,7 +72,7 @@ class ParamSpec:
             return value in self.choices
         return self.min <= value <= self.max
 
-    def check(self, value: int) -> None:
+    def check(self, value: object) -> None:
         """Raise :class:`OutOfRangeError` unless ``value`` is accepted."""
         if not self.accepts(value):
             raise OutOfRangeError(f"K{self.k}={value!r} is out of range")
