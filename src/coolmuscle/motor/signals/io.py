@@ -19,9 +19,14 @@ OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE = 0, 1, 2, 3,
 OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH = 6, 7, 8, 9
 
 
+#: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
+_POWERS = tuple(10 ** n for n in range(12))
+
+
 def digit(value: int, position: int) -> int:
     """Digit ``position`` (1 = rightmost) of a digit-wise parameter such as K27 or K34."""
-    return (abs(value) // 10 ** (position - 1)) % 10
+    power = _POWERS[position - 1] if 1 <= position <= len(_POWERS) else 10 ** (position - 1)
+    return (abs(value) // power) % 10
 
 
 class DigitalIO:
