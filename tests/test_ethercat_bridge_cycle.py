@@ -4,17 +4,23 @@
 The CM port gives every motor a command each millisecond of its own time, whenever the
 master's frames come: the cycles are on an exact grid of virtual time, a cycle that
 fails does not stop the next, and an output image that arrives between two cycles is
-taken by the next one.
+taken by the next one.  Under ``--time-scale`` a cycle stays 1 ms of wall time (the
+master's frames come in wall time).
 """
 
 from __future__ import annotations
 
 import struct
+import time
 
 import pytest
+from ethercat_support import needs_net_admin
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.app import CYCLE_NS, BridgeApp
+from coolmuscle.frontends.ethercat.lab import veth_pair
+from coolmuscle.frontends.ethercat.transport import CycleLateness, EthercatTransport
+from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.sim.kernel import Kernel
 from coolmuscle.sim.realtime import RealtimeClock
 
@@ -36,7 +42,7 @@ def test_cycles_run_every_1_ms_of_virtual_time_2_2_f511h(bridge) -> None:
     kernel, _chain, app = bridge
     assert CYCLE_NS == MS
     seen: list[int] = []
-    app.start_cycles(after=lambda: seen.append(kernel.now))
+    app.start_cycles(on_start=lambda: seen.append(kernel.now))
     kernel.run(until=10 * MS + MS // 2)
     assert seen == [n * MS for n in range(1, 11)]
     assert app.drive.cycles == 10 and app.drive.max_gap_ns == MS
@@ -46,12 +52,21 @@ def test_cycles_run_every_1_ms_of_virtual_time_2_2_f511h(bridge) -> None:
     app.stop_cycles()                                    # twice: harmless
 
 
+@pytest.mark.parametrize("period", [0, -MS])
+def test_a_cycle_that_is_not_a_positive_time_is_refused(bridge, period: int) -> None:
+    kernel, _chain, app = bridge
+    with pytest.raises(ValueError):
+        app.start_cycles(period)
+    kernel.run(until=3 * MS)
+    assert app.drive.cycles == 0
+
+
 def test_start_again_replaces_the_schedule(bridge) -> None:
     kernel, _chain, app = bridge
     seen: list[int] = []
-    app.start_cycles(after=lambda: seen.append(kernel.now))
+    app.start_cycles(on_start=lambda: seen.append(kernel.now))
     kernel.run(until=MS // 2)
-    app.start_cycles(2 * MS, after=lambda: seen.append(-kernel.now))
+    app.start_cycles(2 * MS, on_start=lambda: seen.append(-kernel.now))
     kernel.run(until=5 * MS)
     assert seen == [-(MS // 2 + 2 * MS), -(MS // 2 + 4 * MS)]
 
@@ -67,10 +82,11 @@ def test_a_failing_cycle_is_logged_and_the_next_one_comes(bridge, caplog) -> Non
             raise RuntimeError("boom")
         real()
 
+    starts: list[int] = []
     app.cycle = flaky                                    # type: ignore[method-assign]
-    app.start_cycles()
+    app.start_cycles(on_start=lambda: starts.append(kernel.now))
     kernel.run(until=4 * MS)
-    assert calls == [MS, 2 * MS, 3 * MS, 4 * MS]
+    assert calls == [MS, 2 * MS, 3 * MS, 4 * MS] == starts
     assert "bridge cycle failed" in caplog.text
 
 
@@ -108,3 +124,43 @@ def test_lateness_is_wall_seconds_since_an_instant_was_due() -> None:
     wall[0] += 0.003
     assert clock.lateness(MS) == pytest.approx(0.002)
     assert clock.lateness(5 * MS) == pytest.approx(-0.002)
+
+
+@pytest.mark.parametrize("scale", [1.0, 4.0])
+def test_a_cycle_is_late_when_it_starts_more_than_a_wall_cycle_after_its_instant(
+        scale: float) -> None:
+    """Under a time scale one cycle is still 1 ms of wall time (scale ms of virtual)."""
+    wall = [0.0]
+    clock = RealtimeClock(Kernel(), scale=scale, clock=lambda: wall[0])
+    late = CycleLateness(clock, 0.001)
+    period = round(MS * scale)
+    for n, start_wall in enumerate([0.0013, 0.0035, 0.0040, 0.0041], 1):
+        wall[0] = start_wall                    # cycle n is due at n ms of wall time
+        late.note(n * period)
+    assert late.cycles == 4
+    assert late.late == 1                       # cycle 2 started 1.5 ms after its instant
+    assert late.worst == pytest.approx(0.0015)
+
+
+@needs_net_admin
+@pytest.mark.realtime
+@pytest.mark.parametrize("scale", [1.0, 5.0])
+def test_the_transport_runs_one_cycle_a_wall_ms_on_the_virtual_grid(scale: float) -> None:
+    """``sim --ethercat`` (and ``--time-scale``): the cycles come every 1 ms of wall
+    time, each ``scale`` ms of virtual time after the last, and stop on close."""
+    with veth_pair("cmecyc", inside="master") as lab:
+        with ServiceThread(lambda: Chain(None, 4, firmware="cm2"),
+                           lambda: [EthercatTransport(lab.slave_if, "EB02")],
+                           scale=scale) as st:
+            transport = st.transports[0]
+            start = time.monotonic()
+            time.sleep(0.3)
+            cycles, elapsed = st.call(lambda: transport.cycles), time.monotonic() - start
+            gap = st.call(lambda: transport.app.drive.max_gap_ns)
+            now = st.call(lambda: st.chain.kernel.now)
+        assert 0.5 * elapsed * 1000 < cycles < 1.5 * elapsed * 1000 + 5, (cycles, elapsed)
+        assert gap == round(MS * scale)
+        assert now >= cycles * round(MS * scale)
+        after = transport.cycles
+        time.sleep(0.05)
+        assert transport.cycles == after               # closed: no more cycles

@@ -338,3 +338,23 @@ def test_every_profile_defines_k20_to_k89_with_valid_defaults() -> None:
         table = ParamTable(fw)
         assert sorted(table.defaults()) == list(range(20, 90))
         assert len(table.format_param_listing(1)) == 18
+
+
+def test_a_k_number_is_looked_up_by_value_whatever_its_type(table: ParamTable) -> None:
+    """37.0 and numpy's 37 are K37 (as a dict key); "37" and None are no K number.  The
+    same answers from the compiled table (coolmuscle/_accel.py) as from the sources."""
+    import numpy as np
+    seen: list[tuple[int, int, int]] = []
+    table.on_change(lambda k, old, new: seen.append((k, old, new)))
+    assert table.get(37.0) == table.get(37) == table.get(np.int64(37))  # type: ignore[arg-type]
+    old = table.get(37)
+    table.set(37.0, 23)                                   # type: ignore[arg-type]
+    table.set(np.int64(37), 22)                           # type: ignore[arg-type]
+    assert table.get(37) == 22
+    assert seen == [(37, old, 23), (37, 23, 22)] and all(type(k) is int for k, _, _ in seen)
+    for bad in ("37", None, 37.5, (37,)):
+        with pytest.raises(NoSuchParameterError):
+            table.get(bad)                                # type: ignore[arg-type]
+        with pytest.raises(NoSuchParameterError):
+            table.set(bad, 1)                             # type: ignore[arg-type]
+    assert table.restore({20: True, 21: 1.0, 22: "1"}) == [20, 21, 22]

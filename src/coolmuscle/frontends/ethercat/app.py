@@ -93,17 +93,20 @@ class BridgeApp:
         self.stack.set_inputs(od.pack_inputs())
 
     def start_cycles(self, period_ns: int = CYCLE_NS,
-                     after: Callable[[], None] | None = None) -> None:
+                     on_start: Callable[[], None] | None = None) -> None:
         """Run :meth:`cycle` every ``period_ns`` of virtual time, on the device's kernel.
 
         The bridge's CM port has its own fixed cycle (2.2, F511h.3: 1 ms): every motor
         gets a command each millisecond of its own time, whenever the master's frames
-        come (a cycle uses the latest output image).  So the cycles are kernel events on
-        an exact grid; a paced kernel runs them as the wall clock reaches them, several
-        at once if the model fell behind, and none is lost.  ``after`` runs after each
-        cycle (the transport's lateness count).  A cycle that raises is logged; the next
-        one still comes.
+        come (a cycle reads the output image as it is then).  So the cycles are kernel
+        events on an exact grid; a paced kernel runs them as the wall clock reaches
+        them, several at once if the model fell behind, and none is lost.  ``on_start``
+        runs at the start of each cycle, before it (the transport's lateness count).
+        A cycle that raises is logged; the next one still comes.  Starting again
+        replaces the schedule.
         """
+        if period_ns <= 0:
+            raise ValueError(f"the bridge cycle must be a positive time, not {period_ns} ns")
         self.stop_cycles()
         kernel = self.device.kernel
 
@@ -111,11 +114,11 @@ class BridgeApp:
             self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
                                                    priority=PRIO_IO, name="bridge cycle")
             try:
+                if on_start is not None:
+                    on_start()
                 self.cycle()
             except Exception:
                 log.exception("bridge cycle failed at %d ns", kernel.now)
-            if after is not None:
-                after()
 
         self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
                                                priority=PRIO_IO, name="bridge cycle")

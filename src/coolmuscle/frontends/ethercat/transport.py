@@ -158,6 +158,29 @@ class FrameThread:
         sys.setswitchinterval(self._old_switch)
 
 
+class CycleLateness:
+    """How late the bridge's cycles start on the wall clock (the model's thread).
+
+    A cycle is late when it starts more than ``cycle_s`` of wall time after the wall
+    instant of its virtual instant (the paced kernel fell behind, or the event loop
+    woke late)."""
+
+    def __init__(self, clock: Any, cycle_s: float) -> None:
+        self.clock = clock
+        self.cycle_s = cycle_s
+        self.cycles = 0
+        self.late = 0
+        self.worst = 0.0
+
+    def note(self, virtual_ns: int) -> None:
+        """A cycle due at kernel time ``virtual_ns`` starts now."""
+        late = self.clock.lateness(virtual_ns)
+        self.cycles += 1
+        self.worst = max(self.worst, late)
+        if late > self.cycle_s:
+            self.late += 1
+
+
 class EthercatTransport(Transport):
     """``sim --ethercat IFACE``: the bridge as an EtherCAT slave on a raw interface."""
 
@@ -171,9 +194,7 @@ class EthercatTransport(Transport):
         self.cycle_s = cycle_s
         self.app: Any = None
         self.frames: FrameThread | None = None
-        self.late_cycles = 0           # cycles run more than a cycle after they were due
-        self.max_late_s = 0.0          # the latest a cycle ran after it was due (wall s)
-        self.cycles = 0
+        self.lateness: CycleLateness | None = None
         self.realtime_model = True
         self._old_policy: tuple[int, os.sched_param] | None = None
 
@@ -187,18 +208,33 @@ class EthercatTransport(Transport):
         self.frames.start()
         # The bridge's 1 ms cycle (6.3) runs in the model's thread as kernel events on
         # an exact grid (BridgeApp.start_cycles): the paced kernel reaches them with
-        # the wall clock.
-        port.call(self.app.start_cycles, round(self.cycle_s * 1e9), self._cycle_done)
+        # the wall clock.  The master's frames come in wall time, so under a time scale
+        # the cycle stays 1 ms of wall time (scale x 1 ms of the motors' time).
+        scale = 1.0
+        if port.driver is not None:
+            scale = port.driver.clock.scale
+            self.lateness = CycleLateness(port.driver.clock, self.cycle_s)
+        port.call(self.app.start_cycles, max(1, round(self.cycle_s * scale * 1e9)),
+                  self._cycle_starts)
 
-    def _cycle_done(self) -> None:
-        """Count the cycle, and as late if it ran more than a cycle after it was due."""
-        self.cycles += 1
-        driver = self.port.driver if self.port is not None else None
-        if driver is not None and self.app is not None:
-            late = driver.clock.lateness(self.app.device.kernel.now)
-            self.max_late_s = max(self.max_late_s, late)
-            if late > self.cycle_s:
-                self.late_cycles += 1
+    def _cycle_starts(self) -> None:
+        if self.lateness is not None and self.app is not None:
+            self.lateness.note(self.app.device.kernel.now)
+
+    @property
+    def cycles(self) -> int:
+        """Bridge cycles run."""
+        return self.lateness.cycles if self.lateness is not None else 0
+
+    @property
+    def late_cycles(self) -> int:
+        """Cycles that started more than one cycle after their instant."""
+        return self.lateness.late if self.lateness is not None else 0
+
+    @property
+    def max_late_s(self) -> float:
+        """The latest a cycle started after its instant (wall seconds)."""
+        return self.lateness.worst if self.lateness is not None else 0.0
 
     def _model_realtime(self, on: bool) -> None:
         """The model's thread under SCHED_FIFO below the frame thread (when allowed).

@@ -9,7 +9,7 @@ the motor's job, through :meth:`ParamTable.on_change`.
 
 from __future__ import annotations
 
-from typing import Callable, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 from .firmware import CM2, Firmware
 from .params import FIRST_K, LAST_K, PER_LINE, ChangeListener, NoSuchParameterError, ParamSpec
@@ -45,41 +45,50 @@ class ParamTable:
         """The profile whose specs this table enforces."""
         return self._firmware
 
-    def spec(self, k: int) -> ParamSpec:
+    # ``k`` is any object, looked up as a dict key (37.0 and numpy's 37 find K37, a
+    # string or None finds nothing): compiled (coolmuscle/_accel.py), a typed ``int``
+    # would turn those into a TypeError before the lookup could answer.
+    def spec(self, k: object) -> ParamSpec:
         """The spec of K``k``; :class:`NoSuchParameterError` outside K20..K89."""
+        specs: Any = self._specs
         try:
-            return self._specs[k]
+            found: ParamSpec = specs[k]
+            return found
         except (KeyError, TypeError):
             raise NoSuchParameterError(f"K{k} does not exist") from None
 
-    def get(self, k: int) -> int:
+    def get(self, k: object) -> int:
         """The current value of K``k``."""
+        values: Any = self._values
         try:
-            return self._values[k]          # holds exactly the K numbers of the specs
+            found: int = values[k]          # holds exactly the K numbers of the specs
+            return found
         except (KeyError, TypeError):
             raise NoSuchParameterError(f"K{k} does not exist") from None
 
-    def __getitem__(self, k: int) -> int:
+    def __getitem__(self, k: object) -> int:
         return self.get(k)
 
-    def check(self, k: int, value: object) -> None:
+    def check(self, k: object, value: object) -> None:
         """Validate without applying (raises :class:`OutOfRangeError`)."""
         self.spec(k).check(value)
 
-    def set(self, k: int, value: object) -> int:
+    def set(self, k: object, value: object) -> int:
         """Apply ``value`` to K``k`` and return the old value.
 
         An out-of-range value (or one that is not an integer) raises
         :class:`OutOfRangeError` and is not reflected (ch. 3).  Listeners run after
         the value is applied.
         """
-        self.check(k, value)
+        spec = self.spec(k)
+        spec.check(value)
         assert isinstance(value, int)             # check() refuses anything else
-        old = self._values[k]
-        self._values[k] = value
+        number = spec.k                           # listeners get the K number as an int
+        old = self._values[number]
+        self._values[number] = value
         self.version += 1
         for listener in tuple(self._listeners):
-            listener(k, old, value)
+            listener(number, old, value)
         return old
 
     def items(self) -> Iterator[tuple[int, int]]:
@@ -107,19 +116,20 @@ class ParamTable:
 
         return remove
 
-    def restore(self, values: Mapping[int, int]) -> list[int]:
+    def restore(self, values: Mapping[Any, Any]) -> list[int]:
         """Load saved values (power-up); no listeners run.
 
         Values that this firmware does not accept are skipped and keep their
         current value; their K numbers are returned.
         """
-        rejected: list[int] = []
+        rejected: list[Any] = []
+        table: Any = self._values
         for k, value in values.items():
             spec = self._specs.get(k)
             if spec is None or not spec.accepts(value):
                 rejected.append(k)
                 continue
-            self._values[k] = value
+            table[k] = value
         self.version += 1
         return sorted(rejected)
 

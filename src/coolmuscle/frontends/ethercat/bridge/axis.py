@@ -84,6 +84,7 @@ class AxisDrive:
         self.moving = False
         self.inputs = 0
         self._prev_cw = 0
+        self._target = 0                          # 607Ah of the cycle's output image
 
     # -- helpers ------------------------------------------------------------------
     def idx(self, index: int) -> int:
@@ -109,7 +110,10 @@ class AxisDrive:
         snap = self.device.cyclic_state(self.motor)
         self._observe(snap)
         self._switch_mode(now)
+        # 6040h and 607Ah of one output image: read together, before any call into the
+        # motor (the frame thread writes the next image between two cycles).
         cw = int(self.od.get(self.idx(0x6040)))
+        self._target = int(self.od.get(self.idx(0x607A)))
         if modes.is_cia402(self.mode):
             self._cia402(cw, now)
         elif self.mode == modes.CMD:
@@ -181,8 +185,7 @@ class AxisDrive:
                 self._homing(cw, now)
             else:
                 self.follower.start()
-                target = int(self.od.get(self.idx(0x607A)))
-                self.follower.push(csp.clamp(target, self.k.get(37, 0)))
+                self.follower.push(csp.clamp(self._target, self.k.get(37, 0)))
         if self.mode == modes.CPIO and cpio.is_cpio_word(cw) \
                 and self.state in (State.SWITCHED_ON, State.OPERATION_ENABLED):
             self.set_outputs(cpio.outputs_of(cw, self.firmware))
