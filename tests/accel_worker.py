@@ -4,8 +4,9 @@ Run by tests/test_accel.py twice, once with the compiled hot modules and once wi
 ``COOLMUSCLE_PURE=1`` (coolmuscle/_accel.py): the two outputs must be byte-identical.
 For each script (examples/*.cml, tests/transcripts/*.cml): the bytes the motors send,
 and a 1 ms trace of every motor (positions, speeds, torques, status, I/O) as CSV;
-then a 4-axis csp stream (Chain.target_stream) sampled every cycle, and a PTP bank
-looping on 15 motors.  One line per item: name, length and SHA-256 of its bytes.
+then a 4-axis csp stream (Chain.target_stream) sampled every cycle, the EtherCAT
+bridge's own cycle in csp (its TxPDO image every cycle), and a PTP bank looping on 15
+motors.  One line per item: name, length and SHA-256 of its bytes.
 """
 
 from __future__ import annotations
@@ -53,6 +54,32 @@ def stream_item(cycles: int) -> str:
     return f"csp stream: {digest(chr(10).join(rows).encode())}"
 
 
+def bridge_item(cycles: int) -> str:
+    """The bridge (EB02) in csp: 6.1.2's enable, a triangle of targets, a disable."""
+    import struct
+    from coolmuscle.frontends.ethercat.app import BridgeApp
+    chain = Chain(motors=4)
+    app = BridgeApp(chain, "EB02")
+    od = app.dictionary
+    app.start_cycles()
+    images: list[bytes] = []
+
+    def ms(cw: int, target: int) -> None:
+        od.unpack_outputs(struct.pack("<" + "Hi" * 4, *([cw, target] * 4)))
+        chain.kernel.advance(1_000_000)
+        images.append(od.pack_inputs())
+
+    for cw in (0x06, 0x07, 0x0F):
+        for _ in range(5):
+            ms(cw, 0)
+    for i in range(cycles):
+        phase = i % 2000
+        ms(0x0F, 3 * phase if phase < 1000 else 6000 - 3 * phase)
+    for _ in range(50):
+        ms(0x07, 0)
+    return f"bridge csp: {digest(b''.join(images))}"
+
+
 def bank_item(seconds: int) -> str:
     chain = Chain(motors=15)
     got: list[str] = []
@@ -76,6 +103,7 @@ def main(root: str) -> None:
         for path in scripts:
             print(script_item(path, Path(work)))
     print(stream_item(3000))
+    print(bridge_item(3000))
     print(bank_item(120))
 
 
