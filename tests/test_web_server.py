@@ -494,3 +494,31 @@ def test_the_page_beyond_max_pages_is_refused_and_api_info_says_why(monkeypatch)
         assert status == 503 and (info["pages"], info["max_pages"]) == (2, 2)
     finally:
         st.stop()
+
+
+def test_the_plot_import_beside_the_loop_is_waited_for_at_exit(monkeypatch) -> None:
+    """``run --web`` imports matplotlib in a thread as the recording starts.  A daemon
+    thread stopped at exit inside matplotlib's C++ extensions (Ctrl-C right after the
+    start) aborted the process with SIGABRT ("terminate called without an active
+    exception", seen in CI); the thread is not a daemon, so the exit waits for it."""
+    import threading
+
+    import coolmuscle.tools.web as web
+    from coolmuscle.chain import Chain
+
+    started: list[threading.Thread] = []
+
+    class Recorded(threading.Thread):
+        def start(self) -> None:
+            started.append(self)
+            super().start()
+
+    monkeypatch.setattr(web.threading, "Thread", Recorded)
+    chain = Chain()
+    try:
+        assert web.DashboardTools().start_recording(chain) is not None
+    finally:
+        chain.close()
+    assert [t.name for t in started] == ["coolmuscle-web-plot-import"]
+    assert not started[0].daemon
+    started[0].join(30)

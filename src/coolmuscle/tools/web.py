@@ -101,9 +101,12 @@ class DashboardTools:
         except NoTraceRecorderError:
             return None
         # matplotlib takes seconds to import: do it now, beside the loop, not at the
-        # first plot request (which runs in the model's thread)
+        # first plot request (which runs in the model's thread).  Not a daemon: a
+        # daemon thread stopped at exit inside matplotlib's C++ extensions (Ctrl-C
+        # right after the start) aborts the process ("terminate called without an
+        # active exception", SIGABRT); the exit waits for the import instead.
         threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.plot",),
-                         name="coolmuscle-web-plot-import", daemon=True).start()
+                         name="coolmuscle-web-plot-import", daemon=False).start()
         return recorder
 
     def parquet_available(self) -> bool:
