@@ -1,5 +1,6 @@
-"""The bridge's own 1 ms cycle as kernel events (ethercat-bridge-users-guide.txt 2.2,
-7.3 F511h.3 "1: 1 msec"): ``BridgeApp.start_cycles``, what ``sim --ethercat`` runs.
+"""The bridge's own 1 ms cycle as kernel events (ethercat-bridge-users-guide.txt 6.3,
+7.3 F511h.3 "Cycle Time 1. 1 msec"): ``BridgeApp.start_cycles``, what ``sim --ethercat``
+runs.
 
 The CM port gives every motor a command each millisecond of its own time, whenever the
 master's frames come: the cycles are on an exact grid of virtual time, a cycle that
@@ -38,7 +39,7 @@ def image(cw: int, target: int) -> bytes:
     return struct.pack("<" + "Hi" * 4, *([cw, target] * 4))
 
 
-def test_cycles_run_every_1_ms_of_virtual_time_2_2_f511h(bridge) -> None:
+def test_cycles_run_every_1_ms_of_virtual_time_6_3_f511h(bridge) -> None:
     kernel, _chain, app = bridge
     assert CYCLE_NS == MS
     seen: list[int] = []

@@ -32,7 +32,7 @@ AXIS_OFFSET = 0x800
 #: 6.2 operation modes: hm 6, csp 8, CML 101, CMD 120, CPIO 121.
 MODES = frozenset({6, 8, 101, 120, 121})
 MODE_CSP = 8
-#: 2.2 / 7.3 F511h.3 "1: 1 msec": the CM port's cycle, the bridge's own.
+#: 6.3, 7.3 F511h.3 "CM Serial Communication Cycle Time: 1. 1 msec": the bridge's own cycle.
 CYCLE_NS = 1_000_000
 
 
@@ -96,7 +96,7 @@ class BridgeApp:
                      on_start: Callable[[], None] | None = None) -> None:
         """Run :meth:`cycle` every ``period_ns`` of virtual time, on the device's kernel.
 
-        The bridge's CM port has its own fixed cycle (2.2, F511h.3: 1 ms): every motor
+        The bridge's CM port has its own fixed cycle (6.3, F511h.3: 1 ms): every motor
         gets a command each millisecond of its own time, whenever the master's frames
         come (a cycle reads the output image as it is then).  So the cycles are kernel
         events on an exact grid; a paced kernel runs them as the wall clock reaches
