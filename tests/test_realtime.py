@@ -9,7 +9,8 @@ import pytest
 
 from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, Kernel, ms, seconds
-from coolmuscle.sim.realtime import FastClock, RealtimeClock, RealtimeDriver, make_clock
+from coolmuscle.sim.realtime import (FastClock, PreciseWaker, RealtimeClock, RealtimeDriver,
+                                     make_clock)
 from fakes import FakeChain
 
 
@@ -195,3 +196,58 @@ def test_a_failing_event_is_logged_and_later_events_still_run() -> None:
     wall.t += 0.01
     clock.catch_up()
     assert ran == ["after"] and clock.errors == 1 and kernel.now == ms(10)
+
+
+def test_the_precise_waker_calls_back_in_the_loop_once_per_arming() -> None:
+    """PreciseWaker: the callback runs in the loop's thread, at or after the deadline;
+    a disarmed or replaced deadline does not fire; close ends the thread."""
+    import threading
+
+    async def main() -> tuple[list[tuple[float, bool]], int]:
+        loop = asyncio.get_running_loop()
+        got: list[tuple[float, bool]] = []
+        loop_thread = threading.current_thread()
+        waker = PreciseWaker(loop, lambda: got.append(
+            (time.monotonic(), threading.current_thread() is loop_thread)))
+        try:
+            deadline = time.monotonic() + 0.003
+            waker.arm(deadline)
+            await asyncio.sleep(0.05)
+            waker.arm(time.monotonic() + 0.02)       # disarmed before it is due
+            waker.disarm()
+            waker.arm(time.monotonic() + 1.0)        # replaced by an earlier one
+            second = time.monotonic() + 0.002
+            waker.arm(second)
+            await asyncio.sleep(0.05)
+            assert [t >= d for (t, _), d in zip(got, (deadline, second))] == [True, True]
+        finally:
+            waker.close()
+        assert not waker._thread.is_alive()
+        return got, waker.wakes
+    got, wakes = _run(main())
+    assert len(got) == 2 == wakes and all(in_loop for _, in_loop in got)
+
+
+def test_a_precise_driver_runs_short_waits_through_the_waker() -> None:
+    """``RealtimeDriver.precise`` (the EtherCAT transport sets it): events closer than
+    PRECISE_BELOW are woken for by the waker, on time, and the waker ends with the run."""
+    async def main() -> tuple[list[float], RealtimeDriver]:
+        kernel = Kernel()
+        driver = RealtimeDriver(kernel)
+        driver.precise = True
+        start = time.monotonic()
+        fired: list[float] = []
+
+        def tick() -> None:
+            fired.append(time.monotonic() - start)
+            if len(fired) < 20:
+                kernel.schedule(ms(1), tick)
+            else:
+                driver.stop()
+        kernel.schedule(ms(1), tick)
+        await driver.run()
+        return fired, driver
+    fired, driver = _run(main())
+    assert len(fired) == 20 and fired[-1] >= 0.0199
+    assert driver.waker is not None and driver.waker.wakes >= 10
+    assert not driver.waker._thread.is_alive()

@@ -8,7 +8,9 @@ time, optionally scaled, and the rule every real-time front end follows:
   that matches the wall clock;
 * between inputs, the driver sleeps until the wall time of the next kernel event
   or until it is woken by input (:class:`RealtimeDriver` under asyncio; the
-  pyserial URL handler does the same with a ``threading.Condition``);
+  pyserial URL handler does the same with a ``threading.Condition``); a precise
+  driver hands short waits to a :class:`PreciseWaker` (epoll sleeps in whole
+  milliseconds);
 * it reports falling behind: how late (wall seconds) the most overdue event ran.
 
 :class:`FastClock` is the unpaced mode (``coolmuscle run``, ``coolmuscle://?mode=fast``):
@@ -23,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import threading
 import time
 from typing import Any, Callable, Protocol, TypeVar
 
@@ -39,6 +42,9 @@ DEFAULT_BEHIND_THRESHOLD = 0.05
 BEHIND_LOG_INTERVAL = 5.0
 
 BehindCallback = Callable[[float], None]
+
+#: A precise driver hands waits shorter than this to its :class:`PreciseWaker`.
+PRECISE_BELOW = 0.005
 
 
 class VirtualClock(Protocol):
@@ -193,6 +199,64 @@ def make_clock(kernel: Kernel, mode: str = "realtime", *,
     raise ValueError(f"unknown time mode {mode!r} (expected 'realtime' or 'fast')")
 
 
+class PreciseWaker:
+    """Wakes an asyncio loop at a wall-clock instant to within tens of microseconds.
+
+    asyncio sleeps in its selector, and epoll rounds every timeout up to the next
+    millisecond: a timer 0.3 ms away fires up to 1 ms late.  This thread sleeps on a
+    condition instead (``time.monotonic`` deadline, microsecond resolution) and wakes
+    the loop through its self-pipe (``call_soon_threadsafe``).  For front ends with a
+    cycle of their own (the EtherCAT bridge's 1 ms, :attr:`RealtimeDriver.precise`).
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, callback: Callable[[], Any]) -> None:
+        self._loop = loop
+        self._callback = callback
+        self._cond = threading.Condition()
+        self._deadline: float | None = None
+        self._closed = False
+        self.wakes = 0
+        self._thread = threading.Thread(target=self._run, name="coolmuscle-waker",
+                                        daemon=True)
+        self._thread.start()
+
+    def arm(self, deadline: float) -> None:
+        """Call back in the loop at ``time.monotonic()`` = ``deadline`` (replaces the last)."""
+        with self._cond:
+            self._deadline = deadline
+            self._cond.notify()
+
+    def disarm(self) -> None:
+        with self._cond:
+            self._deadline = None
+            self._cond.notify()
+
+    def _run(self) -> None:
+        with self._cond:
+            while not self._closed:
+                deadline = self._deadline
+                if deadline is None:
+                    self._cond.wait()
+                    continue
+                remaining = deadline - time.monotonic()
+                if remaining > 0:
+                    self._cond.wait(remaining)
+                    continue
+                self._deadline = None
+                self.wakes += 1
+                try:
+                    self._loop.call_soon_threadsafe(self._callback)
+                except RuntimeError:              # the loop is closed: nothing to wake
+                    return
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify()
+        if self._thread is not threading.current_thread():
+            self._thread.join(1.0)
+
+
 class RealtimeDriver:
     """Runs a kernel in step with the wall clock inside an asyncio event loop.
 
@@ -216,6 +280,10 @@ class RealtimeDriver:
         self._wake: asyncio.Event | None = None
         self._stopped = False
         self.running = False
+        #: Wake for kernel events to within tens of microseconds, not the selector's
+        #: millisecond (:class:`PreciseWaker`); a front end with its own cycle sets it.
+        self.precise = False
+        self.waker: PreciseWaker | None = None     # made at the first precise wait
 
     # -- input ----------------------------------------------------------
     def call(self, fn: Callable[..., T], *args: Any) -> T:
@@ -239,12 +307,13 @@ class RealtimeDriver:
     async def run(self) -> None:
         """Keep the kernel in step with the wall clock until :meth:`stop`."""
         loop = asyncio.get_running_loop()
-        self._wake = asyncio.Event()
+        wake = self._wake = asyncio.Event()
         self.running = True
         self.clock.anchor()
+        waker = self.waker = None
         try:
             while not self._stopped:
-                self._wake.clear()  # before catching up: a wake-up from an event is kept
+                wake.clear()  # before catching up: a wake-up from an event is kept
                 self.clock.catch_up()
                 if self._stopped:
                     break
@@ -252,14 +321,24 @@ class RealtimeDriver:
                 if delay is not None and delay <= 0:
                     await asyncio.sleep(0)  # let I/O in between overdue events
                     continue
-                handle = loop.call_later(delay, self._wake.set) if delay is not None else None
+                handle = None
+                if delay is not None and self.precise and delay < PRECISE_BELOW:
+                    if waker is None:
+                        waker = self.waker = PreciseWaker(loop, wake.set)
+                    waker.arm(time.monotonic() + delay)
+                elif delay is not None:
+                    handle = loop.call_later(delay, wake.set)
                 try:
-                    await self._wake.wait()
+                    await wake.wait()
                 finally:
                     if handle is not None:
                         handle.cancel()
+                    if waker is not None:
+                        waker.disarm()
         finally:
             self.running = False
+            if waker is not None:
+                waker.close()
 
     def stop(self) -> None:
         """Ask :meth:`run` to return (at once if it has not started yet; final)."""

@@ -214,6 +214,7 @@ class EthercatTransport(Transport):
         if port.driver is not None:
             scale = port.driver.clock.scale
             self.lateness = CycleLateness(port.driver.clock, self.cycle_s)
+            port.driver.precise = True      # the selector's 1 ms granularity: see PreciseWaker
         port.call(self.app.start_cycles, max(1, round(self.cycle_s * scale * 1e9)),
                   self._cycle_starts)
 
