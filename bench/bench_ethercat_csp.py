@@ -34,7 +34,9 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
 from coolmuscle.frontends.ethercat.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.transport import CycleLateness  # noqa: E402
 from coolmuscle.sim.kernel import Kernel  # noqa: E402
+from coolmuscle.sim.realtime import RealtimeClock  # noqa: E402
 
 CYCLE_NS = 1_000_000
 GOAL_US = 50.0
@@ -66,28 +68,21 @@ def run(seconds: float, moving: bool) -> dict[str, float]:
         frame(cw, 0)
         kernel.run(until=kernel.now + 5 * CYCLE_NS)
     cycles = int(seconds * 1000)
-    late = [0]
     cpu = 0.0
-    t0_wall, t0_cpu = time.perf_counter(), time.process_time()
-    base_virtual = kernel.now
-    period = CYCLE_NS / 1e9
-
-    def wall_at(virtual: int) -> float:
-        return t0_wall + (virtual - base_virtual) / 1e9
-
-    def cycle_starts() -> None:                # more than a cycle late: that cycle is missed
-        late[0] += time.perf_counter() - wall_at(kernel.now) > period
-
-    app.start_cycles(CYCLE_NS, cycle_starts)
+    t0_cpu = time.process_time()
+    clock = RealtimeClock(kernel, clock=time.perf_counter)     # the wall clock <-> kernel time
+    t0_wall, base_virtual = clock.wall_at(kernel.now), kernel.now
+    late = CycleLateness(clock, CYCLE_NS / 1e9)    # the transport's count of late cycles
+    app.start_cycles(CYCLE_NS, lambda: late.note(kernel.now))
     gc.freeze()                                # as the transport does once it has started
     for i in range(cycles):
-        due = wall_at(base_virtual + (i + 1) * CYCLE_NS)
+        due = clock.wall_at(base_virtual + (i + 1) * CYCLE_NS)
         now = time.perf_counter()
         if now < due:
             time.sleep(due - now)
         c0 = time.process_time()
         frame(0x0F, triangle(i) if moving else 0)
-        kernel.run(until=min(base_virtual + int((time.perf_counter() - t0_wall) * 1e9),
+        kernel.run(until=min(clock.virtual_at(time.perf_counter()),
                              base_virtual + cycles * CYCLE_NS))
         cpu += time.process_time() - c0
     kernel.run(until=base_virtual + cycles * CYCLE_NS)
@@ -97,7 +92,7 @@ def run(seconds: float, moving: bool) -> dict[str, float]:
     gc.unfreeze()
     positions = [chain.snapshot(a).position for a in range(1, AXES + 1)]
     words = [od.get(0x6041 + 0x800 * a) for a in range(AXES)]
-    return {"cycles": cycles, "missed": late[0], "cpu_share": total_cpu / wall,
+    return {"cycles": cycles, "missed": late.late, "cpu_share": total_cpu / wall,
             "axis_cycle_us": cpu / cycles / AXES * 1e6, "wall": wall,
             "positions": positions, "words": words}
 
