@@ -70,7 +70,7 @@ def timed(args: list[str]) -> float:
 def warm_run_cost(paths: list[Path], figures: bool) -> float:
     """Seconds per run of ``execute`` in this (warm) process: the work itself."""
     sys.path.insert(0, str(SRC))
-    from coolmuscle.tools.batchjob import execute, make_job
+    from coolmuscle.tools.batch.job import execute, make_job
 
     jobs = [make_job(str(p), p.read_text(encoding="utf-8"), p.parent, figures=figures)
             for p in paths]

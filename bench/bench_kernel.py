@@ -46,7 +46,7 @@ from coolmuscle.motor.motion.planner import Waypoint, limits_from_data, plan_mov
 from coolmuscle.motor.motion.profile import Profile, hold
 from coolmuscle.motor.status import status_line
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S
-from coolmuscle.tools.trace import record as record_trace
+from coolmuscle.tools.trace.recorder import record as record_trace
 
 TARGETS = (20000, 0)
 S_VALUE, A_VALUE = 100, 100

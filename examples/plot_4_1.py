@@ -20,7 +20,7 @@ from pathlib import Path
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.tools.script import run_script
 from coolmuscle.tools.trace import record
-from coolmuscle.tools.plot import plot as plot_chain
+from coolmuscle.tools.trace.plot import plot as plot_chain
 
 HERE = Path(__file__).parent
 OUTPUTS = "K34.1=16\nK73.1=30\n"

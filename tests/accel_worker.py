@@ -20,8 +20,8 @@ from pathlib import Path
 
 import coolmuscle._accel as accel
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.tools.runcmd import header_defaults, make_chain
-from coolmuscle.tools.script import run_script
+from coolmuscle.tools.cli.run import header_defaults, make_chain
+from coolmuscle.tools.script.runner import run_script
 
 
 def digest(data: bytes) -> str:

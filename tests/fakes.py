@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from coolmuscle.device.hostline import BAUD_RATES, HostLine, LineSettings
-from coolmuscle.tools.script import parse_script
+from coolmuscle.tools.script.runner import parse_script
 from coolmuscle.sim.kernel import Kernel, seconds
 
 _QUERY = re.compile(r"\?96\.(\d+)")

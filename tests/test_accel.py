@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 import coolmuscle._accel as accel
-from coolmuscle.tools import accel as accel_tool
+from coolmuscle.tools.accel import build as accel_tool
 
 ROOT = Path(__file__).resolve().parents[1]
 WORKER = Path(__file__).with_name("accel_worker.py")

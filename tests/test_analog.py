@@ -18,7 +18,7 @@ from coolmuscle.motor.signals.analog import (Constant, Ramp, Sine, Table, Torque
 from coolmuscle.motor.signals.analog_control import SAMPLE_NS, TICK_NS, friction_nm
 from coolmuscle.motor.signals.analog_output import output_volts, volts_to_register
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 
 def _chain(firmware: str = "cm2") -> Chain:

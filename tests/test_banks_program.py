@@ -12,7 +12,7 @@ import pytest
 from bank_support import Rig, enters_window
 from bank_support import rig as _rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 MS = NS_PER_MS
 

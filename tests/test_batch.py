@@ -27,8 +27,8 @@ from typing import Iterator
 
 import pytest
 
-from coolmuscle.tools.batchrun import chunks
-from coolmuscle.tools.cli import main
+from coolmuscle.tools.batch.engine import chunks
+from coolmuscle.tools.cli.app import main
 
 DATA = Path(__file__).parent / "data" / "batch"
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -250,7 +250,7 @@ def test_unreachable_scheduler_is_one_line_exit_2_at_once(
 def test_a_scheduler_without_workers_is_one_line_exit_2(
         capsys: pytest.CaptureFixture[str], tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
-    from coolmuscle.tools import batchrun
+    from coolmuscle.tools.batch import engine as batchrun
     monkeypatch.setattr(batchrun, "WORKER_TIMEOUT", 0.5)
     with cluster(tmp_path, 0) as address:
         code, out, err = cli(capsys, "batch", str(DATA), "--scheduler", address)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 from bank_support import Rig, rig
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 DATA = ("P1.1=2500", "S1.1=200", "A1.1=100", "P1.2=1000", "S1.2=100", "A1.2=50",
         "P2.1=1000", "P2.2=2000", "P3.1=3000")

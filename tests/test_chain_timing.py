@@ -15,7 +15,7 @@ from pathlib import Path
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 BT_38400 = byte_time_ns(38400)     # 260,416 ns a byte at the default K20 and K65
 

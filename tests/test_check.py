@@ -20,10 +20,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import pytest
 
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 from coolmuscle.client.program import parse_program
-from coolmuscle.tools.check import RULES, check_program
-from coolmuscle.tools.check_output import format_human, to_json
+from coolmuscle.tools.check.lint import RULES, check_program
+from coolmuscle.tools.check.output import format_human, to_json
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.cml"))

@@ -19,7 +19,7 @@ from coolmuscle.client.program import parse_program
 from coolmuscle.errors import CmlSyntaxError, MotorError
 from coolmuscle.motor.programs.bankcheck import check_line, fill_motor
 from coolmuscle.motor.state.firmware import get_firmware
-from coolmuscle.tools.check import check_program
+from coolmuscle.tools.check.lint import check_program
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = [row.split("\t")[2] for row in

@@ -16,7 +16,7 @@ import pexpect
 import pytest
 import serial
 
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 from fakes import ROUNDTRIP, fake_factory
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")

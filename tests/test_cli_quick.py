@@ -1,4 +1,4 @@
-"""``coolmuscle run`` without typer (coolmuscle.tools.entry): the same bytes, errors and
+"""``coolmuscle run`` without typer (coolmuscle.tools.cli.entry): the same bytes, errors and
 exit codes as the typer command, a start that loads only what the run needs
 (issue 18, docs/performance.md "Starting a run")."""
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.runcmd import parse_run_args
+from coolmuscle.tools.cli.run import parse_run_args
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "200"}
@@ -22,8 +22,8 @@ GOLDEN = "?96.1\n<< ?96.1\\r\\nPx.1=0\\r\\n\n"
 WRONG = "?96.1\n<< ?96.1\\r\\nPx.1=5\\r\\n\n"
 
 #: Python code run in a child: the quick entry point, or the typer command.
-QUICK = "import sys; from coolmuscle.tools.entry import main; main(sys.argv[1:])"
-TYPER = "import sys; from coolmuscle.tools.cli import main; main(sys.argv[1:])"
+QUICK = "import sys; from coolmuscle.tools.cli.entry import main; main(sys.argv[1:])"
+TYPER = "import sys; from coolmuscle.tools.cli.app import main; main(sys.argv[1:])"
 
 
 def run(code: str, *args: str) -> subprocess.CompletedProcess[bytes]:
@@ -133,8 +133,8 @@ def test_check_looks_at_each_bank_statement_a_bounded_number_of_times(monkeypatc
     file (once a bank, the work was quadratic: 13.5 s for a 39 KB file; an attack found
     it).  Counted, not timed: ``writes`` is asked once per statement of the file."""
     from coolmuscle.client.program import parse_program
-    from coolmuscle.tools import check as check_mod
-    from coolmuscle.tools.check import check_program
+    from coolmuscle.tools.check import lint as check_mod
+    from coolmuscle.tools.check.lint import check_program
     calls = [0]
     writes = check_mod.tree.writes
 

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from client_targets import Tcp
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 from coolmuscle import connect, connect_async
 from coolmuscle.client import UploadError, parse_program
 from coolmuscle.errors import NotAllowedInBankError

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.signals.encoder import Gearing, gearing_from_config
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 
 def _chain(gearing: Gearing | None = None, firmware: str = "cm2") -> Chain:

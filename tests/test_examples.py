@@ -14,7 +14,7 @@ import pytest
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.client.program import load_program
-from coolmuscle.tools.script import run_script
+from coolmuscle.tools.script.runner import run_script
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.cml"))

@@ -11,7 +11,7 @@ import math
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 
 def _chain(**options: object) -> tuple[Chain, list[Event]]:

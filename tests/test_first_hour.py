@@ -22,8 +22,8 @@ import pytest
 import coolmuscle
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.errors import CoolMuscleError, InvalidArgumentError, TransportError
-from coolmuscle.tools import cli
-from coolmuscle.tools.script import ScriptError, run_script
+from coolmuscle.tools.cli import app as cli
+from coolmuscle.tools.script.runner import ScriptError, run_script
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"

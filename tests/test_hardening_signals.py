@@ -128,8 +128,8 @@ def test_a_stop_signal_that_python_wraps_is_still_one_stop_line(capsys) -> None:
     (a dataclass field, at start-up) reaches the program as a RuntimeError from it: still
     the stop line and 128 + N, not an internal error (seen once under load in the suite:
     SIGTERM at 0.25 s, 'Error calling __set_name__ on Field instance')."""
-    from coolmuscle.tools.exits import guarded
-    from coolmuscle.tools.stopsignals import STOP_SIGNALS, SignalStop, clear_stop
+    from coolmuscle.tools.cli.exits import guarded
+    from coolmuscle.tools.cli.stopsignals import STOP_SIGNALS, SignalStop, clear_stop
 
     class Named:
         def __set_name__(self, owner: type, name: str) -> None:

@@ -21,7 +21,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.errors import StoreError
 from coolmuscle.motor.state.store import Store
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}

@@ -19,8 +19,8 @@ import tracemalloc
 from pathlib import Path
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.tools.script import run_script
-from coolmuscle.tools.trace import FIELDS
+from coolmuscle.tools.script.runner import run_script
+from coolmuscle.tools.trace.recorder import FIELDS
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}

@@ -17,7 +17,7 @@ import pytest
 
 from bank_support import Rig, enters_window, rig
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 S_PPS = 100 * 100       # S1 = 100 at the default K37 (100 pps a unit): 10,000 pps
 DATA_4_4_1 = ("A1.1=100", "S1.1=100", "P1.1=0", "P2.1=1000", "R1.1=2000",

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 index = st.integers(0, 3)
 modifier = st.sampled_from(["", "+", "-"])

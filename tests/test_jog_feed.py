@@ -11,7 +11,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 
 def _chain() -> tuple[Chain, list[Event]]:

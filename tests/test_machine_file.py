@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds

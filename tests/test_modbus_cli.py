@@ -13,7 +13,7 @@ import pexpect
 import pytest
 import serial
 
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 
 from modbus_support import crc, frame
 

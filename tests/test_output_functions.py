@@ -10,7 +10,7 @@ import pytest
 
 from bank_support import Rig, rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 MS = NS_PER_MS
 

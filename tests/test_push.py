@@ -13,7 +13,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 OBJECT_AT = "[[axis]]\n[axis.stoppers]\ncw = 5000\n"
 

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion.trajectory import Schmitt
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace import record
+from coolmuscle.tools.trace.recorder import record
 
 
 def _chain(k34: int, *, k24: int = 1000, k37: int = 3) -> Chain:

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from coolmuscle.device.hostline import byte_time_ns
-from coolmuscle.tools.script import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry,
+from coolmuscle.tools.script.runner import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry,
                                      escape, load_script, parse_script, run_script,
                                      split_lines, unescape)
 from coolmuscle.sim.kernel import seconds
@@ -256,7 +256,7 @@ def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path,
         traced.append(path)
         return Handle()
 
-    monkeypatch.setattr("coolmuscle.tools.trace.trace", fake_trace)
+    monkeypatch.setattr("coolmuscle.tools.trace.recorder.trace", fake_trace)
     chain = FakeChain()
     run_script("?96.1\n", chain, trace=tmp_path / "t.csv")
     assert traced == [tmp_path / "t.csv"] and Handle.closed

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.batchjob import chain_header, execute, make_job
-from coolmuscle.tools.runcmd import header_defaults
+from coolmuscle.tools.batch.job import chain_header, execute, make_job
+from coolmuscle.tools.cli.run import header_defaults
 
 SCRIPT = "{header} motors=2 firmware=rt3\n?96.2\n<< ?96.2\\r\\nPx.2=0\\r\\n\n"
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.cli import main
+from coolmuscle.tools.cli.app import main
 
 DATA = Path(__file__).parent / "data" / "batch" / "sweep"
 SCRIPT = DATA / "move.cml"

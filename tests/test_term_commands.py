@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from coolmuscle import connect_async
-from coolmuscle.tools import term
+from coolmuscle.tools.term import terminal as term
 
 
 @pytest.mark.parametrize("arg, motor, style", [("2", 2, "info"), ("0", 1, "error"),

@@ -15,15 +15,15 @@ from typing import Any
 import matplotlib.image
 import pytest
 
-from coolmuscle.tools import cli
+from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.signals.encoder import Gearing
-from coolmuscle.tools.plot import status_class
-from coolmuscle.tools import trace as trace_module
+from coolmuscle.tools.trace.plot import status_class
+from coolmuscle.tools.trace import recorder as trace_module
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace import FIELDS, TraceFormatError
-from coolmuscle.tools.trace import record, trace as start_trace
-from coolmuscle.tools.plot import plot as plot_chain
+from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError
+from coolmuscle.tools.trace.recorder import record, trace as start_trace
+from coolmuscle.tools.trace.plot import plot as plot_chain
 
 SCRIPT = """\
 K34.1=77

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.tools.script import load_script, run_script
+from coolmuscle.tools.script.runner import load_script, run_script
 
 TRANSCRIPTS = Path(__file__).parent / "transcripts"
 _CHAIN = re.compile(r"^# chain:(.*)$", re.MULTILINE)

@@ -324,8 +324,8 @@ def test_trace_download_writes_what_run_trace_writes(tmp_path):
     """The page's CSV is the recorder's own CSV (docs/plots.md), sampled in chunks."""
     from coolmuscle.chain import Chain
     from coolmuscle.sim.kernel import seconds
-    from coolmuscle.tools.trace import record
-    from coolmuscle.tools.web import DashboardTools
+    from coolmuscle.tools.trace.recorder import record
+    from coolmuscle.tools.web.dashboard import DashboardTools
 
     chain = Chain(motors=2)
     recorder = record(chain)
@@ -503,7 +503,7 @@ def test_the_plot_import_beside_the_loop_is_waited_for_at_exit(monkeypatch) -> N
     exception", seen in CI); the thread is not a daemon, so the exit waits for it."""
     import threading
 
-    import coolmuscle.tools.web as web
+    import coolmuscle.tools.web.dashboard as web
     from coolmuscle.chain import Chain
 
     started: list[threading.Thread] = []

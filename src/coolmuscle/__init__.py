@@ -23,7 +23,7 @@ if _run_as_the_command():
     # Started as the command: stop signals are handled from here on,
     # before anything else loads (docs/reliability.md "signals").  A library import
     # leaves the program's signal handlers alone.
-    from .tools.stopsignals import install_startup_handlers as _install
+    from .tools.cli.stopsignals import install_startup_handlers as _install
 
     _install()
 

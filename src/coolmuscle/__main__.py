@@ -1,4 +1,4 @@
-"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.tools.entry).
+"""``python -m coolmuscle``: the same as the ``coolmuscle`` command (coolmuscle.tools.cli.entry).
 
 The stop-signal handlers are installed before the command's modules load
 (docs/reliability.md "signals").
@@ -7,7 +7,7 @@ The stop-signal handlers are installed before the command's modules load
 from __future__ import annotations
 
 if __name__ == "__main__":
-    from .tools.stopsignals import install_startup_handlers
+    from .tools.cli.stopsignals import install_startup_handlers
     install_startup_handlers()
-    from .tools.entry import main
+    from .tools.cli.entry import main
     main()

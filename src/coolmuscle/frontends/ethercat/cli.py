@@ -1,6 +1,6 @@
 """``coolmuscle ethercat ...`` (lab up/down, esi) and the ``sim --ethercat`` helpers.
 
-Registered on the main command in :mod:`coolmuscle.tools.cli` with ``add_typer``.
+Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typer``.
 """
 
 from __future__ import annotations

@@ -165,7 +165,7 @@ class Actions:
 
     def _tools(self) -> Toolbox:
         if self.toolbox is None:
-            raise RequestError("banks need the host tools (coolmuscle.tools.web.WebDashboard)")
+            raise RequestError("banks need the host tools (coolmuscle.tools.web.dashboard.WebDashboard)")
         return self.toolbox
 
 

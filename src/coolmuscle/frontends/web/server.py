@@ -142,7 +142,7 @@ class WebTransport(Transport):
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
             raise ValueError("no trace recorder here (the host tools record: "
-                             "coolmuscle.tools.web.WebDashboard)")
+                             "coolmuscle.tools.web.dashboard.WebDashboard)")
         return {"recording": True}
 
     def describe(self) -> str:

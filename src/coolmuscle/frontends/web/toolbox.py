@@ -3,8 +3,8 @@
 The front end owns the page, the feed and the requests; banks (check, upload, read
 back) and traces (record, CSV/Parquet, plot) are host tools of a higher layer
 (``coolmuscle check``'s checker, the client's bank verification, the trace recorder).
-:class:`coolmuscle.tools.web.DashboardTools` implements this protocol and
-:class:`coolmuscle.tools.web.WebDashboard` is the transport with it; a bare
+:class:`coolmuscle.tools.web.dashboard.DashboardTools` implements this protocol and
+:class:`coolmuscle.tools.web.dashboard.WebDashboard` is the transport with it; a bare
 :class:`~.server.WebTransport` without a toolbox answers those requests with a clear
 "not available" message.
 """

@@ -1,0 +1,55 @@
+"""The ``coolmuscle`` command's first code: stop signals first, then a quick start.
+
+``python -m coolmuscle`` and the ``coolmuscle`` script start here, so that a SIGINT,
+SIGTERM or SIGHUP at any moment of start-up (while the model is imported, the store
+opened, the transports started) ends the program with one line and the normal
+clean-up (``finally`` blocks: the store's transaction rolls back, the pty link is
+removed), never a traceback or a silent death.  While ``sim`` serves, its event loop
+takes the signals over (:func:`coolmuscle.tools.cli.app._serve`); once it stops, further
+signals are ignored until the process has exited (docs/reliability.md "signals").
+
+``coolmuscle run SCRIPT`` with plain options (:func:`.runcmd.parse_run_args`) runs at
+once, without loading the command-line library (typer, rich) or anything the script
+does not use (docs/performance.md "Starting a run"); every other command line goes to
+the typer application of :mod:`.cli`.  Both paths map errors the same way
+(:func:`.exits.guarded`).
+
+Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad script;
+70 an internal error (a bug: please report it); 128 + the signal after a stop signal
+(130 for Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from .exits import guarded
+from .stopsignals import check_stop, install_startup_handlers
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``coolmuscle ARGS``: a plain ``run`` at once, anything else through :mod:`.cli`."""
+    install_startup_handlers()
+    args = sys.argv[1:] if argv is None else list(argv)
+    kwargs: dict | None = None
+    full_main = None
+
+    def parse() -> None:      # imports included: a stop signal may land in any of them
+        nonlocal kwargs, full_main
+        from .run import parse_run_args
+        kwargs = parse_run_args(args)
+        if kwargs is None:
+            from .app import main as full_main
+        check_stop()
+    guarded(parse)
+    if full_main is not None:
+        full_main(argv)       # None: the process's own command line and signal handlers
+        return
+
+    def quick() -> None:
+        from .run import run_command
+        code = run_command(**kwargs)
+        check_stop()
+        if code:
+            raise SystemExit(code)
+    guarded(quick)

@@ -1,0 +1,146 @@
+"""The ``check``, ``upload`` and ``term`` subcommands of ``coolmuscle`` (typer).
+
+Registered on the main app by :func:`register` (``coolmuscle.tools.cli.app``).  Exit status as
+the rest of the command: 0 success, 1 errors found or a failed upload/connection,
+2 bad usage (a missing file, bad options).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Any, List, Optional
+
+import typer
+
+from .usage import UsageError
+
+__all__ = ["register"]
+
+
+class Format(str, Enum):
+    human = "human"
+    json = "json"
+
+
+class FirmwareChoice(str, Enum):
+    cm2 = "cm2"
+    rt3 = "rt3"
+    cm1 = "cm1"
+
+
+def check(
+    files: List[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
+    output: Format = typer.Option(Format.human, "--format", help="human or json (schema: "
+                                  "docs/check-schema.json)."),
+    firmware: Optional[FirmwareChoice] = typer.Option(
+        None, "--firmware", help="Firmware the file is for (default: its '# coolmuscle: "
+        "firmware=' comment, else cm2)."),
+    motors: Optional[int] = typer.Option(None, "--motors", min=1, max=15,
+                                         help="Motors on the chain (warn beyond)."),
+    strict: bool = typer.Option(False, "--strict", help="Warnings fail too."),
+) -> None:
+    """Lint CML files: syntax, limits, banks, calls, loops, registers."""
+    from ...client.program import load_program
+    from ..check.lint import check_program
+    from ..check.output import format_human, to_json
+
+    reports = []
+    for path in files:
+        if path.is_char_device() or path.is_block_device():  # /dev/zero fills the memory
+            raise UsageError(f"cannot read {path}: a device, not a file")
+        try:
+            program = load_program(path)
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UsageError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}")
+        try:
+            report = check_program(program, firmware=firmware.value if firmware else None,
+                                   motors=motors)
+        except LookupError:           # the file's own header names no firmware we know
+            raise UsageError(f"{path}: '# coolmuscle: firmware={program.firmware}' is not "
+                             "cm2, rt3 or cm1") from None
+        _check_script_lines(path, report)
+        reports.append(report)
+    if output is Format.json:
+        document = to_json(reports, strict=strict)
+        sys.stdout.write(json.dumps(document, indent=2) + "\n")
+        ok = document["ok"]
+    else:
+        for report in reports:
+            sys.stdout.write("\n".join(format_human(report)) + "\n")
+        ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
+    if not ok:
+        raise typer.Exit(1)
+
+
+def _check_script_lines(path: Path, report: Any) -> None:
+    """The script lines (``@wait`` ...) as ``coolmuscle run`` reads them: a directive
+    ``run`` refuses (``@wiat``) is a ``script`` error here too (docs/scripts.md)."""
+    from ..script.runner import ScriptError, parse_line
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return
+    for number, raw in enumerate(text.splitlines(), start=1):
+        source = raw.rstrip("\r")
+        stripped = source.lstrip()
+        if not (stripped[:1] == "@" and stripped[1:2].isalpha()) and \
+                not stripped.startswith("<<"):
+            continue
+        try:
+            parse_line(stripped, number)
+        except ScriptError as exc:
+            message = str(exc).split(": ", 1)[1] if str(exc).startswith("line ") else str(exc)
+            report.add(number, "script", message)
+    report.diagnostics.sort(key=lambda d: (d.line, d.column))
+
+
+def upload(
+    file: Path = typer.Argument(..., metavar="FILE.cml", help="File to send."),
+    port: str = typer.Option(..., "--port", metavar="URL",
+                             help="Serial device or pyserial URL (socket://, coolmuscle://)."),
+    save: bool = typer.Option(False, "--save", help="Send $ afterwards (2.1.2)."),
+    verify: bool = typer.Option(True, "--verify/--no-verify",
+                                help="Read the banks back and compare."),
+    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for each reply."),
+    firmware: Optional[FirmwareChoice] = typer.Option(None, "--firmware",
+                                                      help="Skip reading ?85."),
+) -> None:
+    """Send a .cml file to a real or virtual motor and verify it by readback."""
+    from ..term.upload import upload_file
+
+    if file.is_dir():
+        raise UsageError(f"{file} is a directory, not a .cml file")
+    if not file.is_file():
+        raise UsageError(f"no such file: {file}")
+    result = upload_file(file, port, save=save, verify=verify, baudrate=baudrate,
+                         timeout=timeout, firmware=firmware.value if firmware else None,
+                         out=sys.stdout, progress=sys.stderr.isatty())
+    if not result.ok:
+        raise typer.Exit(1)
+
+
+def term(
+    url: str = typer.Argument(..., metavar="URL", help="Serial device or pyserial URL."),
+    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
+    timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
+    history: Optional[Path] = typer.Option(None, "--history", metavar="FILE",
+                                           help="History file."),
+    log: Optional[Path] = typer.Option(None, "--log", metavar="FILE.cml",
+                                       help="Record the session as a golden transcript."),
+) -> None:
+    """Interactive terminal: line editing, history, colour, :send, :save, :log."""
+    from ..term.terminal import main
+
+    main(url, baudrate=baudrate, motor=motor, timeout=timeout, history=history, log=log)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``check``, ``upload`` and ``term`` to the ``coolmuscle`` command."""
+    app.command()(check)
+    app.command()(upload)
+    app.command()(term)

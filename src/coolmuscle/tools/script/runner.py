@@ -1,0 +1,545 @@
+"""The ``coolmuscle run`` script / golden transcript format and its runner (docs/scripts.md).
+
+This module owns:
+
+* parsing scripts: plain lines (sent as typed + CR, blank lines too), ``# `` comments,
+  directives ``@wait SECONDS``, ``@until REGEX [TIMEOUT]``, ``@send BYTES``,
+  ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES`` (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
+* running a script against a chain in fast (unpaced, deterministic) virtual time,
+  producing a timestamped transcript of every line sent and received;
+* checking the received byte stream against the expectations, in order, byte for
+  byte, and reporting the first mismatch with context;
+* recording a run back as a golden transcript (:meth:`RunResult.to_script`).
+
+The runner talks to the chain through ``chain.kernel`` and ``chain.host_line``, and
+through the device API's ``set_input`` / ``set_analog`` for the input directives.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Literal
+
+from ...errors import CoolMuscleError
+from ...sim.kernel import seconds, to_seconds
+
+#: Default timeout of ``@until`` (virtual seconds).
+DEFAULT_UNTIL_TIMEOUT = 10.0
+
+StepKind = Literal["send", "raw", "wait", "until", "expect", "comment", "input", "analog"]
+Direction = Literal[">", "<"]
+
+_ESCAPES = {"r": 13, "n": 10, "t": 9, "0": 0, "e": 27, "\\": 92}
+_DIRECTIVE = re.compile(r"@([A-Za-z]\w*)(?:[ \t](.*))?$", re.S)
+_NUMBER = re.compile(r"[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?$")
+
+
+class ScriptError(CoolMuscleError, ValueError):
+    """A script that cannot be parsed or run (bad directive, escape, trace option)."""
+
+    def __init__(self, message: str, line_no: int | None = None) -> None:
+        self.line_no = line_no
+        super().__init__(f"line {line_no}: {message}" if line_no else message)
+
+
+# -- escapes ------------------------------------------------------------
+def unescape(text: str) -> bytes:
+    """``"Ux.1=8\\\\r\\\\n"`` -> ``b"Ux.1=8\\r\\n"``; raises ``ValueError`` on a bad escape."""
+    out = bytearray()
+    i = 0
+    while i < len(text):
+        ch = text[i]
+        if ch != "\\":
+            code = ord(ch)
+            if code > 0xFF:
+                raise ValueError(f"character {ch!r} is not a byte (use \\xNN)")
+            out.append(code)
+            i += 1
+            continue
+        nxt = text[i + 1:i + 2]
+        if nxt in _ESCAPES:
+            out.append(_ESCAPES[nxt])
+            i += 2
+        elif nxt == "x" and re.fullmatch(r"[0-9A-Fa-f]{2}", text[i + 2:i + 4]):
+            out.append(int(text[i + 2:i + 4], 16))
+            i += 4
+        else:
+            raise ValueError(f"bad escape {text[i:i + 4]!r} (use \\r \\n \\t \\0 \\e \\\\ \\xNN)")
+    return bytes(out)
+
+
+#: Bytes that :func:`escape` shows as themselves: printable ASCII but the backslash.
+_PLAIN = re.compile(rb"[\x20-\x5b\x5d-\x7e]*")
+
+
+def escape(data: bytes) -> str:
+    """Inverse of :func:`unescape`: printable ASCII as is, everything else escaped."""
+    if _PLAIN.fullmatch(data):          # a report or a reply: nothing to escape
+        return data.decode("ascii")
+    parts = []
+    for byte in data:
+        if byte == 92:
+            parts.append("\\\\")
+        elif 32 <= byte < 127:
+            parts.append(chr(byte))
+        elif byte == 13:
+            parts.append("\\r")
+        elif byte == 10:
+            parts.append("\\n")
+        elif byte == 9:
+            parts.append("\\t")
+        else:
+            parts.append(f"\\x{byte:02x}")
+    return "".join(parts)
+
+
+def split_lines(data: bytes) -> list[bytes]:
+    """Split at CR, LF or CRLF, keeping the terminators; the last piece may be partial."""
+    pieces = re.findall(rb"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+$", data)
+    return [p for p in pieces if p]
+
+
+def _strip_end(data: bytes) -> bytes:
+    if data.endswith(b"\r\n"):
+        return data[:-2]
+    if data.endswith((b"\r", b"\n")):
+        return data[:-1]
+    return data
+
+
+# -- parsing ------------------------------------------------------------
+@dataclass(frozen=True)
+class Step:
+    """One script line: what to do and where it came from."""
+
+    line_no: int
+    kind: StepKind
+    source: str
+    data: bytes = b""
+    seconds: float = 0.0
+    pattern: re.Pattern[str] | None = None
+    args: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class Script:
+    """A parsed script; ``lines`` keeps comments (for recording), ``steps`` does not."""
+
+    lines: tuple[Step, ...]
+
+    @property
+    def steps(self) -> tuple[Step, ...]:
+        return tuple(s for s in self.lines if s.kind != "comment")
+
+    @property
+    def expectations(self) -> int:
+        return sum(1 for s in self.lines if s.kind == "expect")
+
+
+#: The longest wait a script line may ask for (as ``run --until``): 30 years.
+MAX_SECONDS = 1e9
+
+
+def _seconds_arg(text: str, what: str, line_no: int) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise ScriptError(f"{what}: {text!r} is not a number of seconds", line_no) from None
+    if not math.isfinite(value) or not 0 <= value <= MAX_SECONDS:
+        raise ScriptError(f"{what}: seconds must be 0..{MAX_SECONDS:g}, not {text}", line_no)
+    return value
+
+
+_INPUT = re.compile(r"^(?:(\d+)\.)?(\d+)\s+(on|off|1|0)$", re.IGNORECASE)
+_ANALOG = re.compile(r"^(?:(\d+)\s+)?(\d+)$")
+
+
+def _input_args(arg: str, line_no: int) -> tuple[int, ...]:
+    """``@input [ID.]N on|off``: drive the electrical level of input N of motor ID."""
+    match = _INPUT.match(arg.strip())
+    if not match:
+        raise ScriptError("@input needs [ID.]N on|off, e.g. '@input 1.3 on'", line_no)
+    motor = int(match.group(1) or 1)
+    return motor, int(match.group(2)), int(match.group(3).lower() in ("on", "1"))
+
+
+def _analog_args(arg: str, line_no: int) -> tuple[int, ...]:
+    """``@analog [ID] COUNTS``: set the analog input (0..1023, 6.6 ?74)."""
+    match = _ANALOG.match(arg.strip())
+    if not match:
+        raise ScriptError("@analog needs [ID] COUNTS, e.g. '@analog 1 512'", line_no)
+    return int(match.group(1) or 1), int(match.group(2))
+
+
+def _parse_directive(name: str, arg: str, line_no: int, source: str) -> Step:
+    if name == "wait":
+        return Step(line_no, "wait", source, seconds=_seconds_arg(arg.strip(), "@wait", line_no))
+    if name == "until":
+        arg = arg.strip()
+        if not arg:
+            raise ScriptError("@until needs a regular expression", line_no)
+        timeout = DEFAULT_UNTIL_TIMEOUT
+        head, sep, tail = arg.rpartition(" ")
+        if sep and head.strip() and _NUMBER.match(tail):
+            arg, timeout = head.rstrip(), _seconds_arg(tail, "@until timeout", line_no)
+        try:
+            pattern = re.compile(arg)
+        except re.error as exc:
+            raise ScriptError(f"@until: bad regular expression {arg!r}: {exc}", line_no) from None
+        return Step(line_no, "until", source, seconds=timeout, pattern=pattern)
+    if name == "send":
+        try:
+            data = unescape(arg)
+        except ValueError as exc:
+            raise ScriptError(f"@send: {exc}", line_no) from None
+        if not data:
+            raise ScriptError("@send needs bytes to send", line_no)
+        return Step(line_no, "raw", source, data=data)
+    if name == "input":
+        return Step(line_no, "input", source, args=_input_args(arg, line_no))
+    if name == "analog":
+        return Step(line_no, "analog", source, args=_analog_args(arg, line_no))
+    raise ScriptError(f"unknown directive @{name} (known: @wait, @until, @send, @input, "
+                      "@analog; CML's "
+                      "interpolation command is @ followed by a digit or a dot)", line_no)
+
+
+def parse_line(source: str, line_no: int) -> Step:
+    """Classify one script line (without its file line ending)."""
+    if source == "#" or source.startswith("# "):
+        return Step(line_no, "comment", source)
+    if source.startswith("<<"):
+        if not source.startswith("<< ") or len(source) == 3:
+            raise ScriptError("an expectation is '<< ' followed by the bytes expected", line_no)
+        try:
+            data = unescape(source[3:])
+        except ValueError as exc:
+            raise ScriptError(f"expectation: {exc}", line_no) from None
+        return Step(line_no, "expect", source, data=data)
+    if m := _DIRECTIVE.match(source):
+        return _parse_directive(m.group(1), m.group(2) or "", line_no, source)
+    try:
+        data = source.encode("latin-1") + b"\r"
+    except UnicodeEncodeError:
+        raise ScriptError(f"line {source!r} has characters that are not bytes", line_no) from None
+    return Step(line_no, "send", source, data=data)
+
+
+def parse_script(text: str) -> Script:
+    """Parse script text; raises :class:`ScriptError` with the line number."""
+    rows = text.split("\n")
+    if rows and rows[-1] == "":
+        rows.pop()  # the file's final newline ends the last line, it is not a blank line
+    return Script(tuple(parse_line(row.removesuffix("\r"), n) for n, row in enumerate(rows, 1)))
+
+
+def load_script(source: str | os.PathLike[str]) -> Script:
+    """A path (``Path``, or a one-line ``str`` naming an existing file) or script text.
+
+    A one-line ``str`` ending in ``.cml`` that names no file is a :class:`ScriptError`
+    (it is a mistyped path, not a line of CML)."""
+    if isinstance(source, os.PathLike) or ("\n" not in source and os.path.isfile(source)):
+        path = Path(source)
+        if path.is_char_device() or path.is_block_device():   # /dev/zero never ends
+            raise ScriptError(f"cannot read script {path}: a device, not a file")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ScriptError(f"cannot read script {path}: {exc}") from exc
+        return parse_script(text)
+    if "\n" not in source and source.strip().lower().endswith(".cml"):
+        # a file name, not CML: sending it to the motor would "succeed" silently
+        raise ScriptError(f"no such script file: {source} (a one-line str naming a "
+                          ".cml file must name an existing file; script text is sent)")
+    return parse_script(source)
+
+
+# -- results ------------------------------------------------------------
+@dataclass(frozen=True)
+class TranscriptEntry:
+    """One line sent (``>``) or received (``<``) at virtual time ``time`` (ns)."""
+
+    time: int
+    direction: Direction
+    data: bytes
+    line_no: int | None = None
+
+    def format(self) -> str:
+        """``   1.100000 < Ux.1=8``: seconds, direction, bytes without their line end."""
+        return f"{to_seconds(self.time):11.6f} {self.direction} {escape(_strip_end(self.data))}"
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why a run failed: ``mismatch``, ``unexpected`` (extra output), ``timeout``, ``error``."""
+
+    kind: Literal["mismatch", "unexpected", "timeout", "error"]
+    message: str
+    line_no: int | None
+    time: int
+
+
+@dataclass
+class RunResult:
+    """The outcome of :func:`run_script`."""
+
+    script: Script
+    transcript: list[TranscriptEntry]
+    received: bytes
+    failure: Failure | None
+    expectations: int
+    matched: int
+    end_time: int
+    marks: list[tuple[int, int]] = field(default_factory=list)  # (step line_no, received offset)
+    tail_seconds: float = 0.0
+    exception: BaseException | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.failure is None
+
+    def format(self) -> str:
+        """The transcript, one ``time dir bytes`` line per entry."""
+        return "\n".join(entry.format() for entry in self.transcript)
+
+    def summary(self) -> str:
+        if self.failure is not None:
+            return f"FAIL {self.failure.message}"
+        checked = (f"{self.matched} expectation(s) matched" if self.expectations
+                   else "no expectations")
+        return f"ok: {checked}, ended at {to_seconds(self.end_time):.6f} s"
+
+    def to_script(self) -> str:
+        """The script with ``<<`` lines of what was actually received (a golden transcript)."""
+        out: list[str] = []
+        offsets = dict(self.marks)
+        start = 0
+        for step in self.script.lines:
+            if step.kind == "expect":
+                continue
+            out.append(step.source)
+            end = offsets.get(step.line_no)
+            if end is None:
+                continue
+            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:end])]
+            start = end
+        if start < len(self.received) or self.tail_seconds > 0:
+            if self.tail_seconds > 0:
+                out.append(f"@wait {_fmt_seconds(self.tail_seconds)}")
+            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:])]
+        return "\n".join(out) + "\n"
+
+
+def _fmt_seconds(value: float) -> str:
+    return f"{value:.9f}".rstrip("0").rstrip(".") or "0"
+
+
+# -- running ------------------------------------------------------------
+class _Recorder:
+    """Listens to the host line: keeps the byte stream, complete lines and entries."""
+
+    def __init__(self, kernel: Any, on_entry: Callable[[TranscriptEntry], None] | None) -> None:
+        self.kernel = kernel
+        self.on_entry = on_entry
+        self.stream = bytearray()
+        self.entries: list[TranscriptEntry] = []
+        self.lines: list[str] = []   # complete received lines, without terminator
+        self._line = bytearray()
+        self._held: TranscriptEntry | None = None  # a CR-ended line that may get its LF
+        self.display_error: Exception | None = None
+
+    def emit(self, entry: TranscriptEntry) -> None:
+        self.entries.append(entry)
+        if self.on_entry is not None:
+            try:
+                self.on_entry(entry)
+            except Exception as exc:  # the display's failure, not the motor's: re-raised later
+                self.display_error = exc
+                self.on_entry = None
+
+    def flush_held(self) -> None:
+        if self._held is not None:
+            held, self._held = self._held, None
+            self.emit(held)
+
+    def on_bytes(self, data: bytes) -> None:
+        now = self.kernel.now
+        self.stream += data
+        if (self._held is None and not self._line and data[-2:] == b"\r\n"
+                and data.count(b"\r") == 1 and data.count(b"\n") == 1):
+            # one whole CR LF line (a report, a reply): what the loop below makes of it
+            self.lines.append(data[:-2].decode("latin-1"))
+            self.emit(TranscriptEntry(now, "<", bytes(data)))
+            return
+        for byte in data:
+            if byte == 0x0A and self._held is not None and not self._line:
+                held, self._held = self._held, None
+                self.emit(TranscriptEntry(held.time, "<", held.data + b"\n"))
+                continue
+            self.flush_held()
+            self._line.append(byte)
+            if byte in (0x0D, 0x0A):
+                entry = TranscriptEntry(now, "<", bytes(self._line))
+                self.lines.append(self._line[:-1].decode("latin-1"))
+                self._line.clear()
+                if byte == 0x0D:
+                    self._held = entry
+                else:
+                    self.emit(entry)
+
+    def sent(self, entry: TranscriptEntry) -> None:
+        self.flush_held()
+        self.emit(entry)
+
+    def finish(self) -> None:
+        self.flush_held()
+        if self._line:  # a partial line at the end of the run
+            self.emit(TranscriptEntry(self.kernel.now, "<", bytes(self._line)))
+            self._line.clear()
+
+
+class _Checker:
+    """Matches expectations against the received stream, in order, byte for byte."""
+
+    def __init__(self, stream: bytearray) -> None:
+        self.stream = stream
+        self.pos = 0
+        self.matched = 0
+
+    def expect(self, step: Step, now: int) -> Failure | None:
+        want = step.data
+        got = bytes(self.stream[self.pos:self.pos + len(want)])
+        if got == want:
+            self.pos += len(want)
+            self.matched += 1
+            return None
+        diff = next((i for i, (a, b) in enumerate(zip(want, got)) if a != b), len(got))
+        shown = bytes(self.stream[self.pos:self.pos + max(len(want), diff + 1) + 16])
+        before = bytes(self.stream[max(0, self.pos - 32):self.pos])
+        sent = f'"{escape(shown)}"' if shown else "nothing (yet)"
+        return Failure("mismatch",
+                       f'line {step.line_no}: expected "{escape(want)}" but the motor sent '
+                       f'{sent} (stream byte {self.pos + diff}, differs at offset {diff}, '
+                       f'{to_seconds(now):.6f} s); before it: "{escape(before)}"',
+                       step.line_no, now)
+
+    def leftover(self, now: int) -> Failure | None:
+        extra = bytes(self.stream[self.pos:])
+        if not extra:
+            return None
+        return Failure("unexpected",
+                       f'after the last expectation the motor sent {len(extra)} more byte(s): '
+                       f'"{escape(extra[:80])}"{"..." if len(extra) > 80 else ""}', None, now)
+
+
+def _start_trace(chain: Any, trace: str | os.PathLike[str], step: float,
+                 warn_bytes: int | None, on_warning: Callable[[str], None] | None) -> Any:
+    from ..trace.recorder import TraceFormatError, trace as start_trace
+    try:
+        return start_trace(chain, Path(trace), step, warn_bytes=warn_bytes,
+                           on_warning=on_warning)
+    except OSError as exc:
+        raise ScriptError(f"cannot write trace {os.fspath(trace)}: "
+                          f"{exc.strerror or exc}") from None
+    except TraceFormatError as exc:
+        raise ScriptError(f"cannot write trace {os.fspath(trace)}: {exc}") from None
+
+
+def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
+               until: float | None = None, trace: str | os.PathLike[str] | None = None,
+               on_entry: Callable[[TranscriptEntry], None] | None = None,
+               trace_step: float = 0.001, trace_warn_bytes: int | None = None,
+               on_warning: Callable[[str], None] | None = None) -> RunResult:
+    """Run a script against ``chain`` in fast virtual time and check its expectations.
+
+    ``source`` is a :class:`Script`, a path or script text (:func:`load_script`).
+    ``until``: after the last line, keep running virtual time up to ``until`` seconds
+    (absolute).  ``trace``: CSV (or Parquet) path the trace streams to, one grid row
+    every ``trace_step`` seconds plus every change (``on_warning`` is told once the
+    file passes ``trace_warn_bytes``; an interrupt leaves the rows so far).  ``on_entry`` is
+    called with every transcript entry as it happens (for live display; if it raises,
+    the run goes on silently and the exception is re-raised at the end).  The run stops
+    at the first failure; the result says which.
+    """
+    script = source if isinstance(source, Script) else load_script(source)
+    kernel = chain.kernel
+    host_line = chain.host_line
+    recorder = _Recorder(kernel, on_entry)
+    checker = _Checker(recorder.stream)
+    tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
+              if trace is not None else None)
+    remove = host_line.add_listener(recorder.on_bytes)
+    failure: Failure | None = None
+    exception: BaseException | None = None
+    marks: list[tuple[int, int]] = []
+    tail = 0.0
+    scan = [0]  # next complete line @until looks at
+
+    def matched(pattern: re.Pattern[str]) -> bool:
+        while scan[0] < len(recorder.lines):
+            line = recorder.lines[scan[0]]
+            scan[0] += 1
+            if pattern.search(line):
+                return True
+        return False
+
+    try:
+        for step in script.steps:
+            try:
+                if step.kind in ("send", "raw"):
+                    recorder.sent(TranscriptEntry(kernel.now, ">", step.data, step.line_no))
+                    host_line.feed(step.data)
+                elif step.kind == "wait":
+                    kernel.advance(seconds(step.seconds))
+                elif step.kind == "input":
+                    chain.set_input(step.args[0], step.args[1], bool(step.args[2]))
+                elif step.kind == "analog":
+                    chain.set_analog(step.args[0], step.args[1])
+                elif step.kind == "until":
+                    assert step.pattern is not None
+                    pattern = step.pattern
+                    if not kernel.run_until(lambda: matched(pattern), seconds(step.seconds)):
+                        failure = Failure("timeout", f"line {step.line_no}: @until "
+                                          f"{pattern.pattern!r} timed out after {step.seconds:g} s "
+                                          f"(virtual time {kernel.now_s:.6f} s)",
+                                          step.line_no, kernel.now)
+                elif step.kind == "expect":
+                    failure = checker.expect(step, kernel.now)
+            except Exception as exc:  # a model bug: report it, never crash the runner
+                exception = exc
+                failure = Failure("error", f"line {step.line_no}: the motor model raised "
+                                  f"{type(exc).__name__}: {exc}", step.line_no, kernel.now)
+            if step.kind != "expect":
+                marks.append((step.line_no, len(recorder.stream)))
+            if failure is not None:
+                break
+        if failure is None and until is not None:
+            target = seconds(until)
+            if target > kernel.now:
+                tail = to_seconds(target - kernel.now)
+                try:
+                    kernel.run(until=target)
+                except Exception as exc:
+                    exception = exc
+                    failure = Failure("error", f"the motor model raised {type(exc).__name__}: "
+                                      f"{exc}", None, kernel.now)
+        if failure is None and script.expectations:
+            failure = checker.leftover(kernel.now)
+    finally:
+        remove()
+        recorder.finish()
+        interrupted = sys.exc_info()[0] is not None and not issubclass(
+            sys.exc_info()[0], Exception)     # Ctrl-C, a stop signal: stop at once
+        close = getattr(tracer, "abort" if interrupted else "close", None)
+        if callable(close):
+            close()
+    if recorder.display_error is not None:
+        raise recorder.display_error
+    return RunResult(script=script, transcript=recorder.entries, received=bytes(recorder.stream),
+                     failure=failure, expectations=script.expectations, matched=checker.matched,
+                     end_time=kernel.now, marks=marks, tail_seconds=tail, exception=exception)
