@@ -229,15 +229,15 @@ def private_net() -> Iterator[str]:
                        check=False)
 
 
-def in_net(namespace: str, argv: Sequence[str]) -> list[str]:
-    """``argv`` run inside ``namespace``."""
-    return ["ip", "netns", "exec", namespace, *argv]
+def in_net(namespace: str | None, argv: Sequence[str]) -> list[str]:
+    """``argv`` run inside ``namespace`` (``None``: here)."""
+    return [*argv] if namespace is None else ["ip", "netns", "exec", namespace, *argv]
 
 
 @contextlib.contextmanager
-def sim_process(namespace: str, *args: str, banner: str) -> Iterator[re.Match[str]]:
-    """``coolmuscle sim --no-state ARGS`` inside ``namespace``; yields the match of the
-    regex ``banner`` in what it printed, and stops it afterwards."""
+def sim_process(namespace: str | None, *args: str, banner: str) -> Iterator[re.Match[str]]:
+    """``coolmuscle sim --no-state ARGS`` inside ``namespace`` (``None``: here); yields the
+    match of the regex ``banner`` in what it printed, and stops it afterwards."""
     env = {**os.environ, "PYTHONPATH": str(SRC)}
     proc = subprocess.Popen(in_net(namespace, [sys.executable, "-m", "coolmuscle", "sim",
                                                "--no-state", *args]),
