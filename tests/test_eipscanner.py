@@ -110,7 +110,8 @@ def test_eipscanner_class1_originator_moves_the_motor_and_reads_its_status_ch4(
     program = build(prefix, tmp_path)
     with where_to_run() as ns:
         endpoint = "127.0.0.1" if ns else "127.0.0.1:0"
-        with sim_process(ns, "--firmware", "cm1", "--enip", endpoint, "--enip-io-port", "0",
+        rt = ("--enip-rt-priority", "10") if os.geteuid() == 0 else ()
+        with sim_process(ns, "--firmware", "cm1", "--enip", endpoint, "--enip-io-port", "0", *rt,
                          banner=r"enip: ([\d.]+):(\d+) \(I/O udp (\d+)\)") as banner:
             port, io_port = int(banner.group(2)), int(banner.group(3))
             assert io_port != 2222                   # EIPScanner's own T->O port
