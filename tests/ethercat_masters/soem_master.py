@@ -2,7 +2,8 @@
 
 Run inside the test's network namespace: ``python soem_master.py IFACE SCENARIO``.
 Scenarios: ``full`` (scan, SDO, map, SAFE-OP, OP, cycles, INIT), ``invalid`` (INIT to
-OP refused with 0011h), ``watchdog`` (the master stops sending in OP).
+OP refused with 0011h), ``watchdog`` (the master stops sending in OP), ``csp``, ``fault``,
+``wire`` (every kind of SDO transfer, SDO information, csp cycles: the capture test).
 """
 
 from __future__ import annotations
@@ -190,12 +191,50 @@ def fault(master) -> dict:
     return res
 
 
+def wire(master) -> dict:
+    """Every kind of mailbox exchange, then csp cycles, for the capture test
+    (test_wireshark.py): what was sent and what came back, in order."""
+    master.config_init()
+    s = master.slaves[0]
+    ups = [(0x1000, 0), (0x1008, 0), (0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4)]
+    res: dict = {"uploads": [[i, k, s.sdo_read(i, k).hex()] for i, k in ups]}
+    s.sdo_write(0x6060, 0, struct.pack("<b", 8))                       # expedited download
+    s.sdo_write(0x6099, 1, struct.pack("<I", 2000))
+    res["downloads"] = [[0x6060, 0, "08"], [0x6099, 1, struct.pack("<I", 2000).hex()]]
+    res["abort"] = [0x2000, 0, abort_of(s, 0x2000, 0)]
+    k = s.sdo_read(0x60F6, 1, 1024, ca=True)                            # segmented upload
+    s.sdo_write(0x60F6, 1, k, ca=True)                                  # segmented download
+    res["segmented"] = [0x60F6, 1, k.hex()]
+    od = s.od                                                           # SDO information
+    res["od"] = [o.index for o in od]
+    described = [o for o in od if o.index in (0x1018, 0x6040, 0x60F6)]
+    res["names"] = [[o.index, o.name.decode("latin-1")] for o in described]
+    res["entries"] = [[e.name.decode("latin-1"), e.data_type, e.bit_length]
+                      for e in described[0].entries]
+    res.update(to_op(master, s))
+    sent, seen = [], []
+    for i in range(300):                  # 6.1.2: 06h, 07h, 0Fh; then a csp ramp on ID1
+        cw = 0x06 if i < 30 else 0x07 if i < 60 else 0x0F
+        target = 10 * max(0, i - 90)
+        s.output = b"".join(struct.pack("<Hi", cw, target if a == 0 else 0) for a in range(4))
+        master.send_processdata()
+        master.receive_processdata(10_000)
+        sent.append(bytes(s.output).hex())
+        seen.append(bytes(s.input).hex())
+        time.sleep(0.001)
+    res.update(sent=sent, seen=seen)
+    master.state = pysoem.INIT_STATE
+    master.write_state()
+    res["init"] = master.state_check(pysoem.INIT_STATE, 500_000)
+    return res
+
+
 def main() -> None:
     master = pysoem.Master()
     master.open(sys.argv[1])
     try:
         result = {"full": full, "invalid": invalid, "watchdog": watchdog,
-                  "csp": csp, "fault": fault}[sys.argv[2]](master)
+                  "csp": csp, "fault": fault, "wire": wire}[sys.argv[2]](master)
     finally:
         master.close()
     print(json.dumps(result))
