@@ -7,6 +7,7 @@ SOEM scans it from the master's end.
 from __future__ import annotations
 
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -43,10 +44,26 @@ def test_esi_command_writes_xml_with_the_three_bridges_8_1_4():
     assert [d.findtext("Type") for d in root.iter("Device")] == ["EB01", "EB02", "EB12"]
 
 
+def _read_until_ready(sim: subprocess.Popen, seconds: float = 60.0) -> str:
+    """The sim's stderr up to its ready banner (a loaded machine starts it slowly).
+
+    Read from the descriptor, not the text wrapper: ``communicate()`` reads the
+    descriptor later and would not see lines left in the wrapper's buffer."""
+    assert sim.stderr is not None
+    fd = sim.stderr.fileno()
+    seen = b""
+    deadline = time.monotonic() + seconds
+    while b"ready" not in seen and time.monotonic() < deadline and sim.poll() is None:
+        if select.select([fd], [], [], 0.2)[0]:
+            seen += os.read(fd, 4096)
+    return seen.decode(errors="replace")
+
+
 @needs_net_admin
 def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
     up = coolmuscle("ethercat", "lab", "up", *LAB)
     sim = None
+    banner = ""
     try:
         assert up.returncode == 0, up.stderr
         assert "cmecatclim" in up.stdout and "ip netns exec cmecatclins" in up.stdout
@@ -54,7 +71,7 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
                                 "coolmuscle", "sim", "--ethercat", "cmecatclis", "--bridge",
                                 "EB12", "--no-state"], env=ENV, stderr=subprocess.PIPE,
                                text=True)
-        time.sleep(2.0)
+        banner = _read_until_ready(sim)
         scan = subprocess.run([sys.executable, "-c", (
             "import pysoem,sys; m=pysoem.Master(); m.open('cmecatclim'); n=m.config_init();"
             "print(n, m.slaves[0].name, hex(m.slaves[0].id)); m.close()")],
@@ -62,6 +79,7 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
         assert scan.stdout.split()[0] == "1", scan.stderr
         assert "EB12" in scan.stdout and "0xeb0012" in scan.stdout
     finally:
+        err = ""
         if sim is not None:
             sim.send_signal(signal.SIGTERM)
             try:
@@ -69,10 +87,11 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
             except subprocess.TimeoutExpired:
                 sim.kill()
                 _out, err = sim.communicate()
-            assert "Traceback" not in err
-            assert "virtual CM1/CM1/CM2/CM2 ID1-ID4 ready" in err, err
-            assert "ethercat: cmecatclis (EB12" in err
-        down = coolmuscle("ethercat", "lab", "down", *LAB)
+            err = banner + err
+        down = coolmuscle("ethercat", "lab", "down", *LAB)   # before any assertion here
+    assert "Traceback" not in err
+    assert "virtual CM1/CM1/CM2/CM2 ID1-ID4 ready" in err, err
+    assert "ethercat: cmecatclis (EB12" in err
     assert down.returncode == 0 and "cmecatclins" in down.stdout
     assert "cmecatclins" not in ip("netns", "list").stdout
     again = coolmuscle("ethercat", "lab", "down", *LAB)
