@@ -130,9 +130,9 @@ def test_keyboard_only_console_and_input_toggle(page, host):
 def test_move_typed_in_console_shows_position_rising_and_ux8_in_log(page, host):
     """2.1 example: S, A, P then ^ (cml-users-guide.txt 2.1.1); Ux.1=8 when in position."""
     start = page.number("position-1")
-    page.type_line(f"S.1=40, A.1=100, P.1={start + 5000}, ^.1")     # about 2 s
+    page.type_line(f"S.1=20, A.1=100, P.1={start + 5000}, ^.1")     # about 4 s
     seen = []
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 20
     while time.monotonic() < deadline and (not seen or seen[-1] < start + 5000):
         seen.append(page.number("position-1"))
         time.sleep(0.05)
