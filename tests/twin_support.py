@@ -141,6 +141,21 @@ def _write(events: list[tuple[TranscriptEntry, bytes]], origin: int, rng: random
     return "\n".join(out) + "\n"
 
 
+def write_capture(folder: Path, name: str = "session.cml", *, seed: int = 1,
+                  noise: bool = True, push: bool = True) -> Path:
+    """A capture of the identification session on the hidden machine, in ``folder``."""
+    path = folder / name
+    path.write_text(capture_text(session_plan(push=push), seed=seed, noise=noise),
+                    encoding="utf-8")
+    return path
+
+
+def write_hidden(folder: Path) -> Path:
+    path = folder / "hidden.toml"
+    path.write_text(HIDDEN_TOML, encoding="utf-8")
+    return path
+
+
 def main() -> None:
     """Write the example capture of docs/twin.md (and its hidden machine file)."""
     target = Path(sys.argv[1]) if len(sys.argv) > 1 else EXAMPLE / "session.cml"

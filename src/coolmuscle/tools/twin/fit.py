@@ -337,12 +337,13 @@ def _machine_text(result: FitResult) -> str:
     return text
 
 
-def fit_session(path: str | Path, machine: str | Path | Machine | None = None,
+def fit_session(path: str | Path | Session, machine: str | Path | Machine | None = None,
                 params: str | list[Param] | None = None, *, max_replays: int = MAX_REPLAYS,
                 on_replay: Callable[[int, float], None] | None = None) -> FitResult:
-    """Read the capture at ``path`` and fit ``params`` (names as ``--params``, or
-    :class:`Param` objects; None: inertia, friction, kp) of ``machine``."""
-    session = read_session(path)
+    """Read the capture at ``path`` (or take a read :class:`Session`) and fit ``params``
+    (names as ``--params``, or :class:`Param` objects; None: inertia, friction, kp) of
+    ``machine`` (a path, a Machine; None: the capture's, else the default load)."""
+    session = path if isinstance(path, Session) else read_session(path)
     base, _ = load_machine_arg(machine, session)
     base_path = None if isinstance(machine, Machine) else \
         (Path(machine) if machine is not None else session.machine)

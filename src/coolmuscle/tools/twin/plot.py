@@ -80,12 +80,15 @@ def _draw(panels: Sequence[Panel], title: str) -> "plt.Figure":
                         **_STYLES[series.style])  # type: ignore[arg-type]
         ax.set_title(panel.title, fontsize=9, loc="left")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="upper right")
+    if panels:                       # the same series in every panel: one legend, on top
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="upper right", ncol=len(labels), fontsize=8,
+                   frameon=False)
     if not panels:
         axes[0, 0].text(0.5, 0.5, "no polled values in this session", ha="center",
                         va="center", transform=axes[0, 0].transAxes)
     axes[-1, 0].set_xlabel("time since the capture began, s")
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title, fontsize=10, x=0.08, ha="left")
     fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.6 / (1.0 + PANEL_IN * count),
                         bottom=0.5 / (1.0 + PANEL_IN * count), hspace=0.35)
     return fig
