@@ -20,8 +20,8 @@ from twin_support import HIDDEN_TOML, capture_text, session_plan
 ROOT = Path(__file__).resolve().parents[1]
 
 #: The example of the agreed format (capture-format.md), completed where it says "...".
-FORMAT_EXAMPLE = """\
-# coolmuscle capture: port=socket://127.0.0.1:5150 baud=38400 parity=none echo=on started=2026-12-03T10:00:00.123456Z
+FORMAT_EXAMPLE = ("# coolmuscle capture: port=socket://127.0.0.1:5150 baud=38400 parity=none "
+                  "echo=on started=2026-12-03T10:00:00.123456Z\n") + """\
 # chain: motors=1 firmware=cm2
 # t=0.000000 >
 S.1=100

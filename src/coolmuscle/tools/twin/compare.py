@@ -168,7 +168,7 @@ class Report:
         for panel in self.panels:
             real = next(s for s in panel.series if s.style == "real")
             virtual = next(s for s in panel.series if s.style == "virtual")
-            diffs = [r - v for r, v in zip(real.values, virtual.values)]
+            diffs = [r - v for r, v in zip(real.values, virtual.values, strict=True)]
             if diffs:
                 rms = math.sqrt(sum(d * d for d in diffs) / len(diffs))
                 rows.append((panel.title, len(diffs), max(abs(d) for d in diffs), rms))
@@ -394,7 +394,7 @@ def _wire_times(session: Session, after: list[int]) -> list[float]:
     baud = session.baud
     out: list[float] = []
     total, group = 0, -2
-    for line, sent in zip(session.received, after):
+    for line, sent in zip(session.received, after, strict=True):
         if sent != group:
             total, group = 0, sent
         total += len(line.data)

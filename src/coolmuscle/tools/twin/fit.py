@@ -17,11 +17,13 @@ fit that did not converge within ``max_replays`` replays.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
 
 from ...chain.machine import DRIVE_KEYS, LOAD_KEYS, Machine, parse_machine
 from .compare import load_machine_arg
@@ -30,10 +32,9 @@ from .plot import Panel, Series
 from .replay import Replay, replay
 from .session import POLLED, Poll, Session, parse_poll, read_session
 
-if TYPE_CHECKING:
-    import numpy as np
-
 __all__ = ["FitResult", "fit", "fit_session", "INSTALL_HINT"]
+
+Array = npt.NDArray[np.float64]
 
 INSTALL_HINT = "pip install 'coolmuscle[twin]'"
 #: Replays a fit may take (each Jacobian costs one per parameter).
@@ -42,13 +43,15 @@ MAX_REPLAYS = 300
 DIFF_STEP = 1e-3
 NOISE = 1.0             # units, beyond the rounding (as compare's default)
 SAMPLE = 0.001          # s each side of a poll's window
-#: Two parameters whose estimates correlate beyond this cannot be told apart.
-MAX_CORRELATION = 0.9995
+#: Parameters are told apart when the smallest singular value of the column-normalised
+#: Jacobian is at least this fraction of the largest (two parameters at 0.01: their
+#: estimates correlate by 0.9998).
+MIN_SINGULAR = 0.01
 
 
 def _scipy() -> Any:
     try:
-        from scipy import optimize
+        from scipy import optimize  # type: ignore[import-untyped]
     except ImportError:
         raise FitError(f"coolmuscle fit needs scipy: {INSTALL_HINT}") from None
     return optimize
@@ -77,10 +80,11 @@ class FitResult:
         """The parameters, one line each: value, standard error, 95 % interval, start."""
         width = max(len(p.name) for p in self.params)
         out = []
-        for p, v, se, v0 in zip(self.params, self.values, self.stderr, self.start):
-            rel = f"{100 * se / abs(v):.2f} %" if v else f"{se:.3g}"
-            out.append(f"  {p.name:<{width}} = {_fmt(v)} {p.kind.unit}  ± {rel} (95 %: "
-                       f"{_fmt(v - 1.96 * se)} .. {_fmt(v + 1.96 * se)})  start {_fmt(v0)}")
+        for p, v, se, v0 in zip(self.params, self.values, self.stderr, self.start, strict=True):
+            rel = f" ({100 * se / abs(v):.2f} %)" if v else ""
+            out.append(f"  {p.name:<{width}} = {_fmt(v)} {p.kind.unit}: standard error "
+                       f"{se:.2g}{rel}, 95 % {_fmt(v - 1.96 * se)} .. {_fmt(v + 1.96 * se)}; "
+                       f"start {_fmt(v0)}")
         return out
 
     def machine_text(self) -> str:
@@ -104,24 +108,22 @@ class _Problem:
 
     def __init__(self, session: Session, base: Machine | None, params: list[Param],
                  max_replays: int, on_replay: Callable[[int, float], None] | None) -> None:
-        import numpy as np
-        self.np = np
         self.session = session
         self.base = base
         self.params = params
-        self.scales = np.array([p.kind.scale for p in params])
+        self.scales: Array = np.array([p.kind.scale for p in params], dtype=np.float64)
         self.polls = session.polls
-        self.real = np.array([p.value for p in self.polls], dtype=float)
+        self.real: Array = np.array([p.value for p in self.polls], dtype=np.float64)
         self.sigma = _sigmas(self.polls)
         self.index = {(p.sent_index, p.motor, p.quantity): i for i, p in enumerate(self.polls)}
         self.max_replays = max_replays
         self.replays = 0
         self.on_replay = on_replay
 
-    def machine(self, u: "np.ndarray") -> Machine:
+    def machine(self, u: Array) -> Machine:
         return with_values(self.base, self.params, [float(x) for x in u * self.scales])
 
-    def virtual(self, u: "np.ndarray") -> tuple["np.ndarray", Replay]:
+    def virtual(self, u: Array) -> tuple[Array, Replay]:
         if self.replays >= self.max_replays:
             raise FitError(f"the fit did not converge within {self.max_replays} replays "
                            "(fewer --params, a better start from --machine, or a longer "
@@ -130,9 +132,9 @@ class _Problem:
         rep = replay(self.session, self.machine(u))
         if rep.failure is not None:
             values = ", ".join(f"{p.name}={_fmt(v)}" for p, v in
-                               zip(self.params, u * self.scales))
+                               zip(self.params, u * self.scales, strict=True))
             raise FitError(f"the virtual motor stopped at {values}: {rep.failure}")
-        out = self.np.array(self.real)            # a poll without a reply: no residual
+        out = np.array(self.real)            # a poll without a reply: no residual
         for j, value in rep.exact.items():
             found = parse_poll(rep.lines[j].text)
             assert found is not None
@@ -141,17 +143,16 @@ class _Problem:
                 out[i] = value
         return out, rep
 
-    def residuals(self, u: "np.ndarray") -> "np.ndarray":
+    def residuals(self, u: Array) -> Array:
         values, _ = self.virtual(u)
-        r = (values - self.real) / self.sigma
+        r: Array = (values - self.real) / self.sigma
         if self.on_replay is not None:
-            self.on_replay(self.replays, float(self.np.sqrt(self.np.mean(r * r))))
+            self.on_replay(self.replays, float(np.sqrt(np.mean(r * r))))
         return r
 
 
-def _sigmas(polls: list[Poll]) -> "np.ndarray":
+def _sigmas(polls: list[Poll]) -> Array:
     """What each real value may be off by: rounding + noise + its rate x half its window."""
-    import numpy as np
     sigma = np.full(len(polls), 0.5 + NOISE)
     series: dict[tuple[int, str], list[int]] = {}
     for i, p in enumerate(polls):
@@ -174,7 +175,6 @@ def fit(session: Session, base: Machine | None = None, params: list[Param] | Non
         on_replay: Callable[[int, float], None] | None = None) -> FitResult:
     """Fit ``params`` of ``base`` (None: the default machine) to ``session``."""
     optimize = _scipy()
-    import numpy as np
     polled = {p.motor for p in session.polls}
     if not session.polls:
         raise FitError(f"{session.source}: the session polls no value (?95, ?96, ?97, ?98): "
@@ -196,7 +196,7 @@ def fit(session: Session, base: Machine | None = None, params: list[Param] | Non
         raise FitError(f"the fit did not converge ({result.message}) after "
                        f"{problem.replays} replays")
     u = result.x
-    stderr = _stderr(problem, result.jac, result.fun, u)
+    stderr = _stderr(problem, result.jac, result.fun)
     fitted, rep = problem.virtual(u)
     values = [float(x) for x in u * problem.scales]
     rms = float(np.sqrt(np.mean(result.fun ** 2)))
@@ -240,40 +240,42 @@ def _stopper_guess(session: Session, param: Param) -> float:
     return max(positions) + 1.0 if param.kind.key == "cw" else min(positions) - 1.0
 
 
-def _stderr(problem: _Problem, jac: "np.ndarray", fun: "np.ndarray",
-            u: "np.ndarray") -> "np.ndarray":
+def _stderr(problem: _Problem, jac: Array, fun: Array) -> Array:
     """Standard errors (in values) from cov = s² (JᵀJ)⁻¹; FitError naming a parameter the
     session does not determine."""
-    import numpy as np
     params = problem.params
     norms = np.linalg.norm(jac, axis=0)
     top = float(norms.max()) if len(norms) else 0.0
-    for p, n in zip(params, norms):
+    for p, n in zip(params, norms, strict=True):
         if n <= 1e-9 * max(top, 1e-300):
             raise FitError(f"{p.name} is not identifiable from this session: it changes no "
                            f"polled value (docs/twin.md 'A session the fit can use')")
     m, n = jac.shape
+    _check_apart(params, jac / norms)
     s2 = float(fun @ fun) / max(m - n, 1)
-    try:
-        cov = np.linalg.inv(jac.T @ jac) * s2
-    except np.linalg.LinAlgError:
-        raise FitError("the parameters are not identifiable from this session together "
-                       "(their effects on the polled values are the same)") from None
-    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    for a in range(n):
-        for b in range(a + 1, n):
-            if se[a] > 0 and se[b] > 0:
-                rho = cov[a, b] / (se[a] * se[b])
-                if abs(rho) > MAX_CORRELATION:
-                    raise FitError(f"{params[a].name} and {params[b].name} cannot be told "
-                                   f"apart in this session (correlation {rho:.4f}); fit one "
-                                   "of them, or capture a session that moves them apart "
-                                   "(docs/twin.md)")
-    return se * problem.scales
+    cov = np.linalg.inv(jac.T @ jac) * s2
+    se: Array = np.sqrt(np.clip(np.diag(cov), 0.0, None)) * problem.scales
+    return se
 
 
-def _quantity_rms(polls: list[Poll], real: "np.ndarray", fitted: "np.ndarray") -> dict[str, float]:
-    import numpy as np
+def _check_apart(params: list[Param], unit_jac: Array) -> None:
+    """FitError naming the parameters whose effects the session cannot tell apart: those
+    that weigh in the direction the (column-normalised) Jacobian barely sees."""
+    if len(params) < 2:
+        return
+    _, sv, vt = np.linalg.svd(unit_jac, full_matrices=False)
+    if sv[-1] > MIN_SINGULAR * sv[0]:
+        return
+    weights = np.abs(vt[-1])
+    names = [p.name for p, w in zip(params, weights, strict=True) if w > 0.2 * weights.max()]
+    listed = ", ".join(names[:-1]) + f" and {names[-1]}" if len(names) > 1 else names[0]
+    raise FitError(f"{listed} cannot be told apart in this session (their effects on the "
+                   f"polled values are alike: singular value ratio {sv[-1] / sv[0]:.1e}); "
+                   "fit fewer of them, or capture a session that moves them apart "
+                   "(docs/twin.md)")
+
+
+def _quantity_rms(polls: list[Poll], real: Array, fitted: Array) -> dict[str, float]:
     out: dict[str, float] = {}
     for name in POLLED:
         mask = np.array([p.quantity == name for p in polls])
@@ -283,7 +285,7 @@ def _quantity_rms(polls: list[Poll], real: "np.ndarray", fitted: "np.ndarray") -
     return out
 
 
-def _panels(polls: list[Poll], start: "np.ndarray", fitted: "np.ndarray") -> list[Panel]:
+def _panels(polls: list[Poll], start: Array, fitted: Array) -> list[Panel]:
     groups: dict[tuple[int, str], list[int]] = {}
     for i, p in enumerate(polls):
         groups.setdefault((p.motor, p.quantity), []).append(i)
@@ -318,7 +320,7 @@ def _machine_text(result: FitResult) -> str:
         axes = tomlkit.aot()
         axes.append(single)
         doc["axis"] = axes
-    for p, value in zip(result.params, result.values):
+    for p, value in zip(result.params, result.values, strict=True):
         table = next((t for i, t in enumerate(axes) if t.get("motor", i + 1) == p.motor), None)
         if table is None:
             table = tomlkit.table()
@@ -330,7 +332,7 @@ def _machine_text(result: FitResult) -> str:
             table[p.kind.section] = section
         section[p.kind.key] = float(f"{value:.6g}")
     fitted = ", ".join(f"{p.name} {_fmt(v)} ± {_fmt(se)}" for p, v, se in
-                       zip(result.params, result.values, result.stderr))
+                       zip(result.params, result.values, result.stderr, strict=True))
     text = (f"# fitted by coolmuscle fit to {Path(result.session.source).name}: {fitted} "
             f"(weighted residual RMS {result.rms:.3g})\n" + tomlkit.dumps(doc))
     parse_machine(text, "the fitted machine file")     # what is written loads

@@ -109,7 +109,7 @@ def parse_params(text: str | None, motors: int, polled: set[int]) -> list[Param]
 def with_values(machine: Machine | None, params: list[Param], values: list[float]) -> Machine:
     """``machine`` with each parameter set to its value (new AxisSpec objects)."""
     axes = {a.motor: a for a in (machine.axes if machine is not None else [])}
-    for param, value in zip(params, values):
+    for param, value in zip(params, values, strict=True):
         spec = axes.get(param.motor) or AxisSpec(motor=param.motor)
         kind = param.kind
         if kind.section == "load":

@@ -19,6 +19,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
 from .output import write_atomic  # noqa: E402
 from .session import POLLED  # noqa: E402
@@ -69,15 +70,15 @@ _STYLES: dict[str, dict[str, object]] = {
 }
 
 
-def _draw(panels: Sequence[Panel], title: str) -> "plt.Figure":
+def _draw(panels: Sequence[Panel], title: str) -> Figure:
     count = max(1, len(panels))
     fig, axes = plt.subplots(count, 1, figsize=(WIDTH_IN, 1.0 + PANEL_IN * count),
                              dpi=DPI, sharex=True, squeeze=False)
-    for ax, panel in zip(axes[:, 0], panels):
+    for ax, panel in zip(axes[:, 0], panels, strict=False):
         for series in panel.series:
             if len(series.times):
                 ax.plot(series.times, series.values, label=series.label,
-                        **_STYLES[series.style])  # type: ignore[arg-type]
+                        **_STYLES[series.style])
         ax.set_title(panel.title, fontsize=9, loc="left")
         ax.grid(True, alpha=0.3)
     if panels:                       # the same series in every panel: one legend, on top

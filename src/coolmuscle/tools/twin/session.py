@@ -277,7 +277,7 @@ def parse_session(text: str, source: str = "<capture>") -> Session:
 def _polls(session: Session) -> list[Poll]:
     """The polled values, each with the line sent before it (its query)."""
     out: list[Poll] = []
-    for i, (line, j) in enumerate(zip(session.received, session.sent_before())):
+    for i, (line, j) in enumerate(zip(session.received, session.sent_before(), strict=True)):
         found = parse_poll(line.text)
         if found is None:
             continue
