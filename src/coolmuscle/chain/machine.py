@@ -45,15 +45,16 @@ class MachineFileError(CoolMuscleError, ValueError):
     """A machine file that cannot be read or does not fit the schema."""
 
 
-_LOAD = {"inertia": "load_inertia", "friction": "coulomb_friction", "torque": "load_torque"}
-_MOTOR = {"rotor_inertia": "rotor_inertia", "rated_torque": "rated_torque",
-          "peak_torque": "peak_torque", "max_speed": "max_speed", "kp": "kp"}
+#: Machine-file keys of ``[axis.load]`` and ``[axis.drive]`` -> the Plant attributes they set.
+LOAD_KEYS = {"inertia": "load_inertia", "friction": "coulomb_friction", "torque": "load_torque"}
+DRIVE_KEYS = {"rotor_inertia": "rotor_inertia", "rated_torque": "rated_torque",
+              "peak_torque": "peak_torque", "max_speed": "max_speed", "kp": "kp"}
 _THERMAL = {"idle": "idle", "rise": "rise_at_rated", "time_constant": "time_constant",
             "alarm": "alarm"}
 #: What each physical quantity may be (docs/machine-file.md): wide enough for any
 #: machine a Cool Muscle can drive, narrow enough that the load model's arithmetic
 #: stays finite (a 1e308 N·m load once made every position NaN).
-_BOUNDS: dict[str, tuple[float, float]] = {
+BOUNDS: dict[str, tuple[float, float]] = {
     "inertia": (0.0, 10.0), "friction": (0.0, 1000.0), "torque": (-1000.0, 1000.0),
     "rotor_inertia": (1e-9, 10.0), "rated_torque": (1e-4, 1000.0),
     "peak_torque": (1.0, 10000.0), "max_speed": (1.0, 100000.0), "kp": (1e-3, math.inf),
@@ -173,14 +174,14 @@ def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
     spec.ppr = _int(t.get("ppr", 1000), f"{where}.ppr", 1, 10_000_000)
     spec.start = _num(t.get("start", 0.0), f"{where}.start", -MAX_POSITION, MAX_POSITION)
     spec.params = _params(t.get("params", {}), f"{where}.params")
-    spec.load = _table(t.get("load", {}), _LOAD, f"{where}.load")
+    spec.load = _table(t.get("load", {}), LOAD_KEYS, f"{where}.load")
     drive = t.get("drive", {})
     if not isinstance(drive, dict):
         raise MachineFileError(f"{where}.drive: must be a table")
     drive = dict(drive)
     if "z_phase" in drive:
         spec.z_phase = _num(drive.pop("z_phase"), f"{where}.drive.z_phase")
-    spec.motor_data = _table(drive, _MOTOR, f"{where}.drive")
+    spec.motor_data = _table(drive, DRIVE_KEYS, f"{where}.drive")
     spec.thermal = _table(t.get("thermal", {}), _THERMAL, f"{where}.thermal")
     spec.stoppers = _stoppers(t.get("stoppers", {}), f"{where}.stoppers")
     for name in _NAMED_SENSORS:
@@ -230,7 +231,7 @@ def _table(value: object, keys: dict[str, str], where: str) -> dict[str, float]:
     if unknown:
         raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r} "
                                f"(known: {', '.join(keys)})")
-    return {keys[k]: _num(v, f"{where}.{k}", *_BOUNDS.get(k, (-math.inf, math.inf)))
+    return {keys[k]: _num(v, f"{where}.{k}", *BOUNDS.get(k, (-math.inf, math.inf)))
             for k, v in value.items()}
 
 

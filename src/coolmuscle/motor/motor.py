@@ -167,13 +167,18 @@ class Motor(Supervision):
 
     def torque(self) -> int:
         """Ix (?98): % of rated torque."""
+        return round(self.torque_exact())
+
+    def torque_exact(self) -> float:
+        """Ix before it is rounded to a whole %: what ``?98`` reads (the twin's fit
+        compares these, not the rounded replies: coolmuscle.tools.twin)."""
         if not self.axis.enabled:
-            return 0
+            return 0.0
         commanded = self.analog_control.torque_percent()
         if commanded is not None:
-            return round(commanded)
+            return float(commanded)
         load = self.analog_control.load_percent()       # a torque-sensor load (5.5)
-        return round(load + self.axis.torque_percent())
+        return load + self.axis.torque_percent()
 
     # -- reports --------------------------------------------------------------
     def say(self, ctx: Context | None, text: str, kind: str = "reply",

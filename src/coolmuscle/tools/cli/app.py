@@ -465,6 +465,14 @@ def _register_batch() -> None:
 _register_batch()  # batch, sweep (coolmuscle.tools.batch.commands, docs/batch.md)
 
 
+def _register_twin() -> None:
+    from ..twin.commands import register
+    register(app)
+
+
+_register_twin()  # compare, fit (coolmuscle.tools.twin.commands, docs/twin.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version."""
