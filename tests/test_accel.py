@@ -125,7 +125,7 @@ def test_a_missing_or_damaged_build_is_refused(fake_build: Path) -> None:
     assert accel.read_manifest()[0] is None
     (fake_build / "manifest.json").unlink()
     files, reason = accel.read_manifest()
-    assert files is None and reason.startswith("not compiled (pip install again")
+    assert files is None and reason.startswith("not compiled; pip install again")
 
 
 def test_the_build_tool_answers_status_and_bad_usage(

@@ -132,7 +132,7 @@ def read_manifest(build_dir: Path | None = None) -> tuple[dict[str, Path] | None
     except (OSError, ValueError) as exc:
         return None, f"manifest unreadable: {exc}"
     if data is None:
-        return None, f"not compiled ({REBUILD})"
+        return None, f"not compiled; {REBUILD}"
     if data.get("compiled") is False:
         return None, f"not compiled at install time: {data.get('reason', 'no reason given')}"
     listed, built = data.get("modules"), data.get("files")
@@ -141,13 +141,13 @@ def read_manifest(build_dir: Path | None = None) -> tuple[dict[str, Path] | None
     if data.get("cache_tag") != sys.implementation.cache_tag:
         return None, f"compiled for {data.get('cache_tag')}, this is {sys.implementation.cache_tag}"
     if tuple(listed) != MODULES:
-        return None, f"compiled for another module list ({REBUILD})"
+        return None, f"compiled for another module list; {REBUILD}"
     try:
         current = source_digest()
     except OSError as exc:
         return None, f"sources unreadable: {exc}"
     if data.get("digest") != current:
-        return None, f"a hot module changed since it was compiled ({REBUILD})"
+        return None, f"a hot module changed since it was compiled; {REBUILD}"
     files = {str(k): build_dir / str(v) for k, v in built.items()}
     if not all(p.is_file() for p in files.values()):
         return None, "a compiled file is missing"
