@@ -15,9 +15,9 @@ none of coolmuscle's dependencies, and hands ``_accel`` in (:class:`Sources`).
 * ``1``: compile or fail the build (a release, a test that must get the compiled
   modules).
 
-Whatever happens, the build directory ends with a manifest, written last: the
-compiled files and the digest of their sources, or ``{"compiled": false, "reason":
-...}``.  A failed build never removes a current one.
+Unless it fails (``1``), a build leaves a manifest in the build directory, written
+last: the compiled files and the digest of their sources, or ``{"compiled": false,
+"reason": ...}``.  A failed rebuild never removes a current build.
 """
 
 from __future__ import annotations
