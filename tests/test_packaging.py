@@ -130,11 +130,11 @@ def test_a_wheel_built_with_a_compiler_installs_and_runs_the_compiled_modules(
         f"hot modules: compiled ({len(accel.MODULES)} modules built from the current "
         "sources by mypyc 1.19.0)"]
     files = module_files(python)
-    compiled = tmp_path / "venv" / "lib"
+    venv_lib = tmp_path / "venv" / "lib"
     assert set(files) == set(accel.MODULES)
     for name, path in files.items():
         assert path.endswith(".so") and "/site-packages/coolmuscle/_compiled/" in path \
-            and Path(path).is_relative_to(compiled), (name, path)
+            and Path(path).is_relative_to(venv_lib), (name, path)
 
     head, lines = sample(python)
     assert head == {"compiled": True,
