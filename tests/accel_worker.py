@@ -7,6 +7,10 @@ and a 1 ms trace of every motor (positions, speeds, torques, status, I/O) as CSV
 then a 4-axis csp stream (Chain.target_stream) sampled every cycle, the EtherCAT
 bridge's own cycle in csp (its TxPDO image every cycle), and a PTP bank looping on 15
 motors.  One line per item: name, length and SHA-256 of its bytes.
+
+``accel_worker.py ROOT --sample`` runs a few of them, shorter: a guide example, three
+golden transcripts (motion, a program bank, interpolation) each with its trace, 500 csp
+cycles and a 15-motor bank for 20 s (tests/test_packaging.py, on an installed wheel).
 """
 
 from __future__ import annotations
@@ -95,17 +99,27 @@ def bank_item(seconds: int) -> str:
     return f"15-motor bank: {digest(chr(10).join(got).encode() + tail.encode())}"
 
 
-def main(root: str) -> None:
+#: The scripts of ``--sample``.
+SAMPLE = ("examples/2.1-operation.cml", "tests/transcripts/4.1.3-acceleration-deceleration.cml",
+          "tests/transcripts/2.2-operation-example.cml", "tests/transcripts/4.4.3-linear.cml")
+
+
+def main(root: str, sample: bool = False) -> None:
     base = Path(root)
-    scripts = sorted(base.glob("examples/*.cml")) + sorted(base.glob("tests/transcripts/*.cml"))
+    if sample:
+        scripts = [base / name for name in SAMPLE]
+    else:
+        scripts = (sorted(base.glob("examples/*.cml"))
+                   + sorted(base.glob("tests/transcripts/*.cml")))
     print(json.dumps({"compiled": accel.active(), "reason": accel.state["reason"]}))
     with tempfile.TemporaryDirectory() as work:
         for path in scripts:
             print(script_item(path, Path(work)))
-    print(stream_item(3000))
-    print(bridge_item(3000))
-    print(bank_item(120))
+    cycles, seconds = (500, 20) if sample else (3000, 120)
+    print(stream_item(cycles))
+    print(bridge_item(cycles))
+    print(bank_item(seconds))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], sample=sys.argv[2:] == ["--sample"])

@@ -207,8 +207,12 @@ def test_an_internal_error_is_one_line_too(monkeypatch: pytest.MonkeyPatch, roun
 
 
 def test_version(capsys: Any) -> None:
+    """The version and the hot modules' line (compiled here: the editable install
+    compiled them; docs/performance.md)."""
+    from coolmuscle import __version__, _accel
     code, out, _ = coolmuscle(capsys, "version")
-    assert code == 0 and out.startswith("coolmuscle ")
+    assert code == 0 and out == f"coolmuscle {__version__}\n{_accel.describe()}\n"
+    assert _accel.describe().startswith(("hot modules: compiled (", "hot modules: sources ("))
 
 
 # -- run, as a subprocess with the real chain -----------------------------------

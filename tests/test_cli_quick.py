@@ -65,6 +65,21 @@ def test_a_plain_run_loads_no_command_line_library_nor_unused_protocols(tmp_path
     assert out.stderr.strip().splitlines()[-1] == b"[]"
 
 
+@pytest.mark.parametrize("args", [("--version",), ("version",)])
+def test_version_answers_as_the_typer_command_without_loading_it(args: tuple[str, ...]) -> None:
+    """Two lines: the version, then compiled or the sources and why (issue 26)."""
+    code = QUICK + "; print(sorted({'typer', 'rich', 'click'} & set(sys.modules)), file=sys.stderr)"
+    quick, full = run(code, *args), run(TYPER, *args)
+    assert quick.returncode == full.returncode == 0
+    assert quick.stdout == full.stdout
+    version, hot = quick.stdout.decode().splitlines()
+    assert version.startswith("coolmuscle ") and hot.startswith("hot modules: ")
+    assert quick.stderr.strip() == b"[]"
+    pure = subprocess.run([sys.executable, "-c", QUICK, *args], capture_output=True,
+                          env={**ENV, "COOLMUSCLE_PURE": "1"}, timeout=60)
+    assert pure.stdout.decode().splitlines()[1] == "hot modules: sources (COOLMUSCLE_PURE is set)"
+
+
 def test_parse_run_args_leaves_anything_unusual_to_typer() -> None:
     assert parse_run_args(["run", "a.cml", "--until", "5", "--motors=3", "--check"]) == {
         "file": Path("a.cml"), "until": 5.0, "motors": 3, "check": True}

@@ -1,24 +1,31 @@
 """Compiled copies of the model's hot modules (mypyc), used only when they are current.
 
 The servo and load model, the planner, the kernel and the alarm watchers are plain
-Python (the code one reads next to the manual).  ``python -m coolmuscle.tools.accel
-build`` compiles the modules of :data:`MODULES` with mypyc into ``_compiled/`` beside
-this file (scripts/_env.sh does it after installing; docs/performance.md).  They are
-loaded instead of the sources only when all of these hold:
+Python (the code one reads next to the manual).  The package build compiles the
+modules of :data:`MODULES` with mypyc into ``_compiled/`` beside this file
+(``setup.py``: ``pip install .``, ``pip install -e .``, a wheel; ``python -m
+coolmuscle.tools.accel build`` compiles them again in place; docs/performance.md).
+The build writes a manifest last: what it compiled, or why it kept the sources (no C
+compiler, ``COOLMUSCLE_COMPILE=0``).  The compiled modules are loaded instead of the
+sources only when all of these hold:
 
-* the build's manifest names this interpreter (``sys.implementation.cache_tag``);
-* the digest of the sources it was built from equals the digest of the sources now
-  (one edited module turns the whole set off: compiled modules call each other
-  directly, so a stale one would still run inside a fresh one);
-* ``COOLMUSCLE_PURE`` is unset, empty or ``0`` (``COOLMUSCLE_PURE=1`` runs the sources).
+* the manifest names this interpreter (``sys.implementation.cache_tag``);
+* the digest of the sources it was built from equals the digest of the sources beside
+  it now (one edited module turns the whole set off: compiled modules call each other
+  directly, so a stale one would still run inside a fresh one).  An installed wheel's
+  sources are the ones it was built from, so its digest matches;
+* ``COOLMUSCLE_PURE`` is unset, empty or ``0`` (``COOLMUSCLE_PURE=1`` runs the sources);
+* the shared library loads (one ``dlopen``, about 1 ms).
 
-Otherwise nothing changes: the sources run.  The compiled code is the same source, so
-the numbers are the same (tests/test_accel.py runs both and compares them byte for byte).
+Otherwise nothing changes: the sources run, and :func:`describe` says why (``coolmuscle
+--version``).  The compiled code is the same source, so the numbers are the same
+(tests/test_accel.py and tests/test_packaging.py run both and compare them byte for byte).
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib
 import importlib.machinery
 import importlib.util
 import json
@@ -59,9 +66,13 @@ MODULES: tuple[str, ...] = (
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 BUILD_DIR = PACKAGE_DIR / "_compiled"
-MANIFEST = BUILD_DIR / "manifest.json"
+MANIFEST_NAME = "manifest.json"
 
-#: Why the compiled modules are (not) in use, for ``coolmuscle.tools.accel status``.
+#: How to compile them again, for the reasons that name it.
+REBUILD = "pip install again, or python -m coolmuscle.tools.accel build"
+
+#: Why the compiled modules are (not) in use: ``active``, ``reason`` and, when in use,
+#: ``mypyc`` (the version that compiled them).
 state: dict[str, object] = {"active": False, "reason": "not installed yet"}
 
 
@@ -99,29 +110,48 @@ class _CompiledFinder:
         pass
 
 
-def _read_manifest() -> tuple[dict[str, Path] | None, str]:
+def load_manifest(build_dir: Path | None = None) -> dict[str, object] | None:
+    """The manifest of ``build_dir`` (default :data:`BUILD_DIR`) as written, or ``None``
+    when there is none; ``ValueError`` when it is not a JSON object."""
+    path = (BUILD_DIR if build_dir is None else build_dir) / MANIFEST_NAME
     try:
-        data = json.loads(MANIFEST.read_text(encoding="utf-8"))
+        data = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        return None, "not built (python -m coolmuscle.tools.accel build)"
+        return None
+    if not isinstance(data, dict):
+        raise ValueError("not a JSON object")
+    return data
+
+
+def read_manifest(build_dir: Path | None = None) -> tuple[dict[str, Path] | None, str]:
+    """The compiled files of ``build_dir`` (default :data:`BUILD_DIR`) by module name
+    when they are current, else ``None``; and the reason, in words."""
+    build_dir = BUILD_DIR if build_dir is None else build_dir
+    try:
+        data = load_manifest(build_dir)
     except (OSError, ValueError) as exc:
         return None, f"manifest unreadable: {exc}"
-    if not isinstance(data, dict) or not isinstance(data.get("files"), dict):
+    if data is None:
+        return None, f"not compiled; {REBUILD}"
+    if data.get("compiled") is False:
+        return None, f"not compiled at install time: {data.get('reason', 'no reason given')}"
+    listed, built = data.get("modules"), data.get("files")
+    if not isinstance(listed, list) or not isinstance(built, dict):
         return None, "manifest malformed"
     if data.get("cache_tag") != sys.implementation.cache_tag:
-        return None, f"built for {data.get('cache_tag')}, not {sys.implementation.cache_tag}"
-    if tuple(data.get("modules", ())) != MODULES:
-        return None, "built for another module list"
+        return None, f"compiled for {data.get('cache_tag')}, this is {sys.implementation.cache_tag}"
+    if tuple(listed) != MODULES:
+        return None, f"compiled for another module list; {REBUILD}"
     try:
         current = source_digest()
     except OSError as exc:
         return None, f"sources unreadable: {exc}"
     if data.get("digest") != current:
-        return None, "sources changed since the build (rebuild to use it)"
-    files = {str(k): BUILD_DIR / str(v) for k, v in data["files"].items()}
+        return None, f"a hot module changed since it was compiled; {REBUILD}"
+    files = {str(k): build_dir / str(v) for k, v in built.items()}
     if not all(p.is_file() for p in files.values()):
         return None, "a compiled file is missing"
-    return files, "built from the current sources"
+    return files, f"built from the current sources by mypyc {data.get('mypyc', '?')}"
 
 
 def install() -> None:
@@ -132,14 +162,30 @@ def install() -> None:
     if any(name in sys.modules for name in MODULES):
         state.update(active=False, reason="sources already imported")
         return
-    files, reason = _read_manifest()
+    files, reason = read_manifest()
     if files is None:
         state.update(active=False, reason=reason)
         return
-    sys.meta_path.insert(0, _CompiledFinder(files))  # type: ignore[arg-type]
+    finder = _CompiledFinder(files)
+    sys.meta_path.insert(0, finder)
+    try:
+        for name in files:
+            if "." not in name:           # the shared library of the group (mypyc)
+                importlib.import_module(name)
+    except ImportError as exc:            # a foreign or damaged build: keep the sources
+        sys.meta_path.remove(finder)
+        state.update(active=False, reason=f"the compiled modules do not load: {exc}")
+        return
     state.update(active=True, reason=reason)
 
 
 def active() -> bool:
     """True when the compiled modules are the ones imported."""
     return bool(state["active"])
+
+
+def describe() -> str:
+    """One line for ``coolmuscle --version``: compiled, or the sources and why."""
+    if active():
+        return f"hot modules: compiled ({len(MODULES)} modules {state['reason']})"
+    return f"hot modules: sources ({state['reason']})"

@@ -30,7 +30,7 @@ from typing import Any, Callable, Optional
 import typer
 from rich.console import Console
 
-from ... import __version__
+from .version import version_text
 from ...errors import TransportError
 from .usage import UsageError
 from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
@@ -475,13 +475,13 @@ _register_twin()  # compare, fit (coolmuscle.tools.twin.commands, docs/twin.md)
 
 @app.command()
 def version() -> None:
-    """Print the version."""
-    sys.stdout.write(f"coolmuscle {__version__}\n")
+    """Print the version, and whether the hot modules run compiled or as sources."""
+    sys.stdout.write(version_text())
 
 
 def _print_version(value: bool) -> None:
     if value:
-        sys.stdout.write(f"coolmuscle {__version__}\n")
+        sys.stdout.write(version_text())
         raise typer.Exit()
 
 

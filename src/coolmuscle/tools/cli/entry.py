@@ -8,6 +8,7 @@ removed), never a traceback or a silent death.  While ``sim`` serves, its event 
 takes the signals over (:func:`coolmuscle.tools.cli.app._serve`); once it stops, further
 signals are ignored until the process has exited (docs/reliability.md "signals").
 
+``coolmuscle --version`` (or ``version``) answers at once (:mod:`.version`), and
 ``coolmuscle run SCRIPT`` with plain options (:func:`.runcmd.parse_run_args`) runs at
 once, without loading the command-line library (typer, rich) or anything the script
 does not use (docs/performance.md "Starting a run"); every other command line goes to
@@ -31,6 +32,12 @@ def main(argv: list[str] | None = None) -> None:
     """``coolmuscle ARGS``: a plain ``run`` at once, anything else through :mod:`.cli`."""
     install_startup_handlers()
     args = sys.argv[1:] if argv is None else list(argv)
+    if args in (["--version"], ["version"]):
+        def version() -> None:
+            from .version import version_text
+            sys.stdout.write(version_text())
+        guarded(version)
+        return
     kwargs: dict | None = None
     full_main = None
 

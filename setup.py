@@ -1,0 +1,92 @@
+"""The package build's one step beyond pyproject.toml: the hot modules compiled with
+mypyc (docs/performance.md "Compiled hot modules").
+
+``pip install .``, ``pip install -e .`` and ``python -m build`` run the ``build_accel``
+step after the usual ones.  It compiles :data:`coolmuscle._accel.MODULES` into
+``coolmuscle/_compiled/`` when mypyc, a C compiler and the Python headers are there:
+into the wheel, or in place in the source tree for an editable install (where
+``_accel`` then turns them off as soon as a source differs).  Without a compiler the
+build still succeeds and the sources run; ``COOLMUSCLE_COMPILE=0`` skips compiling and
+``COOLMUSCLE_COMPILE=1`` makes it required (coolmuscle/tools/accel/compiler.py).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+from setuptools import Command, setup
+from setuptools.command.build import build
+from setuptools.dist import Distribution
+
+PACKAGE = Path(__file__).resolve().parent / "src" / "coolmuscle"
+
+
+def _load(name: str, path: Path) -> ModuleType:
+    """A standard-library-only module of the package, loaded by path: the build
+    environment has none of coolmuscle's dependencies, so the package itself is not
+    imported."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None, path
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+accel = _load("_coolmuscle_build_accel", PACKAGE / "_accel.py")
+compiler = _load("_coolmuscle_build_compiler", PACKAGE / "tools" / "accel" / "compiler.py")
+
+
+class BuildAccel(Command):
+    """Compile the hot modules with mypyc, or record why the sources run."""
+
+    description = "compile the hot modules with mypyc (the sources run when that cannot be done)"
+    user_options: list[tuple[str, str | None, str]] = []
+
+    def initialize_options(self) -> None:
+        self.build_lib: str | None = None
+        self.editable_mode = False
+
+    def finalize_options(self) -> None:
+        self.set_undefined_options("build", ("build_lib", "build_lib"))
+
+    def _dest(self) -> Path:
+        if self.editable_mode:            # in place: the editable install imports src/
+            return Path(accel.BUILD_DIR)
+        assert self.build_lib is not None
+        return Path(self.build_lib, "coolmuscle", "_compiled")
+
+    def run(self) -> None:
+        lock = PACKAGE / ".accel-build.lock" if self.editable_mode else None
+        outcome = compiler.build(accel, self._dest(), lock=lock,
+                                 log=lambda line: print(line, file=sys.stderr))
+        print(f"build_accel: {'compiled' if outcome.compiled else 'sources'}: "
+              f"{outcome.reason}")
+
+    def get_outputs(self) -> list[str]:
+        dest = self._dest()
+        return [str(p) for p in sorted(dest.rglob("*")) if p.is_file()] if dest.is_dir() else []
+
+    def get_output_mapping(self) -> dict[str, str]:
+        return {}
+
+    def get_source_files(self) -> list[str]:
+        return []
+
+
+class BuildWithAccel(build):
+    sub_commands = build.sub_commands + [("build_accel", None)]
+
+
+class CoolmuscleDistribution(Distribution):
+    """A platform wheel (``cp311-cp311-linux_x86_64``) when the build will compile."""
+
+    def has_ext_modules(self) -> bool:
+        return bool(compiler.will_compile())
+
+
+setup(cmdclass={"build": BuildWithAccel, "build_accel": BuildAccel},
+      distclass=CoolmuscleDistribution)
