@@ -20,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -315,6 +316,83 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
     while _group(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not _group(proc.pid), "processes of the batch are still running"
+
+
+SLOW = "S.1=100\nP.1=5000\n^.1\n@wait 90\n"
+
+
+def test_a_pool_stopped_by_ctrl_c_leaves_no_thread_of_its_own_running() -> None:
+    """The cause of a traceback seen twice after Ctrl-C (``threading._shutdown`` ->
+    ``atexit_call()`` -> ... "Bad file descriptor"): the pool was shut down without
+    waiting, and its manager thread was still closing its wake-up pipe while the
+    interpreter's exit hook wrote to it.  Once ``run`` has let the Ctrl-C through, every
+    thread the pool started has ended."""
+    from coolmuscle.tools.batch.engine import PoolEngine
+    from coolmuscle.tools.batch.job import Job
+
+    before = set(threading.enumerate())
+    engine = PoolEngine(2)
+    jobs = [Job(name="quick", script="?96.1\n")] + [Job(name=f"slow{i}", script=SLOW)
+                                                      for i in range(4)]
+
+    def ctrl_c(_index: int, _outcome: object) -> None:
+        raise KeyboardInterrupt           # where a Ctrl-C lands: while runs are under way
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            engine.run(jobs, ctrl_c)
+        left = [t.name for t in set(threading.enumerate()) - before if t.is_alive()]
+    finally:
+        engine.close()
+    assert left == []
+
+
+#: A batch's engine, then a Ctrl-C (``CTRL_C`` seconds after it exists) and an exit at
+#: once, as soon as the engine is closed: the exit races with what the pool leaves.
+ENGINE_THEN_EXIT = f"""
+import sys
+from coolmuscle.tools.batch.engine import PoolEngine
+from coolmuscle.tools.batch.job import Job
+engine = PoolEngine(2)
+print("engine", flush=True)
+try:
+    engine.run([Job(name=str(i), script={SLOW!r}) for i in range(6)], lambda i, o: None)
+except KeyboardInterrupt:
+    pass
+finally:
+    try:
+        engine.close()
+    except KeyboardInterrupt:
+        pass
+print("stopped", file=sys.stderr)
+"""
+
+
+def test_ctrl_c_at_a_sweep_of_instants_of_a_pool_prints_nothing_more() -> None:
+    """Ctrl-C to the process group (as a terminal sends it) at instants from the pool's
+    creation on (its server loading the model, workers starting, runs under way): the
+    program's own line is all stderr has, and no process of the group is left.  Before:
+    the fork server's and the workers' KeyboardInterrupt tracebacks (they start with
+    Python's default handler) and a worker's FileNotFoundError (started inside a submit
+    the Ctrl-C cut short, it loaded its queue after the semaphores were gone)."""
+    env = dict(os.environ, PYTHONPATH=str(SRC))
+    for delay in (0.0, 0.1, 0.3, 0.7, 1.2):
+        proc = subprocess.Popen([sys.executable, "-c", ENGINE_THEN_EXIT], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=True)
+        try:
+            assert proc.stdout is not None and proc.stdout.readline() == "engine\n"
+            time.sleep(delay)
+            os.killpg(proc.pid, signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        assert err == "stopped\n", (delay, err)
+        deadline = time.monotonic() + 10
+        while _group(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group(proc.pid), (delay, "processes of the pool are still running")
 
 
 def _group(pgid: int) -> list[str]:
