@@ -43,6 +43,30 @@ def test_esi_command_writes_xml_with_the_three_bridges_8_1_4():
     assert [d.findtext("Type") for d in root.iter("Device")] == ["EB01", "EB02", "EB12"]
 
 
+def test_esi_of_an_unknown_bridge_and_a_failing_lab_are_one_line_each(
+        capsys, monkeypatch) -> None:
+    """The lab's and the ESI command's errors: one line, exit 2 for a bad --bridge, 1
+    when the lab cannot be made (here: ``ip`` refusing, as without root)."""
+    import pytest
+
+    from coolmuscle.frontends.ethercat import lab
+    from coolmuscle.tools.cli.app import main
+
+    def refuse(*_args: str) -> None:
+        raise lab.LabError("ip netns add cmecatclins: Operation not permitted")
+    for args, code in ((["ethercat", "esi", "--bridge", "EB99"], 2),
+                       (["ethercat", "lab", "up", *LAB], 1),
+                       (["ethercat", "lab", "down", *LAB], 1)):
+        monkeypatch.setattr(lab, "up", refuse)
+        monkeypatch.setattr(lab, "down", refuse)
+        with pytest.raises(SystemExit) as stopped:
+            main(args)
+        err = capsys.readouterr().err
+        assert stopped.value.code == code, err
+        assert len(err.splitlines()) == 1 and err.startswith("coolmuscle: "), err
+        assert ("EB99" if code == 2 else "not permitted") in err
+
+
 @needs_net_admin
 def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
     up = coolmuscle("ethercat", "lab", "up", *LAB)
