@@ -12,10 +12,8 @@ The Dask test starts a real ``dask scheduler`` and two ``dask worker`` processes
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
-import shutil
 import signal
 import socket
 import subprocess
@@ -29,6 +27,7 @@ from typing import Iterator
 import pytest
 
 from coolmuscle.tools.batch.engine import chunks
+from dask_support import dask_cluster as dask_cluster_of
 from coolmuscle.tools.cli.app import main
 
 DATA = Path(__file__).parent / "data" / "batch"
@@ -124,61 +123,16 @@ def test_the_golden_transcripts_of_the_suite_pass_as_a_batch(
 
 
 # -- Dask -----------------------------------------------------------------
-def _dask_bin() -> str:
-    found = shutil.which("dask", path=str(Path(sys.executable).parent))
-    if found is None:
-        pytest.fail("dask is a test dependency (pyproject.toml [test]): pip install "
-                    "-e '.[test]'")
-    return found
-
-
-@contextlib.contextmanager
-def cluster(tmp_path: Path, workers: int) -> Iterator[str]:
+def cluster(tmp_path: Path, workers: int) -> contextlib.AbstractContextManager[str]:
     """A scheduler and ``workers`` single-thread workers on 127.0.0.1, always stopped."""
-    dask = _dask_bin()
-    env = dict(os.environ, PYTHONPATH=str(SRC))
-    scheduler_file = tmp_path / "scheduler.json"
-    logs = [(tmp_path / f"dask-{n}.log").open("w") for n in range(workers + 1)]
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        procs.append(subprocess.Popen(
-            [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(scheduler_file)],
-            env=env, stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True))
-        deadline = time.monotonic() + 30
-        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            assert procs[0].poll() is None, (tmp_path / "dask-0.log").read_text()
-            assert time.monotonic() < deadline, "the scheduler did not start"
-            time.sleep(0.05)
-        address = json.loads(scheduler_file.read_text())["address"]
-        assert address.startswith("tcp://127.0.0.1:")
-        for log in logs[1:]:
-            procs.append(subprocess.Popen(
-                [dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
-                 "--no-nanny", "--no-dashboard"],
-                env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True))
-        if workers:
-            from distributed import Client
-            with Client(address, timeout=30) as client:
-                client.wait_for_workers(workers, timeout=60)
-        yield address
-    finally:  # workers first: a worker whose scheduler is gone waits to reconnect
-        for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.terminate()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        for log in logs:
-            log.close()
+    return dask_cluster_of(tmp_path, workers, dict(os.environ, PYTHONPATH=str(SRC)))
 
 
 @pytest.fixture
 def dask_cluster(tmp_path: Path) -> Iterator[str]:
     """A scheduler and two workers on 127.0.0.1 (ports chosen by the OS)."""
     with cluster(tmp_path, 2) as address:
+        assert address.startswith("tcp://127.0.0.1:")
         yield address
 
 
