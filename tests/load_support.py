@@ -8,7 +8,9 @@ bench/ imports it too, with ``tests/`` on its path).
   passing by;
 * :func:`start_sim`, :func:`save_then_kill`, :func:`saved_value`: ``coolmuscle sim``
   as a process, saves ``$`` acknowledged one by one and a ``kill -9`` in flight
-  (cml-users-guide.txt 2.1.2), and what the store holds after it.
+  (cml-users-guide.txt 2.1.2), and what the store holds after it;
+* :func:`signal_and_wait`: a stop signal to a process (or its group, as a terminal's
+  Ctrl-C) and what it printed until it ended.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import threading
 import time
 from pathlib import Path
 from types import TracebackType
-from typing import Mapping
+from typing import Any, Mapping
 
 from coolmuscle.motor.state.store import Store
 
@@ -154,3 +156,20 @@ def saved_value(state: Path) -> tuple[bool, int]:
     with Store(state / "coolmuscle.sqlite3") as store:
         whole = store.integrity_check() == "ok"
         return whole, int(store.load(1)["memory"]["P"][1])
+
+
+def signal_and_wait(proc: subprocess.Popen[Any], sig: int = signal.SIGINT, *,
+                    group: bool = False, timeout: float = 30.0) -> tuple[Any, Any]:
+    """Send ``sig`` to ``proc`` (to its whole process group with ``group``: start it
+    with ``start_new_session=True``), wait for its end and return its (stdout, stderr);
+    a process still running after ``timeout`` is killed (and the wait fails)."""
+    try:
+        if group:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
+        return proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

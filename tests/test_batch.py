@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import signal
 import socket
 import subprocess
 import sys
@@ -28,6 +27,7 @@ import pytest
 
 from coolmuscle.tools.batch.engine import chunks
 from dask_support import dask_cluster as dask_cluster_of
+from load_support import signal_and_wait
 from coolmuscle.tools.cli.app import main
 
 DATA = Path(__file__).parent / "data" / "batch"
@@ -239,19 +239,13 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
                              "--jobs", "2", "--results", str(results), "--junit", str(junit)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
-    try:
-        # once the pool's two workers exist (the runs are under way), as a user would
-        deadline = time.monotonic() + 60
-        while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.05)
-        time.sleep(0.5)
-        os.killpg(proc.pid, signal.SIGINT)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    # once the pool's two workers exist (the runs are under way), as a user would
+    deadline = time.monotonic() + 60
+    while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(0.5)
+    _, err = signal_and_wait(proc, group=True)
     text = err.decode()
     assert proc.returncode == 130, text
     assert "Traceback" not in text
@@ -333,15 +327,9 @@ def test_ctrl_c_at_a_sweep_of_instants_of_a_pool_prints_nothing_more() -> None:
         proc = subprocess.Popen([sys.executable, "-c", ENGINE_THEN_EXIT], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 start_new_session=True)
-        try:
-            assert proc.stdout is not None and proc.stdout.readline() == "engine\n"
-            time.sleep(delay)
-            os.killpg(proc.pid, signal.SIGINT)
-            _, err = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        assert proc.stdout is not None and proc.stdout.readline() == "engine\n"
+        time.sleep(delay)
+        _, err = signal_and_wait(proc, group=True, timeout=60)
         assert err == "stopped\n", (delay, err)
         deadline = time.monotonic() + 10
         while _group(proc.pid) and time.monotonic() < deadline:

@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.motor.state.store import Store
+from load_support import signal_and_wait
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -106,16 +107,10 @@ def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(tmp_path
                                  "--state", str(tmp_path / f"state{n}")],
                                 stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
                                 env=ENV)
-        try:
-            while not handlers_installed(proc.pid):
-                assert proc.poll() is None, proc.communicate()
-            time.sleep(delay)
-            proc.send_signal(signal.SIGINT)
-            _, stderr = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        while not handlers_installed(proc.pid):
+            assert proc.poll() is None, proc.communicate()
+        time.sleep(delay)
+        _, stderr = signal_and_wait(proc)
         lines = stderr.splitlines()
         assert "Traceback" not in stderr and "Exception" not in stderr, (delay, stderr)
         if proc.returncode == 130:
