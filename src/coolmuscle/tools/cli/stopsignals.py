@@ -4,7 +4,7 @@ From the instant :func:`install_startup_handlers` runs (the first code of the co
 ``coolmuscle/__init__.py`` when started as the command) every stop signal ends the
 program with one line and ``128 + N`` (130 for Ctrl-C), whatever is running:
 
-* inside :func:`.exits.guarded` (``guard_depth() > 0``), where the command's work and
+* inside :func:`.exits.guarded` (a :class:`Guard`), where the command's work and
   everything it opens (the store, the pty link) lives, the handler raises
   :class:`SignalStop`; ``guarded`` runs the clean-up (``finally`` blocks) and prints
   the line;
@@ -66,11 +66,6 @@ class Guard:
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
                  tb: TracebackType | None) -> None:
         _depth[0] -= 1
-
-
-def guard_depth() -> int:
-    """How many :class:`Guard` blocks are open (0: a stop signal exits at once)."""
-    return _depth[0]
 
 
 def _raise_stop(signum: int, _frame: FrameType | None) -> None:
