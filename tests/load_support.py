@@ -95,20 +95,27 @@ class Flood:
                 return
 
 
-def round_trip(sock: socket.socket, query: bytes, reply: bytes, timeout: float = 10.0) -> float:
-    """Seconds from sending ``query`` until a whole line starting with ``reply`` (for
-    instance ``b"Px.2="``) arrived; what else arrives (other clients' output: every
-    client sees every line) is passed over."""
+def round_trip(sock: socket.socket, query: bytes, reply: bytes, timeout: float = 10.0,
+               count: int = 1) -> float:
+    """Seconds from sending ``query`` until ``count`` whole lines starting with ``reply``
+    (for instance ``b"Px.2="``) arrived; what else arrives (other clients' output:
+    every client sees every line) is passed over.  ``count``: the replies of a query
+    sent that many times (so that none is left unread for the next one)."""
     wanted = re.compile(re.escape(reply) + rb"[^\r\n]*\r\n")
     sock.settimeout(timeout)
     start = time.perf_counter()
     sock.sendall(query)
     data = b""
-    while not wanted.search(data):
+    found = 0
+    while found < count:
         chunk = sock.recv(1 << 16)
         if not chunk:
             raise ConnectionError(f"closed before {reply!r}; got {data[-200:]!r}")
-        data = data[-256:] + chunk
+        data += chunk
+        end = 0
+        for match in wanted.finditer(data):
+            found, end = found + 1, match.end()
+        data = data[end:] if end else data[-256:]
     return time.perf_counter() - start
 
 
