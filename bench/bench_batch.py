@@ -26,7 +26,7 @@ the trace, docs/batch.md), which gives the workers more to do per run.
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
 import os
 import shutil
 import subprocess
@@ -39,6 +39,9 @@ ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "src"
 TRANSCRIPTS = ROOT / "tests" / "transcripts"
 ENV = dict(os.environ, PYTHONPATH=str(SRC))
+
+sys.path.insert(0, str(ROOT / "tests"))
+from dask_support import dask_cluster  # noqa: E402
 
 
 def make_scripts(folder: Path, count: int) -> list[Path]:
@@ -81,43 +84,6 @@ def warm_run_cost(paths: list[Path], figures: bool) -> float:
     return (time.perf_counter() - start) / len(jobs)
 
 
-class Cluster:
-    """``dask scheduler`` + two ``dask worker`` on 127.0.0.1 (stopped by :meth:`stop`)."""
-
-    def __init__(self, folder: Path) -> None:
-        dask = shutil.which("dask", path=str(Path(sys.executable).parent)) or "dask"
-        scheduler_file = folder / "scheduler.json"
-        self.procs = [subprocess.Popen(
-            [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(scheduler_file)], env=ENV,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-        deadline = time.monotonic() + 60
-        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            if time.monotonic() > deadline:
-                self.stop()
-                raise SystemExit("the Dask scheduler did not start")
-            time.sleep(0.05)
-        self.address = json.loads(scheduler_file.read_text())["address"]
-        for _ in range(2):
-            self.procs.append(subprocess.Popen(
-                [dask, "worker", self.address, "--host", "127.0.0.1", "--nthreads", "1",
-                 "--no-nanny", "--no-dashboard"], env=ENV,
-                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        from distributed import Client
-        with Client(self.address, timeout=30) as client:
-            client.wait_for_workers(2, timeout=60)
-
-    def stop(self) -> None:
-        for proc in reversed(self.procs):
-            if proc.poll() is None:
-                proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=200, help="scripts (default 200)")
@@ -148,10 +114,13 @@ def main() -> None:
         rows: list[tuple[str, int, float, float]] = []
         configs: list[tuple[str, list[str], int]] = [("-j 1", ["--jobs", "1"], 1),
                                                      ("-j 2", ["--jobs", "2"], 2)]
-        cluster = None if options.no_dask else Cluster(folder)
-        try:
-            if cluster is not None:
-                configs.append(("dask, 2 workers", ["--scheduler", cluster.address], 2))
+        with contextlib.ExitStack() as stack:
+            if not options.no_dask:
+                try:
+                    address = stack.enter_context(dask_cluster(folder, 2, ENV))
+                except RuntimeError as exc:
+                    raise SystemExit(str(exc)) from None
+                configs.append(("dask, 2 workers", ["--scheduler", address], 2))
             # round after round of every configuration, so a busy moment of the shared
             # machine falls on all of them alike; the best of the rounds counts
             fulls = {label: float("inf") for label, _, _ in configs}
@@ -164,9 +133,6 @@ def main() -> None:
             for label, _, jobs in configs:
                 rows.append((label, jobs, fulls[label],
                              (fulls[label] - bases[label]) / (count - 2)))
-        finally:
-            if cluster is not None:
-                cluster.stop()
 
     print(f"{count} scripts (tests/transcripts repeated), {cpus} CPU(s)"
           f"{', with figures (--results)' if options.figures else ''}")

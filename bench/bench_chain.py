@@ -25,33 +25,16 @@ from __future__ import annotations
 import sys
 import time
 
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import seconds
+from speed_worker import build          # the chain of PTP banks bench_speed.py measures too
 
 SIZES = (1, 4, 15)
 GOAL = 500.0
 
 
-def build(motors: int) -> tuple[Chain, list[int]]:
-    chain = Chain(motors=motors)
-    moves = [0]
-
-    def count(event: object) -> None:
-        if getattr(event, "kind", None) == "status":
-            moves[0] += 1
-    chain.subscribe(count)
-    for n in range(1, motors + 1):
-        chain.execute(f"S1.{n}={100 + n}, A1.{n}=100, P1.{n}=10000, P2.{n}=0")
-        for line in (f"B1.{n}", "X0", f"S1.{n}, A1.{n}, P1.{n}", f"P2.{n}", "X-", "END"):
-            chain.execute(line)
-    for n in range(1, motors + 1):
-        chain.execute(f"[1.{n}")
-    return chain, moves
-
-
 def run(motors: int, virtual_s: float) -> tuple[float, float, int, int]:
     """One run: (wall s, cpu s, moves, kernel events)."""
-    chain, moves = build(motors)
+    chain, moves = build(motors, 1)         # motor n at S = 100 + n
     wall, cpu = time.perf_counter(), time.process_time()
     events = chain.kernel.run(until=seconds(virtual_s))
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu

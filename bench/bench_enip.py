@@ -25,10 +25,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import socket
 import statistics
-import struct
 import subprocess
 import sys
 import time
@@ -38,29 +36,16 @@ from pathlib import Path
 from pycomm3 import CIPDriver
 
 ROOT = Path(__file__).resolve().parents[1]
-BANNER = re.compile(r"enip: ([\d.]+):(\d+) \(I/O udp (\d+)\)")
 SLICE = 100
+
+sys.path.insert(0, str(ROOT / "tests"))
+from enip_support import KernelStamps, enip_process  # noqa: E402
 
 
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def start_ours(*extra: str) -> tuple[subprocess.Popen[str], int, int]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
-    proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--firmware", "cm1",
-                             "--no-state", "--enip", "127.0.0.1:0", "--enip-io-port", "0",
-                             *extra],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, env=env)
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        match = BANNER.search(line)
-        if match:
-            return proc, int(match.group(2)), int(match.group(3))
-    raise RuntimeError("coolmuscle sim did not start")
 
 
 def start_cpppo() -> tuple[subprocess.Popen[str], int]:
@@ -87,7 +72,11 @@ def _request(d: CIPDriver, cls: int, inst: int, attr: int) -> None:
 
 
 def explicit(requests: int) -> None:
-    ours, our_port, _ = start_ours()
+    with enip_process() as (_ours, our_port, _):
+        _explicit(requests, our_port)
+
+
+def _explicit(requests: int, our_port: int) -> None:
     theirs, their_port = start_cpppo()
     lat: dict[str, list[float]] = {"coolmuscle": [], "cpppo": []}
     try:
@@ -106,9 +95,8 @@ def explicit(requests: int) -> None:
                 _request(a, 4, 0x65, 3)
                 assembly.append(time.perf_counter() - t0)
     finally:
-        for proc in (ours, theirs):
-            proc.terminate()
-            proc.wait(10)
+        theirs.terminate()
+        theirs.wait(10)
     print("explicit messaging (pycomm3, unconnected Get_Attribute_Single 1/1/7):")
     rows = {name: _stats(v) for name, v in lat.items()}
     for name, (rate, p50, p99) in rows.items():
@@ -124,33 +112,6 @@ def _stats(values: list[float]) -> tuple[float, float, float]:
     ordered = sorted(values)
     return (len(values) / sum(values), statistics.median(ordered),
             ordered[int(0.99 * (len(ordered) - 1))])
-
-
-SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)     # Linux: SCM_TIMESTAMPNS
-
-
-class KernelStamps:
-    """Stands in for ethernetip's UDP socket: ``recvfrom`` through ``recvmsg``, keeping
-    the kernel's receive time of each T->O packet (not the receiving thread's)."""
-
-    def __init__(self, sock: socket.socket) -> None:
-        self.sock = sock
-        self.times: list[float] = []
-        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-
-    def fileno(self) -> int:
-        return self.sock.fileno()
-
-    def close(self) -> None:
-        self.sock.close()
-
-    def recvfrom(self, size: int) -> tuple[bytes, object]:
-        data, ancillary, _flags, addr = self.sock.recvmsg(size, 64)
-        for level, kind, raw in ancillary:
-            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
-                sec, nsec = struct.unpack_from("qq", raw)
-                self.times.append(sec + nsec / 1e9)
-        return data, addr
 
 
 def _arrivals(tcp_port: int, io_port: int, rpi_ms: int, seconds: float) -> list[float]:
@@ -180,12 +141,8 @@ def _arrivals(tcp_port: int, io_port: int, rpi_ms: int, seconds: float) -> list[
 
 
 def class1(rpi_ms: int, seconds: float, *extra: str) -> None:
-    ours, tcp_port, io_port = start_ours(*extra)
-    try:
+    with enip_process(*extra) as (_ours, tcp_port, io_port):
         times = _arrivals(tcp_port, io_port, rpi_ms, seconds)
-    finally:
-        ours.terminate()
-        ours.wait(10)
     iv = sorted(b - a for a, b in zip(times, times[1:]))
     if not iv:
         print(f"  RPI {rpi_ms} ms: no T->O packets")

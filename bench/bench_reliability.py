@@ -27,19 +27,19 @@ import os
 import random
 import re
 import resource
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
-from coolmuscle.motor.state.store import Store
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from load_support import (Flood, connect, round_trip, save_then_kill,  # noqa: E402
+                          saved_value, start_sim)
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC}
@@ -97,60 +97,22 @@ def clients(n_clients: int = 20, queries: int = 1000) -> None:
 
 # -- fairness: p99 of one-at-a-time while another floods -------------------------------------
 def _trips(port: int, count: int) -> list[float]:
-    trips = []
-    with socket.create_connection(("127.0.0.1", port), timeout=10) as probe:
-        for _ in range(count):
-            start = time.perf_counter()
-            probe.sendall(b"?96.2\r")
-            data = b""
-            while not re.search(rb"Px\.2=-?\d+\r\n", data):
-                data = data[-16:] + probe.recv(1 << 16)     # the flood's output too
-            trips.append(time.perf_counter() - start)
-    return sorted(trips)
+    with connect(port) as probe:
+        return sorted(round_trip(probe, b"?96.2\r", b"Px.2=") for _ in range(count))
 
 
 def fairness(count: int = 500) -> None:
     with ServiceThread(lambda: Chain(motors=2), lambda: [TcpTransport(port=0)]) as st_:
         port = st_.transports[0].info()["port"]
         alone = _trips(port, count)
-        stop = threading.Event()
-        flood = socket.create_connection(("127.0.0.1", port), timeout=5)
-        flood.settimeout(0.05)
-        sent = [0]
-
-        def pump() -> None:
-            while not stop.is_set():
-                try:
-                    flood.sendall(b"?99.1\r" * 100)
-                    sent[0] += 100
-                except (socket.timeout, BlockingIOError):
-                    continue
-                except OSError:
-                    return
-
-        def drain() -> None:
-            while not stop.is_set():
-                try:
-                    flood.recv(1 << 16)
-                except (socket.timeout, BlockingIOError):
-                    continue
-                except OSError:
-                    return
-        threads = [threading.Thread(target=pump), threading.Thread(target=drain)]
-        for thread in threads:
-            thread.start()
-        time.sleep(0.3)
-        try:
+        with Flood(connect(port)) as flood:
+            time.sleep(0.3)
             loaded = _trips(port, count)
-        finally:
-            stop.set()
-            for thread in threads:
-                thread.join(5)
-            flood.close()
+        sent = flood.sent
     a50, a99 = alone[count // 2], alone[int(count * 0.99)]
     l50, l99 = loaded[count // 2], loaded[int(count * 0.99)]
     print(f"fairness  ?96.2 round trip alone p50 {a50 * 1e3:.2f} ms p99 {a99 * 1e3:.2f} ms | "
-          f"while another floods ({sent[0]:,} lines) p50 {l50 * 1e3:.2f} ms p99 "
+          f"while another floods ({sent:,} lines) p50 {l50 * 1e3:.2f} ms p99 "
           f"{l99 * 1e3:.2f} ms | ratio p99 {l99 / a99:.1f}x")
 
 
@@ -163,36 +125,14 @@ def kill9(rounds: int) -> None:
         acknowledged = 0
         start = time.perf_counter()
         for _ in range(rounds):
-            proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                                     "--state", str(state)], stderr=subprocess.PIPE,
-                                    stdout=subprocess.DEVNULL, text=True, env=ENV)
-            assert proc.stderr is not None
-            port = 0
-            while not port:
-                line = proc.stderr.readline()
-                if not line:
-                    raise SystemExit(f"sim did not start: {proc.wait()}")
-                if "tcp: 127.0.0.1:" in line:
-                    port = int(line.split("tcp: 127.0.0.1:")[1].split()[0])
-            sent = acknowledged
-            with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
-                deadline = time.monotonic() + rng.uniform(0.05, 0.5)
-                data = b""
-                while time.monotonic() < deadline:
-                    sent += 1
-                    sock.sendall(b"P1.1=%d\r$.1\r" % sent)
-                    while b"saved.1" not in data:
-                        data += sock.recv(4096)
-                    data = data.split(b"saved.1", 1)[1]
-                    acknowledged = sent
-                sock.sendall(b"P1.1=%d\r$.1\r" % (sent + 1))
-                time.sleep(rng.uniform(0, 0.003))
-                os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
-            with Store(state / "coolmuscle.sqlite3") as store:
-                if store.integrity_check() != "ok":
-                    damaged += 1
-                saved = store.load(1)["memory"]["P"][1]
+            try:
+                proc, port = start_sim(state, ENV)
+            except RuntimeError as exc:
+                raise SystemExit(f"sim did not start: {exc}") from None
+            acknowledged = save_then_kill(proc, port, acknowledged, rng.uniform(0.05, 0.5),
+                                          rng.uniform(0, 0.003))
+            whole, saved = saved_value(state)
+            damaged += not whole
             if saved not in (acknowledged, acknowledged + 1):
                 wrong += 1
             acknowledged = saved

@@ -1,10 +1,14 @@
-"""Helpers of the EtherNet/IP tests: a virtual CM1 behind the adapter, in a thread or a process."""
+"""Helpers of the EtherNet/IP tests and bench/bench_enip.py (plain Python, no pytest): a
+virtual CM1 behind the adapter, in a thread or a process, and kernel receive times of
+the Class 1 packets an originator gets."""
 
 from __future__ import annotations
 
 import contextlib
 import os
 import re
+import socket
+import struct
 import subprocess
 import sys
 import time
@@ -66,3 +70,32 @@ def enip_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], int, int]
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+#: Linux's SO_TIMESTAMPNS (SCM_TIMESTAMPNS) where the socket module does not name it.
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+
+
+class KernelStamps:
+    """Stands in for the originator's UDP socket: its ``recvfrom`` goes through
+    ``recvmsg`` and keeps the kernel's receive time of every T->O packet, so the
+    intervals measured are the adapter's, not the receiving thread's scheduling."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.times: list[float] = []
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def recvfrom(self, size: int) -> tuple[bytes, object]:
+        data, ancillary, _flags, addr = self.sock.recvmsg(size, 64)
+        for level, kind, raw in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+                sec, nsec = struct.unpack_from("qq", raw)
+                self.times.append(sec + nsec / 1e9)
+        return data, addr

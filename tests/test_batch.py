@@ -12,14 +12,12 @@ The Dask test starts a real ``dask scheduler`` and two ``dask worker`` processes
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
-import shutil
-import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -28,6 +26,8 @@ from typing import Iterator
 import pytest
 
 from coolmuscle.tools.batch.engine import chunks
+from dask_support import dask_cluster as dask_cluster_of
+from load_support import signal_and_wait
 from coolmuscle.tools.cli.app import main
 
 DATA = Path(__file__).parent / "data" / "batch"
@@ -123,61 +123,16 @@ def test_the_golden_transcripts_of_the_suite_pass_as_a_batch(
 
 
 # -- Dask -----------------------------------------------------------------
-def _dask_bin() -> str:
-    found = shutil.which("dask", path=str(Path(sys.executable).parent))
-    if found is None:
-        pytest.fail("dask is a test dependency (pyproject.toml [test]): pip install "
-                    "-e '.[test]'")
-    return found
-
-
-@contextlib.contextmanager
-def cluster(tmp_path: Path, workers: int) -> Iterator[str]:
+def cluster(tmp_path: Path, workers: int) -> contextlib.AbstractContextManager[str]:
     """A scheduler and ``workers`` single-thread workers on 127.0.0.1, always stopped."""
-    dask = _dask_bin()
-    env = dict(os.environ, PYTHONPATH=str(SRC))
-    scheduler_file = tmp_path / "scheduler.json"
-    logs = [(tmp_path / f"dask-{n}.log").open("w") for n in range(workers + 1)]
-    procs: list[subprocess.Popen[bytes]] = []
-    try:
-        procs.append(subprocess.Popen(
-            [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(scheduler_file)],
-            env=env, stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True))
-        deadline = time.monotonic() + 30
-        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            assert procs[0].poll() is None, (tmp_path / "dask-0.log").read_text()
-            assert time.monotonic() < deadline, "the scheduler did not start"
-            time.sleep(0.05)
-        address = json.loads(scheduler_file.read_text())["address"]
-        assert address.startswith("tcp://127.0.0.1:")
-        for log in logs[1:]:
-            procs.append(subprocess.Popen(
-                [dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
-                 "--no-nanny", "--no-dashboard"],
-                env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True))
-        if workers:
-            from distributed import Client
-            with Client(address, timeout=30) as client:
-                client.wait_for_workers(workers, timeout=60)
-        yield address
-    finally:  # workers first: a worker whose scheduler is gone waits to reconnect
-        for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.terminate()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        for log in logs:
-            log.close()
+    return dask_cluster_of(tmp_path, workers, dict(os.environ, PYTHONPATH=str(SRC)))
 
 
 @pytest.fixture
 def dask_cluster(tmp_path: Path) -> Iterator[str]:
     """A scheduler and two workers on 127.0.0.1 (ports chosen by the OS)."""
     with cluster(tmp_path, 2) as address:
+        assert address.startswith("tcp://127.0.0.1:")
         yield address
 
 
@@ -284,19 +239,13 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
                              "--jobs", "2", "--results", str(results), "--junit", str(junit)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
-    try:
-        # once the pool's two workers exist (the runs are under way), as a user would
-        deadline = time.monotonic() + 60
-        while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.05)
-        time.sleep(0.5)
-        os.killpg(proc.pid, signal.SIGINT)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    # once the pool's two workers exist (the runs are under way), as a user would
+    deadline = time.monotonic() + 60
+    while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(0.5)
+    _, err = signal_and_wait(proc, group=True)
     text = err.decode()
     assert proc.returncode == 130, text
     assert "Traceback" not in text
@@ -315,6 +264,77 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
     while _group(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not _group(proc.pid), "processes of the batch are still running"
+
+
+SLOW = "S.1=100\nP.1=5000\n^.1\n@wait 90\n"
+
+
+def test_a_pool_stopped_by_ctrl_c_leaves_no_thread_of_its_own_running() -> None:
+    """The cause of a traceback seen twice after Ctrl-C (``threading._shutdown`` ->
+    ``atexit_call()`` -> ... "Bad file descriptor"): the pool was shut down without
+    waiting, and its manager thread was still closing its wake-up pipe while the
+    interpreter's exit hook wrote to it.  Once ``run`` has let the Ctrl-C through, every
+    thread the pool started has ended."""
+    from coolmuscle.tools.batch.engine import PoolEngine
+    from coolmuscle.tools.batch.job import Job
+
+    before = set(threading.enumerate())
+    engine = PoolEngine(2)
+    jobs = [Job(name="quick", script="?96.1\n")] + [Job(name=f"slow{i}", script=SLOW)
+                                                      for i in range(4)]
+
+    def ctrl_c(_index: int, _outcome: object) -> None:
+        raise KeyboardInterrupt           # where a Ctrl-C lands: while runs are under way
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            engine.run(jobs, ctrl_c)
+        left = [t.name for t in set(threading.enumerate()) - before if t.is_alive()]
+    finally:
+        engine.close()
+    assert left == []
+
+
+#: A batch's engine, then a Ctrl-C (``CTRL_C`` seconds after it exists) and an exit at
+#: once, as soon as the engine is closed: the exit races with what the pool leaves.
+ENGINE_THEN_EXIT = f"""
+import sys
+from coolmuscle.tools.batch.engine import PoolEngine
+from coolmuscle.tools.batch.job import Job
+engine = PoolEngine(2)
+print("engine", flush=True)
+try:
+    engine.run([Job(name=str(i), script={SLOW!r}) for i in range(6)], lambda i, o: None)
+except KeyboardInterrupt:
+    pass
+finally:
+    try:
+        engine.close()
+    except KeyboardInterrupt:
+        pass
+print("stopped", file=sys.stderr)
+"""
+
+
+def test_ctrl_c_at_a_sweep_of_instants_of_a_pool_prints_nothing_more() -> None:
+    """Ctrl-C to the process group (as a terminal sends it) at instants from the pool's
+    creation on (its server loading the model, workers starting, runs under way): the
+    program's own line is all stderr has, and no process of the group is left.  Before:
+    the fork server's and the workers' KeyboardInterrupt tracebacks (they start with
+    Python's default handler) and a worker's FileNotFoundError (started inside a submit
+    the Ctrl-C cut short, it loaded its queue after the semaphores were gone)."""
+    env = dict(os.environ, PYTHONPATH=str(SRC))
+    for delay in (0.0, 0.1, 0.3, 0.7, 1.2):
+        proc = subprocess.Popen([sys.executable, "-c", ENGINE_THEN_EXIT], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=True)
+        assert proc.stdout is not None and proc.stdout.readline() == "engine\n"
+        time.sleep(delay)
+        _, err = signal_and_wait(proc, group=True, timeout=60)
+        assert err == "stopped\n", (delay, err)
+        deadline = time.monotonic() + 10
+        while _group(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group(proc.pid), (delay, "processes of the pool are still running")
 
 
 def _group(pgid: int) -> list[str]:

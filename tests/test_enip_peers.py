@@ -16,7 +16,7 @@ import pytest
 
 from coolmuscle.frontends.enip import objects
 from coolmuscle.frontends.enip.eds import generate
-from enip_support import enip_process, enip_service, ports
+from enip_support import KernelStamps, enip_process, enip_service, ports
 
 pycomm3 = pytest.importorskip("pycomm3")
 from pycomm3 import CIPDriver  # noqa: E402
@@ -188,34 +188,6 @@ def test_eds_pie_parses_the_generated_eds(caplog, service):
 
 
 # -- Class 1: the ethernetip package as originator, against `coolmuscle sim` ---------------
-SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)     # Linux: SCM_TIMESTAMPNS
-
-
-class KernelStamps:
-    """Stands in for the originator's UDP socket: its ``recvfrom`` goes through
-    ``recvmsg`` and keeps the kernel's receive time of every T->O packet, so the
-    intervals measured are the adapter's, not the receiving thread's scheduling."""
-
-    def __init__(self, sock: socket.socket) -> None:
-        self.sock = sock
-        self.times: list[float] = []
-        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-
-    def fileno(self) -> int:
-        return self.sock.fileno()
-
-    def close(self) -> None:
-        self.sock.close()
-
-    def recvfrom(self, size: int):
-        data, ancillary, _flags, addr = self.sock.recvmsg(size, 64)
-        for level, kind, raw in ancillary:
-            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
-                sec, nsec = struct.unpack_from("qq", raw)
-                self.times.append(sec + nsec / 1e9)
-        return data, addr
-
-
 class _Scanner:
     """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our ports."""
 

@@ -59,13 +59,39 @@ def _read_until_ready(sim: subprocess.Popen, seconds: float = 60.0) -> str:
     return seen.decode(errors="replace")
 
 
+def test_esi_of_an_unknown_bridge_and_a_failing_lab_are_one_line_each(
+        capsys, monkeypatch) -> None:
+    """The lab's and the ESI command's errors: one line, exit 2 for a bad --bridge, 1
+    when the lab cannot be made (here: ``ip`` refusing, as without root)."""
+    import pytest
+
+    from coolmuscle.frontends.ethercat import lab
+    from coolmuscle.tools.cli.app import main
+
+    def refuse(*_args: str) -> None:
+        raise lab.LabError("ip netns add cmecatclins: Operation not permitted")
+    for args, code in ((["ethercat", "esi", "--bridge", "EB99"], 2),
+                       (["ethercat", "lab", "up", *LAB], 1),
+                       (["ethercat", "lab", "down", *LAB], 1)):
+        monkeypatch.setattr(lab, "up", refuse)
+        monkeypatch.setattr(lab, "down", refuse)
+        with pytest.raises(SystemExit) as stopped:
+            main(args)
+        err = capsys.readouterr().err
+        assert stopped.value.code == code, err
+        assert len(err.splitlines()) == 1 and err.startswith("coolmuscle: "), err
+        assert ("EB99" if code == 2 else "not permitted") in err
+
+
 @needs_net_admin
 def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
     up = coolmuscle("ethercat", "lab", "up", *LAB)
+    # a failed up made nothing to remove here ("File exists": another run's lab, which a
+    # down in the finally below removed under that run once)
+    assert up.returncode == 0, up.stderr
     sim = None
     banner = ""
     try:
-        assert up.returncode == 0, up.stderr
         assert "cmecatclim" in up.stdout and "ip netns exec cmecatclins" in up.stdout
         sim = subprocess.Popen(["ip", "netns", "exec", "cmecatclins", sys.executable, "-m",
                                 "coolmuscle", "sim", "--ethercat", "cmecatclis", "--bridge",

@@ -20,6 +20,7 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from load_support import Flood, round_trip
 from modbus_support import Wire, frame
 
 MANUAL = {"K78_1": 100, "K79_1": 200, "K80_1": 300, "K81_1": 1}
@@ -105,42 +106,11 @@ def test_a_partial_line_with_trickled_spaces_does_not_starve_another_client(
 
 def test_a_flooding_client_does_not_slow_another_clients_round_trip(
         served: ServiceThread) -> None:
-    flood, probe = connect(served), connect(served)
-    wait_clients(served, 2)
-    stop = threading.Event()
-
-    def drain() -> None:
-        flood.settimeout(0.5)
-        while not stop.is_set():
-            try:
-                if not flood.recv(1 << 16):
-                    return
-            except (socket.timeout, OSError):
-                continue
-
-    def pump() -> None:
-        while not stop.is_set():
-            try:
-                flood.sendall(b"?99.1\r" * 100)
-            except OSError:
-                return
-    threads = [threading.Thread(target=drain), threading.Thread(target=pump)]
-    for t in threads:
-        t.start()
-    try:
+    with Flood(connect(served)), connect(served) as probe:
+        wait_clients(served, 2)
         time.sleep(0.3)
-        trips = []
-        for _ in range(10):
-            start = time.monotonic()
-            probe.sendall(b"?96.2\r")
-            read_until(probe, b"Px.2=", timeout=10)
-            trips.append(time.monotonic() - start)
-        trips.sort()
-        assert trips[-2] < 0.5, trips
-    finally:
-        stop.set()
-        for t in threads:
-            t.join(5)
+        trips = sorted(round_trip(probe, b"?96.2\r", b"Px.2=") for _ in range(10))
+    assert trips[-2] < 0.5, trips
 
 
 def test_a_tcp_half_line_and_a_pty_line_are_never_one_line(served: ServiceThread) -> None:
@@ -159,6 +129,64 @@ def test_a_tcp_half_line_and_a_pty_line_are_never_one_line(served: ServiceThread
             time.sleep(0.02)
     finally:
         pty.close()
+
+
+def test_each_senders_echo_is_its_own_whole_line_on_tcp_and_on_the_pty(
+        served: ServiceThread) -> None:
+    """Issue 28 defect 3: a TCP client sends ``P1.1=12`` without its line end, a pty
+    client ``?96.1\\r``, the TCP client finishes with ``3\\r``.  The lines ran apart, but
+    both received ``P1.1=12?96.1\\r\\n``, the reply and a stray ``3\\r\\n``.  The echo is
+    part of the motor's answer to its sender's line (ch. 3 K23 8): with several hosts
+    connected each line's echo goes out whole at its line end, before its reply; every
+    host sees the same bytes."""
+    pty = serial.Serial(served.transports[1].info()["path"], timeout=5)
+    a = connect(served)
+    wait_clients(served, 1)
+    try:
+        a.sendall(b"P1.1=12")
+        time.sleep(0.1)                      # the half line is in (the order makes no odds)
+        pty.write(b"?96.1\r")
+        seen_by_pty = pty.read_until(b"Px.1=0\r\n")
+        a.sendall(b"3\r")
+        seen_by_pty += pty.read_until(b"P1.1=123\r\n")
+        want = b"?96.1\r\nPx.1=0\r\nP1.1=123\r\n"
+        assert seen_by_pty == want
+        assert read_until(a, b"P1.1=123\r\n") == want
+        pty.timeout = 0.3                    # and nothing after it (the stray "3\r\n")
+        assert pty.read(64) == b""
+        a.settimeout(0.3)
+        with pytest.raises(TimeoutError):
+            a.recv(64)
+        assert served.call(lambda: served.chain.get_register(1, "P", 1)) == 123
+    finally:
+        a.close()
+        pty.close()
+
+
+def test_a_host_alone_sees_its_echo_as_it_types_and_a_cut_one_again_whole(
+        served: ServiceThread) -> None:
+    """A TCP client alone (the pty of the fixture is a host too, so a second server with
+    TCP only): ``?9`` is echoed at once.  A second client joins and ends a line while
+    the first one's typed ``?9`` is out: that ``?9`` is ended with the delimiter, the
+    second line follows whole, and the first line's echo comes again whole at its end."""
+    alone = ServiceThread(lambda: Chain(), lambda: [TcpTransport(port=0)]).start()
+    try:
+        a = connect(alone)
+        wait_clients(alone, 1)
+        a.sendall(b"?9")
+        assert read_until(a, b"?9") == b"?9"
+        b = connect(alone)
+        wait_clients(alone, 2)
+        b.sendall(b"?96.1\r")
+        assert read_until(b, b"Px.1=0\r\n") == b"\r\n?96.1\r\nPx.1=0\r\n"
+        a.sendall(b"6.1\r")
+        want = b"\r\n?96.1\r\nPx.1=0\r\n?96.1\r\nPx.1=0\r\n"     # after its "?9"
+        assert read_until(a, b"Px.1=0\r\n", count=2) == want
+        assert read_until(b, b"Px.1=0\r\n") == b"?96.1\r\nPx.1=0\r\n"
+        a.close()
+        b.close()
+    finally:
+        alone.stop()
 
 
 # -- item 3: a bank upload belongs to the client that opened it ---------------------

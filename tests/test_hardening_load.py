@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import socket
 import struct
-import threading
 import time
 from pathlib import Path
 from typing import Iterator
@@ -23,23 +22,7 @@ from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 import coolmuscle.frontends.transports.tcp as tcp_module
 from coolmuscle.frontends.transports.tcp import TcpTransport
-
-
-def _connect(port: int) -> socket.socket:
-    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
-    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    return sock
-
-
-def _round_trip(sock: socket.socket, line: bytes, marker: bytes) -> float:
-    start = time.monotonic()
-    sock.sendall(line)
-    data = b""
-    while marker not in data or not data.endswith(b"\r\n"):
-        chunk = sock.recv(1 << 16)
-        assert chunk
-        data += chunk
-    return time.monotonic() - start
+from load_support import Flood, connect, round_trip
 
 
 @pytest.fixture
@@ -52,71 +35,41 @@ def served(tmp_path: Path) -> Iterator[ServiceThread]:
 
 def test_64k_of_pipelined_modbus_requests_do_not_freeze_another_client(
         served: ServiceThread) -> None:
-    cml = _connect(served.transports[0].info()["port"])
-    modbus = _connect(served.transports[1].info()["port"])
+    cml = connect(served.transports[0].info()["port"])
+    modbus = connect(served.transports[1].info()["port"])
     fc03 = b"".join(struct.pack(">HHHB", t & 0xFFFF, 0, 6, 1) + bytes((3, 0, 0, 0, 10))
                     for t in range(65536 // 12))
-    reader_done = threading.Event()
-
-    def read_replies() -> None:
-        modbus.settimeout(1)
-        while not reader_done.is_set():
-            try:
-                if not modbus.recv(1 << 16):
-                    return
-            except (socket.timeout, OSError):
-                continue
-    thread = threading.Thread(target=read_replies)
-    thread.start()
-    try:
+    with Flood(modbus, line=None, poll=2.0):
         trips = []
         for _ in range(5):
             modbus.sendall(fc03)
-            trips.append(_round_trip(cml, b"?96.1\r", b"Px.1="))
-        assert max(trips) < 0.5, trips
-    finally:
-        reader_done.set()
-        thread.join(5)
+            trips.append(round_trip(cml, b"?96.1\r", b"Px.1="))
+    assert max(trips) < 0.5, trips
 
 
 def test_a_flood_of_saves_does_not_hold_another_clients_query(served: ServiceThread) -> None:
     port = served.transports[0].info()["port"]
-    flood, probe = _connect(port), _connect(port)
-    stop = threading.Event()
-
-    def drain() -> None:
-        flood.settimeout(0.5)
-        while not stop.is_set():
-            try:
-                if not flood.recv(1 << 16):
-                    return
-            except (socket.timeout, OSError):
-                continue
-    thread = threading.Thread(target=drain)
-    thread.start()
-    try:
-        flood.sendall(b"$\r" * 400)
+    flood, probe = connect(port), connect(port)
+    flood.sendall(b"$\r" * 400)
+    with Flood(flood, line=None), probe:
         time.sleep(0.05)
-        assert _round_trip(probe, b"?96.2\r", b"Px.2=") < 1.0
-    finally:
-        stop.set()
-        thread.join(5)
+        assert round_trip(probe, b"?96.2\r", b"Px.2=") < 1.0
 
 
 def test_connections_beyond_the_limit_are_refused_with_one_line() -> None:
     with ServiceThread(lambda: Chain(), lambda: [TcpTransport(port=0, max_clients=3)]) as st_:
         port = st_.transports[0].info()["port"]
-        kept = [_connect(port) for _ in range(3)]
+        kept = [connect(port) for _ in range(3)]
         deadline = time.monotonic() + 5
         while st_.transports[0].clients < 3:
             assert time.monotonic() < deadline
             time.sleep(0.01)
-        extra = _connect(port)
+        extra = connect(port)
         data = b""
         while chunk := extra.recv(4096):
             data += chunk
         assert data == b"coolmuscle: too many clients (3); connection refused\r\n"
-        assert _round_trip(kept[0], b"?96.1\r", b"Px.1=") < 2
+        assert round_trip(kept[0], b"?96.1\r", b"Px.1=") < 2
         for sock in kept + [extra]:
             sock.close()
 
@@ -125,9 +78,9 @@ def test_modbus_connections_beyond_the_limit_are_closed() -> None:
     with ServiceThread(lambda: Chain(),
                        lambda: [ModbusTcpTransport(port=0, max_clients=2)]) as st_:
         port = st_.transports[0].info()["port"]
-        kept = [_connect(port) for _ in range(2)]
+        kept = [connect(port) for _ in range(2)]
         time.sleep(0.1)
-        extra = _connect(port)
+        extra = connect(port)
         extra.settimeout(5)
         assert extra.recv(4096) == b""
         assert st_.transports[0].refused_clients == 1
@@ -148,7 +101,7 @@ def test_non_reading_clients_are_bounded_and_dropped_alone() -> None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
             sock.connect(("127.0.0.1", port))
             idle.append(sock)
-        reader = _connect(port)
+        reader = connect(port)
         deadline = time.monotonic() + 5
         while transport.clients < 11:
             assert time.monotonic() < deadline
@@ -157,14 +110,14 @@ def test_non_reading_clients_are_bounded_and_dropped_alone() -> None:
         deadline = time.monotonic() + 30
         while transport.dropped_clients < 10:
             assert time.monotonic() < deadline, transport.dropped_clients
-            _round_trip(reader, b"?P1.1\r" * 20, b"P197.1=")
+            round_trip(reader, b"?P1.1\r" * 20, b"P197.1=", count=20)
             peak = max(peak, max((c.unread() for c in list(transport._clients)), default=0))
         assert peak <= bound
         deadline = time.monotonic() + 5
         while transport.clients != 1:      # the dropped ones are forgotten
             assert time.monotonic() < deadline, transport.clients
             time.sleep(0.01)
-        assert _round_trip(reader, b"?96.1\r", b"Px.1=") < 2
+        assert round_trip(reader, b"?96.1\r", b"Px.1=") < 2
         for sock in idle + [reader]:
             sock.close()
     assert DEFAULT_MAX_BUFFER * tcp_module.DEFAULT_MAX_CLIENTS <= 32 << 20
@@ -176,23 +129,8 @@ def test_with_wire_pacing_a_flood_does_not_queue_ahead_of_another_client() -> No
     with ServiceThread(lambda: Chain(motors=2, pacing=True),
                        lambda: [TcpTransport(port=0)]) as st_:
         port = st_.transports[0].info()["port"]
-        flood, probe = _connect(port), _connect(port)
-        stop = threading.Event()
-
-        def drain() -> None:
-            flood.settimeout(0.2)
-            while not stop.is_set():
-                try:
-                    if not flood.recv(1 << 16):
-                        return
-                except (socket.timeout, OSError):
-                    continue
-        thread = threading.Thread(target=drain)
-        thread.start()
-        try:
-            flood.sendall(b"?99.1\r" * 2000)     # 12 KB: 3 s of wire time at 38.4 kbps
+        flood, probe = connect(port), connect(port)
+        flood.sendall(b"?99.1\r" * 2000)         # 12 KB: 3 s of wire time at 38.4 kbps
+        with Flood(flood, line=None), probe:
             time.sleep(0.2)
-            assert _round_trip(probe, b"?96.2\r", b"Px.2=") < 1.0
-        finally:
-            stop.set()
-            thread.join(5)
+            assert round_trip(probe, b"?96.2\r", b"Px.2=") < 1.0

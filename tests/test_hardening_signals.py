@@ -5,7 +5,8 @@ serving, under load and during ``$`` (cml-users-guide.txt 2.1.2): one line, no
 traceback, the pty link removed, the store intact; a second signal during the
 stop changes nothing.  ``sim`` runs as a real subprocess.  The Python interpreter's
 own start-up (before any of our code runs: about 50 ms, more on a loaded machine) is
-outside what a program can handle, so the earliest signal here comes at 0.25 s.
+outside what a program can handle: the sweep of instants starts when the process's
+caught-signal mask shows our handlers (docs/reliability.md "signals").
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.motor.state.store import Store
+from load_support import signal_and_wait
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -72,6 +74,53 @@ def test_a_signal_during_start_up_is_one_clean_line(tmp_path: Path, sig: int,
     time.sleep(max(delay, 2 * interpreter))
     proc.send_signal(sig)
     finish(proc, link)
+
+
+def handlers_installed(pid: int) -> bool:
+    """Whether the process catches SIGTERM (/proc/PID/status SigCgt): the stop handlers
+    are installed (they are set together, SIGINT first); Python alone leaves SIGTERM
+    at its default."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    caught = next(line for line in status.splitlines() if line.startswith("SigCgt:"))
+    return bool(int(caught.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+
+
+#: Instants after the handlers are installed, seconds: the package's own imports, the
+#: command line's, the store, the transports, the event loop's start, serving.
+SWEEP = (0.0, 0.001, 0.002, 0.004, 0.007, 0.01, 0.015, 0.02, 0.03, 0.04, 0.055, 0.07, 0.09,
+         0.11, 0.14, 0.17, 0.2, 0.25, 0.3, 0.4, 0.5)
+
+
+def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(tmp_path: Path) -> None:
+    """Issue 28 defect 1: SIGINT 50 ms after ``sim --tcp 0 --state DIR`` started printed a
+    traceback ending in ``SignalStop: SIGINT`` with exit 1 (the handler raised while the
+    package, runpy or the entry module were still loading, outside any code that catches
+    it).  From the instant our handlers are installed every SIGINT gives one line: before
+    the server is up ``coolmuscle: interrupted`` and 130, once it serves the banner and
+    ``coolmuscle: stopped`` and 0; never a traceback."""
+    seen = set()
+    for n, delay in enumerate(SWEEP):
+        proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
+                                 "--state", str(tmp_path / f"state{n}")],
+                                stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+                                env=ENV)
+        while not handlers_installed(proc.pid):
+            assert proc.poll() is None, proc.communicate()
+        time.sleep(delay)
+        _, stderr = signal_and_wait(proc)
+        lines = stderr.splitlines()
+        assert "Traceback" not in stderr and "Exception" not in stderr, (delay, stderr)
+        if proc.returncode == 130:
+            assert lines == ["coolmuscle: interrupted"], (delay, stderr)
+        else:
+            assert proc.returncode == 0, (delay, proc.returncode, stderr)
+            assert lines[-1] == "coolmuscle: stopped" and "ready" in lines[0], (delay, stderr)
+            assert not any(line.startswith(STOP_LINES) for line in lines[:-1]), (delay, stderr)
+        seen.add(proc.returncode)
+    assert 130 in seen, "no SIGINT of the sweep came before the server was up"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])

@@ -18,13 +18,8 @@ from __future__ import annotations
 import asyncio
 import os
 import random
-import re
-import signal
 import socket
 import struct
-import subprocess
-import sys
-import threading
 import time
 from pathlib import Path
 from typing import Iterator
@@ -37,7 +32,7 @@ from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
-from coolmuscle.motor.state.store import Store
+from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -98,15 +93,8 @@ def everything(tmp_path: Path) -> Iterator[ServiceThread]:
 def probe_alive(st_: ServiceThread, timeout: float = 3.0) -> float:
     """A fresh TCP client's ``K23.1=0`` (quiet) then ``?96.2`` is answered; and Modbus."""
     start = time.monotonic()
-    with socket.create_connection(("127.0.0.1", st_.transports[0].info()["port"]),
-                                  timeout=timeout) as sock:
-        sock.sendall(b"\r?96.2\r")
-        data = b""
-        while not re.search(rb"Px\.2=-?\d+\r", data):
-            chunk = sock.recv(1 << 16)
-            assert chunk, data
-            data += chunk
-            assert time.monotonic() - start < timeout, data[-200:]
+    with connect(st_.transports[0].info()["port"], timeout) as sock:
+        round_trip(sock, b"\r?96.2\r", b"Px.2=", timeout)
     with socket.create_connection(("127.0.0.1", st_.transports[2].info()["port"]),
                                   timeout=timeout) as sock:
         sock.sendall(mbap(7, 255, bytes((3, 0, 0, 0, 2))))
@@ -202,50 +190,10 @@ def test_twenty_clients_on_the_real_chain_lose_nothing_and_keep_order() -> None:
 def test_p99_of_a_one_at_a_time_client_while_another_floods() -> None:
     with ServiceThread(lambda: Chain(motors=2), lambda: [TcpTransport(port=0)]) as st_:
         port = st_.transports[0].info()["port"]
-        stop = threading.Event()
-        flood = socket.create_connection(("127.0.0.1", port), timeout=5)
-
-        flood.settimeout(0.05)
-
-        def pump() -> None:
-            while not stop.is_set():
-                try:
-                    flood.sendall(b"?99.1\r" * 100)
-                except (socket.timeout, BlockingIOError):
-                    continue
-                except OSError:
-                    return
-
-        def drain() -> None:
-            while not stop.is_set():
-                try:
-                    flood.recv(1 << 16)
-                except (socket.timeout, BlockingIOError):
-                    continue
-                except OSError:
-                    return
-        threads = [threading.Thread(target=pump), threading.Thread(target=drain)]
-        for thread in threads:
-            thread.start()
-        trips: list[float] = []
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=5) as probe:
-                time.sleep(0.2)
-                for _ in range(100):
-                    start = time.monotonic()
-                    probe.sendall(b"?96.2\r")
-                    data = b""
-                    while not re.search(rb"Px\.2=-?\d+\r\n", data):
-                        data = data[-16:] + probe.recv(1 << 16)   # the flood's output too
-                    trips.append(time.monotonic() - start)
-        finally:
-            stop.set()
-            for thread in threads:
-                thread.join(5)
-            flood.close()
-    trips.sort()
-    p99 = trips[98]
-    assert p99 < 0.5, trips[-5:]
+        with Flood(connect(port)), connect(port) as probe:
+            time.sleep(0.2)
+            trips = sorted(round_trip(probe, b"?96.2\r", b"Px.2=") for _ in range(100))
+    assert trips[98] < 0.5, trips[-5:]
 
 
 def test_kill_9_during_dollar_leaves_the_last_save(tmp_path: Path) -> None:
@@ -253,33 +201,10 @@ def test_kill_9_during_dollar_leaves_the_last_save(tmp_path: Path) -> None:
     state = tmp_path / "state"
     acknowledged = 0
     for _round in range(3):
-        proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                                 "--state", str(state)], stderr=subprocess.PIPE,
-                                stdout=subprocess.DEVNULL, text=True, env=ENV)
-        assert proc.stderr is not None
-        port = 0
-        while not port:
-            line = proc.stderr.readline()
-            assert line, "sim did not start"
-            if "tcp: 127.0.0.1:" in line:
-                port = int(line.split("tcp: 127.0.0.1:")[1].split()[0])
-        sent = acknowledged
-        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
-            deadline = time.monotonic() + rng.uniform(0.2, 0.6)
-            data = b""
-            while time.monotonic() < deadline:
-                sent += 1
-                sock.sendall(b"P1.1=%d\r$.1\r" % sent)
-                while b"saved.1" not in data:
-                    data += sock.recv(4096)
-                data = data.split(b"saved.1", 1)[1]
-                acknowledged = sent
-            sock.sendall(b"P1.1=%d\r$.1\r" % (sent + 1))
-            os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(10)
-        with Store(state / "coolmuscle.sqlite3") as store:
-            assert store.integrity_check() == "ok"
-            saved = store.load(1)["memory"]["P"][1]
+        proc, port = start_sim(state, ENV)
+        acknowledged = save_then_kill(proc, port, acknowledged, rng.uniform(0.2, 0.6))
+        whole, saved = saved_value(state)
+        assert whole
         assert saved in (acknowledged, acknowledged + 1), (saved, acknowledged)
         acknowledged = saved
 
@@ -333,13 +258,8 @@ def test_fuzz_the_ethernet_ip_front_end_with_a_liveness_check_between_batches() 
                 except OSError:
                     pass                        # closed by the adapter: allowed
             _enip_alive(port)
-            with socket.create_connection(("127.0.0.1", cml), timeout=3) as sock:
-                sock.sendall(b"\r?96.1\r")
-                data = b""
-                while b"Px.1=" not in data:
-                    chunk = sock.recv(4096)
-                    assert chunk
-                    data += chunk
+            with connect(cml, timeout=3) as sock:         # the CML line still answers
+                round_trip(sock, b"\r?96.1\r", b"Px.1=", timeout=3)
 
 
 # -- the web dashboard (HTTP / WebSocket, landed with issue 12) ----------------------------
@@ -379,10 +299,5 @@ def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
                 except OSError:
                     pass
             _http_alive(web)
-            with socket.create_connection(("127.0.0.1", cml), timeout=3) as sock:
-                sock.sendall(b"\r?96.1\r")
-                got = b""
-                while b"Px.1=" not in got:
-                    chunk = sock.recv(4096)
-                    assert chunk
-                    got += chunk
+            with connect(cml, timeout=3) as sock:         # the CML line still answers
+                round_trip(sock, b"\r?96.1\r", b"Px.1=", timeout=3)

@@ -243,3 +243,4 @@ def test_cm1_k34_7_quadrature_with_the_k54_offset() -> None:
     chain.execute("^.1")
     chain.kernel.run(until=seconds(2))
     assert (pulses.signal(1), pulses.signal(2)) == (True, False)    # 100: first quarter
+    assert chain.execute("?50.1") == ["OUT.1=01"]        # K33=0, "Normally open": as the signal

@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.frontends import transports
 from coolmuscle.errors import TransportError
@@ -85,6 +87,43 @@ def test_port_survives_a_failing_line_and_runs_the_lines_after_it() -> None:
     port.feed(b"boom\r?96.1\r")
     assert port.errors == 1
     assert b"".join(out) == b"boom\r\n?96.1\r\nPx.1=1\r\n"
+
+
+ECHOED = (b"?96.1", b"P1.1=5", b"S.1=100", b"A.1=7", b"P2.1=-30")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.data())
+def test_several_hosts_each_lines_echo_is_a_whole_line_however_the_bytes_come(
+        data: st.DataObject) -> None:
+    """Issue 28 defect 3, any interleaving: two or three hosts' lines in chunks of any
+    size, taking turns in any order.  Every line of the shared output is one host's
+    whole line (its echo) or a reply, each line sent is echoed once, and the echo comes
+    before the reply to it (ch. 3 K23 8: the echo is part of the answer)."""
+    chain = FakeChain()
+    port = Port(chain.host_line)
+    out: list[bytes] = []
+    port.add_listener(out.append)
+    hosts = data.draw(st.integers(2, 3))
+    lanes = [port.open_lane(f"h{n}") for n in range(hosts)]
+    sent = [data.draw(st.lists(st.sampled_from(ECHOED), min_size=1, max_size=4))
+            for _ in range(hosts)]
+    pending = []
+    for lines in sent:
+        stream = b"".join(line + b"\r" for line in lines)
+        cuts = sorted(data.draw(st.sets(st.integers(1, len(stream) - 1), max_size=6)))
+        pending.append([stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)])
+    while any(pending):
+        n = data.draw(st.sampled_from([i for i, chunks in enumerate(pending) if chunks]))
+        lanes[n].feed(pending[n].pop(0))
+    text = b"".join(out)
+    assert text.endswith(b"\r\n")
+    got = text.split(b"\r\n")[:-1]
+    echoes = [line for line in got if not line.startswith(b"Px.1=")]
+    assert sorted(echoes) == sorted(line for lines in sent for line in lines), text
+    for i, line in enumerate(got):                  # each reply right after its query
+        if line.startswith(b"Px.1="):
+            assert got[i - 1] == b"?96.1", text
 
 
 def test_port_discard_partial_forgets_a_half_line() -> None:

@@ -91,18 +91,19 @@ def test_every_client_sees_replies_and_events(start_tcp: Starter) -> None:
 
 
 def test_lines_of_two_clients_are_assembled_apart(start_tcp: Starter) -> None:
-    """A's unfinished ``?9`` does not hold B's line: B's runs at once, A's when ended."""
+    """A's unfinished ``?9`` does not hold B's line: B's runs at once, A's when ended;
+    each line's echo is its own whole line (two clients: echoes go out at line ends)."""
     st_ = start_tcp()
     a, b = connect(st_), connect(st_)
     time.sleep(0.05)
     a.sendall(b"?9")
     time.sleep(0.05)
     b.sendall(b"?96.1\r")
-    assert read_until(b, rb"Px\.1=1\r\n") == b"?9?96.1\r\nPx.1=1\r\n"
+    assert read_until(b, rb"Px\.1=1\r\n") == b"?96.1\r\nPx.1=1\r\n"
     a.sendall(b"6.1\r")
-    want = b"?9?96.1\r\nPx.1=1\r\n6.1\r\nPx.1=2\r\n"
+    want = b"?96.1\r\nPx.1=1\r\n?96.1\r\nPx.1=2\r\n"
     assert read_until(a, rb"Px\.1=2\r\n") == want
-    assert read_until(b, rb"Px\.1=2\r\n") == b"6.1\r\nPx.1=2\r\n"
+    assert read_until(b, rb"Px\.1=2\r\n") == b"?96.1\r\nPx.1=2\r\n"
     assert st_.call(lambda: list(st_.chain.lines)) == ["?96.1", "?96.1"]
 
 

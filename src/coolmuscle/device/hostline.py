@@ -18,7 +18,12 @@ source=...)`` assembles each source's line apart (its own partial line, CRLF
 state and over-long-line discard), so one host's unfinished ``P1.1=12`` and
 another's ``?96.1`` are never run as one line.  While a line runs,
 :attr:`HostLine.source` names its sender (bank uploads belong to it);
-:meth:`HostLine.end_source` forgets a sender that went away.
+:meth:`HostLine.open_source` / :meth:`HostLine.end_source` tell the line which
+hosts are connected.  The echo is part of the motor's answer to a line (ch. 3 K23
+8): a host alone on the line sees it byte by byte as it types; while other hosts are
+connected each line's echo goes out whole at its line end, just before what the
+line answers, so one host's echo never runs into another's (docs/fidelity.md
+"Several hosts on COM0").
 
 COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
 :attr:`HostLine.mode` then takes the received bytes instead of the text line,
@@ -42,6 +47,9 @@ BAUD_RATES: dict[int, int] = {0: 38400, 1: 9600, 2: 19200, 3: 57600, 4: 115200, 
 MAX_LINE = 512
 
 ByteListener = Callable[[bytes], None]
+
+#: :attr:`HostLine._open_echo` when no sender's echo is half-way out (``None`` is a sender).
+_NOBODY = object()
 
 
 @dataclass(init=False, unsafe_hash=True)
@@ -92,6 +100,10 @@ class HostLine:
         self._settings = settings
         self.pacing = pacing
         self._assembly: dict[object, _Assembly] = {}
+        #: Connected hosts (:meth:`open_source`); the echo is typed when one is alone.
+        self._hosts: set[object] = set()
+        #: The sender whose typed echo ends the output so far, without its line end.
+        self._open_echo: object = _NOBODY
         #: The sender of the line being run (``None``: the single default host).
         self.source: object = None
         #: Called with a source that went away (its bank upload ends with it).
@@ -118,6 +130,7 @@ class HostLine:
         """Send raw bytes to the host (paced when pacing is on)."""
         if not data:
             return
+        self._open_echo = _NOBODY
         data = bytes(data)                 # a buffer the caller may reuse: copied
         if not self.pacing:
             self._deliver(data)
@@ -179,7 +192,8 @@ class HostLine:
         """Bytes for the RS-232 text line (also what follows a Modbus escape, 5.6.9)."""
         settings = self._settings()
         asm = self._assembly_of(source)
-        echo = bytearray()
+        typed = self._alone(source)
+        echo = bytearray()          # typed: this chunk's echo, written as it comes
         failure: Exception | None = None
         for byte in data:
             if byte == 0x0A and asm.last_was_cr:
@@ -188,9 +202,10 @@ class HostLine:
             asm.last_was_cr = byte == 0x0D
             if byte in (0x0D, 0x0A):
                 if settings.echo:
-                    echo += settings.delimiter
-                    self.write(bytes(echo))
-                    echo.clear()
+                    self._echo_line_end(asm, source, echo, settings.delimiter, typed)
+                echo.clear()
+                asm.held.clear()
+                asm.shown = asm.cut = False
                 try:
                     self._end_line(asm, source)
                 except Exception as exc:  # isolate the line; report after the chunk
@@ -198,26 +213,65 @@ class HostLine:
                 settings = self._settings()  # the line may have changed K23/K70
                 continue
             if settings.echo:
-                echo.append(byte)
+                if typed:
+                    echo.append(byte)
+                elif len(asm.held) < MAX_LINE:
+                    asm.held.append(byte)
             if len(asm.buf) >= MAX_LINE:
                 asm.overflow = True
             else:
                 asm.buf.append(byte)
         if echo:
+            if asm.held:                 # held while others were connected: first
+                echo[:0] = asm.held
+                asm.held.clear()
             self.write(bytes(echo))
+            asm.shown = True
+            self._open_echo = source
         if failure is not None:
             raise failure
+
+    def _alone(self, source: object) -> bool:
+        """Whether ``source`` is the only host connected (its echo goes out as typed)."""
+        hosts = self._hosts
+        return not hosts or (len(hosts) == 1 and source in hosts)
+
+    def _echo_line_end(self, asm: "_Assembly", source: object, echo: bytearray,
+                       delimiter: bytes, typed: bool) -> None:
+        """The echo at the end of a line: the rest of the line and the delimiter; the
+        whole line when what was shown of it was cut off by another host's line (or,
+        while hosts share the line, by anything)."""
+        if asm.cut or (asm.shown and not typed and self._open_echo is not source):
+            out = bytes(asm.buf) + delimiter
+        else:
+            out = bytes(asm.held) + bytes(echo) + delimiter
+        other = self._open_echo
+        if other is not _NOBODY and other is not source:
+            # another host's typed echo is half-way out: end it there, and it is sent
+            # again whole at its own line end
+            out = delimiter + out
+            cut = self._assembly.get(other)
+            if cut is not None:
+                cut.cut = True
+        self.write(out)
 
     def discard_partial(self, source: object = None) -> None:
         """Forget a partly received line of ``source`` (its sender went away mid-line)."""
         asm = self._assembly.get(source)
         if asm is not None:
             asm.buf.clear()
-            asm.overflow = False
+            asm.held.clear()
+            asm.overflow = asm.shown = asm.cut = False
             asm.last_was_cr = False
+
+    def open_source(self, source: object) -> None:
+        """A host connected (a TCP client, the pty, stdin): while another one is
+        connected too, each line's echo goes out whole at its line end."""
+        self._hosts.add(source)
 
     def end_source(self, source: object) -> None:
         """``source`` went away: forget its half line and end what it owned."""
+        self._hosts.discard(source)
         if source is None:
             return
         self._assembly.pop(source, None)
@@ -239,11 +293,16 @@ class HostLine:
 
 
 class _Assembly:
-    """One sender's line in progress: its bytes, over-long flag and CRLF state."""
+    """One sender's line in progress: its bytes, over-long flag and CRLF state, and
+    its echo: held back (``held``), partly shown (``shown``), cut off by another
+    host's line (``cut``)."""
 
-    __slots__ = ("buf", "overflow", "last_was_cr")
+    __slots__ = ("buf", "overflow", "last_was_cr", "held", "shown", "cut")
 
     def __init__(self) -> None:
         self.buf = bytearray()
         self.overflow = False
         self.last_was_cr = False
+        self.held = bytearray()
+        self.shown = False
+        self.cut = False

@@ -28,7 +28,8 @@ from .signals.encoder import ExternalEncoder, Gearing
 from .programs.evaluate import pack_string
 from .state.firmware import Firmware
 from .signals.io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
-                         OUT_ORIGIN_DONE, OUT_PUSH, OUT_ROTATION_PULSE, DigitalIO)
+                         OUT_ORIGIN_DONE, OUT_PUSH, OUT_PUSH_AT_LEVEL, OUT_ROTATION_PULSE,
+                         DigitalIO)
 from .signals.manual import ManualMotion
 from .state.memory import Memory, VNumber, VState, VString
 from .state.param_table import ParamTable
@@ -69,9 +70,9 @@ class Motor(Supervision):
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
-                            self._output_function_signal,
-                            {3: 1, 4: 2} if firmware.name == "cm1" else None,
-                            one_logic=firmware.name == "cm1")
+                            self._output_function_signal, firmware.output_functions,
+                            one_logic=firmware.one_logic,
+                            inverting_logic=firmware.inverting_logic)
         self.torque_limit = 100
         self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
         self.alarm = 0
@@ -460,10 +461,13 @@ class Motor(Supervision):
             return not self.axis.enabled
         if function == OUT_PUSH:
             return self.push.active
+        if function == OUT_PUSH_AT_LEVEL:
+            return self.push.at_level
         return False
 
     def set_output(self, number: int, on: bool) -> None:
-        """``O#``/``F#`` (2.1.2); only general-use outputs (K34 digit 3) follow."""
+        """``O#``/``F#`` (2.1.2); only outputs whose K34 function follows that command
+        change (CM2 digit 3; CM1 0, 3, 4)."""
         if self.io.set_general(number, on):
             self.report_outputs()
 

@@ -26,7 +26,8 @@ import time
 from typing import Any
 
 from ...errors import TransportError
-from ..transports.base import Port, Transport, close_stream_server
+from ..transports.base import Port
+from ..transports.stream_server import StreamServer
 from .adapter import Cm1Module
 from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
 from .encapsulation import INVALID_LENGTH, Frame
@@ -62,7 +63,7 @@ class _Datagrams(asyncio.DatagramProtocol):
         log.debug("enip: udp error %s", exc)
 
 
-class EnipTransport(Transport):
+class EnipTransport(StreamServer):
     """Serve the CM1 EtherNet/IP module of motor ``motor`` (see module docstring)."""
 
     name = "enip"
@@ -70,24 +71,19 @@ class EnipTransport(Transport):
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
                  io_port: int = DEFAULT_IO_PORT, *, motor: int = 1,
                  priority: int | None = None) -> None:
-        super().__init__()
+        super().__init__(host, port, max_clients=MAX_TCP_CLIENTS)
         self.priority = priority
-        self.host = host
-        self.requested_port = port
         self.requested_io_port = io_port
         self.motor = motor
         self.module: Cm1Module | None = None
         self.table: ConnectionTable | None = None
         self.router: Router | None = None
         self.sessions = Sessions()
-        self.bound: tuple[str, int] | None = None
         self.io_port = io_port
-        self._server: asyncio.base_events.Server | None = None
         self._udp: list[asyncio.DatagramTransport] = []
         self._io: asyncio.DatagramTransport | None = None
         self._handle: asyncio.TimerHandle | asyncio.Handle | None = None
         self._closed = True
-        self._writers: set[asyncio.StreamWriter] = set()
         self.lock = threading.Lock()
         self.producer: Producer | None = None
         self._io_sock: socket.socket | None = None
@@ -142,7 +138,7 @@ class EnipTransport(Transport):
     async def _listen_tcp_udp(self) -> None:
         """TCP and UDP on the same port number (44818)."""
         loop = asyncio.get_running_loop()
-        server = await asyncio.start_server(self._serve, self.host, self.requested_port)
+        server = await self.start_server()
         sockname = server.sockets[0].getsockname()
         try:
             udp, _ = await loop.create_datagram_endpoint(
@@ -171,12 +167,10 @@ class EnipTransport(Transport):
         return sock
 
     def describe(self) -> str:
-        host, port = self.bound or (self.host, self.requested_port)
-        return f"enip: {host}:{port} (I/O udp {self.io_port})"
+        return f"{super().describe()} (I/O udp {self.io_port})"
 
     def info(self) -> dict[str, Any]:
-        host, port = self.bound or (self.host, self.requested_port)
-        return {"host": host, "port": port, "io_port": self.io_port}
+        return {**super().info(), "io_port": self.io_port}
 
     async def close(self) -> None:
         self._closed = True
@@ -189,8 +183,7 @@ class EnipTransport(Transport):
         if self.table is not None:
             with self.lock:
                 self.table.close_all()
-        await close_stream_server(self._server, self._writers)
-        self._server = None
+        await self.close_server()
         for udp in self._udp:
             udp.close()
         self._udp.clear()
@@ -200,16 +193,16 @@ class EnipTransport(Transport):
         self.finished.set()
 
     # -- TCP ---------------------------------------------------------------------------------
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    def refuse(self, writer: asyncio.StreamWriter) -> None:
+        writer.transport.abort()
+
+    async def serve_connection(self, reader: asyncio.StreamReader,
+                               writer: asyncio.StreamWriter, peer: str) -> None:
         assert self.router is not None
-        peer = writer.get_extra_info("peername") or ("0.0.0.0", 0)
-        if len(self._writers) >= MAX_TCP_CLIENTS:
-            log.info("enip: client %s refused: %d clients already", peer, MAX_TCP_CLIENTS)
-            writer.transport.abort()
-            return
-        self._writers.add(writer)
+        remote = writer.get_extra_info("peername") or ("0.0.0.0", 0)
         local = writer.get_extra_info("sockname") or (self.host, 0)
-        conn = Connection(self.router, self.sessions, (peer[0], peer[1]), (local[0], local[1]))
+        conn = Connection(self.router, self.sessions, (remote[0], remote[1]),
+                          (local[0], local[1]))
         frames = FrameReader()
         try:
             while not conn.closing:
@@ -220,18 +213,9 @@ class EnipTransport(Transport):
                 if not self._answer_frames(conn, frames, writer):
                     break
                 await writer.drain()
-        except (ConnectionError, OSError) as exc:
-            log.info("enip: client %s: %s", peer, exc)
-        except asyncio.CancelledError:
-            pass
-        except Exception:  # one client's trouble never escapes as a task error
-            log.exception("enip: client %s failed", peer)
         finally:
             with self.lock:
                 conn.close()
-            self._writers.discard(writer)
-            if not writer.transport.is_closing():
-                writer.transport.close()
 
     def _answer_frames(self, conn: Connection, frames: FrameReader,
                        writer: asyncio.StreamWriter) -> bool:

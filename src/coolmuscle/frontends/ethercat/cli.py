@@ -6,6 +6,7 @@ Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typ
 from __future__ import annotations
 
 import sys
+from typing import Any, NoReturn
 
 import typer
 
@@ -46,6 +47,22 @@ _MASTER_IF = typer.Option("cmlab-master", "--master-if", help="The master's end.
 _SLAVE_IF = typer.Option("cmlab-slave", "--slave-if", help="The slave's end (inside the namespace).")
 
 
+def _fail(text: str, code: int) -> NoReturn:
+    typer.echo(f"coolmuscle: {text}", err=True)
+    raise typer.Exit(code)
+
+
+def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Any:
+    """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
+    root's tools); a ``LabError`` is one line and exit status 1."""
+    from . import lab
+    run = lab.up if step == "up" else lab.down
+    try:
+        return run(namespace, master_if, slave_if)
+    except lab.LabError as exc:
+        _fail(str(exc), 1)
+
+
 @lab_app.command("up")
 def lab_up(
     namespace: str = _NAMESPACE,
@@ -53,13 +70,7 @@ def lab_up(
     slave_if: str = _SLAVE_IF,
 ) -> None:
     """Make the veth pair and print which end to give the master."""
-    from .lab import LabError, up
-    try:
-        lab = up(namespace, master_if, slave_if)
-    except LabError as exc:
-        typer.echo(f"coolmuscle: {exc}", err=True)
-        raise typer.Exit(1) from None
-    typer.echo(lab.instructions())
+    typer.echo(_lab("up", namespace, master_if, slave_if).instructions())
 
 
 @lab_app.command("down")
@@ -69,12 +80,7 @@ def lab_down(
     slave_if: str = _SLAVE_IF,
 ) -> None:
     """Remove the pair and the namespace that ``up`` made (nothing else)."""
-    from .lab import LabError, down
-    try:
-        removed = down(namespace, master_if, slave_if)
-    except LabError as exc:
-        typer.echo(f"coolmuscle: {exc}", err=True)
-        raise typer.Exit(1) from None
+    removed = _lab("down", namespace, master_if, slave_if)
     typer.echo("removed: " + ", ".join(removed) if removed else "nothing to remove")
 
 
@@ -88,6 +94,5 @@ def esi(
     try:
         codes = tuple(ident.variant(b).code for b in bridge)
     except ValueError as exc:
-        typer.echo(f"coolmuscle: {exc}", err=True)
-        raise typer.Exit(2) from None
+        _fail(str(exc), 2)
     sys.stdout.write(esi_text(codes))

@@ -6,7 +6,9 @@
   the front end's entry point: no exception from the model escapes it
   (docs/architecture.md rule 5).
 * :class:`Lane` is one host's input (a TCP client, the pty program, stdin): each
-  lane's bytes are assembled into lines apart (``HostLine.feed(source=lane)``) and
+  lane is a host of the line while it is open (``HostLine.open_source``: a host
+  alone sees its echo as it types, several see each line's echo whole), its
+  bytes are assembled into lines apart (``HostLine.feed(source=lane)``) and
   the lanes take turns, one piece (a whole line, or the unfinished tail) each, so
   no host can starve another by flooding or by leaving a line unfinished.  The
   work done per wake-up of the event loop is bounded (``MAX_PIECES_PER_WAKE``,
@@ -164,6 +166,13 @@ class Port:
         scale = getattr(getattr(self.driver, "clock", None), "scale", 1.0) or 1.0
         loop.call_later(after_ns / 1e9 / scale, resume)
 
+    def _open_source(self, source: object) -> None:
+        """A host joined the line: the host line sends whole-line echoes while it is
+        not alone (``HostLine.open_source``)."""
+        opened = getattr(self.host_line, "open_source", None)
+        if opened is not None:
+            opened(source)
+
     def _close_lane(self, lane: "Lane") -> None:
         if lane in self._ready:
             self._ready.remove(lane)
@@ -211,6 +220,7 @@ class Lane:
         self._paused = False
         self._pause: Callable[[], None] | None = None
         self._resume: Callable[[], None] | None = None
+        port._open_source(self.source)
 
     def set_flow(self, pause: Callable[[], None], resume: Callable[[], None]) -> None:
         """Reader controls: called when the backlog passes the high / low water mark."""

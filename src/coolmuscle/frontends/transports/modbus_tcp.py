@@ -32,7 +32,8 @@ import time
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport, close_stream_server
+from .base import DEFAULT_MAX_BUFFER, Port
+from .stream_server import DEFAULT_MAX_CLIENTS, StreamServer
 
 log = logging.getLogger(__name__)
 
@@ -42,12 +43,11 @@ READ_SIZE = 4096
 #: Requests answered per wake-up, and wall time, before the others get a turn.
 MAX_ADUS_PER_WAKE = 32
 MAX_SECONDS_PER_WAKE = 0.01
-DEFAULT_MAX_CLIENTS = 64
 HEADER = 7            # transaction (2), protocol (2), length (2), unit (1)
 MAX_LENGTH = 254      # unit id + the largest PDU (253 bytes)
 
 
-class ModbusTcpTransport(Transport):
+class ModbusTcpTransport(StreamServer):
     """Serve the chain's Modbus map over TCP (see module docstring)."""
 
     name = "modbus-tcp"
@@ -55,15 +55,8 @@ class ModbusTcpTransport(Transport):
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  max_buffer: int = DEFAULT_MAX_BUFFER,
                  max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
-        super().__init__()
-        self.host = host
-        self.requested_port = port
+        super().__init__(host, port, max_clients=max_clients)
         self.max_buffer = max_buffer
-        self.max_clients = max_clients
-        self.refused_clients = 0
-        self.bound: tuple[str, int] | None = None
-        self._server: asyncio.base_events.Server | None = None
-        self._writers: set[asyncio.StreamWriter] = set()
         self._slave: Any = None
         self.requests = 0
         self.closed_connections = 0
@@ -79,68 +72,34 @@ class ModbusTcpTransport(Transport):
             raise TransportError(f"modbus-tcp: firmware {firmware_name(device)} has no "
                                  "Modbus (K78-K85 are other parameters there)")
         self._slave = getattr(device, "modbus", None) or ModbusSlave(device)
-        try:
-            self._server = await asyncio.start_server(self._serve, self.host,
-                                                      self.requested_port)
-        except OSError as exc:
-            raise TransportError(f"modbus-tcp: cannot listen on {self.host}:"
-                                 f"{self.requested_port}: {exc.strerror or exc}") from exc
-        sockname = self._server.sockets[0].getsockname()
-        self.bound = (sockname[0], sockname[1])
-
-    def describe(self) -> str:
-        host, port = self.bound or (self.host, self.requested_port)
-        return f"modbus-tcp: [{host}]:{port}" if ":" in host else f"modbus-tcp: {host}:{port}"
-
-    def info(self) -> dict[str, Any]:
-        host, port = self.bound or (self.host, self.requested_port)
-        return {"host": host, "port": port}
+        await self.listen()
 
     async def close(self) -> None:
-        await close_stream_server(self._server, self._writers)
-        self._server = None
+        await self.close_server()
         self.finished.set()
 
     # -- one connection ---------------------------------------------------------------
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        peer = writer.get_extra_info("peername")
-        if len(self._writers) >= self.max_clients:
-            self.refused_clients += 1
-            log.warning("modbus-tcp: refused %s: %d clients connected (the limit)",
-                        peer, len(self._writers))
-            writer.transport.close()
-            return
-        self._writers.add(writer)
+    async def serve_connection(self, reader: asyncio.StreamReader,
+                               writer: asyncio.StreamWriter, peer: str) -> None:
         buf = bytearray()
-        try:
+        while True:
+            data = await reader.read(READ_SIZE)
+            if not data:
+                break
+            buf += data
             while True:
-                data = await reader.read(READ_SIZE)
-                if not data:
+                out, ok, more = self._take_adus(buf)
+                if out:
+                    writer.write(bytes(out))
+                    if writer.transport.get_write_buffer_size() > self.max_buffer:
+                        await writer.drain()   # it does not read: read no more of it
+                if not ok or not more:
                     break
-                buf += data
-                while True:
-                    out, ok, more = self._take_adus(buf)
-                    if out:
-                        writer.write(bytes(out))
-                        if writer.transport.get_write_buffer_size() > self.max_buffer:
-                            await writer.drain()   # it does not read: read no more of it
-                    if not ok or not more:
-                        break
-                    await asyncio.sleep(0)         # the budget is spent: others' turn
-                if not ok:
-                    self.closed_connections += 1
-                    log.info("modbus-tcp: %s sent a frame without valid length; closed", peer)
-                    break
-        except (ConnectionError, OSError) as exc:
-            log.info("modbus-tcp: client %s: %s", peer, exc)
-        except asyncio.CancelledError:
-            pass
-        except Exception:  # one client's trouble never escapes as a task error
-            log.exception("modbus-tcp: client %s failed", peer)
-        finally:
-            self._writers.discard(writer)
-            if not writer.transport.is_closing():
-                writer.transport.close()
+                await asyncio.sleep(0)         # the budget is spent: others' turn
+            if not ok:
+                self.closed_connections += 1
+                log.info("modbus-tcp: %s sent a frame without valid length; closed", peer)
+                break
 
     def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool, bool]:
         """Answer the complete ADUs at the start of ``buf`` (consumed) within the

@@ -27,15 +27,13 @@ import logging
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport, close_stream_server
+from .base import DEFAULT_MAX_BUFFER, Lane, Port
+from .stream_server import DEFAULT_MAX_CLIENTS, StreamServer
 
 log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5150
-
-#: Clients served at once; more are refused with one line (docs/reliability.md).
-DEFAULT_MAX_CLIENTS = 64
 
 READ_SIZE = 4096
 
@@ -60,12 +58,11 @@ class _Client:
     """One connected host: its stream, its input lane and its output queue."""
 
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
-                 lane: Lane) -> None:
+                 lane: Lane, peer: str) -> None:
         self.reader = reader
         self.writer = writer
         self.lane = lane
-        peer = writer.get_extra_info("peername")
-        self.peer = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
+        self.peer = peer
         self.pending = bytearray()
         self.flush_scheduled = False
         self.dropped = False
@@ -76,7 +73,7 @@ class _Client:
         return 0 if transport.is_closing() else transport.get_write_buffer_size()
 
 
-class TcpTransport(Transport):
+class TcpTransport(StreamServer):
     """Serve the host line to TCP clients (see module docstring for the rules)."""
 
     name = "tcp"
@@ -84,40 +81,19 @@ class TcpTransport(Transport):
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  max_buffer: int = DEFAULT_MAX_BUFFER,
                  max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
-        super().__init__()
-        self.host = host
-        self.requested_port = port
+        super().__init__(host, port, max_clients=max_clients)
         self.max_buffer = max_buffer
-        self.max_clients = max_clients
-        self._server: asyncio.base_events.Server | None = None
         self._clients: list[_Client] = []
         self._unsubscribe: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self.bound: tuple[str, int] | None = None
         self.dropped_clients = 0
-        self.refused_clients = 0
 
     # -- life cycle -----------------------------------------------------
     async def start(self, port: Port) -> None:
         self.port = port
         self._loop = asyncio.get_running_loop()
-        try:
-            self._server = await asyncio.start_server(self._serve_client, self.host,
-                                                      self.requested_port)
-        except OSError as exc:
-            raise TransportError(f"tcp: cannot listen on {self.host}:{self.requested_port}: "
-                                 f"{exc.strerror or exc}") from exc
-        sockname = self._server.sockets[0].getsockname()
-        self.bound = (sockname[0], sockname[1])
+        await self.listen()
         self._unsubscribe = port.add_listener(self._broadcast)
-
-    def describe(self) -> str:
-        host, port = self.bound or (self.host, self.requested_port)
-        return f"tcp: [{host}]:{port}" if ":" in host else f"tcp: {host}:{port}"
-
-    def info(self) -> dict[str, Any]:
-        host, port = self.bound or (self.host, self.requested_port)
-        return {"host": host, "port": port}
 
     @property
     def clients(self) -> int:
@@ -128,26 +104,19 @@ class TcpTransport(Transport):
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
-        await close_stream_server(self._server, [client.writer for client in self._clients])
-        self._server = None
+        await self.close_server()
         self.finished.set()
 
     # -- input ----------------------------------------------------------
-    async def _serve_client(self, reader: asyncio.StreamReader,
-                            writer: asyncio.StreamWriter) -> None:
+    def refuse(self, writer: asyncio.StreamWriter) -> None:
+        writer.write(b"coolmuscle: too many clients (%d); connection refused\r\n"
+                     % self.max_clients)
+        writer.close()
+
+    async def serve_connection(self, reader: asyncio.StreamReader,
+                               writer: asyncio.StreamWriter, peer: str) -> None:
         assert self.port is not None
-        if len(self._clients) >= self.max_clients:
-            self.refused_clients += 1
-            log.warning("tcp: refused a client: %d clients connected (the limit)",
-                        len(self._clients))
-            try:
-                writer.write(b"coolmuscle: too many clients (%d); connection refused\r\n"
-                             % self.max_clients)
-                writer.close()
-            except (ConnectionError, OSError):
-                pass
-            return
-        client = _Client(reader, writer, self.port.open_lane("tcp"))
+        client = _Client(reader, writer, self.port.open_lane("tcp"), peer)
         room = asyncio.Event()
         room.set()
         client.lane.set_flow(room.clear, room.set)
@@ -162,22 +131,10 @@ class TcpTransport(Transport):
                 await room.wait()           # its lines wait their turn: read no further
                 if client.unread() and not client.dropped:
                     await writer.drain()    # its own output backs up: stop reading it
-        except (ConnectionError, OSError) as exc:
-            log.info("tcp: client %s: %s", client.peer, exc)
-        except asyncio.CancelledError:
-            pass
-        except Exception:  # never let one client's trouble escape as a task error
-            log.exception("tcp: client %s failed", client.peer)
         finally:
-            self._forget(client)
-
-    def _forget(self, client: _Client) -> None:
-        if client in self._clients:
             self._clients.remove(client)
-        client.lane.close()         # its half line and its bank upload end with it
-        if not client.writer.transport.is_closing():
-            client.writer.transport.close()
-        log.info("tcp: client %s disconnected", client.peer)
+            client.lane.close()         # its half line and its bank upload end with it
+            log.info("tcp: client %s disconnected", client.peer)
 
     # -- output ---------------------------------------------------------
     def _broadcast(self, data: bytes) -> None:

@@ -3,20 +3,40 @@
 Inputs: the electrical level of each input is driven from outside (device API,
 machine file); the input *signal* applies the logic of K26 (digit odd = on when the
 port is off).  Outputs: each output's *signal* comes from its K34 function (general
-use = the ``O``/``F`` commands); the *port* applies the logic of K33 (1 = high
-active).  ?70 and ?50 report the input signals and the output ports as hex words.
+use = the ``O``/``F`` commands); the *port* applies the logic of K33 (CM2: 1 = high
+active; CM1: 0 = normally open).  ?70 and ?50 report the input signals and the output
+ports as hex words.
 
-The input functions (K27–K32) and the output functions other than general use are
-evaluated by the motor, which passes a ``function_signal`` callback.
+A K34 digit names an output *function* through the firmware's table
+(:data:`CML_OUTPUT_FUNCTIONS`, :data:`CM1_OUTPUT_FUNCTIONS`): the same digit is not
+the same function on CM1 (cm1-ethernetip-interface-manual.txt Appendix A K34).
+The input functions (K27–K32) and the output functions other than the commanded
+ones are evaluated by the motor, which passes a ``function_signal`` callback.
 """
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Sequence
 
-#: K34 digit values (ch. 3 K34).
+#: Output functions; CM2's K34 digit of each is its number (ch. 3 K34).
 OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE = 0, 1, 2, 3, 4
 OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH = 6, 7, 8, 9
+#: Functions of CM1 only (Appendix A K34): "3:CML O1/F1", "4:CML O2/F2" (whichever
+#: output it is), "5:Analog Output", "9: Torque Limit reached - Push Mode Only".
+OUT_FOLLOWS_O1, OUT_FOLLOWS_O2, OUT_ANALOG, OUT_PUSH_AT_LEVEL = 11, 12, 15, 19
+
+#: K34 digit -> output function, cml-users-guide.txt ch. 3 K34 (5 is "—").
+CML_OUTPUT_FUNCTIONS: tuple[int, ...] = (
+    OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE, OUT_NONE,
+    OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH)
+#: K34 digit -> output function, cm1-ethernetip-interface-manual.txt Appendix A K34:
+#: "0:Command 1:Inposition 2:Alarm 3:CML O1/F1 4:CML O2/F2 5:Analog Output 6:merge
+#: motion 7:Quadrature phase output 8: Motor Free 9: Torque Limit reached - Push Mode
+#: Only".  "Command" is read as: the output follows the commands O#/F# of its own
+#: number (docs/fidelity.md "CM1 profile").
+CM1_OUTPUT_FUNCTIONS: tuple[int, ...] = (
+    OUT_GENERAL, OUT_IN_POSITION, OUT_ALARM, OUT_FOLLOWS_O1, OUT_FOLLOWS_O2, OUT_ANALOG,
+    OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH_AT_LEVEL)
 
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
@@ -34,18 +54,20 @@ class DigitalIO:
 
     def __init__(self, inputs: int, outputs: int, param: Callable[[int], int],
                  function_signal: Callable[[int, int], bool] = lambda fn, n: False,
-                 commanded: dict[int, int] | None = None, one_logic: bool = False) -> None:
-        """``commanded``: K34 digit -> the ``O#``/``F#`` number an output with that
-        digit follows (0: its own number).  CM2: {3: 0} (3 = general use); CM1:
-        {3: 1, 4: 2} (CM1 manual, K34: "3:CML O1/F1 4:CML O2/F2").  ``one_logic``: K26
-        and K33 are one value for every input / output (CM1: "K33 Output Logic
-        0:Normally open 1: Normally closed"), not a digit each."""
+                 functions: Sequence[int] = CML_OUTPUT_FUNCTIONS, one_logic: bool = False,
+                 inverting_logic: int = 0) -> None:
+        """``functions``: K34 digit -> output function (the firmware's table).
+        ``one_logic``: K26 and K33 are one value for every input / output (CM1: "K33
+        Output Logic 0:Normally open 1: Normally closed"), not a digit each.
+        ``inverting_logic``: the K33 value whose port is the inverse of its signal
+        (CM2 0, "Low Active"; CM1 1, "Normally closed")."""
         self.input_count = inputs
         self.output_count = outputs
         self._param = param
         self._function_signal = function_signal
-        self._commanded: dict[int, int] = {OUT_GENERAL: 0} if commanded is None else commanded
+        self._functions = tuple(functions)
         self._one_logic = one_logic
+        self._inverting_logic = inverting_logic
         self.levels = [False] * (inputs + 1)        # index 1..inputs (electrical)
         self.general = [False] * (outputs + 1)      # O/F state, index 1..outputs
 
@@ -74,15 +96,21 @@ class DigitalIO:
         return word
 
     # -- outputs --------------------------------------------------------------
-    def output_function(self, number: int) -> int:
-        return digit(self._param(34), number)
+    def output_function(self, number: int, k34: int | None = None) -> int:
+        """The function (``OUT_*``) of output ``number`` by K34 now, or by the K34
+        value ``k34`` (a trace's past instant)."""
+        return self._functions[digit(self._param(34) if k34 is None else k34, number)]
 
     def command_of(self, number: int) -> int | None:
         """The ``O#``/``F#`` number output ``number`` follows now (K34), or ``None``."""
-        follows = self._commanded.get(self.output_function(number))
-        if follows is None:
-            return None
-        return number if follows == 0 else follows
+        fn = self.output_function(number)
+        if fn == OUT_GENERAL:
+            return number
+        if fn == OUT_FOLLOWS_O1:
+            return 1
+        if fn == OUT_FOLLOWS_O2:
+            return 2
+        return None
 
     def set_general(self, number: int, on: bool) -> bool:
         """``O#``/``F#``: only outputs whose K34 digit follows command ``number`` change
@@ -104,15 +132,21 @@ class DigitalIO:
         if follows is not None:
             return self.general[follows]
         fn = self.output_function(number)
-        if fn == OUT_NONE:
+        if fn == OUT_NONE or fn == OUT_ANALOG:      # the analog output: no digital signal
             return False
         return self._function_signal(fn, number)
 
     def output_port(self, number: int) -> bool:
-        """The port state: K33 digit 1 = high active, 0 = low active (ch. 3 K33)."""
-        high_active = digit(self._param(33), 1 if self._one_logic else number) == 1
-        signal = self.output_signal(number)
-        return signal if high_active else not signal
+        """The port state of output ``number`` now (K33 applied)."""
+        return self.port_of(number, self.output_signal(number))
+
+    def port_of(self, number: int, signal: bool, k33: int | None = None) -> bool:
+        """The port for ``signal`` by K33 now, or by the K33 value ``k33``: CM2 digit 1
+        high active, 0 low active (ch. 3 K33); CM1 0 normally open, 1 normally closed
+        (Appendix A K33)."""
+        value = self._param(33) if k33 is None else k33
+        inverted = digit(value, 1 if self._one_logic else number) == self._inverting_logic
+        return signal != inverted
 
     def output_word(self) -> int:
         """?50: bit 0 = output 1."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .io import OUT_ROTATION_PULSE, digit
+from .io import OUT_ROTATION_PULSE
 from ..motion.trajectory import Schmitt, Timeline, Track
 
 if TYPE_CHECKING:
@@ -51,10 +51,10 @@ class RotationPulses:
 
     # -- configuration --------------------------------------------------------
     def outputs(self) -> list[int]:
-        """Output numbers whose K34 digit is 7."""
-        k34 = self.motor.k(34)
-        return [n for n in range(1, self.motor.io.output_count + 1)
-                if digit(k34, n) == OUT_ROTATION_PULSE]
+        """Output numbers whose K34 function is the rotation pulse (digit 7)."""
+        io = self.motor.io
+        return [n for n in range(1, io.output_count + 1)
+                if io.output_function(n) == OUT_ROTATION_PULSE]
 
     def quadrature(self) -> bool:
         """Outputs 1 and 2 both 7: quadrature encoder output (ch. 3 K34, K24)."""

@@ -9,8 +9,8 @@ limits, U1/U2 scaling, servo or stepper drive and the ``?85`` version title.
 * ``RT3`` follows cm-banks-rt3.txt (older firmware): K85/K87 ladder parameters,
   its register counts ("2. Registers") and U1 scaling; everything it does not
   mention is taken from table 6.1.
-* ``CM1`` follows cm1-ethernetip-interface-manual.txt Appendix A for the K table;
-  banks as in RT3.
+* ``CM1`` follows cm1-ethernetip-interface-manual.txt Appendix A for the K table,
+  its K34 output functions and its K26/K33 logic (one value each); banks as in RT3.
 
 The choices made where the manuals are silent are listed in docs/fidelity.md.
 """
@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Mapping
 
+from ..signals.io import CM1_OUTPUT_FUNCTIONS, CML_OUTPUT_FUNCTIONS
 from .params import ParamSpec, chosen, digitwise, per_channel, ranged, reserved
 from .units import RESOLUTIONS
 
@@ -76,6 +77,13 @@ class Firmware:
     ladder_displays: bool = False
     program_banks: int = 30
     ladder_banks: int = 30
+    #: K34 digit -> output function (ch. 3 K34; CM1: its Appendix A K34)
+    output_functions: tuple[int, ...] = CML_OUTPUT_FUNCTIONS
+    #: K26 and K33 are one value for every input / output (CM1 Appendix A), not a digit each
+    one_logic: bool = False
+    #: The K33 value whose port is the inverse of its signal: ch. 3 K33 0 "Low Active";
+    #: CM1 Appendix A K33 1 "Normally closed"
+    inverting_logic: int = 0
     series: str = "CM2"
     version: str = "3.10"
     motor_type: MotorType = "R"
@@ -354,6 +362,7 @@ CM1 = Firmware(
     ladder_bank_k=85, ladder_period_k=87, trig="rt3", drive="stepper",
     states=_RT3_STATES, max_bank_steps=200, ladder_displays=True,
     series="CM1", version="3.00", motor_type="C", serial="0000A00000",
+    output_functions=CM1_OUTPUT_FUNCTIONS, one_logic=True, inverting_logic=1,
 )
 
 FIRMWARES: Mapping[str, Firmware] = {f.name: f for f in (CM2, RT3, CM1)}

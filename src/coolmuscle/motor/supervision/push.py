@@ -51,6 +51,12 @@ class Push:
         """A push is running (Ux 32, K34 function 9)."""
         return self.state == PUSHING
 
+    @property
+    def at_level(self) -> bool:
+        """Pushing with the torque at the K60 level (CM1 K34 function 9, "Torque Limit
+        reached - Push Mode Only", cm1-ethernetip-interface-manual.txt Appendix A)."""
+        return self.state == PUSHING and self.since is not None
+
     def status_bits(self) -> int:
         """The Ux value the push contributes (6.6 ?99): 32, 40, 256 or 0."""
         return _STATUS_BITS.get(self.state or "", 0)

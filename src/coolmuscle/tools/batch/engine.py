@@ -13,14 +13,18 @@ the same plain-value job, so the outcomes are the same whichever engine ran them
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import logging
 import multiprocessing
+import multiprocessing.forkserver
+import multiprocessing.resource_tracker
 import os
 import re
 import signal
 import socket
+import threading
 import time
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from ...errors import CoolMuscleError
 from .job import Job, Outcome, execute, execute_many
@@ -80,14 +84,26 @@ class PoolEngine(Engine):
         # from this process (whose progress-bar thread a fork would copy mid-lock)
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["coolmuscle.tools.batch.job", "coolmuscle.chain"])
+        # the server (and so every worker forked from it) starts with Ctrl-C blocked: a
+        # terminal's Ctrl-C reaches the whole process group, and the server's first
+        # second (its own start-up, the preload) has Python's default handler: a
+        # KeyboardInterrupt traceback on the user's terminal
+        # (the resource tracker first: starting it unblocks SIGINT again)
+        multiprocessing.resource_tracker.ensure_running()
+        with sigint_held(block=True):
+            multiprocessing.forkserver.ensure_running()
         self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=context,
                                            initializer=_ignore_sigint)
 
     def run(self, jobs: Sequence[Job], on_done: OnDone) -> list[Outcome | None]:
         outcomes: list[Outcome | None] = [None] * len(jobs)
-        futures = {self.pool.submit(execute_many, [jobs[i] for i in part]): part
-                   for part in chunks(len(jobs), self.jobs)}
         try:
+            # a Ctrl-C inside submit (which starts the workers) left a worker the pool
+            # never learnt of: it failed to load its queue, whose semaphores were gone,
+            # with a traceback; held, it lands after the submits, and every worker stops
+            with sigint_held():
+                futures = {self.pool.submit(execute_many, [jobs[i] for i in part]): part
+                           for part in chunks(len(jobs), self.jobs)}
             for future in cf.as_completed(futures):
                 for index, outcome in zip(futures[future], future.result()):
                     outcomes[index] = outcome
@@ -98,17 +114,45 @@ class PoolEngine(Engine):
         return outcomes
 
     def _stop(self) -> None:
-        """Ctrl-C: drop the queued runs and end the running ones now."""
+        """Ctrl-C: end the running runs now, drop the queued ones, and wait until the
+        pool's threads have ended (a thread still closing its pipes when the interpreter
+        exits raced with Python's exit hook: "Bad file descriptor" with a traceback)."""
         # the executor has no public way to end a running task; its processes are ours
         processes = list((getattr(self.pool, "_processes", None) or {}).values())
-        self.pool.shutdown(wait=False, cancel_futures=True)
-        for process in processes:
-            if process.is_alive():
-                process.terminate()
-        self.pool.shutdown(wait=True)
+        with sigint_held():
+            for process in processes:
+                if process.is_alive():
+                    process.terminate()
+            self.pool.shutdown(wait=True, cancel_futures=True)
 
     def close(self) -> None:
-        self.pool.shutdown(wait=True)
+        """Wait for the pool's processes and threads to end (a Ctrl-C meanwhile is
+        held until they have: it must not leave a thread behind)."""
+        with sigint_held():
+            self.pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def sigint_held(block: bool = False) -> Iterator[None]:
+    """Ctrl-C (SIGINT) is held back inside: a handler that only notes it, then, once
+    the block is done, the signal again for the handler that was there before (a
+    ``KeyboardInterrupt`` from Python's default one).  ``block`` also blocks the
+    signal in this thread, so that processes started inside inherit it blocked.
+    Outside the main thread (no signal handlers there) it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: came.append(signum))
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
+    try:
+        yield
+    finally:
+        if mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)   # a pending one: noted now
+        signal.signal(signal.SIGINT, previous)
+        if came:
+            signal.raise_signal(signal.SIGINT)
 
 
 class DaskEngine(Engine):

@@ -34,8 +34,7 @@ from .version import version_text
 from ...errors import TransportError
 from .usage import UsageError
 from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
-                          clear_stop, install_startup_handlers, serve_until_signal,
-                          stop_line, stop_requested)
+                          clear_stop, install_startup_handlers, run_served, stop_line)
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
 from ..script.runner import load_script
@@ -201,15 +200,16 @@ MAX_TIME_SCALE = 1e6
 
 
 async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
-                 state: Path | None, scale: float, label: str | None = None) -> None:
+                 state: Path | None, scale: float, stop: asyncio.Event,
+                 label: str | None = None) -> None:
+    """Start the transports, print the banner, serve until ``stop`` (run by
+    :func:`.stopsignals.run_served`: a stop signal sets it)."""
     from ...frontends.transports.service import Service
 
     service = Service(chain, chosen, scale=scale)
-    loop = asyncio.get_running_loop()
     try:          # a stop signal may land anywhere from here on: close what was started
         await service.start()
-        stop = asyncio.Event()
-        serve_until_signal(loop, stop)   # from "ready" on, a signal is a served stop
+        check_stop()      # a signal during start-up (or swallowed before): one line, 130
         err.print(f"coolmuscle: virtual {label or firmware.value.upper()} {_ids(motors)} "
                   "ready", markup=False)
         where = "   ".join(t.describe() for t in chosen)
@@ -219,10 +219,7 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         if station:
             asked = any(t.name == "modbus-rtu" for t in chosen)
             err.print(_modbus_notice(station, state, asked), markup=False)
-        if stop_requested():          # a signal whose exception was swallowed on the way
-            clear_stop()
-            stop.set()
-        await service.wait(stop)
+        await service.wait(stop)      # from "ready" on, a signal is a served stop
     finally:
         ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
@@ -353,7 +350,8 @@ def sim(
     try:
         check_stop()
         label = fw.upper().replace(",", "/") if ethercat is not None else None
-        asyncio.run(_serve(chain, chosen, motors, firmware, state_dir, time_scale, label))
+        run_served(lambda stop: _serve(chain, chosen, motors, firmware, state_dir, time_scale,
+                                       stop, label))
     finally:
         ignore_stop_signals()
         chain.close()

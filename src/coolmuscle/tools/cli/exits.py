@@ -12,7 +12,7 @@ import os
 import sys
 from typing import Callable
 
-from .stopsignals import SignalStop, ignore_stop_signals, stop_line, stop_requested
+from .stopsignals import Guard, SignalStop, ignore_stop_signals, stop_line, stop_requested
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
@@ -20,9 +20,13 @@ EXIT_INTERNAL = 70
 
 
 def guarded(call: Callable[[], object]) -> None:
-    """Run ``call``; map what escapes it to one line on stderr and an exit status."""
+    """Run ``call``; map what escapes it to one line on stderr and an exit status.
+
+    A stop signal raises :class:`.stopsignals.SignalStop` only inside the ``Guard``,
+    which is inside the ``try``: it lands here at any instant of ``call``."""
     try:
-        call()
+        with Guard():
+            call()
     except SystemExit:
         raise
     except (KeyboardInterrupt, SignalStop) as exc:   # a stop signal outside a serving loop

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import matplotlib
 
@@ -26,6 +26,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from ...motor.signals import io  # noqa: E402
 from ...motor.status import ALARM_BITS, Ux  # noqa: E402
 from ...sim.kernel import NS_PER_S  # noqa: E402
 
@@ -83,16 +84,24 @@ def _changes(values: Sequence[float]) -> bool:
     return any(v != values[0] for v in values)
 
 
-#: K34 output functions (ch. 3 K34) as the timeline labels them.
-OUTPUT_FUNCTIONS = {0: "no function", 1: "in-position", 2: "alarm", 3: "general",
-                    4: "origin done", 6: "merge pulse", 7: "rotation pulse",
-                    8: "motor free", 9: "push"}
+#: Output functions (ch. 3 K34; CM1 Appendix A K34) as the timeline labels them.
+OUTPUT_FUNCTIONS = {io.OUT_NONE: "no function", io.OUT_IN_POSITION: "in-position",
+                    io.OUT_ALARM: "alarm", io.OUT_GENERAL: "general",
+                    io.OUT_ORIGIN_DONE: "origin done", io.OUT_MERGE_PULSE: "merge pulse",
+                    io.OUT_ROTATION_PULSE: "rotation pulse", io.OUT_MOTOR_FREE: "motor free",
+                    io.OUT_PUSH: "push", io.OUT_FOLLOWS_O1: "O1/F1", io.OUT_FOLLOWS_O2: "O2/F2",
+                    io.OUT_ANALOG: "analog", io.OUT_PUSH_AT_LEVEL: "push torque reached"}
+
+
+def _output_functions(motor: Any) -> list[int]:
+    """The function of each output of ``motor`` now (its K34 through its firmware)."""
+    return [motor.io.output_function(n) for n in range(1, motor.io.output_count + 1)]
 
 
 def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
-              k34: int = 0) -> list[tuple[str, list[bool]]]:
+              functions: Sequence[int] = ()) -> list[tuple[str, list[bool]]]:
     """Inputs and outputs that are ever on (or change), as (label, bits); an output is
-    labelled with its K34 function (``OUT1 in-position``)."""
+    labelled with its K34 function, ``functions[n - 1]`` (``OUT1 in-position``)."""
     rows = []
     prefix = f"ID{motor} " if multi else ""
     for kind, field in (("IN", "inputs"), ("OUT", "outputs")):
@@ -100,9 +109,8 @@ def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
             bits = [bool(getattr(s, field) >> n & 1) for s in samples]
             if any(bits):
                 label = f"{prefix}{kind}{n + 1}"
-                if kind == "OUT":
-                    function = (abs(k34) // 10 ** n) % 10
-                    label += f" {OUTPUT_FUNCTIONS.get(function, f'K34={function}')}"
+                if kind == "OUT" and n < len(functions):
+                    label += f" {OUTPUT_FUNCTIONS.get(functions[n], 'no function')}"
                 rows.append((label, bits))
     return rows
 
@@ -168,7 +176,8 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     colors = dict(zip(motors, _palette(len(motors))))
     inputs = {mid: recorder.chain.motors[mid].io.input_count for mid in motors}
     bit_rows = {mid: _bit_rows(data[mid], mid, inputs[mid], multi,
-                               recorder.chain.motors[mid].k(34)) for mid in motors}
+                               _output_functions(recorder.chain.motors[mid]))
+                for mid in motors}
     occurring = {status_class(s.status) for d in data.values() for s in d}
     show_analog = any(_changes([s.analog_in for s in data[m]])
                       or recorder.chain.motors[m].k(35) != 0 for m in motors)

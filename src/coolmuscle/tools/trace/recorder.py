@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ...motor.signals.analog_output import output_volts
-from ...motor.signals.io import OUT_ROTATION_PULSE, digit
+from ...motor.signals.io import OUT_ROTATION_PULSE
 from ...motor.status import ALARM_BITS, Ux
 from ...sim.kernel import NS_PER_S
 
@@ -613,9 +613,9 @@ def _pulse_ports(motor: "Motor", t: int, outputs: int, k33: int, k34: int) -> in
     if pulses is None:
         return outputs
     for number, signal in pulses.signals_at(t).items():
-        if digit(k34, number) != OUT_ROTATION_PULSE:     # K34=7 at that instant
+        if motor.io.output_function(number, k34) != OUT_ROTATION_PULSE:   # at that instant
             continue
-        port = signal if digit(k33, number) == 1 else not signal
+        port = motor.io.port_of(number, signal, k33)
         bit = 1 << (number - 1)
         outputs = (outputs | bit) if port else (outputs & ~bit)
     return outputs

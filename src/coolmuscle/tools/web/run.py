@@ -22,7 +22,7 @@ from ...frontends.web.access import parse_web_address
 from ...frontends.web.server import WebTransport
 from ...sim.kernel import seconds
 from ..script.runner import Script, Step, TranscriptEntry
-from ..cli.stopsignals import ignore_stop_signals, serve_until_signal
+from ..cli.stopsignals import ignore_stop_signals, run_served
 from .dashboard import WebDashboard
 
 log = logging.getLogger(__name__)
@@ -120,16 +120,14 @@ def run_script_web(script: Script, chain: Any, address: str, *, until: float | N
         out.flush()
 
     web = web_transport(address, title=title, record=True)
-    asyncio.run(_serve_run(script, chain, web, until, show, say))
+    run_served(lambda stop: _serve_run(script, chain, web, until, show, say, stop))
 
 
 async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float | None,
-                     show: Callable[[TranscriptEntry], None], say: Callable[[str], None]) -> None:
+                     show: Callable[[TranscriptEntry], None], say: Callable[[str], None],
+                     stop: asyncio.Event) -> None:
     service = Service(chain, [web])
     await service.start()
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    serve_until_signal(loop, stop)
     try:
         say(f"coolmuscle: {web.describe()}   (the script starts when a page connects)")
         while not web.hub or not web.hub.clients:
