@@ -28,7 +28,7 @@ from ..motion.dynamics import Piece
 from ..status import Ux
 
 if TYPE_CHECKING:
-    from ..motion.axis import Axis
+    from ..motion.axis import Axis, Watcher
     from ..core import MotorCore
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
@@ -187,7 +187,7 @@ class TemperatureWatch(_AlarmWatch):
         return thermal.first_above(axis.motion, after_ns, thermal.alarm)
 
 
-def alarm_watchers(motor: "MotorCore") -> list[_AlarmWatch]:
+def alarm_watchers(motor: "MotorCore") -> "list[Watcher]":
     """The alarm watchers of one motor, in the order they are checked."""
     return [PositionErrorWatch(motor), OverSpeedWatch(motor), OverloadWatch(motor),
             TemperatureWatch(motor)]
