@@ -67,7 +67,9 @@ class Motor:
         self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
-        self.k = self.params.get       # K lookups are many a move: no extra frame
+        #: ``k(number)``: the current value of K parameter ``number``; the table's own
+        #: lookup (K lookups are many a move: no extra frame)
+        self.k: Callable[[int], int] = self.params.get
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
@@ -121,10 +123,6 @@ class Motor:
         self.pending_baud: int | None = None
 
     # -- parameters and units ----------------------------------------------
-    def k(self, number: int) -> int:
-        """Current value of K parameter ``number``."""
-        return self.params.get(number)
-
     @property
     def resolution(self) -> units.Resolution:
         """K37's resolution (ch. 3 K37 table), kept while no K value changes."""
@@ -256,14 +254,18 @@ class Motor:
         command is still on its way down the chain (ch. 3 K65), it starts that much later.
         """
         self._go_target = None
-        if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
+        if not self.can_move() or not waypoints:
             return
-        waypoints = [(self.travel.clamp(t), lim) for t, lim in waypoints]
-        if self.supervision.allowed_target(waypoints[-1][0]) is None:
+        points: list[tuple[float, Limits]] = []
+        for t, lim in waypoints:
+            if lim is None:
+                return
+            points.append((self.travel.clamp(t), lim))
+        if self.supervision.allowed_target(points[-1][0]) is None:
             return
         self.supervision.abandon_motion()
-        self._last_limits = waypoints[-1][1]
-        self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
+        self._last_limits = points[-1][1]
+        self.axis.move(points, start_ns=self.kernel.now + delay_ns if delay_ns else None)
 
     def path_end_allowed(self, user_end: float) -> bool:
         """Whether an interpolation path may take this motor to ``user_end``: it can move,
@@ -323,6 +325,7 @@ class Motor:
                 self.stop()
         else:
             lim = self.limits(s0, a0)
+            assert lim is not None                # S0 and A0 are not 0
             if self.encoder.handles_go(p0, s0, lim) or self.analog_control.handles_go(p0, lim):
                 pass                          # index / feedback (K71), torque feedback (K38)
             elif p0 == units.CONTINUOUS:
@@ -355,6 +358,7 @@ class Motor:
             self.path.stop(self.kernel.now)
             return
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
+        assert lim is not None                    # K43 and K49 are at least 1 (ch. 3)
         if self.supervision.stop_push():
             return
         self.supervision.abandon_motion()
@@ -589,10 +593,9 @@ class Motor:
         """Numeric value of a register of this motor."""
         if reg.kind == "K":
             return self.k(reg.number)
-        value = self.memory.get(reg.kind, reg.number)
         if reg.kind == "V":
-            return self.v_numeric(value)
-        return int(value)
+            return self.v_numeric(self.memory.get("V", reg.number))
+        return self.memory.number(reg.kind, reg.number)
 
     def write_register(self, kind: str, index: int, value: int | str | VState | VString) -> None:
         """Store data; raises OutOfRangeError / IndexError."""

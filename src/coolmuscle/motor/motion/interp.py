@@ -168,7 +168,7 @@ class SubPath:
 
     def __init__(self, path: "Line | Arc | SubPath", s0: float) -> None:
         self.path, self.s0 = path, min(max(s0, 0.0), path.length)
-        self.length = path.length - self.s0
+        self.length: float = path.length - self.s0
 
     def point(self, s: float) -> Point:
         return self.path.point(self.s0 + min(max(s, 0.0), self.length))

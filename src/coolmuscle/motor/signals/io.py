@@ -20,7 +20,7 @@ OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH = 6, 7, 8, 9
 
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
-_POWERS = tuple(10 ** n for n in range(12))
+_POWERS: tuple[int, ...] = tuple(10 ** n for n in range(12))
 
 
 def digit(value: int, position: int) -> int:

@@ -29,13 +29,14 @@ from ..status import Ux
 
 if TYPE_CHECKING:
     from ..motion.axis import Axis, Watcher
+    from ..motion.dynamics import Conditions
     from ..core import MotorCore
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple:
+def _beyond(f: Callable[[Piece], xp.F], limit: float) -> "tuple[Conditions, Conditions]":
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
