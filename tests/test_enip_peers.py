@@ -217,7 +217,8 @@ class KernelStamps:
 
 
 class _Scanner:
-    """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our ports."""
+    """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our
+    ports."""
 
     def __init__(self, monkeypatch, tcp_port: int, io_port: int) -> None:
         import ethernetip.ethernetip as E

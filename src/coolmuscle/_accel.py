@@ -136,7 +136,7 @@ def install() -> None:
     if files is None:
         state.update(active=False, reason=reason)
         return
-    sys.meta_path.insert(0, _CompiledFinder(files))  # type: ignore[arg-type]
+    sys.meta_path.insert(0, _CompiledFinder(files))
     state.update(active=True, reason=reason)
 
 

@@ -57,8 +57,8 @@ class MotorBus(Protocol):
     def relay(self, src: int, dst: int, nbytes: int) -> int:
         """When ``nbytes`` that ID ``src`` sends now reach ID ``dst`` (ch. 3 K65)."""
 
-    def save(self, motor: "MotorCore") -> None:
-        """``$``: store parameters, data and banks of ``motor`` (2.1.2)."""
+    def save(self, motor: int) -> None:
+        """``$``: store parameters, data and banks of motor ``motor`` (2.1.2)."""
 
     def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: "Context") -> bool:
         """A statement for an ID not on the chain (the COM1 Modbus slave, 5.6.6)."""
@@ -93,6 +93,10 @@ class ProgramRunner(Protocol):
     def next_line(self, ctx: Context | None = None) -> None: ...
 
     def prev_line(self, ctx: Context | None = None) -> None: ...
+
+    def stop_after_line(self) -> None: ...
+
+    def terminate(self) -> None: ...
 
     def emergency(self) -> None: ...
 

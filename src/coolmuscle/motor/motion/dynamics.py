@@ -442,9 +442,9 @@ class Motion:
 @lru_cache(maxsize=1024)
 def _solved(drive: Drive, position: float, velocity: float,
             cmd: tuple[tuple[float, float, F], ...]) -> tuple[Piece, ...]:
-    """The pieces of a motion relative to the command's position at its origin.  The solution depends on nothing else, so a
-    machine that repeats a cycle solves each of its moves once (docs/performance.md);
-    a hit and a miss give the same numbers."""
+    """The pieces of a motion relative to the command's position at its origin.  The
+    solution depends on nothing else, so a machine that repeats a cycle solves each of its
+    moves once (docs/performance.md); a hit and a miss give the same numbers."""
     solver = _Solver(drive, list(cmd))
     solver._build(position, velocity)
     return tuple(solver.pieces)

@@ -47,7 +47,8 @@ def _constant_beyond(f: xp.F, limit: float) -> bool:
     return f[1] == f[2] == f[3] == f[4] == 0.0 and abs(f[0]) > limit
 
 
-@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py): tests subclass it
+# compiled (coolmuscle/_accel.py): tests subclass it
+@mypyc_attr(allow_interpreted_subclasses=True)
 class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
