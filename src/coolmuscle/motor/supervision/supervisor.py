@@ -24,7 +24,7 @@ from .alarms import alarm_watchers
 from ..motion.dynamics import Drive
 from .faults import Faults
 from .limits import TravelLimits
-from .origin import STOPPER, OriginSearch, auto_start
+from .origin import OriginSearch, auto_start
 from ..motion.planner import Limits
 from .push import Push
 from .sensors import Geometry
@@ -100,10 +100,6 @@ class Supervisor:
     def push_error(self) -> bool:
         """The push error (Ux=256) is latched (4.1.4 "alarm state")."""
         return self.push.status_bits() == int(Ux.PUSH_ERROR)
-
-    def position_error_exempt(self) -> bool:
-        """No position error overflow while pushing or searching a stopper."""
-        return self.push.active or (self.origin.active and self.origin.source == STOPPER)
 
     def param_changed(self, k: int) -> None:
         """K``k`` changed: K45 direction, CM1 K71 temperature alarm, re-solve on limits."""
