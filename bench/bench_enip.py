@@ -1,4 +1,5 @@
-"""Benchmark: the CM1 EtherNet/IP adapter, explicit messaging next to cpppo's adapter, and Class 1 timing.
+"""Benchmark: the CM1 EtherNet/IP adapter, explicit messaging next to cpppo's adapter, and
+Class 1 timing.
 
 1. **Explicit messaging, side by side.** Two adapters, each in its own process:
    ``coolmuscle sim --firmware cm1 --enip`` and cpppo's EtherNet/IP server
@@ -10,8 +11,8 @@
    request, Get 4/0x65/3 (cpppo has no such assembly).
 2. **Class 1 T->O intervals** at RPI 10 ms and 2 ms: the ``ethernetip`` package is
    the originator (Forward_Open 101/102/128, it produces O->T, it receives T->O);
-   every T->O arrival is stamped by the kernel on its socket (``SO_TIMESTAMPNS``).  Printed: packets, p1 / p50
-   / p99 / max interval and the share within 10 ± 2 ms (RPI 10) or ± 20 % (RPI 2).
+   every T->O arrival is stamped by the kernel on its socket (``SO_TIMESTAMPNS``).  Printed:
+   packets, p1 / p50 / p99 / max interval and the share within 10 ± 2 ms (RPI 10) or ± 20 % (RPI 2).
    The acceptance's 60 s run at 10 ms is the default (``--io-seconds``).  As root
    both runs are repeated with ``--enip-rt-priority 10`` (the producer thread
    SCHED_FIFO), which keeps the intervals on a machine busy with other work.

@@ -137,7 +137,8 @@ def main() -> None:
     if a["turn_p99"]:
         print(f"turnaround p99 with the model / without: {b['turn_p99'] / a['turn_p99']:.2f}; "
               f"late share with / without: {b['late_share']:.4%} / {a['late_share']:.4%}")
-    print(f"({time.time() - started:.0f} s; load average {open('/proc/loadavg').read().split()[0]})")
+    load = open('/proc/loadavg').read().split()[0]
+    print(f"({time.time() - started:.0f} s; load average {load})")
 
 
 if __name__ == "__main__":

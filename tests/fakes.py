@@ -144,7 +144,8 @@ def play_over_serial(ser: Any, text: str, *, timeout: float = 5.0) -> bytes:
                     scan = hit
                     break
                 if time.monotonic() > deadline:
-                    raise AssertionError(f"line {step.line_no}: @until timed out; got {bytes(received)!r}")
+                    raise AssertionError(f"line {step.line_no}: @until timed out; "
+                                         f"got {bytes(received)!r}")
                 read_more(deadline)
         elif step.kind == "expect":
             deadline = time.monotonic() + timeout

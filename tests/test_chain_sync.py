@@ -32,7 +32,7 @@ def check_exact_and_within_s(r: Rig, recorder: Any, motor_id: int, s_pps: float)
         if profile.segments:                          # each motion's command ends on P
             assert abs(sign * (motion.command_at(profile.end_ns) - zero)
                        - profile.final_position) < 1e-6
-    for start, end, target in motions(r, motor_id):
+    for start, end, _target in motions(r, motor_id):
         for i in range(201):
             t = start + (end - start) * i // 200
             assert abs(recorder.sample(motor_id, t).speed) <= s_pps * (1 + 1e-9)

@@ -1,4 +1,5 @@
-"""The ``coolmuscle`` command: ``sim`` as a real subprocess, ``run`` in-process and as a subprocess."""
+"""The ``coolmuscle`` command: ``sim`` as a real subprocess, ``run`` in-process and as a
+subprocess."""
 
 from __future__ import annotations
 

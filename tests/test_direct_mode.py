@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from coolmuscle.chain.daisy import Chain
+from coolmuscle.errors import NoSuchMotorError
 from coolmuscle.sim.kernel import seconds
 
 
@@ -43,6 +46,22 @@ def test_2_1_2_save_then_power_cycle_restores_saved_data_only(tmp_path: Path) ->
         assert again.execute("P2.1") == ["P2.1=0"]
         assert again.execute("V2.1") == ['V2.1="abcd"']
         assert again.execute("S3.1") == ["S3.1=-77"]
+    finally:
+        again.close()
+
+
+def test_device_api_save_takes_the_motor_id_as_dollar_does(tmp_path: Path) -> None:
+    """``Device.save(motor)`` is ``$.n`` (docs/device-api.md); an ID not on the chain is
+    ``NoSuchMotorError``, as for every other device call."""
+    chain = Chain(motors=2, state_dir=tmp_path)
+    chain.execute("P1.2=4321")
+    chain.save(2)
+    with pytest.raises(NoSuchMotorError):
+        chain.save(3)
+    chain.close()
+    again = Chain(motors=2, state_dir=tmp_path)
+    try:
+        assert again.execute("P1.2") == ["P1.2=4321"]
     finally:
         again.close()
 

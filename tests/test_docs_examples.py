@@ -143,7 +143,8 @@ class Env:
     def command(self, argv: list[str]) -> list[str]:
         return ["nsenter", "-t", str(self.ns.pid), "-n", "--"] + argv
 
-    def run(self, argv: list[str], timeout: float = RUN_TIMEOUT) -> subprocess.CompletedProcess[str]:
+    def run(self, argv: list[str],
+            timeout: float = RUN_TIMEOUT) -> subprocess.CompletedProcess[str]:
         return subprocess.run(self.command(argv), cwd=self.cwd, env=self.env, text=True,
                               capture_output=True, timeout=timeout, stdin=subprocess.DEVNULL)
 

@@ -1,4 +1,5 @@
-"""The CM1 EtherNet/IP module's behaviour (cm1-ethernetip-interface-manual.txt ch. 3), in virtual time.
+"""The CM1 EtherNet/IP module's behaviour (cm1-ethernetip-interface-manual.txt ch. 3), in
+virtual time.
 
 The module (:class:`Cm1Module`) drives a real virtual CM1 through the device API;
 each test checks what the motor then does, read back through the device API.

@@ -189,7 +189,8 @@ def test_eds_pie_parses_the_generated_eds(caplog, service):
 
 # -- Class 1: the ethernetip package as originator, against `coolmuscle sim` ---------------
 class _Scanner:
-    """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our ports."""
+    """The ``ethernetip`` PyPI package's EtherNetIP / EtherNetIPExpConnection, pointed at our
+    ports."""
 
     def __init__(self, monkeypatch, tcp_port: int, io_port: int) -> None:
         import ethernetip.ethernetip as E

@@ -397,7 +397,7 @@ def test_appendix_6_table_details():
     assert all(b.od.table.get(0xF591 + i).entries[0].bits == 64 * 8 for i in range(4))
 
 
-# -- 6.5 digital I/O, 7.1 CPIO ----------------------------------------------------------------------
+# -- 6.5 digital I/O, 7.1 CPIO --------------------------------------------------------------
 def test_6_5_digital_io_in_csp_state_b_or_c():
     b = Bench("EB02")
     assert b.abort(0x60FD, 0) == DEVICE_STATE                      # state A
@@ -440,7 +440,7 @@ def test_7_1_cpio_outputs_from_bits_4_7_and_inputs_in_bits_4_7():
     assert b.chain.execute("?50.1", origin="host") == ["OUT.1=01"]
 
 
-# -- 7.3-7.5 settings and status ------------------------------------------------------------------------
+# -- 7.3-7.5 settings and status ------------------------------------------------------------
 def test_7_3_f511_cm_type_baud_rate_and_cycle_codes():
     b = Bench("EB12")
     assert [b.read(0xF511 + i, 1) for i in range(4)] == [1, 1, 2, 2]

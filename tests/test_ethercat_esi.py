@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.dictionary import Dictionary
+from coolmuscle.frontends.ethercat.dictionary import NO_OBJECT, Dictionary, SdoAbort
 from coolmuscle.frontends.ethercat.esi import esi_text
 from coolmuscle.frontends.ethercat.objects import VAR, build_table
 from coolmuscle.frontends.ethercat.sii import build_sii, crc8, parse
@@ -105,8 +105,9 @@ def test_the_eb12_bridge_has_cm1_on_id1_2_and_cm2_on_id3_4_1_4_3():
     od = Dictionary(build_table("EB12"))
     assert [od.get(0xF511 + i, 1) for i in range(4)] == [1, 1, 2, 2]
     assert od.lookup(0x60FB + 0x800 * 2, 1)                   # servo stiffness: CM2 only
-    with pytest.raises(Exception):
+    with pytest.raises(SdoAbort) as refused:
         od.lookup(0x60FB, 1)
+    assert refused.value.code == NO_OBJECT
     assert struct.unpack("<I", od.read(0x1018, 2))[0] == 0x00EB0012
 
 

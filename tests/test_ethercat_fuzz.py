@@ -158,7 +158,7 @@ def test_fuzzed_mailboxes_are_answered_or_ignored_never_crash_5_4():
     to_op(app)
     esc = app.stack.esc
     answered = 0
-    for n in range(1500):
+    for _ in range(1500):
         length = rng.choice([0, 1, 2, 4, 10, 16, 40, 122, 200, 0xFFFF])
         kind = rng.choice([0x03, 0x13, 0x33, 0x01, 0x04, 0x0F, rng.randrange(256)])
         body = bytes(rng.randrange(256) for _ in range(rng.randint(0, 122)))

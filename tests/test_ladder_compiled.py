@@ -1,9 +1,10 @@
 """Compiled ladder statements mean what the interpreter means (property tests).
 
-The ladder scanner runs closures from :mod:`coolmuscle.motor.programs.compiled`; program banks and
-direct mode use :mod:`coolmuscle.motor.programs.evaluate` / :mod:`coolmuscle.motor.programs.direct`.  Random
-trees (tests/cml_support.py strategies) on a two-motor chain with data in its registers
-must give the same value, the same stored data and the same printed lines both ways.
+The ladder scanner runs closures from :mod:`coolmuscle.motor.programs.compiled`; program
+banks and direct mode use :mod:`coolmuscle.motor.programs.evaluate` /
+:mod:`coolmuscle.motor.programs.direct`.  Random trees (tests/cml_support.py strategies) on
+a two-motor chain with data in its registers must give the same value, the same stored data
+and the same printed lines both ways.
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ def test_compiled_assignments_equal_the_interpreter(target: ast.Reg, op: str, va
     for compiled in (False, True):
         c = chain()
         seen: list[str] = []
-        c.subscribe(lambda e: seen.append(e.text))
+        c.subscribe(lambda e: seen.append(e.text))  # noqa: B023 (c: this iteration's)
         runner = c.motors[1].ladder
         fn = compile_statement(stmt, c.motors[1], runner.ctx, quiet, _Clock(), _assigned)
         if compiled and fn is not None:
@@ -129,7 +130,7 @@ def test_compiled_assignments_table() -> None:
         for compiled in (False, True):
             c = chain()
             seen: list[str] = []
-            c.subscribe(lambda e: seen.append(e.text))
+            c.subscribe(lambda e: seen.append(e.text))  # noqa: B023 (c: this iteration's)
             runner = c.motors[1].ladder
             stmt = line.statements[0]
             fn = compile_statement(stmt, c.motors[1], runner.ctx, False, _Clock(), _assigned)

@@ -213,7 +213,7 @@ def test_fuzz_10000_malformed_frames_over_tcp(tcp_sim: tuple[ServiceThread, int]
             sent, expected = bytearray(), bytearray()
             for _ in range(100):
                 roll = rng.random()
-                unit, protocol, (category, pdu, reply) = UNIT, 0, next(pdus)
+                unit, protocol, (_category, pdu, reply) = UNIT, 0, next(pdus)
                 if roll < 0.05:
                     unit, reply = rng.choice((2, 3, 100, 254)), None
                 elif roll < 0.08:

@@ -311,7 +311,8 @@ def test_merge_limits_and_passing_speed(case: tuple[float, list[Waypoint]]) -> N
     targets = [w.target for w in points]
     passing = prof.passing_times_ns()
     for t_ns, index in passing:
-        assert abs(prof.position_at(t_ns) - targets[index]) <= 1e-6 * max(1.0, abs(targets[index])) + abs(prof.velocity_at(t_ns)) * 1e-9
+        assert abs(prof.position_at(t_ns) - targets[index]) <= (
+            1e-6 * max(1.0, abs(targets[index])) + abs(prof.velocity_at(t_ns)) * 1e-9)
         if not reverses_at(targets, start, index):
             assert prof.velocity_at(t_ns) != 0.0
             assert abs(prof.velocity_at(t_ns - 1)) > 0.0
@@ -413,7 +414,8 @@ def test_first_crossing_is_exact_and_first(case: tuple[float, list[Waypoint]],
     start, points = case
     prof = plan_moves((start, 0.0, 0.0), points, 5 * NS)
     if data.draw(st.booleans()):
-        prof = plan_velocity(prof.state_at(5 * NS + data.draw(st.integers(0, prof.end_ns - 5 * NS))),
+        at = 5 * NS + data.draw(st.integers(0, prof.end_ns - 5 * NS))
+        prof = plan_velocity(prof.state_at(at),
                              -points[0].limits.speed, points[0].limits, 5 * NS)
     end = prof.end_ns if prof.end_ns is not None else 5 * NS + 20 * NS
     lo, hi = min(start, *(w.target for w in points)), max(start, *(w.target for w in points))

@@ -111,7 +111,7 @@ def test_fuzz_every_front_end_with_a_liveness_check_between_batches(
     pty = serial.Serial(everything.transports[1].info()["path"], timeout=0)
     worst = 0.0
     try:
-        for batch in range(15):
+        for _batch in range(15):
             clients = [socket.create_connection(("127.0.0.1", tcp_port), timeout=5)
                        for _ in range(3)]
             mb = socket.create_connection(("127.0.0.1", mb_port), timeout=5)
@@ -276,7 +276,8 @@ def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
     from coolmuscle.frontends.transports import create
 
     rng = random.Random(8080)
-    requests = [b"GET / HTTP/1.1\r\nHost: x\r\n\r\n", b"POST /api HTTP/1.1\r\nContent-Length: 5\r\n\r\n",
+    requests = [b"GET / HTTP/1.1\r\nHost: x\r\n\r\n",
+                b"POST /api HTTP/1.1\r\nContent-Length: 5\r\n\r\n",
                 b"GET /ws HTTP/1.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                 b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
                 b"\x16\x03\x01\x00\xa5", b"GET /" + b"A" * 9000 + b" HTTP/1.1\r\n\r\n"]

@@ -14,7 +14,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.motion.trajectory import Schmitt
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
 
@@ -155,7 +154,6 @@ def test_5_2_a_reversal_inside_one_trajectory_keeps_the_hysteresis() -> None:
 
 def test_5_2_live_reads_agree_with_the_trace() -> None:
     chain = _chain(77)
-    motor = chain.motors[1]
     chain.execute("S.1=80, A.1=200, P.1=5000")
     chain.execute("^.1")
     live = []

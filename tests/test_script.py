@@ -46,7 +46,8 @@ def test_until_default_timeout_and_spaces_in_the_pattern() -> None:
     step = parse_script("@until Ux.1=8").steps[0]
     assert step.seconds == DEFAULT_UNTIL_TIMEOUT
     step = parse_script("@until End of Bank 2.5").steps[0]
-    assert step.pattern is not None and step.pattern.pattern == "End of Bank" and step.seconds == 2.5
+    assert step.pattern is not None
+    assert step.pattern.pattern == "End of Bank" and step.seconds == 2.5
     step = parse_script("@until Px.1=100").steps[0]
     assert step.pattern is not None and step.pattern.pattern == "Px.1=100"
 
@@ -239,8 +240,8 @@ def test_record_gives_a_golden_transcript_that_passes() -> None:
     assert again.ok, again.summary()
 
 
-def test_trace_needs_a_recorder_and_is_closed_after_the_run(tmp_path: Path,
-                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+def test_trace_needs_a_recorder_and_is_closed_after_the_run(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(ScriptError, match="no trace recorder"):
         run_script("?96.1\n", FakeChain(), trace=tmp_path / "t.csv")
 

@@ -40,7 +40,8 @@ def test_registry_imports_nothing_until_a_transport_is_chosen() -> None:
 
 
 def test_unknown_name_lists_the_known_ones() -> None:
-    with pytest.raises(TransportError, match=r"unknown transport 'carrier-pigeon'; known: .*pty.*tcp"):
+    with pytest.raises(TransportError,
+                       match=r"unknown transport 'carrier-pigeon'; known: .*pty.*tcp"):
         transports.load("carrier-pigeon")
 
 

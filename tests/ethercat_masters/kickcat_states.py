@@ -12,7 +12,8 @@ import kickcat
 def connect(iface: str) -> Any:
     """A bus on ``iface``, scanned."""
     link = kickcat.create_link(iface, "")
-    link.set_timeout(timedelta(milliseconds=50))   # a loaded CI machine: answers may take more than 10 ms
+    # a loaded CI machine: answers may take more than 10 ms
+    link.set_timeout(timedelta(milliseconds=50))
     bus = kickcat.Bus(link)
     bus.init(timedelta(seconds=2))
     return bus

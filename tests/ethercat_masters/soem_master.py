@@ -66,7 +66,8 @@ def cycles(master, slave, n: int, period: float = 0.001) -> dict:
             time.sleep(delay)
         else:
             late += 1
-    return {"cycles": n, "wkc_ok": ok, "missed": missed, "master_late": late, "last_input": last_in.hex()}
+    return {"cycles": n, "wkc_ok": ok, "missed": missed, "master_late": late,
+            "last_input": last_in.hex()}
 
 
 def full(master) -> dict:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable
 
@@ -38,6 +39,8 @@ from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
 
 if TYPE_CHECKING:
     from .machine import Machine
+    from ..device.api import Device
+    from ..motor.core import MotorBus, MotorCore
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +122,7 @@ class Chain:
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
-        self.host_line.on_source_end = lambda source: self.uploads.abandon("host", source)
+        self.host_line.on_source_end = self._source_ended
         self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
         self.motors[1].params.on_change(
             lambda k, _old, new: self._k65_written(new) if k == 65 else None)
@@ -166,6 +169,10 @@ class Chain:
                 baud=BAUD_RATES.get(key[2], 38400))
         self._settings_now, self._settings_version = found, version
         return found
+
+    def _source_ended(self, source: object) -> None:
+        """A host line sender went away: an upload it left open is dropped."""
+        self.uploads.abandon("host", source)
 
     def _on_host_line(self, text: str) -> None:
         self._execute_text(text, Context(origin="host", session=self.host_line.source))
@@ -279,7 +286,7 @@ class Chain:
             if at <= now:
                 self._run_statements(statements, ctx)
             else:
-                self.kernel.schedule_at(at, lambda st=statements: self._relayed(st, ctx),
+                self.kernel.schedule_at(at, partial(self._relayed, statements, ctx),
                                         priority=PRIO_IO, name="chain-relay")
 
     def _relayed(self, statements: list[ast.Statement], ctx: Context) -> None:
@@ -362,8 +369,9 @@ class Chain:
         return remove
 
     # -- chain-wide commands and banks (cml-users-guide.txt 2.1.2) ------------
-    def chain_command(self, motor: Motor, stmt: ast.Exec, ctx: Context) -> None:
-        """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``, ``<``."""
+    def chain_command(self, motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
+        """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``,
+        ``<``."""
         op = stmt.op
         if op == "pause":          # 2.1.2 "]": stop all motors, pause the banks
             for each in self.motors.values():
@@ -389,7 +397,7 @@ class Chain:
         elif op == "prev_line":
             motor.program.prev_line(ctx)
 
-    def bank_command(self, motor: Motor, stmt: ast.Statement, ctx: Context) -> None:
+    def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
         """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
         if isinstance(stmt, ast.StartBank):
             if stmt.kind == "B":
@@ -414,25 +422,27 @@ class Chain:
             motor.banks.clear(stmt.ladder)
         # C J CL JL X X- W END typed outside a bank mean nothing in direct mode
 
-    def bank_query(self, motor: Motor, query: ast.Query) -> list[str] | None:
+    def bank_query(self, motor: MotorCore, query: ast.Query) -> list[str] | None:
         """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6); error05/06 for a missing bank."""
         if query.number is None:
             return None
         if query.letter is None and query.number == 1000:
-            return motor.banks.all_listing(motor.id)
+            listing: list[str] = motor.banks.all_listing(motor.id)
+            return listing
         ladder = query.letter == "L"
         if not 1 <= query.number <= motor.banks.count(ladder):
             return None
-        lines = motor.banks.listing(ladder, query.number)
+        lines: list[str] | None = motor.banks.listing(ladder, query.number)
         if lines is None:
             raise NoLadderBankError() if ladder else NoProgramBankError()
         return lines
 
     # -- saving ---------------------------------------------------------------
-    def save(self, motor: Motor) -> None:
-        """``$``: store parameters, data and banks of ``motor`` (2.1.2)."""
+    def save(self, motor: int) -> None:
+        """``$``: store parameters, data and banks of motor ``motor`` (2.1.2)."""
+        found = self._require(motor)
         if self.store is not None:
-            self.store.save_snapshot(motor.id, motor.to_snapshot())
+            self.store.save_snapshot(motor, found.to_snapshot())
 
     def _restore(self) -> None:
         for motor in self.motors.values():
@@ -448,11 +458,12 @@ class Chain:
                         raise StoreError(bad_state_message(
                             self.store.path, motor.id, f"cannot be restored ({exc})")) from exc
                 motor.params.on_change(
-                    lambda k, old, new, m=motor.id: self._store_param(m, k, new))
+                    partial(self._store_param, motor.id))
 
-    def _store_param(self, motor_id: int, k: int, value: int) -> None:
+    def _store_param(self, motor_id: int, k: int, old: int, value: int) -> None:
         """Persist an accepted K change (ch. 3); a failed write is told, never raised:
         the value holds in memory until the next power cycle."""
+        del old
         if self.store is None:
             return
         try:
@@ -572,6 +583,13 @@ class Chain:
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         self._require(motor).inject_fault(fault, **params)
         self._changed()
+
+
+if TYPE_CHECKING:
+    def _meets_its_protocols(chain: Chain) -> tuple[MotorBus, Device]:
+        """For mypy (tests/test_quality.py): a chain is the bus of its motors
+        (``motor.core.MotorBus``) and the device API (``device.api.Device``)."""
+        return chain, chain
 
 
 __all__ = ["Chain", "VState", "MotorError"]

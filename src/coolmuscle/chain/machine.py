@@ -17,6 +17,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ..errors import CoolMuscleError
@@ -38,7 +39,7 @@ class MachineHost(Protocol):
 
     def set_input(self, motor: int, number: int, on: bool) -> None: ...
 
-    def inject_fault(self, motor: int, fault: str, **params: float) -> None: ...
+    def inject_fault(self, motor: int, fault: str, **params: object) -> None: ...
 
 
 class MachineFileError(CoolMuscleError, ValueError):
@@ -319,10 +320,10 @@ def apply_machine(machine: Machine, chain: "MachineHost") -> None:
 def _install(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
     for k, value in spec.params.items():
         motor.params.set(k, value)
-    for attr, value in {**spec.load, **spec.motor_data}.items():
-        setattr(motor.plant, attr, value)
-    for attr, value in spec.thermal.items():
-        setattr(motor.thermal, attr, value)
+    for attr, amount in {**spec.load, **spec.motor_data}.items():
+        setattr(motor.plant, attr, amount)
+    for attr, amount in spec.thermal.items():
+        setattr(motor.thermal, attr, amount)
     motor.thermal.reset(None, chain.kernel.now)
     geo = motor.geometry
     geo.ppr = spec.ppr
@@ -348,16 +349,15 @@ def _schedule(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
     kernel, now, mid = chain.kernel, chain.kernel.now, motor.id
     for item in spec.inputs:
         kernel.schedule_at(now + seconds(item.at),
-                           lambda i=item: chain.set_input(mid, i.input, i.on),
+                           partial(chain.set_input, mid, item.input, item.on),
                            name="machine input")
     for f in spec.faults:
         motor.faults.check(f.fault, f.params)
         kernel.schedule_at(now + seconds(f.at),
-                           lambda f=f: chain.inject_fault(mid, f.fault, **f.params),
+                           partial(chain.inject_fault, mid, f.fault, **f.params),
                            name="machine fault")
         if f.until is not None:
             keep = {k: f.params[k] for k in _CLEARABLE[f.fault] if k in f.params}
             kernel.schedule_at(now + seconds(f.until),
-                               lambda f=f, keep=keep: chain.inject_fault(
-                                   mid, f.fault, clear=True, **keep),
+                               partial(chain.inject_fault, mid, f.fault, clear=True, **keep),
                                name="machine fault cleared")

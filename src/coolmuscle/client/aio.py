@@ -388,7 +388,7 @@ class AsyncCoolMuscle(AsyncMotor):
         since = self._session.protocol.seq
         request = ops.Listen(since, lambda e: (kind is None or e.kind == kind) and
                              (motor is None or e.motor == motor), timeout)
-        event = await self._driver._do(request)
+        event: MotorEvent | None = await self._driver._do(request)
         if event is None:
             raise CoolMuscleTimeout(f"no {kind or 'event'} within {timeout:g} s")
         return event

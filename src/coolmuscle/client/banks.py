@@ -25,8 +25,9 @@ from ..cml import ast
 from ..cml.parser import parse
 from ..errors import CmlSyntaxError, CoolMuscleError, MotorError
 from . import args
-from .ops import Exchange, Op, Pause, Session, exchange, fenced, listing
+from .ops import Op, Pause, Session, exchange, fenced, listing
 from .program import BankBlock, ProgramFile, SourceLine, canonical_lines
+from .protocol import Exchange
 
 __all__ = ["BankDifference", "UploadResult", "UploadError", "upload", "read_bank",
            "all_banks", "parse_bank_listing", "compare_bank", "send_line", "save",

@@ -202,12 +202,13 @@ class SyncDriver:
     def _read(self, wait: float) -> bytes:
         try:
             self._set_timeout(max(0.0, min(wait, READ_SLICE)))
-            data = self.port.read(1)
+            data: bytes = self.port.read(1)
             if not data:
                 return b""
             if self._drain_by_timeout:  # socket:// in_waiting only says 0 or 1
                 self._set_timeout(0)
-                return data + self.port.read(65536)
+                rest: bytes = self.port.read(65536)
+                return data + rest
             waiting = self.port.in_waiting
             return data + self.port.read(waiting) if waiting else data
         except (SerialException, OSError) as exc:

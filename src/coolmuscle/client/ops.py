@@ -129,7 +129,8 @@ def exchange(session: Session, lines: tuple[str, ...], done: Callable[[Received]
                         keep_echo=keep_echo)
     if ex.errors:
         raise ex.errors[0]
-    return ex
+    done_exchange: Exchange = ex
+    return done_exchange
 
 
 def named(name: str, motor: int) -> Callable[[Received], bool]:

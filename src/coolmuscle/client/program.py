@@ -223,8 +223,14 @@ def load_program(path: str | Path) -> ProgramFile:
     return parse_program(text, str(path))
 
 
+def _fill_reg(reg: ast.Reg, motor: int) -> ast.Reg:
+    return reg if reg.motor is not None else dataclasses.replace(reg, motor=motor)
+
+
 def _fill_expr(expr: ast.Expr, motor: int) -> ast.Expr:
-    if isinstance(expr, (ast.Reg, ast.Input)):
+    if isinstance(expr, ast.Reg):
+        return _fill_reg(expr, motor)
+    if isinstance(expr, ast.Input):
         return expr if expr.motor is not None else dataclasses.replace(expr, motor=motor)
     if isinstance(expr, (ast.BinOp, ast.Compare, ast.Logic)):
         return dataclasses.replace(expr, left=_fill_expr(expr.left, motor),
@@ -239,10 +245,10 @@ def _fill_expr(expr: ast.Expr, motor: int) -> ast.Expr:
 def _fill(statement: ast.Statement, motor: int) -> ast.Statement:
     """``statement`` with the bank's motor ID where it names none (``S1`` in ``B1.2``)."""
     if isinstance(statement, ast.Assign):
-        return dataclasses.replace(statement, target=_fill_expr(statement.target, motor),
+        return dataclasses.replace(statement, target=_fill_reg(statement.target, motor),
                                    value=_fill_expr(statement.value, motor))
     if isinstance(statement, ast.Ref):
-        return dataclasses.replace(statement, reg=_fill_expr(statement.reg, motor))
+        return dataclasses.replace(statement, reg=_fill_reg(statement.reg, motor))
     if isinstance(statement, ast.Branch):
         return ast.Branch(_fill_expr(statement.condition, motor),
                           tuple(_fill(s, motor) for s in statement.then),
@@ -251,7 +257,7 @@ def _fill(statement: ast.Statement, motor: int) -> ast.Statement:
         statement = dataclasses.replace(statement, value=_fill_expr(statement.value, motor))
     if isinstance(statement, ast.Alloc) or getattr(statement, "motor", 0) is not None:
         return statement
-    return dataclasses.replace(statement, motor=motor)  # type: ignore[call-arg]
+    return dataclasses.replace(statement, motor=motor)
 
 
 def canonical_lines(texts: list[str], motor: int | None = None) -> list[str]:

@@ -408,7 +408,7 @@ class CoolMuscle(Motor):
 
 def _listen(since: int, match: Callable[[MotorEvent], bool],
             timeout: float) -> ops.Op[MotorEvent | None]:
-    event = yield ops.Listen(since, match, timeout)
+    event: MotorEvent | None = yield ops.Listen(since, match, timeout)
     return event
 
 

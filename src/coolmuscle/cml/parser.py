@@ -312,7 +312,7 @@ class _Parser:
             return Exec(plain, self.motor_suffix(tok))  # type: ignore[arg-type]
         if num.val not in ops:
             self.fail(f"{tok.kind}{num.val} is not a command", num.start)
-        return Exec(ops[num.val], num.motor)  # type: ignore[arg-type,index]
+        return Exec(ops[num.val], num.motor)  # type: ignore[arg-type]
 
     def origin(self, tok: Tok) -> Exec:
         return self.digit_exec(tok, {1: "go_origin", 2: "set_origin"}, "origin")

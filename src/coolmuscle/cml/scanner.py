@@ -123,7 +123,8 @@ def scan(text: str) -> tuple[list[Tok], int]:
     while pos < size:
         m = match(text, pos)
         if m is None:
-            pos = _BLANKS_RE.match(text, pos).end()
+            blanks = _BLANKS_RE.match(text, pos)      # matches: it may match nothing
+            pos = blanks.end() if blanks else pos
             if pos < size:
                 _bad_character(text, pos)
             break

@@ -146,7 +146,7 @@ class Device(Protocol):
     def target_stream(self, motor: int) -> TargetStream:
         """Enter cyclic position mode for ``motor``."""
 
-    def inject_fault(self, motor: int, fault: str, **params: float) -> None:
+    def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         """Inject a fault now (see docs/machine-file.md for names)."""
 
     def save(self, motor: int) -> None:

@@ -24,6 +24,7 @@ from .signals.analog import AnalogInput, AnalogSource
 from .signals.analog_control import AnalogControl
 from .signals.analog_output import output_volts, volts_to_register
 from .motion.axis import Axis
+from .motion.dynamics import Drive
 from .signals.encoder import ExternalEncoder, Gearing
 from .programs.evaluate import pack_string
 from .state.firmware import Firmware
@@ -38,10 +39,12 @@ from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
 from .motion.profile import Profile
 from .signals.pulses import RotationPulses
 from .status import Report, Ux, io_word_hex, status_line
-from .supervision.mixin import Supervision
+from .supervision.origin import STOPPER
+from .supervision.supervisor import Supervisor
 from .motion.trajectory import Timeline
 
 if TYPE_CHECKING:
+    from .core import MotorCore
     from .programs.coordinated import PairMotion
 
 log = logging.getLogger(__name__)
@@ -53,7 +56,7 @@ _IN_POSITION = int(Ux.IN_POSITION)
 _K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
 
 
-class Motor(Supervision):
+class Motor:
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
     def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
@@ -66,23 +69,28 @@ class Motor(Supervision):
         self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
-        self.k = self.params.get       # K lookups are many a move: no extra frame
+        #: ``k(number)``: the current value of K parameter ``number``; the table's own
+        #: lookup (K lookups are many a move: no extra frame)
+        self.k: Callable[[int], int] = self.params.get
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
         self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
                             self._output_function_signal, firmware.output_functions,
                             one_logic=firmware.one_logic,
                             inverting_logic=firmware.inverting_logic)
-        self.torque_limit = 100
         self.plant = Plant(kp=DEFAULT_KP if firmware.is_servo else STEPPER_KP)
         self.alarm = 0
         self.voltage = 240
-        self._init_supervision()
-        self.axis = Axis(kernel, drive=self.drive,
+        #: torque limit, alarms, push, origin search, travel limits, temperature, faults;
+        #: its parts are the motor's too (the machine file, the device API, tests)
+        self.supervision = sup = Supervisor(self)
+        self.thermal, self.faults, self.travel = sup.thermal, sup.faults, sup.travel
+        self.push, self.origin, self.geometry = sup.push, sup.origin, sup.geometry
+        self.axis = Axis(kernel, drive=sup.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
                          on_passing_point=self._passing_point)
-        self._attach_supervision()
+        sup.attach()
         self.estopped = False
         self.origin_done = False
         self.merge_pulse_until = 0
@@ -117,10 +125,6 @@ class Motor(Supervision):
         self.pending_baud: int | None = None
 
     # -- parameters and units ----------------------------------------------
-    def k(self, number: int) -> int:
-        """Current value of K parameter ``number``."""
-        return self.params.get(number)
-
     @property
     def resolution(self) -> units.Resolution:
         """K37's resolution (ch. 3 K37 table), kept while no K value changes."""
@@ -137,7 +141,7 @@ class Motor(Supervision):
         del old
         if k == 37:
             self.memory.k37 = new
-        self._supervision_param(k)
+        self.supervision.param_changed(k)
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""
@@ -153,7 +157,7 @@ class Motor(Supervision):
             return int(Ux.EMERGENCY_STOP)
         if not self.axis.enabled:
             return int(Ux.MOTOR_FREE)
-        special = self._supervision_status()
+        special = self.supervision.status()
         if special is not None:
             return special
         return 0 if self.axis.moving else _IN_POSITION
@@ -257,27 +261,31 @@ class Motor(Supervision):
         command is still on its way down the chain (ch. 3 K65), it starts that much later.
         """
         self._go_target = None
-        if not self.can_move() or not waypoints or any(lim is None for _, lim in waypoints):
+        if not self.can_move() or not waypoints:
             return
-        waypoints = [(self.travel.clamp(t), lim) for t, lim in waypoints]
-        if self._allowed_target(waypoints[-1][0]) is None:
+        points: list[tuple[float, Limits]] = []
+        for t, lim in waypoints:
+            if lim is None:
+                return
+            points.append((self.travel.clamp(t), lim))
+        if self.supervision.allowed_target(points[-1][0]) is None:
             return
-        self.abandon_motion()
-        self._last_limits = waypoints[-1][1]
-        self.axis.move(waypoints, start_ns=self.kernel.now + delay_ns if delay_ns else None)
+        self.supervision.abandon_motion()
+        self._last_limits = points[-1][1]
+        self.axis.move(points, start_ns=self.kernel.now + delay_ns if delay_ns else None)
 
     def path_end_allowed(self, user_end: float) -> bool:
         """Whether an interpolation path may take this motor to ``user_end``: it can move,
         the end is within the software limits (K58, K59) and not toward an active limit
         sensor (which reports its error, as for a move)."""
-        return self.can_move() and self._allowed_target(user_end) == user_end
+        return self.can_move() and self.supervision.allowed_target(user_end) == user_end
 
     def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
         """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""
         self._go_target = None
         if not self.can_move():
             return False
-        self.abandon_motion()
+        self.supervision.abandon_motion()
         self._last_limits = limits
         self.axis.run_profile(profile)
         self.path = path
@@ -295,9 +303,9 @@ class Motor(Supervision):
             if self.axis.moving:
                 self.stop()
             return
-        self.abandon_motion()
+        self.supervision.abandon_motion()
         self._last_limits = limits
-        if self._continuous_blocked(s_value, limits):
+        if self.supervision.continuous_blocked(s_value, limits):
             return
         pps = s_value * self.resolution.speed_unit_pps
         self.axis.run(math.copysign(min(abs(pps), limits.speed), pps), limits)   # K40
@@ -310,7 +318,7 @@ class Motor(Supervision):
         ladder bank switches S.1 during a ``^`` move; cm-banks-rt3.txt 7.1-7.3).
         """
         p0 = int(self.memory.get("P", 0))
-        self.torque_limit = int(self.memory.get("M", 0))
+        self.supervision.torque_limit = int(self.memory.get("M", 0))
         same = (p0, int(self.memory.get("S", 0)), int(self.memory.get("A", 0)))
         if self._go_target is not None and self.axis.moving and same == self._go_data:
             return   # that very motion is running already (RT3 7.2 sends ^ every scan)
@@ -324,6 +332,7 @@ class Motor(Supervision):
                 self.stop()
         else:
             lim = self.limits(s0, a0)
+            assert lim is not None                # S0 and A0 are not 0
             if self.encoder.handles_go(p0, s0, lim) or self.analog_control.handles_go(p0, lim):
                 pass                          # index / feedback (K71), torque feedback (K38)
             elif p0 == units.CONTINUOUS:
@@ -356,16 +365,17 @@ class Motor(Supervision):
             self.path.stop(self.kernel.now)
             return
         lim = self._last_limits or self.limits(self.k(49), self.k(43))
-        if self._stop_push():
+        assert lim is not None                    # K43 and K49 are at least 1 (ch. 3)
+        if self.supervision.stop_push():
             return
-        self.abandon_motion()
+        self.supervision.abandon_motion()
         self.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
 
     def emergency_stop(self) -> None:
         """``*``: stop at maximum deceleration; Ux=512 until ``*1`` (2.1.2)."""
         self._go_target = None
-        if not self._stop_push():
-            self.abandon_motion()
+        if not self.supervision.stop_push():
+            self.supervision.abandon_motion()
             self.axis.stop(ESTOP_DECEL)
         if not self.estopped:
             self.estopped = True
@@ -384,7 +394,7 @@ class Motor(Supervision):
     def enable(self) -> None:
         """``(``: servo on; also clears a latched alarm (CM1 manual 3.2.3 ControlWord 3)."""
         self.alarm = 0
-        self.abandon_motion()
+        self.supervision.abandon_motion()
         self.axis.hold_here()
         self.axis.enabled = True
         self.motion_settled()
@@ -392,16 +402,16 @@ class Motor(Supervision):
     def free(self) -> None:
         """``)``: motor free (servo off); the shaft coasts to rest where it is."""
         self._go_target = None
-        self.abandon_motion()
+        self.supervision.abandon_motion()
         was_moving = not self.motion_done()
         self.axis.enabled = False
         if was_moving:
-            self.notify_motion_done("free")
+            self.supervision.notify_motion_done("free")
         self.motion_settled()
 
     def reset_alarm(self) -> None:
         """Alarm reset (input function 1, K28–K32): clear the alarm, servo on again."""
-        if self.alarm or self.push_error:
+        if self.alarm or self.supervision.push_error:
             self.enable()
 
     def jog(self, direction: int) -> None:
@@ -418,7 +428,7 @@ class Motor(Supervision):
 
     def raise_alarm(self, bits: int) -> None:
         """An alarm: report it, go free, raise the K34 alarm output (ch. 3 K56, K57)."""
-        if self._alarm_latched(bits):
+        if self.supervision.alarm_latched(bits):
             self.program.alarm()
             self.motion_settled()
 
@@ -426,10 +436,96 @@ class Motor(Supervision):
         """``#x``: P[x] := current position (2.1.2)."""
         self.memory.set("P", index, self.position())
 
+    # -- supervision: push, origin search, limits, faults (supervision/supervisor.py) ----
+    def push_to(self, target: float, limits: Limits | None,
+                via: Sequence[tuple[float, Limits | None]] = ()) -> None:
+        """Push motion toward user position ``target`` (4.1.4), merging through ``via``.
+
+        Zero speed data (no limits) means no motion (docs/fidelity.md "Motion")."""
+        if self.supervision.push_to(target, limits, via):
+            self._last_limits = limits
+
+    def set_torque_limit(self, percent: int) -> None:
+        """``M`` (2.1.1): the torque limit, % of the maximum torque, applies at once."""
+        self.supervision.set_torque_limit(percent)
+
+    def select_torque_limit(self, percent: int) -> None:
+        """A bank line's ``M#``: the torque limit of the motions that follow (the running
+        one keeps its solution)."""
+        self.supervision.torque_limit = percent
+
+    def drive(self) -> Drive:
+        """Dynamics parameters now: plant, torque limit, machine, faults."""
+        return self.supervision.drive()
+
+    def origin_search(self) -> None:
+        """``|`` / input function 7: origin search (5.3)."""
+        self.supervision.origin_search()
+
+    def limit_sensor(self, direction: int, on: bool) -> None:
+        """A CW (+1) / CCW (-1) limit sensor changed (input functions 6, 9)."""
+        self.travel.sensor(direction, on)
+
+    @property
+    def limit_sensors(self) -> dict[int, bool]:
+        """Limit sensor states: {+1: CW on, -1: CCW on} (read only)."""
+        return dict(self.travel.on)
+
+    def inject_fault(self, fault: str, **params: object) -> None:
+        """Fault injection through the device API (docs/machine-file.md "Faults")."""
+        self.faults.inject(fault, **params)
+
+    def position_error_exempt(self) -> bool:
+        """No position error overflow while pushing or searching a stopper."""
+        return self.push.active or (self.origin.active and self.origin.source == STOPPER)
+
+    def abandon_motion(self) -> None:
+        """A push or origin search in progress ends without completing."""
+        self.supervision.abandon_motion()
+
+    def motion_done(self) -> bool:
+        """No move, push or origin search in progress (what ``P``/``Q`` lines wait for)."""
+        return not (self.axis.moving or self.push.active or self.origin.active)
+
+    def add_motion_listener(self, listener: Callable[[str], None]) -> Callable[[], None]:
+        """Call ``listener(reason)`` whenever a motion completes; returns a remover.
+
+        Reasons: ``in-position``, ``push-complete``, ``push-error``, ``origin-complete``,
+        ``alarm``, ``free``.
+        """
+        return self.supervision.add_motion_listener(listener)
+
+    def notify_motion_done(self, reason: str) -> None:
+        """A motion completed: tell the listeners, let waiting bank lines look again."""
+        self.supervision.notify_motion_done(reason)
+
+    def push_finished(self, ux: int, reason: str) -> None:
+        """The push completed (40), failed (256) or ended at its target (8)."""
+        del ux
+        self.supervision.push_finished(reason)
+
+    def refresh_inputs(self) -> None:
+        """Re-apply the faults to every driven input level."""
+        self.supervision.refresh_inputs()
+
+    # -- temperature and machine ------------------------------------------------------
+    @property
+    def temperature(self) -> int:
+        """?71 Temp (°C)."""
+        return round(self.thermal.temperature_at(self.axis.motion, self.kernel.now))
+
+    def set_temperature(self, celsius: float) -> None:
+        """The case is at ``celsius`` now (fault injection, machine file)."""
+        self.supervision.set_temperature(celsius)
+
+    def z_position(self) -> float:
+        """Raw position of the Z phase / encoder phase 0 (machine file, default 0)."""
+        return self.geometry.z_raw(self.resolution.pulses_per_rev)
+
     def _arrived(self) -> None:
         if self._go_speed:            # a "^" reached P0 (not halted by S0 = 0): done
             self._go_target = None
-        self._arrival()
+        self.supervision.arrival()
         self.motion_settled()
 
     # -- motion completion (issue 4: bank executors wait on these) -----------------
@@ -450,7 +546,7 @@ class Motor(Supervision):
         if function == OUT_IN_POSITION:
             return self.status & Ux.IN_POSITION != 0
         if function == OUT_ALARM:
-            return self.alarm != 0 or self.push_error
+            return self.alarm != 0 or self.supervision.push_error
         if function == OUT_ORIGIN_DONE:
             return self.origin_done and self.status == Ux.IN_POSITION
         if function == OUT_MERGE_PULSE:
@@ -474,9 +570,9 @@ class Motor(Supervision):
     def set_input_level(self, number: int, on: bool) -> None:
         """Drive an input's electrical level (device API, machine file); the input
         functions of K27-K32 follow (:mod:`.inputs`), faults may hold it (:mod:`.faults`)."""
-        if self.io.set_level(number, self._input_driven(number, on)):
+        if self.io.set_level(number, self.supervision.input_level(number, on)):
             self.report_inputs()
-            self._input_changed(number)
+            self.origin.on_input(number)    # the origin search watches its sensor
             self.inputs.signal_changed(number)
         self.bus.poke()
 
@@ -512,10 +608,9 @@ class Motor(Supervision):
         """Numeric value of a register of this motor."""
         if reg.kind == "K":
             return self.k(reg.number)
-        value = self.memory.get(reg.kind, reg.number)
         if reg.kind == "V":
-            return self.v_numeric(value)
-        return int(value)
+            return self.v_numeric(self.memory.get("V", reg.number))
+        return self.memory.number(reg.kind, reg.number)
 
     def write_register(self, kind: str, index: int, value: int | str | VState | VString) -> None:
         """Store data; raises OutOfRangeError / IndexError."""
@@ -620,7 +715,7 @@ class Motor(Supervision):
             self.free()
         self.inputs.power_up()
         self.ladder.power_up()
-        self._power_on_search()
+        self.supervision.power_on()
         self.analog_control.activate()
 
     # -- analog input / output and the external encoder (own modules) -------------
@@ -687,3 +782,9 @@ class Motor(Supervision):
     def analog_output(self) -> int:
         """The analog output as the Modbus register reads it (K78+54): 0..1023."""
         return volts_to_register(self.analog_output_volts())
+
+
+if TYPE_CHECKING:
+    def _meets_its_protocol(motor: Motor) -> MotorCore:
+        """For mypy (tests/test_quality.py): the façade is what its parts see of it."""
+        return motor

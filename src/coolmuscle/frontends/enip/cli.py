@@ -1,4 +1,5 @@
-"""Command-line glue: ``coolmuscle sim --firmware cm1 --enip [HOST[:PORT]]`` and ``coolmuscle enip eds``.
+"""Command-line glue: ``coolmuscle sim --firmware cm1 --enip [HOST[:PORT]]`` and
+``coolmuscle enip eds``.
 
 ``--enip`` takes an optional value: alone it means 127.0.0.1 (port 44818);
 :func:`optional_value_argv` inserts that default before Typer parses the line.

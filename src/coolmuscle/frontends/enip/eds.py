@@ -1,4 +1,5 @@
-"""The EDS file of the CM1 EtherNet/IP module, written from :mod:`.objects` (ODVA EDS spec, CIP Vol 1 ch. 7).
+"""The EDS file of the CM1 EtherNet/IP module, written from :mod:`.objects` (ODVA EDS spec,
+CIP Vol 1 ch. 7).
 
 Identity, assembly sizes, the exclusive-owner connection and its RPI range are read
 from the same definitions the adapter serves, so the file cannot disagree with the
@@ -45,11 +46,13 @@ def _file_section() -> list[str]:
 def _device_section() -> list[str]:
     ident = IDENTITY
     return ["[Device]",
-            f"        VendCode = {ident.vendor_id};", f"        VendName = {_q(ident.vendor_name)};",
+            f"        VendCode = {ident.vendor_id};",
+            f"        VendName = {_q(ident.vendor_name)};",
             f"        ProdType = {ident.device_type};",
             '        ProdTypeStr = "Generic Device (keyable)";',
             f"        ProdCode = {ident.product_code};", f"        MajRev = {ident.revision[0]};",
-            f"        MinRev = {ident.revision[1]};", f"        ProdName = {_q(ident.product_name)};",
+            f"        MinRev = {ident.revision[1]};",
+            f"        ProdName = {_q(ident.product_name)};",
             '        Catalog = "CM1-EIP";', "",
             "[Device Classification]", "        Class1 = EtherNetIP;", ""]
 
@@ -91,7 +94,8 @@ def _connection_section(conn: ConnectionInfo) -> list[str]:
     params = PARAMS_HEADER if conn.run_idle_header else PARAMS_MODELESS
     return ["[Connection Manager]",
             "        Connection1 =",
-            f"                0x{TRIGGER_EXCLUSIVE_OWNER:08X},   $ class 1, cyclic, exclusive owner",
+            f"                0x{TRIGGER_EXCLUSIVE_OWNER:08X},"
+            "   $ class 1, cyclic, exclusive owner",
             f"                0x{params:08X},   $ O->T run/idle header, T->O modeless",
             f"                Param1,{out.size},Assem{out.instance},   $ O->T RPI, size, format",
             f"                Param1,{inp.size},Assem{inp.instance},   $ T->O RPI, size, format",

@@ -11,9 +11,9 @@
 
 Refusals (CIP Vol 1 appendix B; docs/fidelity.md "EtherNet/IP"): an unknown class or
 instance is 0x05 (path destination unknown, as ODVA's OpENer answers), a service the
-object lacks 0x08 (Identity also has Reset), an attribute it lacks 0x14, a read-only attribute 0x0E, short
-and long data 0x13 and 0x15, a write to the output assembly while an I/O connection
-owns it 0x10.  The Get services ignore request data after the path (as OpENer
+object lacks 0x08 (Identity also has Reset), an attribute it lacks 0x14, a read-only
+attribute 0x0E, short and long data 0x13 and 0x15, a write to the output assembly while an
+I/O connection owns it 0x10.  The Get services ignore request data after the path (as OpENer
 does; pycomm3 sends its route path there by default); a Set of an assembly accepts
 its exact size, or its size followed by exactly that empty route path (``00 00``).
 """
@@ -224,7 +224,8 @@ class ObjectModel:
                 raise CipError(cip.ATTRIBUTE_NOT_SETTABLE)
             attr.setter(request.data)
             return b""
-        if service == cip.RESET and request.path.class_id == IDENTITY_CLASS and request.path.instance:
+        path = request.path
+        if service == cip.RESET and path.class_id == IDENTITY_CLASS and path.instance:
             return self._reset(request.data)
         if service == cip.GET_ATTRIBUTES_ALL and self._has_get_all(request):
             return b"".join(attrs[n].getter() for n in sorted(attrs) if attrs[n].in_all)

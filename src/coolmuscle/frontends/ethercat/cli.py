@@ -44,7 +44,8 @@ def sim_transport(iface: str, bridge: str) -> object:
 #: The lab's options, shared by ``up`` and ``down`` (the same names remove what up made).
 _NAMESPACE = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace.")
 _MASTER_IF = typer.Option("cmlab-master", "--master-if", help="The master's end.")
-_SLAVE_IF = typer.Option("cmlab-slave", "--slave-if", help="The slave's end (inside the namespace).")
+_SLAVE_IF = typer.Option("cmlab-slave", "--slave-if",
+                         help="The slave's end (inside the namespace).")
 
 
 def _fail(text: str, code: int) -> NoReturn:

@@ -234,6 +234,8 @@ class Esc:
     # -- time ------------------------------------------------------------------
     def watchdog_ns(self) -> int:
         """SM watchdog time: 0x0420 x (0x0400 + 2) x 40 ns; 0 = disabled."""
+        divider: int
+        time_sm: int
         divider, = struct.unpack_from("<H", self.mem, REG_WD_DIVIDER)
         time_sm, = struct.unpack_from("<H", self.mem, REG_WD_SM)
         return time_sm * (divider + 2) * 40

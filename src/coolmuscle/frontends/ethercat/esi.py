@@ -173,7 +173,7 @@ def _device(devices: ET.Element, table: Table) -> None:
     _sub(eeprom, "ConfigData", build_sii(table)[:14].hex().upper())
 
 
-def build_esi(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> ET.ElementTree:
+def build_esi(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> "ET.ElementTree[ET.Element]":
     """The EtherCATInfo tree with one Device per bridge variant."""
     root = ET.Element("EtherCATInfo", {
         "xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
@@ -189,14 +189,14 @@ def build_esi(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> ET.ElementTre
     devices = _sub(descriptions, "Devices")
     for code in bridges:
         _device(devices, build_table(code))
-    tree = ET.ElementTree(root)
+    tree: ET.ElementTree[ET.Element] = ET.ElementTree(root)
     ET.indent(tree, space="  ")
     return tree
 
 
 def esi_text(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> str:
     """The ESI file as text (UTF-8 XML declaration included)."""
-    body = ET.tostring(build_esi(bridges).getroot(), encoding="unicode")
+    body: str = ET.tostring(build_esi(bridges).getroot(), encoding="unicode")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n"
 
 

@@ -40,7 +40,8 @@ class DataType:
     def decode(self, data: bytes) -> int | str:
         if not self.fmt:
             return data.decode("latin-1")
-        return struct.unpack("<" + self.fmt, data)[0]
+        value: int = struct.unpack("<" + self.fmt, data)[0]
+        return value
 
     @property
     def size(self) -> int:

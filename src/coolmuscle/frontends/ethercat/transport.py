@@ -76,6 +76,8 @@ def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
     """The kernel's receive time stamp (ns, CLOCK_REALTIME) of a frame, 0 if none."""
     for level, kind, data in ancdata:
         if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            sec: int
+            nsec: int
             sec, nsec = struct.unpack_from("@qq", data)
             return sec * 1_000_000_000 + nsec
     return 0

@@ -80,10 +80,11 @@ def load(name: str) -> type[Transport]:
         raise TransportError(f"transport {name!r}: cannot import module {module_name!r}: "
                              f"{type(exc).__name__}: {exc}") from exc
     try:
-        cls = getattr(module, attr) if attr else module
+        found: Any = getattr(module, attr) if attr else module    # as the entry point says
     except AttributeError as exc:
         raise TransportError(f"transport {name!r}: module {module_name!r} has no "
                              f"attribute {attr!r}") from exc
+    cls: type[Transport] = found
     _loaded[name] = cls
     return cls
 

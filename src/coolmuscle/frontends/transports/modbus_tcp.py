@@ -131,11 +131,13 @@ class ModbusTcpTransport(StreamServer):
     def _answer(self, unit: int, pdu: bytes) -> bytes | None:
         assert self.port is not None
         try:
-            return self.port.call(self._handle, unit, pdu)
+            answer: bytes | None = self.port.call(self._handle, unit, pdu)
+            return answer
         except Exception:
             self.port.errors += 1
             log.exception("modbus-tcp: the model failed on %s", pdu[:16].hex(" "))
             return None
 
     def _handle(self, unit: int, pdu: bytes) -> bytes | None:
-        return self._slave.handle(unit, pdu, tcp=True)
+        answer: bytes | None = self._slave.handle(unit, pdu, tcp=True)
+        return answer

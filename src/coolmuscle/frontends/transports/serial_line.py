@@ -227,7 +227,7 @@ class SerialTransport(_PumpedLine):
 
 def ensure_modbus_mode(device: Any) -> int:
     """Put COM0 in Modbus mode (K81.1=1 when it is 0); return the station address."""
-    k81 = device.get_param(1, 81)
+    k81: int = device.get_param(1, 81)
     if k81 == 0:
         device.set_param(1, 81, 1)
         k81 = 1

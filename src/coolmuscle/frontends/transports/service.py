@@ -50,12 +50,12 @@ class Service:
 
     async def wait(self, stop: asyncio.Event | None = None) -> None:
         """Return when ``stop`` is set or a transport that ends the service finished."""
-        waits = [asyncio.ensure_future(t.finished.wait())
-                 for t in self._started if t.stops_service]
+        waits: list[asyncio.Future[Any]] = [asyncio.ensure_future(t.finished.wait())
+                                            for t in self._started if t.stops_service]
         if stop is not None:
             waits.append(asyncio.ensure_future(stop.wait()))
         if self._driver_task is not None:
-            waits.append(self._driver_task)  # type: ignore[arg-type]
+            waits.append(self._driver_task)
         if not waits:
             return
         try:

@@ -36,14 +36,18 @@ import threading
 import time
 import urllib.parse
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+from serial.serialutil import to_bytes  # type: ignore[attr-defined]  # not in its stubs
 
 from ...errors import CoolMuscleError
 from ...sim.kernel import NS_PER_S, seconds
 from ...sim.realtime import FastClock, RealtimeClock
 from ..transports.base import split_after_line_ends
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer
 
 log = logging.getLogger("coolmuscle.frontends.urlhandler")
 
@@ -129,6 +133,10 @@ class Serial(SerialBase):
     """A pyserial port whose far end is a virtual Cool Muscle chain."""
 
     BAUDRATES = (9600, 19200, 38400, 57600, 115200, 230400)
+    # SerialBase keeps the settings here (its stubs name only the public properties)
+    _port: str | None
+    _baudrate: int
+    _timeout: float | None
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.chain: Any = None
@@ -236,7 +244,9 @@ class Serial(SerialBase):
 
     def _read_fast(self, size: int) -> None:
         kernel = self._clock.kernel  # type: ignore[union-attr]
-        ready = lambda: len(self._rx) >= size or self._cancel or self.chain is None  # noqa: E731
+
+        def ready() -> bool:
+            return len(self._rx) >= size or self._cancel or self.chain is None
         try:
             if self._timeout is None:
                 while not ready():
@@ -263,19 +273,19 @@ class Serial(SerialBase):
             waits = [w for w in (remaining, nxt) if w is not None]
             self._cond.wait(min(waits) if waits else None)
 
-    def write(self, data: bytes) -> int:
+    def write(self, data: Buffer) -> int:
         if not self.is_open:
             raise PortNotOpenError()
-        data = to_bytes(data)
+        payload: bytes = to_bytes(data)
         with self._cond:
             self._catch_up()
-            for piece in split_after_line_ends(data):  # a failing line costs only itself
+            for piece in split_after_line_ends(payload):  # a failing line costs only itself
                 try:
                     self.chain.host_line.feed(piece)
                 except Exception:  # front-end entry point: the model's failure is logged
                     log.exception("virtual chain failed on input %r", piece[:64])
             self._cond.notify_all()  # a reader may need to re-plan (pacing scheduled events)
-        return len(data)
+        return len(payload)
 
     def flush(self) -> None:
         """Nothing to drain: written bytes are already in the motor (or on the wire)."""

@@ -161,11 +161,14 @@ class Actions:
         if len(text) > MAX_BANK_TEXT:
             raise RequestError(f"bank text too long ({len(text)} characters, at most "
                                f"{MAX_BANK_TEXT})")
-        return self._call(self._tools().upload_banks, self.device, motor, text, self._note)
+        result: dict[str, Any] = self._call(self._tools().upload_banks, self.device, motor,
+                                            text, self._note)
+        return result
 
     def _tools(self) -> Toolbox:
         if self.toolbox is None:
-            raise RequestError("banks need the host tools (coolmuscle.tools.web.dashboard.WebDashboard)")
+            raise RequestError("banks need the host tools "
+                               "(coolmuscle.tools.web.dashboard.WebDashboard)")
         return self.toolbox
 
 

@@ -13,9 +13,9 @@ Owns what every open page receives, as JSON text frames:
 * ``tick``: the virtual time, once a second, so charts run on while nothing changes.
 
 What is pending for a page goes out as one WebSocket message, one JSON frame a line
-(JSON text holds no raw newline).  Each page has a bounded queue: a snapshot replaces the unsent one, log lines beyond
-``MAX_PENDING_LOG`` are dropped (the page is told how many), so a slow page never holds
-up the motor or the other pages.
+(JSON text holds no raw newline).  Each page has a bounded queue: a snapshot replaces the
+unsent one, log lines beyond ``MAX_PENDING_LOG`` are dropped (the page is told how many), so
+a slow page never holds up the motor or the other pages.
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
@@ -63,6 +63,9 @@ REL_TOL = 1e-9
 MAX_PIECES = 2000
 
 Conditions = Callable[["Piece"], Sequence[F] | None]
+#: How a piece may end: (exit name, the functions whose first root ends it, or the
+#: instant itself).
+Exits = list[tuple[str, "list[F] | float"]]
 
 
 @dataclass(init=False, eq=False, slots=True)
@@ -439,9 +442,9 @@ class Motion:
 @lru_cache(maxsize=1024)
 def _solved(drive: Drive, position: float, velocity: float,
             cmd: tuple[tuple[float, float, F], ...]) -> tuple[Piece, ...]:
-    """The pieces of a motion relative to the command's position at its origin.  The solution depends on nothing else, so a
-    machine that repeats a cycle solves each of its moves once (docs/performance.md);
-    a hit and a miss give the same numbers."""
+    """The pieces of a motion relative to the command's position at its origin.  The
+    solution depends on nothing else, so a machine that repeats a cycle solves each of its
+    moves once (docs/performance.md); a hit and a miss give the same numbers."""
     solver = _Solver(drive, list(cmd))
     solver._build(position, velocity)
     return tuple(solver.pieces)
@@ -450,7 +453,7 @@ def _solved(drive: Drive, position: float, velocity: float,
 @lru_cache(maxsize=1024)
 def _placed(drive: Drive, position: float, velocity: float,
             cmd: tuple[tuple[float, float, F], ...]
-            ) -> tuple[tuple[Piece, ...], list[float], dict[str, float], dict]:
+            ) -> tuple[tuple[Piece, ...], list[float], dict[str, float], dict[Any, Any]]:
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (cached too: a cycle repeats its moves in place)."""
     ref = cmd[0][2][0]
@@ -580,7 +583,7 @@ class _Solver:
 
     # -- choosing a mode ------------------------------------------------------------
     def _choose(self, t: float, p: float, v: float, cmd: F,
-                dur: float = math.inf) -> tuple[Piece, list]:
+                dur: float = math.inf) -> tuple[Piece, Exits]:
         d = self.drive
         if not d.enabled:
             return self._free(t, p, v, cmd, FREE, 0)
@@ -614,16 +617,16 @@ class _Solver:
             return self._sat(t, p, v, cmd, _sign(torque))
         return self._sat(t, p, v, cmd, _sign(vref - v))
 
-    def _walls(self, pos: F) -> list:
+    def _walls(self, pos: F) -> Exits:
         d = self.drive
-        out = []
+        out: Exits = []
         if math.isfinite(d.wall_hi):
             out.append(("wall_hi", [xp.sub(pos, xp.const(d.wall_hi))]))
         if math.isfinite(d.wall_lo):
             out.append(("wall_lo", [xp.sub(xp.const(d.wall_lo), pos)]))
         return out
 
-    def _track(self, t: float, p: float, cmd: F, dur: float) -> tuple[Piece, list]:
+    def _track(self, t: float, p: float, cmd: F, dur: float) -> tuple[Piece, Exits]:
         """First-order tracking of the command from error cmd(0) - p.
 
         The hot path of every motion: the expoly operations (sub, deriv, plus) are
@@ -649,7 +652,7 @@ class _Solver:
         if ed:
             ep = ep + ed * math.exp(-k * probe)
         sgn = (ep > 0.0) - (ep < 0.0)
-        still: list = []
+        still: Exits = []
         if sgn and q1 == q2 == q3 == 0.0:
             # settling on a standing command: once creeping, static friction holds
             if abs(k * ed) <= V_STILL:
@@ -673,7 +676,7 @@ class _Solver:
         piece._vel = vel
         return piece, exits
 
-    def _sat(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
+    def _sat(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, Exits]:
         """The torque limit in direction ``s``: constant acceleration, the shaft lags."""
         d = self.drive
         drive_force = s * d.a_limit - d.a_load
@@ -697,7 +700,7 @@ class _Solver:
         d = self.drive
         return d.a_limit + d.a_friction + s * d.a_load
 
-    def _brake_exit(self, pos: F, cmd: F, s: int) -> list:
+    def _brake_exit(self, pos: F, cmd: F, s: int) -> Exits:
         """Where braking at the limit lands exactly on the loop's steady lag."""
         a_b = self._braking(s)
         if a_b <= 0.0:
@@ -708,7 +711,7 @@ class _Solver:
         curve = xp.sub(xp.mul(u, u), xp.scale(eps, 2.0 * a_b * s))
         return [("brake", [xp.scale(u, float(s)), curve])]
 
-    def _brake(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, list]:
+    def _brake(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, Exits]:
         """Braking at the limit torque (against ``s``) onto the command's speed."""
         d = self.drive
         sgn = _sign(v)
@@ -729,7 +732,7 @@ class _Solver:
         exits.append(("vmax", [xp.sub(xp.scale(vel, float(sgn)), xp.const(d.v_max))]))
         return Piece(t, math.inf, BRAKE, pos, cmd, xp.const(-s * d.a_limit), 0.0, s), exits
 
-    def _vsat(self, t: float, p: float, cmd: F, s: int) -> tuple[Piece, list]:
+    def _vsat(self, t: float, p: float, cmd: F, s: int) -> tuple[Piece, Exits]:
         d = self.drive
         pos: F = (p, s * d.v_max, 0.0, 0.0, 0.0)
         e = xp.sub(cmd, pos)
@@ -739,19 +742,19 @@ class _Solver:
         ] + self._brake_exit(pos, cmd, s)
         return Piece(t, math.inf, VSAT, pos, cmd, torque, 0.0, s), exits
 
-    def _held(self, t: float, p: float, cmd: F, mode: str, s: int) -> tuple[Piece, list]:
+    def _held(self, t: float, p: float, cmd: F, mode: str, s: int) -> tuple[Piece, Exits]:
         """Standing still at the limit torque (stall, contact) until Pe turns round."""
         pos = xp.const(p)
-        exits = [("release", [xp.scale(xp.sub(cmd, pos), -float(s))])]
+        exits: Exits = [("release", [xp.scale(xp.sub(cmd, pos), -float(s))])]
         torque = xp.const(s * self.drive.a_limit)
         return Piece(t, math.inf, mode, pos, cmd, torque, 0.0, s), exits
 
-    def _contact(self, t: float, side: int, cmd: F) -> tuple[Piece, list]:
+    def _contact(self, t: float, side: int, cmd: F) -> tuple[Piece, Exits]:
         d = self.drive
         return self._held(t, d.wall_hi if side > 0 else d.wall_lo, cmd, CONTACT, side)
 
     def _free(self, t: float, p: float, v: float, cmd: F, mode: str,
-              s: int) -> tuple[Piece, list]:
+              s: int) -> tuple[Piece, Exits]:
         """No motor torque: friction and load only (servo off, lost steps)."""
         d = self.drive
         if v == 0.0 and abs(d.a_load) <= d.a_friction:
@@ -773,7 +776,7 @@ class _Solver:
         return Piece(t, math.inf, mode, pos, cmd, shown, 0.0, s), exits
 
     def _stepper(self, t: float, p: float, v: float, cmd: F,
-                 dur: float) -> tuple[Piece, list]:
+                 dur: float) -> tuple[Piece, Exits]:
         """CM1: exactly on the command within the torque limit, else steps are lost."""
         d = self.drive
         e0 = cmd[0] - p
@@ -821,7 +824,7 @@ def _stretch_sign(f: F, k: float, dur: float) -> tuple[int, float | None]:
     return _sign(xp.value(f, k, (lo + end) / 2.0)), None
 
 
-def _beyond(name: str, f: F, dur: float, limit: float) -> list:
+def _beyond(name: str, f: F, dur: float, limit: float) -> Exits:
     """Exits for ``|f| > limit`` within ``dur``, only when a bound says it may happen."""
     if xp.abs_bound(f, dur) <= limit:
         return []

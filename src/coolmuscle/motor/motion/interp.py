@@ -4,8 +4,9 @@ Geometry: the start point is the current position of the X motor (the lower ID) 
 the Y motor; the end point is their P data.  With ``R`` the path is an arc of that
 radius (equal radii: a circle; different radii: an oval whose semi-axes are the two
 radii), the major arc for a positive radius and the minor arc for a negative radius
-or the ``-`` modifier (4.4.1); with ``N`` the arc is centred on the N data (4.4.2; when the end is not as far from
-the centre as the start, the radius changes evenly with the angle, a spiral arc);
+or the ``-`` modifier (4.4.1); with ``N`` the arc is centred on the N data (4.4.2; when the
+end is not as far from the centre as the start, the radius changes evenly with the angle, a
+spiral arc);
 ``R`` = 0 draws a straight line (4.4.3).  ``+`` turns CW, ``-`` CCW.
 
 Timing: the arc length ``s(t)`` is planned as a one-dimensional move with the
@@ -168,7 +169,7 @@ class SubPath:
 
     def __init__(self, path: "Line | Arc | SubPath", s0: float) -> None:
         self.path, self.s0 = path, min(max(s0, 0.0), path.length)
-        self.length = path.length - self.s0
+        self.length: float = path.length - self.s0
 
     def point(self, s: float) -> Point:
         return self.path.point(self.s0 + min(max(s, 0.0), self.length))

@@ -59,7 +59,8 @@ class Piece:
         shaft = getattr(self.tracking, "position_at", None)
         if callable(shaft):
             return float(shaft(t))
-        return self.profile.position_at(t) - self.tracking.error_at(t)
+        error: float = self.tracking.error_at(t)
+        return self.profile.position_at(t) - error
 
     def user_of(self, raw: float) -> float:
         """A raw position in this piece's user coordinates."""
@@ -67,7 +68,8 @@ class Piece:
 
     def velocity(self, t: int) -> float:
         """Actual speed, user pulses/s."""
-        return self.sign * self.tracking.actual_velocity_at(t)
+        velocity: float = self.tracking.actual_velocity_at(t)
+        return self.sign * velocity
 
     def turns(self, t0: int, t1: int) -> list[int]:
         """Instants in (t0, t1) where the actual motion may reverse.

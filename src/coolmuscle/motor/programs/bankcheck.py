@@ -128,7 +128,7 @@ def _fill_stmt(stmt: ast.Statement, m: int) -> ast.Statement:
         stmt = dataclasses.replace(stmt, value=_fill_expr(stmt.value, m))
     if isinstance(stmt, ast.Alloc) or getattr(stmt, "motor", 0) is not None:
         return stmt
-    return dataclasses.replace(stmt, motor=m)  # type: ignore[call-arg]
+    return dataclasses.replace(stmt, motor=m)
 
 
 # ---------------------------------------------------------------- steps

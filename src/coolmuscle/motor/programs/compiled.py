@@ -77,7 +77,8 @@ def _register(reg: ast.Reg, motor: "MotorCore") -> Reader:
                 return 0
             cls = cell.__class__
             if cls is VNumber:
-                return cell.value
+                number: int = cell.value
+                return number
             if cls is VState:
                 return motor.state_value(cell.name)
             return motor.v_numeric(cell)        # a string
@@ -85,9 +86,10 @@ def _register(reg: ast.Reg, motor: "MotorCore") -> Reader:
 
     def read() -> int:
         try:
-            return motor.memory.data[kind][index]
+            value: int = motor.memory.data[kind][index]
         except IndexError:
             return 0
+        return value
     return read
 
 
@@ -214,7 +216,7 @@ def compile_statement(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", q
     def run() -> object:
         clock.clock += steps
         try:
-            return body()  # type: ignore[misc]
+            return body()
         except MotorError as error:
             motor.report_error(ctx, error)
         except (LookupError, ValueError, ArithmeticError, TypeError):
@@ -259,7 +261,7 @@ def _actions(stmts: tuple[ast.Statement, ...], motor: "MotorCore", ctx: "Context
     if any(fn is None for fn in fns):
         return None
     if len(fns) == 1:
-        return fns[0]  # type: ignore[return-value]
+        return fns[0]
 
     def run() -> object:
         result = None

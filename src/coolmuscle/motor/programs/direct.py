@@ -77,7 +77,8 @@ def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | 
         return value
     if stmt.op != "=":
         if reg.kind == "P" and not motor.resolution.incremental_allowed:
-            raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
+            # ch. 3 K37: "40-70, the incremental motion cannot be executed"
+            raise OutOfRangeError()
         if reg.kind == "P" and reg.number == 0 and not ctx.program and not ctx.ladder:
             base = motor.position()          # 6.2: direct P0 is relative to the current position
         else:
@@ -166,7 +167,7 @@ def _exec(motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
         motor.free()
     elif op == "save":
         try:
-            motor.bus.save(motor)
+            motor.bus.save(motor.id)
         except StoreError as exc:   # full disk, read-only file: the host is told, always
             log.warning("motor %d: $ not saved: %s", motor.id, exc)
             motor.say(ctx, f"not saved.{motor.id}: {exc}", kind="message")

@@ -247,6 +247,7 @@ class LadderRunner:
               pending: object = None) -> Step:
         """Interpret bank ``number``; ``start`` >= 0 continues a scan the fast loop began
         (``pending``: what its statement left to do)."""
+        flow: object
         code = self._code(number)
         if code is None:
             self.motor.report_error(self.ctx, NoLadderBankError())
@@ -292,6 +293,7 @@ class LadderRunner:
         wake = max(self.clock, self.kernel.now) + ns
         yield Sleep(wake - self.kernel.now)
         self.clock = wake
+        return None
 
     def _statement(self, stmt: ast.Statement, quiet: bool, callers: tuple[int, ...]) -> Step:
         if isinstance(stmt, ast.Branch):
@@ -333,13 +335,14 @@ class LadderRunner:
             ns = timer_ns(self.motor, reg)
             if ns:
                 yield from self._sleep(ns)
-            return
+            return None
         target = target_motor(self.motor, stmt)
         if target is not None:
             try:
                 target.say(self.ctx, display_reply(target, reg))
             except (MotorError, LookupError):
                 target.report_error(self.ctx, OutOfRangeError())
+        return None
 
     def _assign(self, stmt: ast.Assign, quiet: bool) -> None:
         """Store, and display ``V1.1=123`` unless the line ends with ``;`` (RT3 1.1)."""

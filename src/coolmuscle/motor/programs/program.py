@@ -479,8 +479,8 @@ class ProgramExecutor:
             target.program.sel_path = target.program.sel_path.select(reg.kind, reg.number,
                                                                       stmt.modifier)
         elif reg.kind == "M":
-            _guard(target, lambda: setattr(target, "torque_limit",
-                                           target.memory.number("M", reg.number)))
+            _guard(target, lambda: target.select_torque_limit(
+                target.memory.number("M", reg.number)))
         elif reg.kind in ("V", "K", "H"):
             _guard(target, lambda: target.say(self.ctx, display_reply(target, reg)))
 

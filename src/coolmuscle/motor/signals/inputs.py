@@ -28,6 +28,7 @@ command from the host has priority: pulses wait while its motion runs.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import TYPE_CHECKING
 
 from ...cml import ast
@@ -174,7 +175,7 @@ class InputFunctions:
                 self.quick[number] = True
                 self._level(QUICK_LEVEL, number, True)
                 self._timers[number] = self.motor.kernel.schedule(
-                    self.delay_ns(number), lambda n=number: self._slow_on(n),
+                    self.delay_ns(number), partial(self._slow_on, number),
                     priority=PRIO_IO, name=f"slow-input-{number}")
 
     # -- functions ---------------------------------------------------------------------

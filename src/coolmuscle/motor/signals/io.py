@@ -40,7 +40,7 @@ CM1_OUTPUT_FUNCTIONS: tuple[int, ...] = (
 
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
-_POWERS = tuple(10 ** n for n in range(12))
+_POWERS: tuple[int, ...] = tuple(10 ** n for n in range(12))
 
 
 def digit(value: int, position: int) -> int:

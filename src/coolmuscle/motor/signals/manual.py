@@ -85,6 +85,7 @@ class ManualMotion:
         m = self.motor
         if self.feeding():
             lim = m.limits(m.k(49), m.k(43))
+            assert lim is not None                # K43 and K49 are at least 1 (ch. 3)
             m.axis.stop(lim.decel, lim.scurve, creep=lim.creep, speed=lim.speed)
         self.feed_profile = None
         self.feed_direction = 0

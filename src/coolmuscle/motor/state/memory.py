@@ -14,7 +14,7 @@ both an ``OutOfRangeError`` (the motor reports error00 ``Out Of Range!!``) and a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping, Union
+from typing import Any, Literal, Mapping, Union, overload
 
 from ...errors import OutOfRangeError
 from .firmware import REGISTER_KINDS, Firmware
@@ -75,6 +75,8 @@ class VState:
 
 
 VValue = Union[VNumber, VString, VState]
+#: The registers that hold numbers (every kind but V), as the type checker names them.
+NumericKind = Literal["P", "S", "A", "M", "T", "N", "R", "H"]
 
 #: Every spelling in the manuals, upper-cased, to the canonical state name.
 #: CML 6.2 / 2.2.1: Px Sx Ix Ux Pe ADIN (formerly AIN) PT ST CT; CML 5.4.3: Ecnt;
@@ -172,11 +174,21 @@ class Memory:
 
     # -- access ----------------------------------------------------------------
 
+    @overload
+    def get(self, kind: NumericKind, index: int) -> int: ...
+
+    @overload
+    def get(self, kind: Literal["V"], index: int) -> VValue: ...
+
+    @overload
+    def get(self, kind: str, index: int) -> int | VValue: ...
+
     def get(self, kind: str, index: int) -> int | VValue:
         """The value of ``kind`` memory ``index`` (a :data:`VValue` for V)."""
         kind = _kind(kind)
         self._check_index(kind, index)
-        return self._data[kind][index]
+        value: int | VValue = self._data[kind][index]
+        return value
 
     def number(self, kind: str, index: int) -> int:
         """The value of a numeric memory (``S``, ``A``, ``P``, ``M``, ``T`` ...; not V)."""

@@ -389,9 +389,10 @@ def _decode(text: str, motor_id: int, path: str = "") -> dict[str, Any]:
 def snapshot_problem(snapshot: Mapping[str, Any]) -> str:
     """What is wrong with the shape of a loaded motor snapshot (``""``: nothing).
 
-    The store itself keeps any JSON data; this checks the shape the motor writes (module docstring): ``params`` K number -> integer,
-    ``memory`` an object of register lists, ``banks`` ``{"program"|"ladder":
-    {"N": [line, ...]}}``.  Values are checked by the motor as it restores them.
+    The store itself keeps any JSON data; this checks the shape the motor writes (module
+    docstring): ``params`` K number -> integer, ``memory`` an object of register lists,
+    ``banks`` ``{"program"|"ladder": {"N": [line, ...]}}``.  Values are checked by the motor
+    as it restores them.
     """
     params = snapshot.get("params", {})
     if not isinstance(params, Mapping):

@@ -28,14 +28,15 @@ from ..motion.dynamics import Piece
 from ..status import Ux
 
 if TYPE_CHECKING:
-    from ..motion.axis import Axis
+    from ..motion.axis import Axis, Watcher
+    from ..motion.dynamics import Conditions
     from ..core import MotorCore
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple:
+def _beyond(f: Callable[[Piece], xp.F], limit: float) -> "tuple[Conditions, Conditions]":
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
@@ -46,7 +47,8 @@ def _constant_beyond(f: xp.F, limit: float) -> bool:
     return f[1] == f[2] == f[3] == f[4] == 0.0 and abs(f[0]) > limit
 
 
-@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py): tests subclass it
+# compiled (coolmuscle/_accel.py): tests subclass it
+@mypyc_attr(allow_interpreted_subclasses=True)
 class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
@@ -187,7 +189,7 @@ class TemperatureWatch(_AlarmWatch):
         return thermal.first_above(axis.motion, after_ns, thermal.alarm)
 
 
-def alarm_watchers(motor: "MotorCore") -> list[_AlarmWatch]:
+def alarm_watchers(motor: "MotorCore") -> "list[Watcher]":
     """The alarm watchers of one motor, in the order they are checked."""
     return [PositionErrorWatch(motor), OverSpeedWatch(motor), OverloadWatch(motor),
             TemperatureWatch(motor)]

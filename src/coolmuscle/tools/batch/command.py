@@ -237,8 +237,14 @@ def _escape(text: object) -> str:
 
 def write_outputs(run: BatchRun, junit: Path | None, results: Path | None,
                   suite: str) -> None:
-    for path, write in ((junit, lambda p: write_junit(p, run.jobs, run.outcomes, suite=suite)),
-                        (results, lambda p: write_results(p, run.jobs, run.outcomes))):
+    def junit_to(p: Path) -> None:
+        write_junit(p, run.jobs, run.outcomes, suite=suite)
+
+    def results_to(p: Path) -> None:
+        write_results(p, run.jobs, run.outcomes)
+    writers: tuple[tuple[Path | None, Callable[[Path], None]], ...] = (
+        (junit, junit_to), (results, results_to))
+    for path, write in writers:
         if path is None:
             continue
         try:

@@ -186,12 +186,13 @@ class _Checker:
             return
         try:
             if target.kind == "K":
-                self.fw.spec(target.number).check(literal)  # type: ignore[arg-type]
+                self.fw.spec(target.number).check(literal)
             else:
                 self.memory.normalise(target.kind, literal)
         except OutOfRangeError as error:
-            self.report.add(line, "range", f"{tree.reg_text(target.kind, target.index, target.motor)}"
-                            f"={literal}: {error}", column=tree.column(line.raw, target.kind))
+            reg = tree.reg_text(target.kind, target.index, target.motor)
+            self.report.add(line, "range", f"{reg}={literal}: {error}",
+                            column=tree.column(line.raw, target.kind))
 
     def _direct(self, line: SourceLine, set_before: set[RegKey]) -> None:
         for statement in line.statements:
@@ -240,7 +241,7 @@ class _Checker:
     def _set_in_banks(self) -> set[RegKey]:
         """Registers some bank of the file writes (ladder banks set them for programs);
         worked out once a file (it was once a bank: quadratic in the banks)."""
-        cached = getattr(self, "_banks_write", None)
+        cached: set[RegKey] | None = getattr(self, "_banks_write", None)
         if cached is not None:
             return cached
         found: set[RegKey] = set()
@@ -404,7 +405,9 @@ class _Checker:
 
 def _split_commas(code: str) -> list[str]:
     """The pieces between commas, ignoring commas inside strings."""
-    pieces, current, quoted = [], [], False
+    pieces: list[str] = []
+    current: list[str] = []
+    quoted = False
     for ch in code:
         if ch == '"':
             quoted = not quoted

@@ -23,6 +23,7 @@ Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad s
 from __future__ import annotations
 
 import sys
+from typing import Any, Callable
 
 from .exits import guarded
 from .stopsignals import check_stop, install_startup_handlers
@@ -38,8 +39,8 @@ def main(argv: list[str] | None = None) -> None:
             sys.stdout.write(version_text())
         guarded(version)
         return
-    kwargs: dict | None = None
-    full_main = None
+    kwargs: dict[str, Any] | None = None
+    full_main: Callable[[list[str] | None], None] | None = None
 
     def parse() -> None:      # imports included: a stop signal may land in any of them
         nonlocal kwargs, full_main
@@ -55,6 +56,7 @@ def main(argv: list[str] | None = None) -> None:
 
     def quick() -> None:
         from .run import run_command
+        assert kwargs is not None             # parse() gave them: no full_main
         code = run_command(**kwargs)
         check_stop()
         if code:

@@ -2,8 +2,8 @@
 :mod:`.entry` and the typer application of :mod:`.cli`).
 
 Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad script;
-70 an internal error (a bug: please report it); 128 + N after stop signal N (130: Ctrl-C).  No traceback reaches the user unless
-``COOLMUSCLE_DEBUG=1``.
+70 an internal error (a bug: please report it); 128 + N after stop signal N (130: Ctrl-C).
+No traceback reaches the user unless ``COOLMUSCLE_DEBUG=1``.
 """
 
 from __future__ import annotations

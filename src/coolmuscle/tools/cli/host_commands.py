@@ -54,7 +54,8 @@ def check(
         try:
             program = load_program(path)
         except (OSError, UnicodeDecodeError) as exc:
-            raise UsageError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}")
+            raise UsageError(
+                f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from exc
         try:
             report = check_program(program, firmware=firmware.value if firmware else None,
                                    motors=motors)

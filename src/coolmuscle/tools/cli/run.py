@@ -160,10 +160,10 @@ def header_defaults(file: Path, motors: int | None, firmware: str | None,
     given_fw = header.get("firmware")
     if given_fw is not None and given_fw.lower() not in FIRMWARES:
         raise UsageError(f"{file}: '# coolmuscle: firmware={given_fw}' is not cm2, rt3 or cm1")
-    for option, value, key in (("--motors", motors, "motors"), ("--firmware", firmware,
+    for option, given, key in (("--motors", motors, "motors"), ("--firmware", firmware,
                                                                  "firmware")):
-        if value is not None and header.get(key) not in (None, str(value)):
-            stderr_line(f"coolmuscle: note: {option} {value} overrides the script's "
+        if given is not None and header.get(key) not in (None, str(given)):
+            stderr_line(f"coolmuscle: note: {option} {given} overrides the script's "
                         f"{key}={header[key]}")
     if motors is None:
         motors = int(given_motors) if given_motors else 1
@@ -194,9 +194,10 @@ def check_run_times(until: float | None, trace_step: float = 0.001) -> None:
 
 
 def run_command(file: Path, until: float | None = None, trace: Path | None = None,
-                trace_step: float = 0.001, plot: Path | None = None, xy: str | None = None, motors: int | None = None,
-                firmware: str | None = None, state: Path | None = None, check: bool = False,
-                pace: bool = False, record: Path | None = None, machine: Path | None = None,
+                trace_step: float = 0.001, plot: Path | None = None, xy: str | None = None,
+                motors: int | None = None, firmware: str | None = None,
+                state: Path | None = None, check: bool = False, pace: bool = False,
+                record: Path | None = None, machine: Path | None = None,
                 chain_factory: Callable[..., Any] = default_chain) -> int:
     """Run a script in fast virtual time, print every line, check expectations.
 

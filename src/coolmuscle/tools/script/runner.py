@@ -4,7 +4,8 @@ This module owns:
 
 * parsing scripts: plain lines (sent as typed + CR, blank lines too), ``# `` comments,
   directives ``@wait SECONDS``, ``@until REGEX [TIMEOUT]``, ``@send BYTES``,
-  ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES`` (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
+  ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES``
+  (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
 * running a script against a chain in fast (unpaced, deterministic) virtual time,
   producing a timestamped transcript of every line sent and received;
 * checking the received byte stream against the expectations, in order, byte for
@@ -503,7 +504,10 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
                 elif step.kind == "until":
                     assert step.pattern is not None
                     pattern = step.pattern
-                    if not kernel.run_until(lambda: matched(pattern), seconds(step.seconds)):
+                    # the closure runs before the loop goes on (B023)
+                    waited = kernel.run_until(lambda: matched(pattern),  # noqa: B023
+                                              seconds(step.seconds))
+                    if not waited:
                         failure = Failure("timeout", f"line {step.line_no}: @until "
                                           f"{pattern.pattern!r} timed out after {step.seconds:g} s "
                                           f"(virtual time {kernel.now_s:.6f} s)",
@@ -533,8 +537,9 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
     finally:
         remove()
         recorder.finish()
-        interrupted = sys.exc_info()[0] is not None and not issubclass(
-            sys.exc_info()[0], Exception)     # Ctrl-C, a stop signal: stop at once
+        raised = sys.exc_info()[0]
+        interrupted = raised is not None and not issubclass(
+            raised, Exception)                # Ctrl-C, a stop signal: stop at once
         close = getattr(tracer, "abort" if interrupted else "close", None)
         if callable(close):
             close()

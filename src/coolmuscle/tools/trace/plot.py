@@ -24,6 +24,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
 from ...motor.signals import io  # noqa: E402
@@ -32,6 +33,8 @@ from ...sim.kernel import NS_PER_S  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from matplotlib.typing import ColorType
 
     from ...chain import Chain
     from .recorder import Sample, TraceRecorder
@@ -132,10 +135,11 @@ def _status_spans(t: list[float], samples: list["Sample"], end: float
 _EXTRA = ("#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173")
 
 
-def _palette(n: int) -> list[object]:
+def _palette(n: int) -> list[ColorType]:
     """tab10, then five darker colours: 15 motors, none faint."""
     cmap = plt.get_cmap("tab10")
-    colours: list[object] = [cmap(i) for i in range(10)] + list(_EXTRA)
+    colours: list[ColorType] = [cmap(i) for i in range(10)]
+    colours += _EXTRA
     return [colours[i % len(colours)] for i in range(n)]
 
 
@@ -144,8 +148,12 @@ def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
     if len(ppr) != 1:
         return
     (p,) = ppr
-    right = ax.secondary_yaxis("right", functions=(lambda v: v * 60.0 / p,
-                                                   lambda r: r * p / 60.0))
+    def to_rpm(v: Any) -> Any:          # pulses/s (numbers or numpy arrays) -> min⁻¹
+        return v * 60.0 / p
+
+    def to_pps(r: Any) -> Any:
+        return r * p / 60.0
+    right = ax.secondary_yaxis("right", functions=(to_rpm, to_pps))
     right.set_ylabel("min⁻¹")
 
 
@@ -254,7 +262,7 @@ def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], 
 
 
 def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple[int, int]],
-              colors: dict[int, object]) -> None:
+              colors: dict[int, ColorType]) -> None:
     """Each pair's path: the X motor's position across, the Y motor's up (4.4 figures);
     the command dashed, the start a circle, the end a square."""
     for x_id, y_id in pairs:
@@ -277,7 +285,7 @@ def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple
 
 def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
                    bit_rows: dict[int, list[tuple[str, list[bool]]]],
-                   colors: dict[int, object], end: float) -> None:
+                   colors: dict[int, ColorType], end: float) -> None:
     """Per motor: a status bar, then one logic-analyser row per active input/output."""
     labels: list[tuple[float, str]] = []
     y = 0.0
@@ -319,8 +327,8 @@ def _draw_stoppers(ax: "Axes", motor: object, color: object, multi: bool) -> Non
                         va="bottom", color=color)
 
 
-def _legends(fig: "plt.Figure", ax: dict[str, "Axes"], motors: Sequence[int],
-             colors: dict[int, object], outside: bool, analog: bool,
+def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
+             colors: dict[int, ColorType], outside: bool, analog: bool,
              occurring: set[str] | None = None) -> None:
     status = [Patch(color=c, label=name) for name, c in STATUS_COLORS.items()
               if occurring is None or name in occurring]
@@ -332,8 +340,8 @@ def _legends(fig: "plt.Figure", ax: dict[str, "Axes"], motors: Sequence[int],
         ax["analog"].legend(loc="upper right", fontsize="x-small")
     ax["position"].plot([], [], "--", color="gray", linewidth=0.8, label="target")
     if outside:
-        handles = [plt.Line2D([], [], color=colors[m], label=f"ID{m}") for m in motors]
-        handles.append(plt.Line2D([], [], color="gray", linestyle="--", label="target"))
+        handles = [Line2D([], [], color=colors[m], label=f"ID{m}") for m in motors]
+        handles.append(Line2D([], [], color="gray", linestyle="--", label="target"))
         fig.legend(handles=handles, loc="upper right", bbox_to_anchor=(0.995, 0.96),
                    fontsize="small", title="motor")
     else:

@@ -124,7 +124,7 @@ class _MotorLog:
         """(K33, K34, K35) in force at ``t``."""
         return self.k_values[max(bisect_right(self.k_times, t) - 1, 0)]
 
-    def starts(self, history: list) -> list[int]:
+    def starts(self, history: list[Any]) -> list[int]:
         """Start times of the axis history (cached; the history only grows)."""
         if len(self._starts) != len(history):
             self._starts = [h[0] for h in history]
@@ -597,7 +597,7 @@ def _record_signals(motor: "Motor") -> None:
         analog.recording = True
 
 
-def _append(times: list[int], values: list, now: int, value: object) -> None:
+def _append(times: list[int], values: list[Any], now: int, value: object) -> None:
     """Append a change at ``now`` (a second change at the same instant replaces it)."""
     if times and times[-1] == now:
         values[-1] = value

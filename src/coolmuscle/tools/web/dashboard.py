@@ -142,8 +142,8 @@ def _cell(value: float) -> str:
 
 
 def _write_parquet(path: Path, header: list[str], rows: list[list[float]]) -> None:
-    import pyarrow as pa  # type: ignore[import-not-found]  # noqa: PLC0415  (optional)
-    import pyarrow.parquet as pq  # type: ignore[import-not-found]  # noqa: PLC0415
+    import pyarrow as pa  # noqa: PLC0415  (optional)
+    import pyarrow.parquet as pq  # noqa: PLC0415
 
     from ..trace.recorder import INTEGER_FIELDS
     columns = list(zip(*rows)) if rows else [() for _ in header]

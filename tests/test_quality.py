@@ -1,0 +1,57 @@
+"""Quality gates (issue 28): the type checker and the linter, as ``./scripts/test`` runs them.
+
+* ``mypy`` (pinned in the ``accel`` extra: the one that compiles the hot modules) checks the
+  whole package with ``--strict``, with the settings of ``[tool.mypy]`` in pyproject.toml.
+  Every module is strict, a new one too.  Among what it checks: ``Chain`` is every motor's
+  ``MotorBus`` and a ``Device``, ``Motor`` is the ``MotorCore`` its parts see (the
+  ``_meets_its_protocol*`` functions in chain/daisy.py and motor/motor.py, and every call
+  that hands the chain or the motor to a part).
+* ``ruff`` (pinned in the ``test`` extra) lints the repository with the rules of
+  ``[tool.ruff]`` (pycodestyle, pyflakes, bugbear; lines up to 100 characters).
+
+A new error in either fails the suite; each test also shows that its tool, with the
+project's settings, finds an error in a module written to have one.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "pyproject.toml"
+
+
+def _run(*argv: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", *argv], cwd=cwd, capture_output=True,
+                          text=True, timeout=900)
+
+
+@pytest.mark.timeout(900)          # a cold cache on a loaded 2-CPU machine: a few minutes
+def test_mypy_strict_passes_on_the_whole_package(tmp_path: Path) -> None:
+    done = _run("mypy")                                   # files, strict: pyproject.toml
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Success: no issues found" in done.stdout
+
+    new = tmp_path / "new_module.py"                      # a new module is strict
+    new.write_text("def twice(x):\n    return 2 * x\n\n\ndef name() -> str:\n"
+                   "    return twice('a')\n")
+    done = _run("mypy", "--config-file", str(CONFIG), str(new))
+    assert done.returncode == 1
+    assert "Function is missing a type annotation" in done.stdout, done.stdout
+    assert "Call to untyped function" in done.stdout, done.stdout
+
+
+def test_ruff_passes_on_the_repository(tmp_path: Path) -> None:
+    done = _run("ruff", "check", "--no-cache", ".")       # rules: pyproject.toml
+    assert done.returncode == 0, done.stdout + done.stderr
+
+    new = tmp_path / "new_module.py"                      # the rules are in force
+    new.write_text("import os\n\n\ndef add(item: int, into: list[int] = []) -> list[int]:\n"
+                   "    into.append(item)\n    return into\n")
+    done = _run("ruff", "check", "--no-cache", "--config", str(CONFIG), str(new))
+    assert done.returncode == 1
+    assert "F401" in done.stdout and "B006" in done.stdout, done.stdout
