@@ -88,7 +88,8 @@ def build(prefix: Path, where: Path) -> Path:
     for step in steps:
         done = subprocess.run(step, capture_output=True, text=True, timeout=BUILD_TIMEOUT,
                               check=False)
-        assert done.returncode == 0, f"{' '.join(step)}:\n{done.stdout[-3000:]}{done.stderr[-3000:]}"
+        assert done.returncode == 0, \
+            f"{' '.join(step)}:\n{done.stdout[-3000:]}{done.stderr[-3000:]}"
     return where / "build" / "eipscanner_originator"
 
 

@@ -106,6 +106,12 @@ def _mailboxes(frames: list[Frame], cmd: int) -> list[Frame]:
             and ints([f], "ecat.cnt")[0] == 1]
 
 
+def _coe(frames: list[Frame], cmd: int, coe_type: int) -> list[Frame]:
+    """The mailbox datagrams of one CoE service (SDO request, response, information)."""
+    return [f for f in _mailboxes(frames, cmd)
+            if ints([f], "ecat_mailbox.coe.type") == [coe_type]]
+
+
 def test_ethercat_capture_has_no_malformed_frame_nor_expert_error(ecat: Session) -> None:
     _result, frames, path = ecat
     assert problems(path) == []
@@ -126,7 +132,7 @@ def test_ethercat_al_control_goes_init_preop_safeop_op_init_5_2(ecat: Session) -
 
 def test_ethercat_sdo_requests_and_answers_are_the_ones_soem_made_5_4(ecat: Session) -> None:
     result, frames, _path = ecat
-    requests = [f for f in _mailboxes(frames, FPWR) if ints([f], "ecat_mailbox.coe.type") == [SDO_REQ]]
+    requests = _coe(frames, FPWR, SDO_REQ)
     initiate = [(ints([f], "ecat_mailbox.coe.sdoreq")[0], ints([f], "ecat_mailbox.coe.sdoidx")[0],
                  ints([f], "ecat_mailbox.coe.sdosub")[0]) for f in requests
                 if ints([f], "ecat_mailbox.coe.sdoreq")[0] in (1, 2)]
@@ -165,7 +171,7 @@ def test_ethercat_segmented_upload_and_download_carry_the_whole_object_5_4(ecat:
     index, _sub, data_hex = result["segmented"]
     k = bytes.fromhex(data_hex)
     assert len(k) > ident.MBX_OUT_SIZE
-    answers = [f for f in _mailboxes(frames, FPRD) if ints([f], "ecat_mailbox.coe.type") == [SDO_RES]]
+    answers = _coe(frames, FPRD, SDO_RES)
     start = next(i for i, f in enumerate(answers)
                  if ints([f], "ecat_mailbox.coe.sdoidx") == [index]
                  and ints([f], "ecat_mailbox.coe.sdores") == [2])
@@ -180,7 +186,7 @@ def test_ethercat_segmented_upload_and_download_carry_the_whole_object_5_4(ecat:
     assert [ints([f], "ecat_mailbox.coe.sdoscsus_lastseg")[0] for f in segments][-1] == 1
     uploaded = b"".join(hexbytes(f["ecat_mailbox.coe.dsoldata"][0]) for f in [head, *segments])
     assert len(segments) >= 2 and uploaded[:len(k)] == k
-    requests = [f for f in _mailboxes(frames, FPWR) if ints([f], "ecat_mailbox.coe.type") == [SDO_REQ]]
+    requests = _coe(frames, FPWR, SDO_REQ)
     start = next(i for i, f in enumerate(requests)
                  if ints([f], "ecat_mailbox.coe.sdoreq") == [1]
                  and ints([f], "ecat_mailbox.coe.sdoidx") == [index])
@@ -202,8 +208,8 @@ def test_ethercat_segmented_upload_and_download_carry_the_whole_object_5_4(ecat:
 
 def test_ethercat_sdo_information_names_what_soem_read_5_4(ecat: Session) -> None:
     result, frames, _path = ecat
-    info_q = [f for f in _mailboxes(frames, FPWR) if ints([f], "ecat_mailbox.coe.type") == [SDO_INFO]]
-    info_s = [f for f in _mailboxes(frames, FPRD) if ints([f], "ecat_mailbox.coe.type") == [SDO_INFO]]
+    info_q = _coe(frames, FPWR, SDO_INFO)
+    info_s = _coe(frames, FPRD, SDO_INFO)
     assert ints(info_q[:1], "ecat_mailbox.coe.sdoinfoopcode") == [1]          # Get OD List
     assert ints(info_q[:1], "ecat_mailbox.coe.sdoinfolisttype") == [1]        # all objects
     # The list spans mailboxes: every fragment but the last has the Incomplete bit (0x80),
@@ -214,10 +220,12 @@ def test_ethercat_sdo_information_names_what_soem_read_5_4(ecat: Session) -> Non
     assert len(lists) >= 2 and opcodes == [0x82] * (len(lists) - 1) + [0x02]
     assert left == list(range(len(lists) - 1, -1, -1))
     assert len(result["od"]) > 50
-    described = [(ints([f], "ecat_mailbox.coe.sdoinfoindex")[0], f["ecat_mailbox.coe.sdoinfoname"][0])
+    described = [(ints([f], "ecat_mailbox.coe.sdoinfoindex")[0],
+                  f["ecat_mailbox.coe.sdoinfoname"][0])
                  for f in info_s if ints([f], "ecat_mailbox.coe.sdoinfoopcode") == [4]]
     assert [tuple(n) for n in result["names"]] == described
-    entries = [(f["ecat_mailbox.coe.sdoinfoname"][0], ints([f], "ecat_mailbox.coe.sdoinfodatatype")[0],
+    entries = [(f["ecat_mailbox.coe.sdoinfoname"][0],
+                ints([f], "ecat_mailbox.coe.sdoinfodatatype")[0],
                 ints([f], "ecat_mailbox.coe.sdoinfobitlen")[0])
                for f in info_s if ints([f], "ecat_mailbox.coe.sdoinfoopcode") == [6]]
     assert [tuple(e) for e in result["entries"]] == entries
@@ -291,9 +299,10 @@ def test_enip_get_set_attribute_services_and_statuses_cip_vol1_appendix_b(enip: 
     result, frames, _path = enip
     answers = [f for f in frames if "cip.sc" in f and "cip.cm.sc" not in f
                and ints([f], "cip.rr") == [1]]
-    got: list[list[int | None]] = [[ints([f], "cip.sc")[0], ints([f], "cip.class")[0], ints([f], "cip.instance")[0],
-            ints([f], "cip.attribute")[0] if "cip.attribute" in f else None,
-            ints([f], "cip.genstat")[0]] for f in answers]
+    got: list[list[int | None]] = [
+        [ints([f], "cip.sc")[0], ints([f], "cip.class")[0], ints([f], "cip.instance")[0],
+         ints([f], "cip.attribute")[0] if "cip.attribute" in f else None,
+         ints([f], "cip.genstat")[0]] for f in answers]
     assert got[:-1] == result["requests"]
     assert got[-1] == [0x0E, 4, 0x65, 3, 0]                 # the input assembly, afterwards
     assert [r[4] for r in result["requests"][3:]] == result["expected"] == [0x05, 0x14, 0x0E, 0x08]
@@ -323,7 +332,8 @@ def test_enip_forward_open_class1_io_both_ways_and_forward_close_ch4(enip: Sessi
         seq = ints(stream, "enip.cpf.sai.seq")
         assert seq == list(range(seq[0], seq[0] + len(seq)))           # +1 a packet
         counts = ints(stream, "cip.seq")
-        assert all(0 <= b - a <= 1 for a, b in itertools.pairwise(counts)) and counts[-1] > counts[0]
+        assert all(0 <= b - a <= 1 for a, b in itertools.pairwise(counts))
+        assert counts[-1] > counts[0]
     assert set(ints(o_t, "cip.32bitheader.run_idle")) == {1}            # run
     assert {hexbytes(v) for v in values(o_t, "cipio.data")} == {bytes.fromhex(result["move"])}
     images = [struct.unpack("<HHi", hexbytes(v)) for v in values(t_o, "cipio.data")]
@@ -335,7 +345,8 @@ def test_enip_forward_open_class1_io_both_ways_and_forward_close_ch4(enip: Sessi
 
 
 # -- Modbus/TCP: pymodbus, every function code the slave serves and its exceptions -------
-MODBUS_FIELDS = ["frame.protocols", "tcp.srcport", "tcp.dstport", "mbtcp.trans_id", "mbtcp.unit_id", "modbus.func_code",
+MODBUS_FIELDS = ["frame.protocols", "tcp.srcport", "tcp.dstport", "mbtcp.trans_id",
+                 "mbtcp.unit_id", "modbus.func_code",
                  "modbus.exception_code", "modbus.request_frame", "modbus.regnum16",
                  "modbus.regval_uint16", "modbus.reference_num", "modbus.word_cnt"]
 MOVE = b"S.1=100, A.1=100, P.1=2000, ^.1\r"
@@ -430,7 +441,7 @@ def test_web_dashboard_websocket_session_dissects_as_sent(tmp_path: Path) -> Non
     ws = [f for f in frames if "websocket.opcode" in f]
     to_server = [f for f in ws if ints([f], "tcp.srcport") != [port]]
     to_client = [f for f in ws if ints([f], "tcp.srcport") == [port]]
-    assert ints(to_server, "websocket.opcode") == [1, 2, 9, 8]             # text, binary, ping, close
+    assert ints(to_server, "websocket.opcode") == [1, 2, 9, 8]    # text, binary, ping, close
     assert values(to_server, "websocket.mask") == ["1"] * 4 or \
         values(to_server, "websocket.mask") == ["True"] * 4                # RFC 6455 5.3
     assert set(values(to_client, "websocket.mask")) <= {"0", "False"}
