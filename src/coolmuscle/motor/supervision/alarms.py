@@ -35,7 +35,8 @@ if TYPE_CHECKING:
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple:
+def _beyond(f: Callable[[Piece], xp.F], limit: float
+            ) -> tuple[Callable[[Piece], list[xp.F]], Callable[[Piece], list[xp.F]]]:
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
@@ -46,7 +47,7 @@ def _constant_beyond(f: xp.F, limit: float) -> bool:
     return f[1] == f[2] == f[3] == f[4] == 0.0 and abs(f[0]) > limit
 
 
-@mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py): tests subclass it
+@mypyc_attr(allow_interpreted_subclasses=True)  # compiled (_accel.py): tests subclass it
 class _AlarmWatch:
     """Base: watches only while the servo is on and this alarm is not latched."""
 
@@ -80,8 +81,8 @@ class PositionErrorWatch(_AlarmWatch):
         limit, motion = self.limit(), axis.motion
         if motion.peak("err") <= limit:       # every piece would be skipped
             return None
-        return motion.first(after_ns, *_beyond(Piece.err, limit),
-                            skip=lambda p: motion.reach(p, "err") <= limit)
+        return motion.first_of(after_ns, _beyond(Piece.err, limit), None,
+                               lambda p: motion.reach(p, "err") <= limit)
 
 
 class OverSpeedWatch(_AlarmWatch):
@@ -98,8 +99,8 @@ class OverSpeedWatch(_AlarmWatch):
         motion = axis.motion
         if motion.peak("vel") <= limit:       # every piece would be skipped
             return None
-        return motion.first(after_ns, *_beyond(Piece.vel, limit),
-                            skip=lambda p: motion.reach(p, "vel") <= limit)
+        return motion.first_of(after_ns, _beyond(Piece.vel, limit), None,
+                               lambda p: motion.reach(p, "vel") <= limit)
 
 
 class OverloadWatch(_AlarmWatch):
@@ -149,18 +150,18 @@ class OverloadWatch(_AlarmWatch):
             if since is None:
                 if motion.peak("torque") <= rated:    # every piece would be skipped
                     return None
-                since = motion.first(t, *_beyond(lambda p: p.torque, rated),
-                                     skip=lambda p: motion.reach(p, "torque") <= rated,
-                                     accept=lambda p: _constant_beyond(p.torque, rated))
+                since = motion.first_of(t, _beyond(lambda p: p.torque, rated), None,
+                                        lambda p: motion.reach(p, "torque") <= rated,
+                                        lambda p: _constant_beyond(p.torque, rated))
                 if since is None:
                     return None
                 walk.append([since, None])
                 t = since + 1
             deadline = since + hold
-            back = motion.first(t, lambda p: [xp.plus(p.torque, rated),
-                                              xp.plus(xp.scale(p.torque, -1.0), rated)],
-                                horizon_ns=deadline,
-                                accept=lambda p: motion.reach(p, "torque") < rated)
+            back = motion.first_of(t, (lambda p: [xp.plus(p.torque, rated),
+                                                  xp.plus(xp.scale(p.torque, -1.0), rated)],),
+                                   deadline, None,
+                                   lambda p: motion.reach(p, "torque") < rated)
             if back is None or back > deadline:
                 return max(deadline, t)
             walk[-1][1] = back
