@@ -156,7 +156,8 @@ def baseline_tree(ref: str, compiled: bool) -> tuple[Path | None, str]:
         return into, "sources (no compiled modules then)"
     env = dict(os.environ, PYTHONPATH=str(into / "src"))
     env.pop("COOLMUSCLE_PURE", None)
-    print(f"compiling the hot modules of {ref} in {into} (once; kept there) ...", flush=True)
+    print(f"{ref}: its compiled hot modules in {into} (built on first use, then kept)",
+          flush=True)
     built = subprocess.run([sys.executable, "-m", "coolmuscle.tools.accel", "build", "--quiet"],
                            env=env, cwd=into)
     return into, "compiled" if built.returncode == 0 else "sources (its build failed)"
