@@ -91,7 +91,7 @@ class Tree:
     def __init__(self, name: str, root: Path, work: Path, *, pure: bool = False) -> None:
         self.name = name
         self.root = root
-        self.out = work / f"transcript-{len(name)}-{abs(hash(name))}.txt"
+        self.out = work / f"transcript-{name.replace(' ', '-')}.txt"   # what the run printed
         self.env = dict(os.environ)
         self.env.pop("PYTHONDONTWRITEBYTECODE", None)
         self.env.pop("COOLMUSCLE_PURE", None)
