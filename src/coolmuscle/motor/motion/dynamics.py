@@ -227,6 +227,15 @@ def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float,
 _COMMANDS: dict[tuple[object, ...], tuple[object, tuple[tuple[float, float, F], ...]]] = {}
 
 
+#: Motion.continued's splices: (id of the pieces taken from the old motion, their offset
+#: in it, its origin to the new origin, the new origin to the tail's, id of the tail's
+#: pieces) -> (those pieces, the tail's pieces, (pieces, starts, peaks, memo)); the pieces
+#: are kept, so an id is never reused while it is a key.
+_Splice = tuple[Sequence[Piece], list[float], dict[str, float], dict[object, int | None]]
+_SPLICED: dict[tuple[int, int, int, int, int],
+               tuple[Sequence[Piece], Sequence[Piece], _Splice]] = {}
+
+
 def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
     off = (origin_ns - profile.origin_ns) / NS_PER_S
     out: list[tuple[float, float, F]] = []
@@ -284,6 +293,23 @@ class Motion:
         motion = Motion(profile, at, position, velocity, old.drive, tail)   # pieces below
         motion.origin_ns = int(origin_ns)
         motion._tail = tail
+        # The spliced pieces depend only on old's pieces from now on, tail's pieces and
+        # the offsets: a repeated cycle splices the same ones again (_SPLICED).  When old
+        # is a splice too and now is on its tail, its pieces from now on are its tail's
+        # (a solution, kept by _placed) moved by old's own offset.
+        source: Sequence[Piece] | None = old.pieces
+        offset = -1
+        if old._tail is not None:
+            source = None
+            if motion.origin_ns >= old._tail.origin_ns:
+                source, offset = old._tail.pieces, old._tail.origin_ns - old.origin_ns
+        key = (id(source), offset, motion.origin_ns - old.origin_ns, at - motion.origin_ns,
+               id(tail.pieces))
+        if source is not None:
+            found = _SPLICED.get(key)
+            if found is not None and found[0] is source and found[1] is tail.pieces:
+                motion.pieces, motion._starts, motion._peaks, motion._memo = found[2]
+                return motion
         shift_old = (motion.origin_ns - old.origin_ns) / NS_PER_S
         cut = (at - motion.origin_ns) / NS_PER_S
         pieces = [piece.moved(shift_old, cut) for piece in old.pieces
@@ -291,6 +317,11 @@ class Motion:
         pieces += [piece.moved(-cut, math.inf) for piece in tail.pieces]
         motion.pieces, motion._starts = pieces, [p.start for p in pieces]
         motion._peaks, motion._memo = _peaks(pieces), {}
+        if source is not None:
+            if len(_SPLICED) >= 1024:
+                _SPLICED.clear()
+            _SPLICED[key] = (source, tail.pieces,
+                             (motion.pieces, motion._starts, motion._peaks, motion._memo))
         return motion
 
     def exact_state(self, t_ns: int) -> tuple[float, float]:
@@ -380,7 +411,7 @@ class Motion:
             def inside(piece: Piece) -> list[F]:
                 e = piece.err()
                 return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
-            at = self.first(after_ns, inside)
+            at = self.first_of(after_ns, (inside,))
             found = self._memo[key] = None if at is None else at - self.origin_ns
         return None if found is None else self.origin_ns + found
 
@@ -396,7 +427,7 @@ class Motion:
             def inside(piece: Piece) -> list[F]:
                 off = xp.sub(piece.pos, xp.const(center))
                 return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
-            at = self.first(after_ns, inside)
+            at = self.first_of(after_ns, (inside,))
             found = self._memo[key] = None if at is None else at - self.origin_ns
         return None if found is None else self.origin_ns + found
 
@@ -414,6 +445,15 @@ class Motion:
         which ``skip`` is true are known not to qualify; pieces for which ``accept`` is
         true are known to qualify all along (a bound says so: no roots are sought).  The
         instant is rounded up to the next nanosecond, so the condition already holds then."""
+        return self.first_of(after_ns, alternatives, horizon_ns, skip, accept)
+
+    def first_of(self, after_ns: int, alternatives: Sequence[Conditions],
+                 horizon_ns: int | None = None,
+                 skip: Callable[[Piece], bool] | None = None,
+                 accept: Callable[[Piece], bool] | None = None) -> int | None:
+        """:meth:`first` with the alternatives as one sequence and no keywords: compiled
+        code calls it directly (a call with ``*`` and keywords goes through the generic
+        call protocol: 1 % of a csp axis-cycle, docs/performance.md)."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -508,6 +548,7 @@ def clear_solutions() -> None:
     """Forget every solved motion (benchmarks: to time every move solved afresh)."""
     _placed.cache_clear()
     _solved.cache_clear()
+    _SPLICED.clear()
 
 
 def solution_reuse() -> tuple[int, int]:

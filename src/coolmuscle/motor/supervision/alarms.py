@@ -82,8 +82,8 @@ class PositionErrorWatch(_AlarmWatch):
         limit, motion = self.limit(), axis.motion
         if motion.peak("err") <= limit:       # every piece would be skipped
             return None
-        return motion.first(after_ns, *_beyond(Piece.err, limit),
-                            skip=lambda p: motion.reach(p, "err") <= limit)
+        return motion.first_of(after_ns, _beyond(Piece.err, limit), None,
+                               lambda p: motion.reach(p, "err") <= limit)
 
 
 class OverSpeedWatch(_AlarmWatch):
@@ -100,8 +100,8 @@ class OverSpeedWatch(_AlarmWatch):
         motion = axis.motion
         if motion.peak("vel") <= limit:       # every piece would be skipped
             return None
-        return motion.first(after_ns, *_beyond(Piece.vel, limit),
-                            skip=lambda p: motion.reach(p, "vel") <= limit)
+        return motion.first_of(after_ns, _beyond(Piece.vel, limit), None,
+                               lambda p: motion.reach(p, "vel") <= limit)
 
 
 class OverloadWatch(_AlarmWatch):
@@ -151,18 +151,18 @@ class OverloadWatch(_AlarmWatch):
             if since is None:
                 if motion.peak("torque") <= rated:    # every piece would be skipped
                     return None
-                since = motion.first(t, *_beyond(lambda p: p.torque, rated),
-                                     skip=lambda p: motion.reach(p, "torque") <= rated,
-                                     accept=lambda p: _constant_beyond(p.torque, rated))
+                since = motion.first_of(t, _beyond(lambda p: p.torque, rated), None,
+                                        lambda p: motion.reach(p, "torque") <= rated,
+                                        lambda p: _constant_beyond(p.torque, rated))
                 if since is None:
                     return None
                 walk.append([since, None])
                 t = since + 1
             deadline = since + hold
-            back = motion.first(t, lambda p: [xp.plus(p.torque, rated),
-                                              xp.plus(xp.scale(p.torque, -1.0), rated)],
-                                horizon_ns=deadline,
-                                accept=lambda p: motion.reach(p, "torque") < rated)
+            back = motion.first_of(t, (lambda p: [xp.plus(p.torque, rated),
+                                                  xp.plus(xp.scale(p.torque, -1.0), rated)],),
+                                   deadline, None,
+                                   lambda p: motion.reach(p, "torque") < rated)
             if back is None or back > deadline:
                 return max(deadline, t)
             walk[-1][1] = back
