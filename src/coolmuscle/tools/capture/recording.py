@@ -18,9 +18,9 @@ lines at a time.
 from __future__ import annotations
 
 import os
-import queue
 import threading
 import time
+from collections import deque
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
@@ -30,8 +30,10 @@ from .settings import LineSettings
 
 __all__ = ["CaptureFile", "header_lines"]
 
-#: How long the writer waits for bytes before it ends a line held at a lone CR (s).
-IDLE = 0.05
+#: The writer wakes this often (s) and writes what came meanwhile: waking for every
+#: chunk would compete with the relay's threads for the processor and the interpreter
+#: just when they pass bytes on.  A round with nothing new ends a line held at a lone CR.
+ROUND = 0.02
 
 
 def _word(value: str) -> str:
@@ -81,39 +83,38 @@ class CaptureFile:
         self.file.write("".join(line + "\n" for line in header(started)))
         self.writer = SessionWriter(self.file.write, stamps=True)
         self._failed = False
-        self._queue: queue.SimpleQueue[tuple[int, Direction, bytes] | None] = \
-            queue.SimpleQueue()
+        self._items: deque[tuple[int, Direction, bytes]] = deque()
         self._lock = threading.Lock()
+        self._closing = threading.Event()
         self._thread = threading.Thread(target=self._run, name="capture-writer", daemon=True)
         self._thread.start()
 
     def put(self, direction: Direction, data: bytes) -> None:
         """``data`` seen now going to the motor (``">"``) or coming from it (``"<"``)."""
         with self._lock:          # stamps in the order of the queue
-            self._queue.put((time.monotonic_ns(), direction, data))
+            self._items.append((time.monotonic_ns(), direction, data))
 
     def _run(self) -> None:
         while True:
-            try:
-                item = self._queue.get(timeout=IDLE)
-            except queue.Empty:
+            closing = self._closing.wait(ROUND)
+            if not self._items:
+                if closing:
+                    return
                 self.writer.tick()
-                continue
-            if item is None:
-                return
-            at, direction, data = item
-            if self._failed:
-                continue
-            try:
-                self.writer.feed((at - self.start_ns) / 1e9, direction, data)
-            except Exception as exc:      # a bug here must not stop the relay: said once
-                self._failed = True
-                self.on_error(f"{self.path} stopped growing: internal error "
-                              f"{type(exc).__name__}: {exc}")
+            while self._items:
+                at, direction, data = self._items.popleft()
+                if self._failed:
+                    continue
+                try:
+                    self.writer.feed((at - self.start_ns) / 1e9, direction, data)
+                except Exception as exc:  # a bug here must not stop the relay: said once
+                    self._failed = True
+                    self.on_error(f"{self.path} stopped growing: internal error "
+                                  f"{type(exc).__name__}: {exc}")
 
     def close(self, stopped: str | None) -> None:
         """Write what is queued and pending; the end line when ``stopped`` says why."""
-        self._queue.put(None)
+        self._closing.set()
         self._thread.join()
         if self._failed:
             self.file.close()
@@ -125,8 +126,3 @@ class CaptureFile:
                             f"bytes_to_motor={w.bytes_sent} bytes_from_motor={w.bytes_received}"
                             f" stopped={stopped}\n")
         self.file.close()
-
-    @property
-    def growing(self) -> bool:
-        """False once the file has stopped growing (:class:`LineFile`)."""
-        return self.file.error is None

@@ -52,19 +52,16 @@ _SENT_END = re.compile(rb"[\r\n]")
 _PRINTABLE = re.compile(rb"[\x20-\x7e]*")
 
 
+#: Every byte (as a latin-1 character) -> how an ``@until`` pattern says it.
+_UNTIL_ESCAPED = {code: (chr(code) if chr(code).isalnum() and code < 128
+                         else re.escape(chr(code)) if 32 <= code < 127 else f"\\x{code:02x}")
+                  for code in range(256)}
+
+
 def until_pattern(text: bytes) -> str:
     """``^LINE$`` for ``@until``: letters and digits as is, other printable ASCII escaped
     by :func:`re.escape`, everything else as ``\\xNN`` (the file stays ASCII)."""
-    out = []
-    for byte in text:
-        char = chr(byte)
-        if char.isalnum() and byte < 128:
-            out.append(char)
-        elif 32 <= byte < 127:
-            out.append(re.escape(char))
-        else:
-            out.append(f"\\x{byte:02x}")
-    return "^" + "".join(out) + "$"
+    return "^" + text.decode("latin-1").translate(_UNTIL_ESCAPED) + "$"
 
 
 def _plain_line(line: bytes) -> str | None:
