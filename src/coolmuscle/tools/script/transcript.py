@@ -216,7 +216,7 @@ class SessionWriter:
         lines.append(plain if plain is not None else f"@send {escape(data)}")
         self._write("\n".join(lines) + "\n")
         self.sent_lines += 1
-        self._replay_at = self._last_sent = at
+        self._last_sent = at
         body = data.rstrip(b"\r\n")
         if ended:
             self._tx_text += body
