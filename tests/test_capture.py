@@ -431,11 +431,14 @@ def _capture_bad(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, s
       "{tmp}/s.cml"], "--machine {tmp}/none.toml: no such file"),
     (["coolmuscle://", "--listen", "0", "--machine", "{tmp}/bad.toml", "--out",
       "{tmp}/s.cml"], "inertai"),
+    (["coolmuscle://", "--listen", "0", "--machine", "{tmp}/my machine.toml", "--out",
+      "{tmp}/s.cml"], "use a path without spaces"),
 ])
 def test_bad_input_is_one_line_exit_2_and_nothing_written(
         args: list[str], says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "afile").write_text("not a link\n")
     (tmp_path / "bad.toml").write_text("[[axis]]\n[axis.load]\ninertai = 1\n")
+    (tmp_path / "my machine.toml").write_text(PLAIN.read_text())
     before = sorted(p.name for p in tmp_path.iterdir())
     code, text = _capture_bad(capsys, *(a.format(tmp=tmp_path) for a in args))
     assert code == 2, text

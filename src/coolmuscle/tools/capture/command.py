@@ -73,7 +73,12 @@ def _machine_word(machine: Path, out: Path) -> str:
     if not machine.is_file():
         raise UsageError(f"--machine {machine}: no such file")
     load_machine(machine)                       # a bad file is refused now (exit 2)
-    return os.path.relpath(machine.resolve(), out.resolve().parent)
+    word = os.path.relpath(machine.resolve(), out.resolve().parent)
+    if any(char.isspace() for char in word):
+        raise UsageError(f"--machine {machine}: the header names the file as {word!r}, and "
+                         "'run' reads a header path up to the first space: use a path "
+                         "without spaces")
+    return word
 
 
 def _open_host(listen: str | None, pty: Path | None) -> TcpHostSide | PtyHostSide:
@@ -170,6 +175,7 @@ def capture(
     record: CaptureFile | None = None
     stopped = "error"                     # what the end line says if setting up fails
     signum: int | None = None
+    switch_interval = sys.getswitchinterval()
     try:
         settings = _settings(motor, url, given, probing=probing,
                              scan=baud is None and parity is None, echo=echo,
@@ -189,10 +195,11 @@ def capture(
              f"{settings.echo_word()}); writing {out}; Ctrl-C ends it")
         stopped = relay.wait()
     except (KeyboardInterrupt, SignalStop) as exc:
-        ignore_stop_signals()                 # a second signal must not cut the file short
         signum = exc.signum if isinstance(exc, SignalStop) else signal.SIGINT
         stopped = "ctrl-c" if signum == signal.SIGINT else signal.Signals(signum).name.lower()
     finally:
+        ignore_stop_signals()                 # a second signal must not cut the file short
+        sys.setswitchinterval(switch_interval)
         if relay is not None:
             relay.close()                     # both ends too
         else:

@@ -119,6 +119,8 @@ class Relay:
                     self._to_host(data)
         except LinkBroken as exc:
             self.stop("link-broken", str(exc))
+        except Exception as exc:           # a bug: the relay stops, said in one line
+            self.stop("error", f"the relay failed: {type(exc).__name__}: {exc}")
 
     def _to_host(self, data: bytes) -> None:
         with self._out_lock:
@@ -178,6 +180,8 @@ class Relay:
                 watched = self._watch(selector, watched)
         except LinkBroken as exc:
             self.stop("link-broken", str(exc))
+        except Exception as exc:           # a bug: the relay stops, said in one line
+            self.stop("error", f"the relay failed: {type(exc).__name__}: {exc}")
         finally:
             selector.close()
 
