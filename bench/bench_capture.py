@@ -6,6 +6,8 @@
    alternately straight to the sim and through the relay, in the same run.  Printed:
    p50 / p99 of each and what the relay adds (the round trip crosses it twice: once
    for the line, once for the answer).
+   The same with an echo server (its own process) for the motor: the relay's own cost,
+   without the sim's pacing and scheduling in the figures.
 2. Throughput.  A plain TCP peer stands in for the motor; 1 MiB of random bytes goes
    each way at once, straight and through the relay (which records every byte).
 
@@ -119,6 +121,68 @@ def latency(tmp: Path, queries: int) -> None:
     print(f"  capture file: {lines} lines")
 
 
+_ECHO = """
+import socket, threading
+server = socket.create_server(("127.0.0.1", 0))
+print(f"echo 127.0.0.1:{server.getsockname()[1]}", flush=True)
+def serve(conn):
+    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    while data := conn.recv(65536):
+        conn.sendall(data)
+while True:
+    threading.Thread(target=serve, args=(server.accept()[0],), daemon=True).start()
+"""
+
+
+def _echo_round_trip(sock: socket.socket, other: socket.socket) -> float:
+    """One ``?96.1\\r`` echoed on ``sock`` (``other`` is not served by the echo peer)."""
+    start = time.perf_counter()
+    sock.sendall(QUERY)
+    got = b""
+    while len(got) < len(QUERY):
+        got += sock.recv(4096)
+    return time.perf_counter() - start
+
+
+def latency_bare(tmp: Path, queries: int) -> None:
+    with (tmp / "echo.log").open("w") as fh:
+        echo = subprocess.Popen([sys.executable, "-c", _ECHO], stdout=fh,
+                                stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 30
+        while (found := re.search(r"echo (\S+)", (tmp / "echo.log").read_text())) is None:
+            if time.monotonic() > deadline:
+                raise SystemExit("the echo server did not start")
+            time.sleep(0.05)
+        cap, relay_at = _start(["capture", f"socket://{found.group(1)}", "--no-probe",
+                                "--listen", "0", "--out", str(tmp / "echo.cml")],
+                               tmp / "echo-capture.log", r"host program on (\S+);")
+        try:
+            direct, relayed = _connect(found.group(1)), _connect(relay_at)
+            straight, through = [], []
+            for i in range(queries + 50):
+                a = _echo_round_trip(direct, relayed)
+                b = _echo_round_trip(relayed, direct)
+                if i >= 50:
+                    straight.append(a)
+                    through.append(b)
+            direct.close()
+            relayed.close()
+        finally:
+            cap.send_signal(signal.SIGINT)
+            cap.wait(30)
+    finally:
+        echo.kill()
+        echo.wait(10)
+    print(f"the relay alone (an echo server for the motor), {queries} round trips each:")
+    for name, values in (("straight to the echo", straight), ("through the relay   ", through)):
+        print(f"  {name} p50 {_pct(values, 0.5) * 1e6:7.1f} us   p99 "
+              f"{_pct(values, 0.99) * 1e6:7.1f} us")
+    print(f"  added by the relay (both crossings): p50 "
+          f"{(_pct(through, 0.5) - _pct(straight, 0.5)) * 1e6:7.1f} us   p99 "
+          f"{(_pct(through, 0.99) - _pct(straight, 0.99)) * 1e6:7.1f} us")
+
+
 class _Peer:
     """The motor for the throughput run: takes everything, sends what it is told."""
 
@@ -189,6 +253,7 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         latency(Path(tmp), args.queries)
+        latency_bare(Path(tmp), args.queries)
         throughput(Path(tmp), args.burst)
 
 
