@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
 import re
 import signal
 import socket
@@ -93,7 +94,10 @@ def latency(tmp: Path, queries: int) -> None:
         straight: list[float] = []
         through: list[float] = []
         for i in range(queries + 50):
-            a, b = _round_trip(direct, relayed), _round_trip(relayed, direct)
+            time.sleep(random.uniform(0, 0.002))    # no phase to the sim's byte clock
+            a = _round_trip(direct, relayed)
+            time.sleep(random.uniform(0, 0.002))
+            b = _round_trip(relayed, direct)
             if i >= 50:                                  # warm-up left out
                 straight.append(a)
                 through.append(b)
@@ -189,21 +193,34 @@ class _Peer:
     def __init__(self) -> None:
         self.server = socket.create_server(("127.0.0.1", 0))
         self.address = f"127.0.0.1:{self.server.getsockname()[1]}"
+        self.errors: list[BaseException] = []
 
     def serve_once(self, down: bytes, up_size: int, out: list[bytes]) -> threading.Thread:
         def run() -> None:
-            conn, _ = self.server.accept()
-            sender = threading.Thread(target=conn.sendall, args=(down,))
-            sender.start()
-            got = bytearray()
-            while len(got) < up_size and (data := conn.recv(65536)):
-                got += data
-            sender.join()
-            out.append(bytes(got))
-            conn.close()
+            try:
+                conn, _ = self.server.accept()
+                with conn:
+                    # the relay's link is accepted before the host program connects to
+                    # the relay: send once its bytes come (the relay passes on nothing
+                    # to a host program that is not there)
+                    got = bytearray(conn.recv(65536))
+                    sender = threading.Thread(target=self._send, args=(conn, down))
+                    sender.start()
+                    while len(got) < up_size and (data := conn.recv(65536)):
+                        got += data
+                    sender.join()
+                    out.append(bytes(got))
+            except OSError as exc:
+                self.errors.append(exc)
         thread = threading.Thread(target=run)
         thread.start()
         return thread
+
+    def _send(self, conn: socket.socket, data: bytes) -> None:
+        try:
+            conn.sendall(data)
+        except OSError as exc:
+            self.errors.append(exc)
 
 
 def _burst(address: str, peer: _Peer, size: int) -> float:
@@ -211,18 +228,30 @@ def _burst(address: str, peer: _Peer, size: int) -> float:
     received: list[bytes] = []
     served = peer.serve_once(down, size, received)
     sock = _connect(address)
+    sock.settimeout(60)
+    failed: list[BaseException] = []
+
+    def write() -> None:
+        try:
+            sock.sendall(up)
+        except OSError as exc:
+            failed.append(exc)
     start = time.perf_counter()
-    writer = threading.Thread(target=sock.sendall, args=(up,))
+    writer = threading.Thread(target=write)
     writer.start()
     got = bytearray()
     while len(got) < size:
-        got += sock.recv(65536)
+        chunk = sock.recv(65536)
+        if not chunk:
+            raise SystemExit(f"{address} closed after {len(got)} bytes "
+                             f"({failed + peer.errors})")
+        got += chunk
     writer.join()
     served.join()
     elapsed = time.perf_counter() - start
     sock.close()
-    if bytes(got) != down or received != [up]:
-        raise SystemExit("bytes lost or changed")
+    if bytes(got) != down or received != [up] or failed or peer.errors:
+        raise SystemExit(f"bytes lost or changed ({failed + peer.errors})")
     return elapsed
 
 

@@ -449,14 +449,21 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(
 
 def test_a_link_that_breaks_says_so_in_one_line_and_the_file_is_complete(
         procs: list[Proc], tmp_path: Path) -> None:
+    """The motor's end closes: what it said last still reaches the host program, on a
+    pty (a small buffer: the relay holds the rest) read late."""
     peer = Peer(echo=True)
     session = tmp_path / "s.cml"
-    cap, where = start_capture(procs, tmp_path, peer.url, "--listen", "0", "--no-probe",
-                               "--out", str(session))
+    cap, where = start_capture(procs, tmp_path, peer.url, "--pty", str(tmp_path / "link"),
+                               "--no-probe", "--out", str(session))
+    last = os.urandom(1 << 20)
     with serial.serial_for_url(where, timeout=0.5) as port:
         port.write(b"?96.1\r")
         assert _read_exactly(port.read, 6) == b"?96.1\r"
-        peer.close()                                     # the motor's cable is pulled
+        assert peer.conn is not None
+        peer.conn.sendall(last)                          # its last words, then
+        peer.close()                                     # the other end closes
+        time.sleep(0.3)                                  # the program reads them late:
+        assert _read_exactly(port.read, len(last)) == last     # they still reach it
         assert cap.proc.wait(timeout=20) == 1
     errors = [line for line in cap.text.splitlines() if "error" in line]
     assert errors == [f"coolmuscle: error: the link to {peer.url} broke: closed by the "

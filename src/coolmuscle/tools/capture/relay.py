@@ -17,9 +17,11 @@ up (back pressure), as a wire with flow control would.
 from __future__ import annotations
 
 import os
+import select
 import selectors
 import socket
 import threading
+import time
 from typing import Callable
 
 from ..script.transcript import Direction
@@ -94,6 +96,7 @@ class Relay:
         for thread in self._threads:
             if thread.ident is not None:
                 thread.join(timeout=2)
+        self._flush_before_close()
         self._detach()
         for fd in (self._wake_r, self._wake_w):
             try:
@@ -157,6 +160,16 @@ class Relay:
                 pass
             except OSError:
                 self._pending.clear()
+
+    def _flush_before_close(self, limit: float = 1.0) -> None:
+        """What the host program has not taken yet goes on (for ``limit`` s at most):
+        the motor's last words before it closed its side reach the program."""
+        deadline = time.monotonic() + limit
+        while self._pending and self._host_fd is not None:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([], [self._host_fd], [], left)[1]:
+                return
+            self._flush_pending()
 
     # -- host -> motor ------------------------------------------------------
     def _host_loop(self) -> None:

@@ -246,14 +246,16 @@ class SessionWriter:
         if self._rx.endswith(b"\r") and data[:1] != b"\n":
             self._line_received(self._rx_time, bytes(self._rx))   # ended at its CR
             self._rx.clear()
+        scan = max(len(self._rx) - 1, 0)     # what was there has no line end (but a CR)
         self._rx += data
         self._rx_time = at
         while True:
-            match = _LINE_END.search(self._rx)
+            match = _LINE_END.search(self._rx, scan)
             if match is None:
                 return
             raw = bytes(self._rx[:match.end()])
             del self._rx[:match.end()]
+            scan = 0
             self._line_received(at, raw)
 
     def _flush_held_cr(self) -> None:
