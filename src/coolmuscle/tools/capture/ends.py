@@ -53,6 +53,18 @@ def _fileno(port: Any) -> int | None:
     return fd if isinstance(fd, int) and fd >= 0 else None
 
 
+def _no_delay(fd: int) -> None:
+    """A TCP link to the motor (``socket://``) sends each write at once (pyserial leaves
+    Nagle's algorithm on; a serial device is not a socket and is left alone)."""
+    try:
+        with socket.socket(fileno=os.dup(fd)) as sock:
+            if sock.type == socket.SOCK_STREAM and sock.family in (socket.AF_INET,
+                                                                   socket.AF_INET6):
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except OSError:
+        pass                       # not a socket
+
+
 class MotorPort:
     """The motor's side: a pyserial port (see module docstring)."""
 
@@ -64,6 +76,8 @@ class MotorPort:
             raise TransportError(f"cannot open the motor's port {url}: {_why(exc, url)}") from None
         self.port.timeout = POLL
         self._fd = _fileno(self.port)
+        if self._fd is not None:
+            _no_delay(self._fd)
 
     def read(self, timeout: float) -> bytes:
         """What has arrived (at most ``timeout`` s of waiting; ``b""``: nothing yet)."""
