@@ -214,8 +214,10 @@ def capture(
     if relay.error is not None:
         raise TransportError(relay.error)
     w = record.writer
+    unsent = (f"; {relay.dropped} byte(s) from the motor came while no program took them "
+              "(recorded, not passed on)" if relay.dropped else "")
     _say(f"capture ended ({stopped}): {w.sent_lines} line(s) sent, {w.received_lines} "
-         f"received, in {out}")
+         f"received, in {out}{unsent}")
 
 
 def register(app: typer.Typer) -> None:

@@ -53,7 +53,8 @@ class Relay:
         self.say = say
         self.reason: str | None = None
         self.error: str | None = None
-        self.dropped = 0
+        self.dropped = 0                   # bytes from the motor not passed on
+        self._closed = False
         self._done = threading.Event()
         self._out_lock = threading.Lock()
         self._host_fd: int | None = None
@@ -91,7 +92,10 @@ class Relay:
         return self.reason or "closed"
 
     def close(self) -> None:
-        """Stop and release both ends (idempotent)."""
+        """Stop and release both ends (once; later calls do nothing)."""
+        if self._closed:
+            return
+        self._closed = True
         self.stop("closed")
         for thread in self._threads:
             if thread.ident is not None:
@@ -269,6 +273,7 @@ class Relay:
             if client is not None:
                 self._host_fd = None
                 self._host_generation += 1
+                self.dropped += len(self._pending)
                 self._pending.clear()
         if client is not None:
             client.close()
