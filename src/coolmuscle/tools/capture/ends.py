@@ -12,10 +12,12 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import select
 import socket
+import sys
 import termios
 import tty
 from pathlib import Path
@@ -172,6 +174,15 @@ class PtyHostSide:
 
     def describe(self) -> str:
         return f"{self.link.path} -> {self.path}"
+
+    def unread(self) -> int:
+        """Bytes written to the host program that it has not read yet (closing the
+        pseudo-terminal would throw them away)."""
+        try:
+            count = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
+        except OSError:
+            return 0
+        return int.from_bytes(count, sys.byteorder)
 
     def close(self) -> None:
         self.link.remove()

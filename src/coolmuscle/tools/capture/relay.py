@@ -174,6 +174,12 @@ class Relay:
             if left <= 0 or not select.select([], [self._host_fd], [], left)[1]:
                 return
             self._flush_pending()
+        if isinstance(self.host, PtyHostSide):      # closing it would discard what it holds
+            quiet_since = time.monotonic()
+            while time.monotonic() < deadline and time.monotonic() - quiet_since < 0.05:
+                if self.host.unread():                # (bytes in flight to the reading
+                    quiet_since = time.monotonic()    # side show up a moment later)
+                time.sleep(0.005)
 
     # -- host -> motor ------------------------------------------------------
     def _host_loop(self) -> None:
