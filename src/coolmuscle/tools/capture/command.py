@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
@@ -20,6 +21,7 @@ import typer
 
 from ...device.hostline import BAUD_RATES
 from ...errors import TransportError
+from ..cli.host_commands import FirmwareChoice
 from ..cli.run import stderr_line
 from ..cli.stopsignals import SignalStop, ignore_stop_signals
 from ..cli.usage import UsageError
@@ -44,12 +46,6 @@ class Parity(str, Enum):
 class OnOff(str, Enum):
     on = "on"
     off = "off"
-
-
-class FirmwareChoice(str, Enum):
-    cm2 = "cm2"
-    rt3 = "rt3"
-    cm1 = "cm1"
 
 
 def _say(text: str) -> None:
@@ -98,11 +94,9 @@ def _settings(motor: MotorPort, url: str, given: LineSettings, *, probing: bool,
         if found.echo is not None and found.echo != wanted:
             _say(f"note: --echo {echo.value} overrides what the motor said "
                  f"(K23={found.k23}: echo {found.echo_word()})")
-        settings = LineSettings(settings.baud, settings.parity, wanted, settings.k20,
-                                settings.k23, settings.firmware)
+        settings = replace(settings, echo=wanted)
     if firmware is not None:
-        settings = LineSettings(settings.baud, settings.parity, settings.echo, settings.k20,
-                                settings.k23, firmware.value)
+        settings = replace(settings, firmware=firmware.value)
     return settings
 
 
