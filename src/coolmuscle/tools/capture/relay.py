@@ -3,9 +3,9 @@
 Two threads: one waits on the motor's port and passes what comes to the host program;
 one waits on the host side (a TCP connection or the pty) and passes what comes to the
 motor.  Nothing waits for a line end: a byte goes on as soon as it is read, so the host
-program's own pacing is kept.  Each chunk is handed to the recorder (a queue: the file
-is written on a thread of its own, :class:`~.recording.CaptureFile`) just before it is
-passed on, with the instant it was read.
+program's own pacing is kept.  Each chunk is handed to the recorder just before it is
+passed on, stamped with the instant it was read (:class:`~.recording.CaptureFile` keeps
+it in memory; the file is written on a thread of its own).
 
 Output to the host program never blocks the motor's side: what the host side does not
 take at once waits in a buffer (``MAX_PENDING``; beyond it, bytes from the motor are
