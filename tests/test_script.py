@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -92,6 +93,43 @@ def _escape_byte(byte: int) -> str:
 def test_escape_is_byte_by_byte_on_every_path(data: bytes) -> None:
     """The transcript's fast path (printable ASCII shown as is) and the byte loop agree."""
     assert escape(data) == "".join(_escape_byte(b) for b in data)
+
+
+def _unescape_byte_by_byte(text: str) -> bytes:
+    """The reading of docs/scripts.md "Escapes", one character at a time: the reference
+    the table-driven :func:`unescape` must agree with (result and first error)."""
+    names = {"r": 13, "n": 10, "t": 9, "0": 0, "e": 27, "\\": 92}
+    out, i = bytearray(), 0
+    while i < len(text):
+        if text[i] != "\\":
+            if ord(text[i]) > 0xFF:
+                raise ValueError(f"character {text[i]!r} is not a byte (use \\xNN)")
+            out.append(ord(text[i]))
+            i += 1
+        elif text[i + 1:i + 2] in names and text[i + 1:i + 2]:
+            out.append(names[text[i + 1]])
+            i += 2
+        elif text[i + 1:i + 2] == "x" and re.fullmatch(r"[0-9A-Fa-f]{2}", text[i + 2:i + 4]):
+            out.append(int(text[i + 2:i + 4], 16))
+            i += 4
+        else:
+            raise ValueError(f"bad escape {text[i:i + 4]!r} (use \\r \\n \\t \\0 \\e "
+                             "\\\\ \\xNN)")
+    return bytes(out)
+
+
+@given(st.lists(st.sampled_from(["a", "\\", "x", "4", "F", "r", "e", "q", "\n", "\u20ac",
+                                 "\xff", " "])).map("".join))
+def test_unescape_agrees_with_a_byte_at_a_time_reading(text: str) -> None:
+    try:
+        expected: bytes | str = _unescape_byte_by_byte(text)
+    except ValueError as exc:
+        expected = str(exc)
+    try:
+        got: bytes | str = unescape(text)
+    except ValueError as exc:
+        got = str(exc)
+    assert got == expected
 
 
 def test_split_lines() -> None:

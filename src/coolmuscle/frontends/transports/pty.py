@@ -36,6 +36,49 @@ log = logging.getLogger(__name__)
 READ_SIZE = 4096
 
 
+class SymLink:
+    """A stable path to a pseudo-terminal: a symlink made in one step (an old symlink is
+    replaced, any other file never), removed only while it still points at what it was
+    made for.  Used by the simulator's pty and by ``coolmuscle capture --pty``."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.made = False
+        self._target: str | None = None
+        self._tmp: Path | None = None
+
+    def check(self) -> None:
+        """Refuse a path that is there and is not a symlink (before anything is opened)."""
+        if self.path.exists() and not self.path.is_symlink():
+            raise TransportError(f"pty: {self.path} exists and is not a symlink; "
+                                 "not replacing it")
+
+    def make(self, target: str) -> None:
+        self.check()
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self._tmp, self._target = tmp, target   # removed by remove() if a signal cuts this
+        try:
+            if tmp.is_symlink():
+                tmp.unlink()
+            os.symlink(target, tmp)
+            self.made = True            # from here on remove() removes what points at us
+            os.replace(tmp, self.path)
+        except OSError as exc:
+            self.made = False
+            raise TransportError(f"pty: cannot create link {self.path}: {exc}") from exc
+
+    def remove(self) -> None:
+        if not self.made:
+            return
+        for made in (self.path, self._tmp):
+            try:
+                if made is not None and made.is_symlink() and os.readlink(made) == self._target:
+                    made.unlink()
+            except OSError:
+                pass
+        self.made = False
+
+
 class PtyTransport(Transport):
     """Serve the host line on a pseudo-terminal (see module docstring)."""
 
@@ -53,8 +96,7 @@ class PtyTransport(Transport):
         self._writer_armed = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._unsubscribe: Any = None
-        self._link_made = False
-        self._tmp_link: Path | None = None
+        self._symlink = SymLink(self.link) if self.link is not None else None
         self._lane: Any = None
         self.bytes_discarded = 0
 
@@ -71,8 +113,8 @@ class PtyTransport(Transport):
             tty.setraw(slave, termios.TCSANOW)
             os.set_blocking(master, False)
             self.path = os.ttyname(slave)
-            if self.link is not None:
-                self._make_link(self.path)
+            if self._symlink is not None:
+                self._symlink.make(self.path)
         except (OSError, termios.error, TransportError) as exc:
             self._close_fds()
             if isinstance(exc, TransportError):
@@ -91,45 +133,22 @@ class PtyTransport(Transport):
         if self._loop is not None and self._master is not None:
             self._loop.add_reader(self._master, self._on_readable)
 
-    def _make_link(self, target: str) -> None:
-        assert self.link is not None
-        link = self.link
-        if link.exists() or link.is_symlink():
-            if not link.is_symlink():
-                raise TransportError(f"pty: {link} exists and is not a symlink; not replacing it")
-        tmp = link.with_name(f".{link.name}.{os.getpid()}.tmp")
-        self._tmp_link = tmp            # removed by close() if a signal cuts this short
-        try:
-            if tmp.is_symlink():
-                tmp.unlink()
-            os.symlink(target, tmp)
-            self._link_made = True      # from here on close() removes what points at us
-            os.replace(tmp, link)
-        except OSError as exc:
-            self._link_made = False
-            raise TransportError(f"pty: cannot create link {link}: {exc}") from exc
-
     def describe(self) -> str:
         where = self.path or "(not open)"
-        if self.link is not None and self._link_made:
+        if self._symlink is not None and self._symlink.made:
             return f"pty: {self.link} -> {where}"
         return f"pty: {where}"
 
     def info(self) -> dict[str, Any]:
-        return {"path": self.path, "link": str(self.link) if self._link_made else None}
+        made = self._symlink is not None and self._symlink.made
+        return {"path": self.path, "link": str(self.link) if made else None}
 
     async def close(self) -> None:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
-        if self._link_made and self.link is not None:
-            for made in (self.link, self._tmp_link):
-                try:
-                    if made is not None and made.is_symlink() and os.readlink(made) == self.path:
-                        made.unlink()
-                except OSError:
-                    pass
-            self._link_made = False
+        if self._symlink is not None:
+            self._symlink.remove()
         self._close_fds()
         if self._lane is not None:
             self._lane.close()

@@ -10,8 +10,8 @@ errors to one-line messages and exit codes.  No traceback reaches the user
 
 ``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
 SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
-its expectations (docs/scripts.md); ``check``, ``upload`` and ``term`` are the host
-tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
+its expectations (docs/scripts.md); ``check``, ``upload``, ``term`` and ``capture`` are
+the host tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
 """
 
 from __future__ import annotations
@@ -469,6 +469,14 @@ def _register_twin() -> None:
 
 
 _register_twin()  # compare, fit (coolmuscle.tools.twin.commands, docs/twin.md)
+
+
+def _register_capture() -> None:
+    from ..capture.command import register
+    register(app)
+
+
+_register_capture()  # capture (coolmuscle.tools.capture, docs/user-guide.md)
 
 
 @app.command()

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import string
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,54 +50,47 @@ class ScriptError(CoolMuscleError, ValueError):
 
 
 # -- escapes ------------------------------------------------------------
+#: A backslash and the character after it (or nothing), or ``\\xNN``.
+_ESCAPE_SEQUENCE = re.compile(r"\\(?:x[0-9A-Fa-f]{2}|.?)", re.S)
+#: Every good escape -> its byte (as a latin-1 character); anything else is an error.
+_UNESCAPED = {**{"\\" + name: chr(code) for name, code in _ESCAPES.items()},
+              **{f"\\x{hi}{lo}": chr(int(hi + lo, 16))
+                 for hi in string.hexdigits for lo in string.hexdigits}}
+_NOT_A_BYTE = re.compile(r"[^\x00-\xff]")
+
+
 def unescape(text: str) -> bytes:
-    """``"Ux.1=8\\\\r\\\\n"`` -> ``b"Ux.1=8\\r\\n"``; raises ``ValueError`` on a bad escape."""
-    out = bytearray()
-    i = 0
-    while i < len(text):
-        ch = text[i]
-        if ch != "\\":
-            code = ord(ch)
-            if code > 0xFF:
-                raise ValueError(f"character {ch!r} is not a byte (use \\xNN)")
-            out.append(code)
-            i += 1
-            continue
-        nxt = text[i + 1:i + 2]
-        if nxt in _ESCAPES:
-            out.append(_ESCAPES[nxt])
-            i += 2
-        elif nxt == "x" and re.fullmatch(r"[0-9A-Fa-f]{2}", text[i + 2:i + 4]):
-            out.append(int(text[i + 2:i + 4], 16))
-            i += 4
-        else:
-            raise ValueError(f"bad escape {text[i:i + 4]!r} (use \\r \\n \\t \\0 \\e \\\\ \\xNN)")
-    return bytes(out)
+    """``"Ux.1=8\\\\r\\\\n"`` -> ``b"Ux.1=8\\r\\n"``; raises ``ValueError`` on a bad escape
+    or a character above U+00FF (the first one in the text)."""
+    bad_char = _NOT_A_BYTE.search(text)
+
+    def byte(match: re.Match[str]) -> str:
+        char = _UNESCAPED.get(match.group())
+        if char is not None:
+            return char
+        if bad_char is not None and bad_char.start() < match.start():
+            raise ValueError(f"character {bad_char.group()!r} is not a byte (use \\xNN)")
+        raise ValueError(f"bad escape {text[match.start():match.start() + 4]!r} "
+                         "(use \\r \\n \\t \\0 \\e \\\\ \\xNN)")
+    out = _ESCAPE_SEQUENCE.sub(byte, text) if "\\" in text else text
+    if bad_char is not None:
+        raise ValueError(f"character {bad_char.group()!r} is not a byte (use \\xNN)")
+    return out.encode("latin-1")
 
 
 #: Bytes that :func:`escape` shows as themselves: printable ASCII but the backslash.
 _PLAIN = re.compile(rb"[\x20-\x5b\x5d-\x7e]*")
+#: Every byte (as a latin-1 character) -> how :func:`escape` writes it.
+_ESCAPED = {code: ("\\\\" if code == 92 else chr(code) if 32 <= code < 127
+                   else {13: "\\r", 10: "\\n", 9: "\\t"}.get(code, f"\\x{code:02x}"))
+            for code in range(256)}
 
 
 def escape(data: bytes) -> str:
     """Inverse of :func:`unescape`: printable ASCII as is, everything else escaped."""
     if _PLAIN.fullmatch(data):          # a report or a reply: nothing to escape
         return data.decode("ascii")
-    parts = []
-    for byte in data:
-        if byte == 92:
-            parts.append("\\\\")
-        elif 32 <= byte < 127:
-            parts.append(chr(byte))
-        elif byte == 13:
-            parts.append("\\r")
-        elif byte == 10:
-            parts.append("\\n")
-        elif byte == 9:
-            parts.append("\\t")
-        else:
-            parts.append(f"\\x{byte:02x}")
-    return "".join(parts)
+    return data.decode("latin-1").translate(_ESCAPED)
 
 
 def split_lines(data: bytes) -> list[bytes]:

@@ -62,6 +62,11 @@ def show(text: str, style: str) -> None:
     print_formatted_text(FormattedText([(STYLES.get(style, ""), text)]))
 
 
+def _log_failed(text: str) -> None:
+    """The log's file failed (a full disk): said once; the session goes on."""
+    show(f"log: {text}; the session goes on", "error")
+
+
 def describe(event: MotorEvent) -> tuple[str, str]:
     """``(text, style)`` for an event; Ux reports get their flags spelled out."""
     if event.kind == "status" and event.value is not None:
@@ -126,7 +131,7 @@ class Terminal:
             show(f"log written: {self.recorder.path}", "info")
             self.recorder = None
         if target.lower() != "off":
-            self.recorder = TranscriptRecorder(target, self.url)
+            self.recorder = TranscriptRecorder(target, self.url, on_error=_log_failed)
             self._untap = self.client.add_tap(self.recorder.tap)
             show(f"logging to {target} (:log off to stop)", "info")
 
@@ -190,7 +195,8 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
     client = await connect_async(url, baudrate=baudrate, motor=motor, timeout=timeout,
                                  **serial_options)
     try:
-        recorder = TranscriptRecorder(log, url) if log is not None else None
+        recorder = (TranscriptRecorder(log, url, on_error=_log_failed) if log is not None
+                    else None)
         if recorder is not None:
             client.add_tap(recorder.tap)
         try:
