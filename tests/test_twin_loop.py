@@ -1,0 +1,161 @@
+"""The twin loop end to end, through the real relay (issue 25 "How to test without
+hardware"; docs/twin.md).
+
+A ``coolmuscle sim`` with the hidden machine file of the twin tests (a heavier load,
+more friction, a softer position loop, a stopper) stands in for the user's real motor on
+TCP.  ``coolmuscle capture`` relays a pseudo-terminal to it, and the identification
+session of examples/twin/identify.py plays on that pty with pyserial, in real time, as
+a user runs it.  Then, with the commands a user types:
+
+* ``compare`` against the hidden machine finds no difference beyond tolerance;
+* ``compare`` against the default machine finds the differences and names them;
+* ``fit`` recovers every hidden parameter within 5 %, from the capture as recorded
+  (wall-clock jitter, replies quantized to whole pulses) and from a copy whose polled
+  values carry one more unit of noise each, and ``compare`` of the capture passes with
+  the fitted file.
+
+One capture (about 20 s of wall time) serves every assertion.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from twin_support import HIDDEN
+
+ROOT = Path(__file__).resolve().parents[1]
+HIDDEN_TOML = ROOT / "examples" / "twin" / "hidden.toml"
+IDENTIFY = ROOT / "examples" / "twin" / "identify.py"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "COLUMNS": "200"}
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+
+
+def coolmuscle(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "coolmuscle", *args], capture_output=True,
+                          text=True, timeout=timeout, env=ENV)
+
+
+def _wait_for(log: Path, proc: subprocess.Popen[bytes], pattern: str,
+              seconds: float = 60) -> re.Match[str]:
+    deadline = time.monotonic() + seconds
+    while True:
+        match = re.search(pattern, log.read_text())
+        if match is not None:
+            return match
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise AssertionError(f"{pattern!r} not printed:\n{log.read_text()}")
+        time.sleep(0.05)
+
+
+def _start(args: list[str], log: Path) -> subprocess.Popen[bytes]:
+    with log.open("w") as out:
+        return subprocess.Popen([sys.executable, "-m", "coolmuscle", *args], stdout=out,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=ENV)
+
+
+@pytest.fixture(scope="module")
+def captured(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A session of the identification plan, captured through the relay from the sim."""
+    folder = tmp_path_factory.mktemp("twin-loop")
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        sim = _start(["sim", "--no-state", "--machine", str(HIDDEN_TOML), "--tcp", "0"],
+                     folder / "sim.log")
+        procs.append(sim)
+        port = _wait_for(folder / "sim.log", sim, r"tcp: (127\.0\.0\.1:\d+)").group(1)
+        link = folder / "motor"
+        session = folder / "session.cml"
+        relay = _start(["capture", f"socket://{port}", "--pty", str(link), "--out",
+                        str(session)], folder / "capture.log")
+        procs.append(relay)
+        _wait_for(folder / "capture.log", relay, r"capture ready")
+        played = subprocess.run([sys.executable, str(IDENTIFY), str(link), "--push-to",
+                                 "25000"], capture_output=True, text=True, timeout=120,
+                                env=ENV)
+        assert played.returncode == 0, played.stderr
+        relay.send_signal(signal.SIGINT)
+        assert relay.wait(timeout=30) == 130, (folder / "capture.log").read_text()
+        yield session
+    finally:
+        for proc in reversed(procs):
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
+
+
+def _noisy_copy(session: Path, out: Path, seed: int = 25) -> Path:
+    """The capture with every polled value (``Px``, ``Pe``, ``Ix`` ...) off by -1, 0 or +1:
+    a real encoder and current sense beside the quantization the replies already have."""
+    rng = random.Random(seed)
+    rows = session.read_text(encoding="utf-8").split("\n")
+    for i, row in enumerate(rows):
+        m = re.fullmatch(r"<< ([A-Z][a-z]\.1=)(-?\d+)(\\r\\n)", row)
+        if m is None or m.group(1) not in ("Px.1=", "Pe.1=", "Ix.1="):
+            continue
+        old = m.group(1) + m.group(2)
+        new = m.group(1) + str(int(m.group(2)) + rng.choice((-1, 0, 1)))
+        rows[i] = f"<< {new}{m.group(3)}"
+        for j in range(i - 1, max(i - 3, -1), -1):     # its @until, above its stamp
+            if rows[j].startswith(f"@until ^{re.escape(old)}$ "):
+                rows[j] = rows[j].replace(re.escape(old), re.escape(new), 1)
+                break
+    out.write_text("\n".join(rows), encoding="utf-8")
+    return out
+
+
+def test_the_capture_is_complete_and_compares_equal_with_the_hidden_machine(
+        captured: Path) -> None:
+    text = captured.read_text(encoding="utf-8")
+    assert text.startswith("# coolmuscle capture: port=socket://127.0.0.1:")
+    assert re.search(r"^# end: .*stopped=ctrl-c", text, re.M)
+    polls = len(re.findall(r"^<< (?:Px|Pe|Ix)\.1=", text, re.M))
+    assert polls > 1000                              # the plan polls every 10 ms
+    done = coolmuscle("compare", str(captured), "--machine", str(HIDDEN_TOML))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "different bytes 0, different timing 0, missing 0, extra 0" in done.stdout
+
+
+def test_against_the_default_machine_compare_names_the_differences(
+        captured: Path, tmp_path: Path) -> None:
+    report = tmp_path / "report.md"
+    done = coolmuscle("compare", str(captured), "--report", str(report))
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert re.search(r"FAIL \d+ difference\(s\) beyond tolerance", done.stdout + done.stderr)
+    body = report.read_text(encoding="utf-8")
+    # the softer loop lags more while cruising (Pe = speed / kp) and the heavier,
+    # stickier load takes more current (Ix): both are named with their lines
+    assert re.search(r"Pe\.1=", body) and re.search(r"Ix\.1=", body)
+
+
+@pytest.mark.parametrize("noise", [False, True], ids=["as-captured", "one-unit-noise"])
+def test_fit_recovers_the_hidden_machine_and_compare_then_passes(
+        captured: Path, tmp_path: Path, noise: bool) -> None:
+    session = _noisy_copy(captured, tmp_path / "noisy.cml") if noise else captured
+    fitted = tmp_path / "fitted.toml"
+    done = coolmuscle("fit", str(session), "--machine-out", str(fitted), "--params",
+                      "inertia,friction,kp,cw")
+    assert done.returncode == 0, done.stdout + done.stderr
+    axis = tomllib.loads(fitted.read_text(encoding="utf-8"))["axis"][0]
+    got = {"inertia": axis["load"]["inertia"], "friction": axis["load"]["friction"],
+           "kp": axis["drive"]["kp"], "cw": axis["stoppers"]["cw"]}
+    for name, hidden in HIDDEN.items():
+        assert got[name] == pytest.approx(hidden, rel=0.05), (name, got, done.stdout)
+        # the printed 95 % interval (standard error and the replies' resolution) holds it
+        lo, hi = re.search(rf"^  {name}\.1 += .*95 % (\S+) \.\. (\S+);", done.stdout,
+                           re.M).groups()
+        assert float(lo) <= hidden <= float(hi), (name, lo, hi)
+    # the fitted machine stands in for the real one: the capture compares equal with it
+    again = coolmuscle("compare", str(captured), "--machine", str(fitted))
+    assert again.returncode == 0, again.stdout + again.stderr
