@@ -93,7 +93,11 @@ def test_every_block_names_its_language_and_notes_are_known() -> None:
             assert "/dev/tty" in block.body or "--ethercat" in block.body, \
                 f"{block.id}: 'hardware' without a device"
     not_run = [b for b in BLOCKS if b.kind in NOT_RUN]
-    assert len(not_run) <= 14, [b.id for b in not_run]         # the exceptions stay few
+    # the exceptions stay few: a real serial port or NIC, a shell per process, the set-up
+    # itself (the two newest, docs/twin.md's capture from /dev/ttyUSB0 and docs/wireshark.md's
+    # three-shell EtherCAT capture, are run without hardware by tests/test_twin_loop.py and
+    # tests/test_wireshark.py)
+    assert len(not_run) <= 16, [b.id for b in not_run]
 
 
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.lang == "toml"], ids=lambda b: b.id)

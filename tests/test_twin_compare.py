@@ -105,6 +105,40 @@ def test_a_line_the_virtual_motor_did_not_say_is_missing(folder: Path, tmp_path:
     assert 'the real motor said "error01.1: syntax error!!"' in diff.describe()
 
 
+def _stamp_earlier(text: str, line: str, by: float, *, echo: bool) -> str:
+    """Move the stamp of every ``line`` sent (and with ``echo`` its echo's) ``by`` s earlier:
+    as if the real motor had acted on it ``by`` later than the relay saw its CR go by."""
+    rows = text.split("\n")
+    for i, row in enumerate(rows):
+        if row == line and rows[i - 1].endswith(" >"):
+            rows[i - 1] = f"# t={float(rows[i - 1][4:-2]) - by:.6f} >"
+            if echo:
+                assert rows[i + 1].endswith(" <") and rows[i + 2] == f"<< {line}\\r\\n"
+                rows[i + 1] = f"# t={float(rows[i + 1][4:-2]) - by:.6f} <"
+    return "\n".join(rows)
+
+
+def test_polled_values_allow_the_lag_the_echo_shows_ch3_k23_echo(folder: Path,
+                                                                 tmp_path: Path) -> None:
+    """The real motor acts on a line at its CR and echoes its bytes as they arrive (ch. 3
+    K23 8): when the echo of ``^`` came back 4 ms after the relay saw the CR, the move may
+    have started up to 4 ms late (a busy host, a USB adapter), and the values polled
+    during it pass; when the echo came back at once, the same late values do not."""
+    text = (folder / "exact.cml").read_text()
+    lagged = tmp_path / "lagged.cml"
+    lagged.write_text(_stamp_earlier(text, "^.1", 0.004, echo=False))
+    report = compare_session(lagged, folder / "hidden.toml")
+    assert report.ok, [v.describe() for v in report.differences[:5]]
+    prompt = tmp_path / "prompt.cml"
+    prompt.write_text(_stamp_earlier(text, "^.1", 0.004, echo=True))
+    report = compare_session(prompt, folder / "hidden.toml")
+    late = [v for v in report.differences if v.real is not None and v.band is not None]
+    assert len(late) > 20 and {v.kind for v in report.differences} == {"bytes"}
+    # 4 ms at up to 30 000 pps is up to 120 pulses behind the band
+    assert all(v.real is not None and v.band is not None and v.real.text.startswith(
+        ("Px", "Pe", "Ix")) and v.off > 0 for v in late)
+
+
 class _Tables(HTMLParser):
     def __init__(self) -> None:
         super().__init__()

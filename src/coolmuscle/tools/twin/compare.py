@@ -24,7 +24,12 @@ Tolerances (docs/twin.md "Tolerances"):
   its reply's last byte (both stamped by the relay), so the virtual value may be
   anything the virtual quantity passes through in that window (widened by ``sample``
   seconds each side), plus 0.5 (rounding) and ``noise`` units: a value polled while
-  moving moves with its timing.
+  moving moves with its timing.  The window also reaches back by the *lag* of the last
+  command before the poll (the last line sent that is not a ``?`` query): the replay
+  acts on a command at its stamp, the real motor somewhere before its first reply came
+  back, so a motion it started may run late on the real motor by up to that reply's
+  stamp less the wire time of what the motor sent after acting on the command
+  (:func:`_command_lags`), measured per command from the capture.
 """
 
 from __future__ import annotations
@@ -66,7 +71,8 @@ class Tolerance:
         return (f"timing: max({self.time_abs * 1000:g} ms, {self.time_rel * 100:g} % of "
                 f"the time since the line sent before it){wire}; polled values: what the "
                 f"virtual value spans from the query to the reply (±{self.sample * 1000:g} "
-                f"ms) ± {0.5 + self.noise:g} units (rounding and {self.noise:g} of noise)")
+                f"ms, and back by the real motor's lag on the command before it) "
+                f"± {0.5 + self.noise:g} units (rounding and {self.noise:g} of noise)")
 
 
 @dataclass(frozen=True)
@@ -340,6 +346,7 @@ def compare(session: Session, rep: Replay, tolerance: Tolerance = Tolerance(),
     """Judge every line of ``session`` against the replay ``rep``."""
     real_after = session.sent_before()
     wire = _wire_times(session, real_after)
+    lags = _command_lags(session, real_after)
     bands = _Bands(rep)
     verdicts: list[Verdict] = []
     poll_pairs: list[tuple[Line, Line, bool]] = []
@@ -356,8 +363,9 @@ def compare(session: Session, rep: Replay, tolerance: Tolerance = Tolerance(),
         before = session.sent[real_after[i]].time if real_after[i] >= 0 else 0.0
         tol = max(tolerance.time_abs, tolerance.time_rel * (real.time - before)) + wire[i]
         timely = abs(virtual.time - real.time) <= tol
+        lag = lags[real_after[i]] if real_after[i] >= 0 else 0.0
         verdict = _judge(real, virtual, tol, timely, session, real_after[i], rep.exact.get(j),
-                         bands, tolerance)
+                         bands, tolerance, lag)
         verdicts.append(verdict)
         if verdict.band is not None:
             poll_pairs.append((real, virtual, verdict.differs))
@@ -365,13 +373,14 @@ def compare(session: Session, rep: Replay, tolerance: Tolerance = Tolerance(),
 
 
 def _judge(real: Line, virtual: Line, tol: float, timely: bool, session: Session,
-           before: int, exact: float | None, bands: _Bands, tolerance: Tolerance) -> Verdict:
+           before: int, exact: float | None, bands: _Bands, tolerance: Tolerance,
+           lag: float) -> Verdict:
     found_real, found_virtual = parse_poll(real.text), parse_poll(virtual.text)
     if found_real is not None and found_virtual is not None \
             and found_real[:2] == found_virtual[:2]:
         quantity, motor, value = found_real
         asked = session.sent[before].time if before >= 0 else real.time
-        span = bands.span(motor, quantity, asked - tolerance.sample,
+        span = bands.span(motor, quantity, asked - tolerance.sample - lag,
                           real.time + tolerance.sample)
         span += [found_virtual[2]] + ([exact] if exact is not None else [])
         margin = 0.5 + tolerance.noise
@@ -386,6 +395,32 @@ def _judge(real: Line, virtual: Line, tol: float, timely: bool, session: Session
     if real.data != virtual.data:
         return Verdict("bytes", real, virtual, tol)
     return Verdict("equal" if timely else "timing", real, virtual, tol)
+
+
+def _command_lags(session: Session, after: list[int]) -> list[float]:
+    """Per line sent: the lag of the last command up to it (itself, or the last line
+    before it that is not a ``?`` query): how much later than its stamp the real motor
+    may have acted on it.  That is the stamp of the first line received after it, less
+    the command's CR on the wire and the wire time of what the motor sent after acting:
+    of its echo only the line end (K23 8: the motor echoes each byte as it arrives, and
+    acts on the line at its CR), of a reply the whole line.  0 when nothing came back
+    before the next line was sent; without a baud rate no wire time is taken off."""
+    baud = session.baud
+    byte_s = session.bits_per_byte / baud if baud else 0.0
+    first: dict[int, float] = {}
+    for line, sent in zip(session.received, after, strict=True):
+        if sent >= 0 and sent not in first:
+            command = session.sent[sent]
+            echo = line.text == command.text
+            after_acting = len(line.data) - (len(line.data.rstrip(b"\r\n")) if echo else 0)
+            first[sent] = max(0.0, line.time - command.time - byte_s - after_acting * byte_s)
+    out: list[float] = []
+    lag = 0.0
+    for index, line in enumerate(session.sent):
+        if not line.text.lstrip().startswith("?"):
+            lag = first.get(index, 0.0)
+        out.append(lag)
+    return out
 
 
 def _wire_times(session: Session, after: list[int]) -> list[float]:
