@@ -28,23 +28,12 @@ import pytest
 from coolmuscle.tools.batch.engine import chunks
 from dask_support import dask_cluster as dask_cluster_of
 from load_support import signal_and_wait
-from coolmuscle.tools.cli.app import main
+from cli_support import cli
 
 DATA = Path(__file__).parent / "data" / "batch"
 SRC = Path(__file__).resolve().parent.parent / "src"
 FAILING = DATA / "4.1.3-wrong-position.cml"
 SCRIPTS = sorted(DATA.glob("*.cml"))
-
-
-def cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    """Run ``coolmuscle ARGS`` in this process: (exit status, stdout, stderr)."""
-    try:
-        main(list(args))
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def junit_cases(path: Path) -> dict[str, ET.Element]:

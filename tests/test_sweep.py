@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.cli.app import main
+from cli_support import cli
 
 DATA = Path(__file__).parent / "data" / "batch" / "sweep"
 SCRIPT = DATA / "move.cml"
@@ -23,16 +23,6 @@ MACHINE = DATA / "load.toml"
 SPEEDS = ("100", "250", "400")
 ACCELS = ("50", "300")
 NUMBERS = ("m1.final_position", "m1.peak_speed", "m1.peak_torque")
-
-
-def cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    try:
-        main(list(args))
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def trace_figures(trace: Path) -> dict[str, str]:

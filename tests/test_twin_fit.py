@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.chain.machine import load_machine
-from coolmuscle.tools.cli.app import main
+from cli_support import cli
 from coolmuscle.tools.twin.compare import compare_session
 from coolmuscle.tools.twin.fit import fit_session
 
@@ -24,16 +24,6 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_capture(tmp_path_factory.mktemp("twin-fit"), seed=7)
-
-
-def cli(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    try:
-        main(list(args))
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_fit_recovers_the_hidden_machine_and_compare_then_passes(
