@@ -38,6 +38,15 @@ MAX_ERROR = 0.05
 #: points held all of it; tests/test_interp_geometry.py).
 MAX_SPEED_ERROR = 1e-4
 _CHECK_SPEED_ERROR = MAX_SPEED_ERROR / 2
+#: Largest difference between the arc length of a table step (Gauss–Legendre, 5 points)
+#: and the sum of its halves, relative to the step's angle times the slowest speed on it.
+#: The speed the table implies then stays within 3e-7 of the true speed (ovals of axis
+#: ratio up to 1000, any start angle), far inside MAX_SPEED_ERROR.  Circles and ovals up
+#: to an axis ratio of about 8 meet it with the steps of π/32 and are not split.
+TABLE_ERROR = 1e-8
+#: Most halvings of a table step (π/32 / 2^40 ≈ 1e-13 rad: a few hundred float steps of
+#: an angle, below the tip of any oval of integer radii up to 1e9).
+TABLE_DEPTH = 40
 #: Shortest piece (s): the kernel's clock has nanoseconds, pieces stop splitting here.
 MIN_PIECE = 1e-6
 #: A centre (4.4.2) whose distances to the start and the end differ by at most this
@@ -78,7 +87,8 @@ class Arc:
 
     ``theta0`` is the start angle, ``sweep`` the signed angle travelled (negative =
     CW).  Points: ``center + (rx cos θ, ry sin θ)``.  Arc length is tabulated with
-    Gauss–Legendre quadrature and inverted by Newton's method.
+    Gauss–Legendre quadrature (steps of at most π/32, halved where the rule is not
+    accurate: at the tips of flat ovals) and inverted by Newton's method.
     """
 
     def __init__(self, center: Point, rx: float, ry: float, theta0: float, sweep: float,
@@ -87,10 +97,13 @@ class Arc:
         self.theta0, self.sweep = theta0, sweep
         self.exact_end = end
         n = max(8, int(abs(sweep) / (math.pi / 32)) + 1)
-        self._thetas = [theta0 + sweep * i / n for i in range(n + 1)]
+        grid = [theta0 + sweep * i / n for i in range(n + 1)]
+        self._thetas = [theta0]
         self._lengths = [0.0]
-        for a, b in zip(self._thetas, self._thetas[1:]):
-            self._lengths.append(self._lengths[-1] + self._length(a, b))
+        for a, b in zip(grid, grid[1:]):
+            for step_end, length in self._table(a, b, 0):
+                self._thetas.append(step_end)
+                self._lengths.append(self._lengths[-1] + length)
         self.length = self._lengths[-1]
 
     def _speed(self, theta: float) -> float:
@@ -100,19 +113,49 @@ class Arc:
         half, mid = (b - a) / 2, (a + b) / 2
         return abs(half) * sum(w * self._speed(mid + half * x) for x, w in _GAUSS)
 
+    def _table(self, a: float, b: float, depth: int) -> list[tuple[float, float]]:
+        """Ends and lengths of the table steps over [a, b]: halved while the rule on the
+        whole step and on its halves disagree by more than :data:`TABLE_ERROR`.
+
+        At the tips of a flat oval |dP/dθ| dips to the short radius over an angle about
+        the axis ratio (ry/rx); on a wider step the rule, inverted by :meth:`theta`,
+        puts the points off the path speed (5.4e-5 at an axis ratio of 25), which no
+        cubic piece can meet (docs/fidelity.md, "Interpolation").
+        """
+        whole = self._length(a, b)
+        if depth < TABLE_DEPTH:
+            mid = (a + b) / 2
+            halves = self._length(a, mid) + self._length(mid, b)
+            slowest = min(self._speed(a), self._speed(mid), self._speed(b))
+            if abs(halves - whole) > TABLE_ERROR * abs(b - a) * slowest:
+                return self._table(a, mid, depth + 1) + self._table(mid, b, depth + 1)
+        return [(b, whole)]
+
     def theta(self, s: float) -> float:
-        """Angle at arc length ``s`` from the start."""
+        """Angle at arc length ``s`` from the start: Newton's method from the start of
+        its table step, kept inside the step (a step that would leave it halves the
+        bracket instead: from the tip of a flat oval, where the speed is tiny, a bare
+        Newton step flies off by thousands of radians)."""
         s = min(max(s, 0.0), self.length)
         i = min(max(bisect_right(self._lengths, s) - 1, 0), len(self._thetas) - 2)
         a = self._thetas[i]
+        lo, hi = sorted((a, self._thetas[i + 1]))
         base = self._lengths[i]
         direction = 1.0 if self.sweep >= 0 else -1.0
         theta = a
         for _ in range(30):
             err = base + self._length(a, theta) - s
+            if (err < 0) == (direction > 0):
+                lo = theta      # short of s going up, or past it going down
+            else:
+                hi = theta
             speed = self._speed(theta) or 1e-12
             step = err / speed
-            theta -= direction * step
+            following = theta - direction * step
+            if not lo <= following <= hi:
+                following = (lo + hi) / 2
+                step = following - theta
+            theta = following
             if abs(step) < 1e-13:
                 break
         return theta
@@ -311,19 +354,21 @@ class _Sampler:
 
 
 def _pieces(sampler: _Sampler, t0: float, t1: float, depth: int = 0) -> list[tuple[float, float]]:
-    """Split [t0, t1] until each cubic Hermite piece is within MAX_ERROR of the path."""
+    """Split [t0, t1] until each cubic Hermite piece is within MAX_ERROR of the path
+    and _CHECK_SPEED_ERROR of its speed (not below MIN_PIECE, nor where the clock's
+    float cannot halve the piece: a path lasting years)."""
     h = t1 - t0
     a, b = sampler.state(t0), sampler.state(t1)
     x_seg = _hermite(t0, h, a[0], a[2], b[0], b[2])
     y_seg = _hermite(t0, h, a[1], a[3], b[1], b[3])
-    if depth < 24 and h > MIN_PIECE:
+    mid = t0 + h / 2
+    if depth < 24 and h > MIN_PIECE and t0 < mid < t1:
         for f in (0.25, 0.5, 0.75):
             x, y, vx, vy = sampler.state(t0 + f * h)
             tau = f * h
             if (math.hypot(x_seg.position(tau) - x, y_seg.position(tau) - y) > MAX_ERROR
                     or math.hypot(x_seg.velocity(tau) - vx, y_seg.velocity(tau) - vy)
                     > _CHECK_SPEED_ERROR * max(math.hypot(vx, vy), 1.0)):
-                mid = t0 + h / 2
                 return _pieces(sampler, t0, mid, depth + 1) + _pieces(sampler, mid, t1, depth + 1)
     return [(t0, t1)]
 
