@@ -240,6 +240,7 @@ class SessionWriter:
     # -- lines received -----------------------------------------------------
     def _received_bytes(self, at: float, data: bytes) -> None:
         if self._rx_after_cr and data[:1] == b"\n" and not self._rx:
+            self._sent_part_first()
             self._emit_received(at, b"\n", until=False)      # a CRLF split by a pause
             data = data[1:]
         self._rx_after_cr = False
@@ -264,10 +265,14 @@ class SessionWriter:
             self._rx.clear()
             self._rx_after_cr = True
 
-    def _line_received(self, at: float, raw: bytes) -> None:
+    def _sent_part_first(self) -> None:
+        """A line came while one was being sent: what went out so far goes first (the
+        file stays in the order the bytes came)."""
         if self._tx:
-            # a line came while one was being sent: what went out so far goes first
             self._emit_sent(self._tx_time, bytes(self._tx), ended=False)
+
+    def _line_received(self, at: float, raw: bytes) -> None:
+        self._sent_part_first()
         text = raw.rstrip(b"\r\n")
         until = bool(text) and text not in self._sent
         if text in self._sent:
