@@ -54,6 +54,8 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.signals.io",
     "coolmuscle.motor.signals.analog",
     "coolmuscle.motor.signals.analog_output",
+    "coolmuscle.motor.supervision.supervisor",
+    "coolmuscle.motor.motor",
     "coolmuscle.frontends.ethercat.cia402",
     "coolmuscle.frontends.ethercat.dictionary",
     "coolmuscle.frontends.ethercat.bridge.modes",
