@@ -13,7 +13,7 @@ Printed side by side, for the axes following (csp moving) and holding (same targ
 
 * missed cycles: cycles that started more than one cycle after they were due (they
   still run, back to back, as in the transport: virtual time does not skip them);
-* CPU share: process CPU time over wall time;
+* CPU share: process CPU time over wall time (the spin before each cycle included);
 * the cost of one axis-cycle (CPU time of a bridge cycle with its kernel run, / 4)
   against the 50 us goal of issue 12 item 9, and the 1 ms cycle it must fit in;
 * what a late cycle was late by (p99, worst) and the CPU time the machine's hypervisor
@@ -24,7 +24,7 @@ The loop runs as ``sim --ethercat`` runs the model's thread where the system all
 cycle by sleeping until ``--spin-us`` before it and spinning the rest (a sleeping
 virtual CPU wakes 0.1-1 ms late); and the cyclic collector runs between cycles, when
 the next one is at least ``GC_SLACK`` away, instead of at whatever allocation crosses
-its threshold inside a cycle (a generation-1 collection is 1-2.5 ms here).
+its threshold inside a cycle (a generation-1 collection is 1-2.7 ms here).
 
     PYTHONPATH=src python bench/bench_ethercat_csp.py [--seconds 60]
 """
