@@ -37,30 +37,38 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Final, Sequence
 
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
 from .expoly import AnyF, F
 from .profile import Profile
 
-TRACK, SAT, BRAKE, VSAT, STALL, CONTACT, FREE, LOST = (
-    "track", "sat", "brake", "vsat", "stall", "contact", "free", "lost")
+# The module's constants are Final: compiled code then has them as C constants instead
+# of looking each up in the module's dictionary at every use (docs/performance.md).
+TRACK: Final = "track"
+SAT: Final = "sat"
+BRAKE: Final = "brake"
+VSAT: Final = "vsat"
+STALL: Final = "stall"
+CONTACT: Final = "contact"
+FREE: Final = "free"
+LOST: Final = "lost"
 
 #: Searches for a mode's end start this long after the mode began (s): no Zeno chains.
-TAU_MIN = 1e-9
+TAU_MIN: Final = 1e-9
 #: Settling slower than this (pulses/s) on a standing command needs no friction torque.
-V_STILL = 0.5
+V_STILL: Final = 0.5
 #: A speed mismatch the torque limit would close within this time (s) is closed at once.
-SNAP_TIME = 1e-6
+SNAP_TIME: Final = 1e-6
 #: After this many pieces shorter than 0.1 µs in a row the solver tracks through
 #: (the torque limit is exceeded by a hair for at most SLIDE seconds): no chattering.
-CHATTER = 8
-SLIDE = 1e-4
+CHATTER: Final = 8
+SLIDE: Final = 1e-4
 #: Relative margin by which a mode's end condition must hold (float noise at a switch).
-REL_TOL = 1e-9
+REL_TOL: Final = 1e-9
 #: Pieces one motion may hold before the model gives up saturating (a safety net).
-MAX_PIECES = 2000
+MAX_PIECES: Final = 2000
 
 Conditions = Callable[["Piece"], Sequence[AnyF] | None]
 #: How a piece may end: (exit name, the functions whose first root ends it, or the
@@ -145,8 +153,8 @@ class Piece:
         self.s = s
         self.exit = exit
         self.on_cmd = on_cmd
-        self._vel: F = xp.ZERO
-        self._err: F = xp.ZERO
+        self._vel: F = (0.0, 0.0, 0.0, 0.0, 0.0)
+        self._err: F = (0.0, 0.0, 0.0, 0.0, 0.0)
         self._has_vel = False
         self._has_err = False
         self._bounds: tuple[float, float, float] | None = None
@@ -215,7 +223,7 @@ class Piece:
         return bounds[_REACH[what]]
 
 
-_REACH = {"err": 0, "vel": 1, "torque": 2}
+_REACH: Final = {"err": 0, "vel": 1, "torque": 2}
 
 
 def _sign(x: float) -> int:
@@ -856,12 +864,25 @@ class _Solver:
 def _strict(f: AnyF) -> AnyF:
     """``f - tol``: a mode ends only when its condition holds beyond float noise."""
     top = 1.0                        # max(1.0, max(f), -min(f)), without boxing
+    if len(f) == 5:                  # a piece's function (unboxed when compiled)
+        c0, c1, c2, c3, d = f
+        top = _top(_top(_top(_top(_top(top, c0), c1), c2), c3), d)
+        return (c0 - REL_TOL * top, c1, c2, c3, d)
     for c in f:
         if c > top:
             top = c
         if -c > top:
             top = -c
     return (f[0] - REL_TOL * top,) + f[1:]
+
+
+def _top(top: float, c: float) -> float:
+    """One step of :func:`_strict`'s loop."""
+    if c > top:
+        top = c
+    if -c > top:
+        top = -c
+    return top
 
 
 def _wall_side(p: float, d: Drive) -> int:

@@ -15,7 +15,7 @@ time grid (docs/architecture.md rule 2).
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from typing import Final, Iterable, Sequence
 
 #: (c0, c1, c2, c3, d): c0 + c1 τ + c2 τ² + c3 τ³ + d·exp(-k τ), the function of every
 #: piece of motion.  Of fixed size, so that compiled code keeps it unboxed (five C
@@ -26,9 +26,9 @@ F = tuple[float, float, float, float, float]
 #: squares a speed: :func:`mul`).  A 5-tuple takes the :data:`F` paths, the same numbers.
 AnyF = tuple[float, ...]
 
-ZERO: F = (0.0, 0.0, 0.0, 0.0, 0.0)
-INF = math.inf
-_ITERATIONS = 100
+ZERO: Final[F] = (0.0, 0.0, 0.0, 0.0, 0.0)
+INF: Final = math.inf
+_ITERATIONS: Final = 100
 
 
 def const(c: float) -> F:
@@ -149,15 +149,37 @@ def mul(f: F, g: F) -> AnyF:
     the same numbers, tests/test_expoly.py)."""
     if f[4] or g[4]:
         raise ValueError("mul() takes polynomials only")
-    out = [0.0] * 7
-    fs, gs = [f[0], f[1], f[2], f[3]], [g[0], g[1], g[2], g[3]]
-    for i, a in enumerate(fs):
-        if a:
-            for j, b in enumerate(gs):
-                out[i + j] += a * b
-    while len(out) > 4 and out[-1] == 0.0:
-        out.pop()
-    return _pad(tuple(out)) + (0.0,)
+    # out[i + j] += f[i] * g[j] for i, then j, ascending, skipping f[i] == 0, written out
+    f0, f1, f2, f3 = f[0], f[1], f[2], f[3]
+    g0, g1, g2, g3 = g[0], g[1], g[2], g[3]
+    o0 = o1 = o2 = o3 = o4 = o5 = o6 = 0.0
+    if f0:
+        o0 += f0 * g0
+        o1 += f0 * g1
+        o2 += f0 * g2
+        o3 += f0 * g3
+    if f1:
+        o1 += f1 * g0
+        o2 += f1 * g1
+        o3 += f1 * g2
+        o4 += f1 * g3
+    if f2:
+        o2 += f2 * g0
+        o3 += f2 * g1
+        o4 += f2 * g2
+        o5 += f2 * g3
+    if f3:
+        o3 += f3 * g0
+        o4 += f3 * g1
+        o5 += f3 * g2
+        o6 += f3 * g3
+    if o6 != 0.0:
+        return (o0, o1, o2, o3, o4, o5, o6, 0.0)
+    if o5 != 0.0:
+        return (o0, o1, o2, o3, o4, o5, 0.0)
+    if o4 != 0.0:
+        return (o0, o1, o2, o3, o4, 0.0)
+    return (o0, o1, o2, o3, 0.0)
 
 
 def shift(f: F, k: float, a: float) -> F:
