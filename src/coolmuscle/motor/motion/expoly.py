@@ -460,6 +460,10 @@ def first_true(conds: Sequence[AnyF], k: float, a: float, b: float) -> float | N
     """
     if b <= a:
         return None
+    if len(conds) == 1:
+        cond = conds[0]
+        if len(cond) == 5:
+            return _first_true5(cond, k, a, b)
     for cond in conds:
         if upper_bound(cond, k, a, b) <= 0.0:
             return None
@@ -473,6 +477,21 @@ def first_true(conds: Sequence[AnyF], k: float, a: float, b: float) -> float | N
             if not value_any(c, k, mid) > 0.0:
                 break
         else:
+            return lo
+    return None
+
+
+def _first_true5(f: F, k: float, a: float, b: float) -> float | None:
+    """:func:`first_true` of one piece-sized condition (most are): taken apart once."""
+    if _upper_bound5(f, k, a, b) <= 0.0:
+        return None
+    found = roots5(f, k, a, b)
+    cuts = sorted({a, *found}) if found else [a]
+    last = len(cuts) - 1
+    for i, lo in enumerate(cuts):
+        hi = cuts[i + 1] if i < last else b
+        mid = lo + 1.0 if math.isinf(hi) else 0.5 * (lo + hi)
+        if value(f, k, mid) > 0.0:
             return lo
     return None
 
