@@ -4,12 +4,13 @@ Every quantity of the servo and load model (:mod:`coolmuscle.motor.motion.dynami
 piece of motion, ``f(τ) = c0 + c1 τ + ... + cn τⁿ + d·exp(-k τ)``: the command is a
 cubic (piecewise-constant jerk, :mod:`.profile`), the first-order tracking error adds one
 exponential, saturated and free motion are quadratics, a braking curve squares a speed.
-This module owns that form (``F``, a tuple ending with ``d``, with the rate ``k`` passed
-alongside) and the instants where such a function changes sign, found by a derivative
-cascade: the n-th derivative of ``f`` is ``n! cn + d (-k)ⁿ e^(-kτ)``, monotonic, so it
-has at most one root, which bounds the monotonic stretches of every lower derivative;
-each root is then bracketed and refined (safeguarded Newton).  Nothing is sampled on a
-time grid (docs/architecture.md rule 2).
+This module owns that form (``F``, the 5-tuple (c0, c1, c2, c3, d) of every piece, or
+``AnyF`` of any degree for a condition; the rate ``k`` is passed alongside) and the
+instants where such a function changes sign, found by a derivative cascade: the n-th
+derivative of ``f`` is ``n! cn + d (-k)ⁿ e^(-kτ)``, monotonic, so it has at most one
+root, which bounds the monotonic stretches of every lower derivative; each root is then
+bracketed and refined (safeguarded Newton).  Nothing is sampled on a time grid
+(docs/architecture.md rule 2).
 """
 
 from __future__ import annotations
