@@ -19,15 +19,15 @@ import heapq
 import itertools
 import logging
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Final
 
 from mypy_extensions import mypyc_attr
 
 log = logging.getLogger(__name__)
 
-NS_PER_S = 1_000_000_000
-NS_PER_MS = 1_000_000
-NS_PER_US = 1_000
+NS_PER_S: Final = 1_000_000_000
+NS_PER_MS: Final = 1_000_000
+NS_PER_US: Final = 1_000
 
 #: Priorities for events that fall on the same instant (lower runs first).
 PRIO_IO = 0        # input edges, bytes arriving on a line

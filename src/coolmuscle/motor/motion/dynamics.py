@@ -37,35 +37,43 @@ import math
 from bisect import bisect_right
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Final, Sequence
 
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
-from .expoly import F
+from .expoly import AnyF, F
 from .profile import Profile
 
-TRACK, SAT, BRAKE, VSAT, STALL, CONTACT, FREE, LOST = (
-    "track", "sat", "brake", "vsat", "stall", "contact", "free", "lost")
+# The module's constants are Final: compiled code then has them as C constants instead
+# of looking each up in the module's dictionary at every use (docs/performance.md).
+TRACK: Final = "track"
+SAT: Final = "sat"
+BRAKE: Final = "brake"
+VSAT: Final = "vsat"
+STALL: Final = "stall"
+CONTACT: Final = "contact"
+FREE: Final = "free"
+LOST: Final = "lost"
 
 #: Searches for a mode's end start this long after the mode began (s): no Zeno chains.
-TAU_MIN = 1e-9
+TAU_MIN: Final = 1e-9
 #: Settling slower than this (pulses/s) on a standing command needs no friction torque.
-V_STILL = 0.5
+V_STILL: Final = 0.5
 #: A speed mismatch the torque limit would close within this time (s) is closed at once.
-SNAP_TIME = 1e-6
+SNAP_TIME: Final = 1e-6
 #: After this many pieces shorter than 0.1 µs in a row the solver tracks through
 #: (the torque limit is exceeded by a hair for at most SLIDE seconds): no chattering.
-CHATTER = 8
-SLIDE = 1e-4
+CHATTER: Final = 8
+SLIDE: Final = 1e-4
 #: Relative margin by which a mode's end condition must hold (float noise at a switch).
-REL_TOL = 1e-9
+REL_TOL: Final = 1e-9
 #: Pieces one motion may hold before the model gives up saturating (a safety net).
-MAX_PIECES = 2000
+MAX_PIECES: Final = 2000
 
-Conditions = Callable[["Piece"], Sequence[F] | None]
+Conditions = Callable[["Piece"], Sequence[AnyF] | None]
 #: How a piece may end: (exit name, the functions whose first root ends it, or the
 #: instant itself).
-Exits = list[tuple[str, "list[F] | float"]]
+Exits = list[tuple[str, "list[AnyF] | float"]]
 
 
 @dataclass(init=False, eq=False, slots=True)
@@ -123,13 +131,18 @@ class Piece:
     Immutable in meaning once :class:`Motion` has set its ``end`` and ``exit``.  Its
     derived functions (speed, error) and their bounds are computed once, on first use,
     and kept: watchers and evaluations ask for them many times per motion (the
-    arithmetic is the same as computing them afresh)."""
+    arithmetic is the same as computing them afresh).  ``on_cmd``: the shaft is on its
+    command (a stepper that keeps its steps: ``pos`` equals ``cmd``).
+
+    The functions are fixed-size tuples (:data:`.expoly.F`), which compiled code keeps
+    unboxed in the object; so ``_vel`` and ``_err`` are never ``None`` (an optional
+    tuple would be boxed) and flags say whether they are computed yet."""
 
     __slots__ = ("start", "end", "mode", "pos", "cmd", "torque", "k", "s", "exit",
-                 "_vel", "_err", "_bounds")
+                 "on_cmd", "_vel", "_err", "_has_vel", "_has_err", "_bounds")
 
     def __init__(self, start: float, end: float, mode: str, pos: F, cmd: F, torque: F,
-                 k: float, s: int = 0, exit: str = "") -> None:
+                 k: float, s: int = 0, exit: str = "", on_cmd: bool = False) -> None:
         self.start = start
         self.end = end
         self.mode = mode
@@ -139,9 +152,20 @@ class Piece:
         self.k = k
         self.s = s
         self.exit = exit
-        self._vel: F | None = None
-        self._err: F | None = None
+        self.on_cmd = on_cmd
+        self._vel: F = (0.0, 0.0, 0.0, 0.0, 0.0)
+        self._err: F = (0.0, 0.0, 0.0, 0.0, 0.0)
+        self._has_vel = False
+        self._has_err = False
         self._bounds: tuple[float, float, float] | None = None
+
+    def set_vel(self, vel: F) -> None:
+        """Give the speed, computed already (the same numbers as :meth:`vel`)."""
+        self._vel, self._has_vel = vel, True
+
+    def set_err(self, err: F) -> None:
+        """Give the error, computed already (the same numbers as :meth:`err`)."""
+        self._err, self._has_err = err, True
 
     def __repr__(self) -> str:
         return (f"Piece(start={self.start!r}, end={self.end!r}, mode={self.mode!r}, "
@@ -158,9 +182,10 @@ class Piece:
         afresh against the command, so Pe = command - position holds in absolute terms
         and a command ends exactly on its target.  Speed and torque do not depend on
         where the axis is: they are shared."""
-        out = Piece(self.start, self.end, self.mode, (p0,) + self.pos[1:], cmd,
-                    self.torque, self.k, self.s, self.exit)
-        out._vel = self.vel()
+        pos = self.pos
+        out = Piece(self.start, self.end, self.mode, (p0, pos[1], pos[2], pos[3], pos[4]),
+                    cmd, self.torque, self.k, self.s, self.exit, self.on_cmd)
+        out.set_vel(self.vel())
         return out
 
     def moved(self, shift: float, end: float) -> "Piece":
@@ -168,25 +193,24 @@ class Piece:
         the latest (the same functions of its own τ)."""
         last = self.end - shift
         out = Piece(self.start - shift, min(last, end), self.mode, self.pos,
-                    self.cmd, self.torque, self.k, self.s, self.exit)
-        out._vel, out._err = self._vel, self._err
+                    self.cmd, self.torque, self.k, self.s, self.exit, self.on_cmd)
+        out._vel, out._has_vel = self._vel, self._has_vel
+        out._err, out._has_err = self._err, self._has_err
         if last <= end:
             out._bounds = self._bounds          # the same stretch: the same bounds
         return out
 
     def vel(self) -> F:
         """The actual speed (d pos / dτ)."""
-        found = self._vel
-        if found is None:
-            found = self._vel = xp.deriv(self.pos, self.k)
-        return found
+        if not self._has_vel:
+            self.set_vel(xp.deriv(self.pos, self.k))
+        return self._vel
 
     def err(self) -> F:
         """Pe = command - actual."""
-        found = self._err
-        if found is None:
-            found = self._err = xp.sub(self.cmd, self.pos)
-        return found
+        if not self._has_err:
+            self.set_err(xp.sub(self.cmd, self.pos))
+        return self._err
 
     def reach(self, what: str) -> float:
         """A bound of |err|, |vel| or |torque| (``what``) over the piece."""
@@ -199,7 +223,7 @@ class Piece:
         return bounds[_REACH[what]]
 
 
-_REACH = {"err": 0, "vel": 1, "torque": 2}
+_REACH: Final = {"err": 0, "vel": 1, "torque": 2}
 
 
 def _sign(x: float) -> int:
@@ -408,7 +432,7 @@ class Motion:
         key = (window, after_ns - self.origin_ns)
         found = self._memo.get(key, self)
         if found is self:
-            def inside(piece: Piece) -> list[F]:
+            def inside(piece: Piece) -> list[AnyF]:
                 e = piece.err()
                 return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
@@ -424,7 +448,7 @@ class Motion:
         key = ("within", center, window, after_ns - self.origin_ns)
         found = self._memo.get(key, self)
         if found is self:
-            def inside(piece: Piece) -> list[F]:
+            def inside(piece: Piece) -> list[AnyF]:
                 off = xp.sub(piece.pos, xp.const(center))
                 return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
@@ -500,7 +524,7 @@ def _placed(drive: Drive, position: float, velocity: float,
     rel_drive = drive
     if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
         rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
-    rel_cmd = tuple((a, b, (c[0] - ref,) + c[1:]) for a, b, c in cmd)
+    rel_cmd = tuple((a, b, (c[0] - ref, c[1], c[2], c[3], c[4])) for a, b, c in cmd)
     solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
     pieces: list[Piece] = []
     ci = 0
@@ -521,8 +545,9 @@ def _placed(drive: Drive, position: float, velocity: float,
         else:
             shown = xp.shift(c_poly, 0.0, t - c_start)
         if piece.mode == FREE and not drive.enabled:     # servo off: the command follows
-            shown = (p0,) + piece.cmd[1:]
-        elif piece.pos is piece.cmd:                     # a stepper on its command
+            c = piece.cmd
+            shown = (p0, c[1], c[2], c[3], c[4])
+        elif piece.on_cmd:                               # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
     return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
@@ -642,8 +667,10 @@ class _Solver:
             piece = track[0]
             # err() and the values at TAU_MIN written out (xp.sub, xp.value: same arithmetic)
             pos, x = piece.pos, self._exp_tau_min
-            c0, c1, c2, c3, cd = piece._err = (cmd[0] - pos[0], cmd[1] - pos[1], cmd[2] - pos[2],
-                                               cmd[3] - pos[3], cmd[4] - pos[4])
+            err = (cmd[0] - pos[0], cmd[1] - pos[1], cmd[2] - pos[2], cmd[3] - pos[3],
+                   cmd[4] - pos[4])
+            piece.set_err(err)
+            c0, c1, c2, c3, cd = err
             e_t = c0 + TAU_MIN * (c1 + TAU_MIN * (c2 + TAU_MIN * c3))
             if cd:
                 e_t = e_t + cd * x
@@ -682,7 +709,7 @@ class _Solver:
         pos: F = (q0 - c0, q1 - c1, q2 - c2, q3 - 0.0, q4 - ed)            # cmd - e
         # _stretch_sign(e, k, dur) written out (the value at the probe as xp.value)
         lo = min(TAU_MIN, dur / 2.0)
-        found = xp.roots(e, k, lo, dur)
+        found = xp.roots5(e, k, lo, dur)
         if found:
             turn: float | None = found[0]
             probe = (lo + found[0]) / 2.0
@@ -714,7 +741,7 @@ class _Solver:
         if turn is not None:
             exits.append(("vzero", turn))
         piece = Piece(t, math.inf, TRACK, pos, cmd, torque, k)
-        piece._vel = vel
+        piece.set_vel(vel)
         return piece, exits
 
     def _sat(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, Exits]:
@@ -749,7 +776,7 @@ class _Solver:
         v_cmd = xp.deriv(cmd, 0.0)
         u = xp.sub(xp.deriv(pos, 0.0), v_cmd)
         eps = xp.sub(xp.sub(cmd, pos), xp.scale(v_cmd, 1.0 / self.drive.kp))
-        curve = xp.sub(xp.mul(u, u), xp.scale(eps, 2.0 * a_b * s))
+        curve = xp.sub_any(xp.mul(u, u), xp.scale(eps, 2.0 * a_b * s))
         return [("brake", [xp.scale(u, float(s)), curve])]
 
     def _brake(self, t: float, p: float, v: float, cmd: F, s: int) -> tuple[Piece, Exits]:
@@ -831,18 +858,31 @@ class _Solver:
         exits = self._walls(cmd) + _beyond("limit", torque, dur, d.a_limit)
         if turn is not None:
             exits.append(("vzero", turn))
-        return Piece(t, math.inf, TRACK, cmd, cmd, torque, 0.0), exits
+        return Piece(t, math.inf, TRACK, cmd, cmd, torque, 0.0, on_cmd=True), exits
 
 
-def _strict(f: F) -> F:
+def _strict(f: AnyF) -> AnyF:
     """``f - tol``: a mode ends only when its condition holds beyond float noise."""
     top = 1.0                        # max(1.0, max(f), -min(f)), without boxing
+    if len(f) == 5:                  # a piece's function (unboxed when compiled)
+        c0, c1, c2, c3, d = f
+        top = _top(_top(_top(_top(_top(top, c0), c1), c2), c3), d)
+        return (c0 - REL_TOL * top, c1, c2, c3, d)
     for c in f:
         if c > top:
             top = c
         if -c > top:
             top = -c
     return (f[0] - REL_TOL * top,) + f[1:]
+
+
+def _top(top: float, c: float) -> float:
+    """One step of :func:`_strict`'s loop."""
+    if c > top:
+        top = c
+    if -c > top:
+        top = -c
+    return top
 
 
 def _wall_side(p: float, d: Drive) -> int:
@@ -858,7 +898,7 @@ def _stretch_sign(f: F, k: float, dur: float) -> tuple[int, float | None]:
     """Sign of ``f`` on its first stretch after TAU_MIN, and where it ends (within
     ``dur``); a sign change closer to the start than TAU_MIN is float noise."""
     lo = min(TAU_MIN, dur / 2.0)
-    found = xp.roots(f, k, lo, dur)
+    found = xp.roots5(f, k, lo, dur)
     if found:
         return _sign(xp.value(f, k, (lo + found[0]) / 2.0)), found[0]
     end = dur if dur != math.inf else lo + 2.0

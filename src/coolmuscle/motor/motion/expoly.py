@@ -4,25 +4,32 @@ Every quantity of the servo and load model (:mod:`coolmuscle.motor.motion.dynami
 piece of motion, ``f(τ) = c0 + c1 τ + ... + cn τⁿ + d·exp(-k τ)``: the command is a
 cubic (piecewise-constant jerk, :mod:`.profile`), the first-order tracking error adds one
 exponential, saturated and free motion are quadratics, a braking curve squares a speed.
-This module owns that form (``F``, a tuple ending with ``d``, with the rate ``k`` passed
-alongside) and the instants where such a function changes sign, found by a derivative
-cascade: the n-th derivative of ``f`` is ``n! cn + d (-k)ⁿ e^(-kτ)``, monotonic, so it
-has at most one root, which bounds the monotonic stretches of every lower derivative;
-each root is then bracketed and refined (safeguarded Newton).  Nothing is sampled on a
-time grid (docs/architecture.md rule 2).
+This module owns that form (``F``, the 5-tuple (c0, c1, c2, c3, d) of every piece, or
+``AnyF`` of any degree for a condition; the rate ``k`` is passed alongside) and the
+instants where such a function changes sign, found by a derivative cascade: the n-th
+derivative of ``f`` is ``n! cn + d (-k)ⁿ e^(-kτ)``, monotonic, so it has at most one
+root, which bounds the monotonic stretches of every lower derivative; each root is then
+bracketed and refined (safeguarded Newton).  Nothing is sampled on a time grid
+(docs/architecture.md rule 2).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from typing import Final, Iterable, Sequence
 
-#: (c0, c1, ..., cn, d): c0 + c1 τ + ... + cn τⁿ + d·exp(-k τ); n >= 3 by convention.
-F = tuple[float, ...]
+#: (c0, c1, c2, c3, d): c0 + c1 τ + c2 τ² + c3 τ³ + d·exp(-k τ), the function of every
+#: piece of motion.  Of fixed size, so that compiled code keeps it unboxed (five C
+#: doubles, no tuple and no float objects: docs/performance.md "Tenth round").
+F = tuple[float, float, float, float, float]
+#: (c0, c1, ..., cn, d) with n >= 3: a function of any degree, as the conditions of
+#: :func:`roots` and :func:`first_true` are (the braking curve of an S-curve command
+#: squares a speed: :func:`mul`).  A 5-tuple takes the :data:`F` paths, the same numbers.
+AnyF = tuple[float, ...]
 
-ZERO: F = (0.0, 0.0, 0.0, 0.0, 0.0)
-INF = math.inf
-_ITERATIONS = 100
+ZERO: Final[F] = (0.0, 0.0, 0.0, 0.0, 0.0)
+INF: Final = math.inf
+_ITERATIONS: Final = 100
 
 
 def const(c: float) -> F:
@@ -31,10 +38,15 @@ def const(c: float) -> F:
 
 def value(f: F, k: float, t: float) -> float:
     """``f(t)``."""
+    c0, c1, c2, c3, d = f
+    out = c0 + t * (c1 + t * (c2 + t * c3))
+    return out + d * math.exp(-k * t) if d else out
+
+
+def value_any(f: AnyF, k: float, t: float) -> float:
+    """:func:`value` of a function of any degree."""
     if len(f) == 5:
-        c0, c1, c2, c3, d = f
-        out = c0 + t * (c1 + t * (c2 + t * c3))
-        return out + d * math.exp(-k * t) if d else out
+        return value(f, k, t)
     out = 0.0
     for c in reversed(f[:-1]):
         out = out * t + c
@@ -46,8 +58,12 @@ def value(f: F, k: float, t: float) -> float:
 
 def deriv(f: F, k: float) -> F:
     """``f'``."""
+    return (f[1], 2.0 * f[2], 3.0 * f[3], 0.0, -k * f[4])
+
+
+def _deriv_any(f: AnyF, k: float) -> AnyF:
     if len(f) == 5:
-        return (f[1], 2.0 * f[2], 3.0 * f[3], 0.0, -k * f[4])
+        return deriv(f, k)
     poly = tuple(i * c for i, c in enumerate(f[:-1]) if i) + (0.0,)
     return _pad(poly) + (-k * f[-1],)
 
@@ -56,90 +72,131 @@ def _pad(poly: tuple[float, ...]) -> tuple[float, ...]:
     return poly + (0.0,) * (4 - len(poly)) if len(poly) < 4 else poly
 
 
-def _poly(f: F, n: int) -> tuple[float, ...]:
+def _poly(f: AnyF, n: int) -> tuple[float, ...]:
     return f[:-1] + (0.0,) * (n - len(f) + 1)
 
 
 def add(f: F, g: F) -> F:
-    if len(f) == 5 and len(g) == 5:
-        return (f[0] + g[0], f[1] + g[1], f[2] + g[2], f[3] + g[3], f[4] + g[4])
+    return (f[0] + g[0], f[1] + g[1], f[2] + g[2], f[3] + g[3], f[4] + g[4])
+
+
+def _add_any(f: AnyF, g: AnyF) -> AnyF:
     n = max(len(f), len(g)) - 1
     return tuple(a + b for a, b in zip(_poly(f, n), _poly(g, n))) + (f[-1] + g[-1],)
 
 
 def sub(f: F, g: F) -> F:
+    return (f[0] - g[0], f[1] - g[1], f[2] - g[2], f[3] - g[3], f[4] - g[4])
+
+
+def sub_any(f: AnyF, g: AnyF) -> AnyF:
+    """:func:`sub` of functions of any degree (the braking curve)."""
     if len(f) == 5 and len(g) == 5:
-        return (f[0] - g[0], f[1] - g[1], f[2] - g[2], f[3] - g[3], f[4] - g[4])
-    return add(f, scale(g, -1.0))
+        return sub(f, g)
+    return _add_any(f, tuple(c * -1.0 for c in g))
 
 
 def plus(f: F, c: float) -> F:
     """``f + c``."""
-    return (f[0] + c,) + f[1:]
+    return (f[0] + c, f[1], f[2], f[3], f[4])
 
 
 def scale(f: F, s: float) -> F:
-    if len(f) == 5:
-        return (f[0] * s, f[1] * s, f[2] * s, f[3] * s, f[4] * s)
-    return tuple(c * s for c in f)
+    return (f[0] * s, f[1] * s, f[2] * s, f[3] * s, f[4] * s)
 
 
 def spread(f: F, b: float) -> float:
     """A bound of ``|f(τ) - c0|`` on [0, b] (∞ when b is and ``f`` has a τ term)."""
-    out = abs(f[-1])
-    for i in range(1, len(f) - 1):
-        c = f[i]
-        if c:
-            if math.isinf(b):
-                return INF
-            out += abs(c) * b ** i
+    out = abs(f[4])
+    c = f[1]
+    if c:
+        if math.isinf(b):
+            return INF
+        out += abs(c) * b ** 1
+    c = f[2]
+    if c:
+        if math.isinf(b):
+            return INF
+        out += abs(c) * b ** 2
+    c = f[3]
+    if c:
+        if math.isinf(b):
+            return INF
+        out += abs(c) * b ** 3
     return out
 
 
 def abs_bound(f: F, b: float) -> float:
     """A bound of ``|f|`` on [0, b] (∞ when b is and ``f`` has a τ term): |c0| plus
-    :func:`spread`, written out for the 5-tuple every motion piece is."""
-    out = abs(f[0]) + abs(f[-1])
-    if len(f) == 5:
-        c1, c2, c3 = f[1], f[2], f[3]
-        if c1 or c2 or c3:
-            if math.isinf(b):
-                return INF
-            if c1:
-                out += abs(c1) * b ** 1
-            if c2:
-                out += abs(c2) * b ** 2
-            if c3:
-                out += abs(c3) * b ** 3
-        return out
-    return abs(f[0]) + spread(f, b)
+    :func:`spread`, written out."""
+    out = abs(f[0]) + abs(f[4])
+    c1, c2, c3 = f[1], f[2], f[3]
+    if c1 or c2 or c3:
+        if math.isinf(b):
+            return INF
+        if c1:
+            out += abs(c1) * b ** 1
+        if c2:
+            out += abs(c2) * b ** 2
+        if c3:
+            out += abs(c3) * b ** 3
+    return out
 
 
-def mul(f: F, g: F) -> F:
+def mul(f: F, g: F) -> AnyF:
     """Product of two polynomials (no exponential part).  Zero coefficients above the
-    cubic are dropped: a product of degree 3 or less is the 5-tuple every piece uses
-    (the braking curve of a standing command: its roots on the 5-tuple path, the same
-    numbers, tests/test_expoly.py)."""
-    if f[-1] or g[-1]:
+    cubic are dropped: a product of degree 3 or less is a 5-tuple, as every piece's
+    function (the braking curve of a standing command: its roots on the 5-tuple path,
+    the same numbers, tests/test_expoly.py)."""
+    if f[4] or g[4]:
         raise ValueError("mul() takes polynomials only")
-    out = [0.0] * (len(f) + len(g) - 3)
-    for i, a in enumerate(f[:-1]):
-        if a:
-            for j, b in enumerate(g[:-1]):
-                out[i + j] += a * b
-    while len(out) > 4 and out[-1] == 0.0:
-        out.pop()
-    return _pad(tuple(out)) + (0.0,)
+    # out[i + j] += f[i] * g[j] for i, then j, ascending, skipping f[i] == 0, written out
+    f0, f1, f2, f3 = f[0], f[1], f[2], f[3]
+    g0, g1, g2, g3 = g[0], g[1], g[2], g[3]
+    o0 = o1 = o2 = o3 = o4 = o5 = o6 = 0.0
+    if f0:
+        o0 += f0 * g0
+        o1 += f0 * g1
+        o2 += f0 * g2
+        o3 += f0 * g3
+    if f1:
+        o1 += f1 * g0
+        o2 += f1 * g1
+        o3 += f1 * g2
+        o4 += f1 * g3
+    if f2:
+        o2 += f2 * g0
+        o3 += f2 * g1
+        o4 += f2 * g2
+        o5 += f2 * g3
+    if f3:
+        o3 += f3 * g0
+        o4 += f3 * g1
+        o5 += f3 * g2
+        o6 += f3 * g3
+    if o6 != 0.0:
+        return (o0, o1, o2, o3, o4, o5, o6, 0.0)
+    if o5 != 0.0:
+        return (o0, o1, o2, o3, o4, o5, 0.0)
+    if o4 != 0.0:
+        return (o0, o1, o2, o3, o4, 0.0)
+    return (o0, o1, o2, o3, 0.0)
 
 
 def shift(f: F, k: float, a: float) -> F:
     """The same function with its origin moved to ``a``: ``g(τ) = f(a + τ)``."""
     if not a:
         return f
+    c0, c1, c2, c3, d = f
+    return (c0 + a * (c1 + a * (c2 + a * c3)), c1 + a * (2.0 * c2 + 3.0 * c3 * a),
+            c2 + 3.0 * c3 * a, c3, d * math.exp(-k * a) if d else 0.0)
+
+
+def _shift_any(f: AnyF, k: float, a: float) -> AnyF:
     if len(f) == 5:
-        c0, c1, c2, c3, d = f
-        return (c0 + a * (c1 + a * (c2 + a * c3)), c1 + a * (2.0 * c2 + 3.0 * c3 * a),
-                c2 + 3.0 * c3 * a, c3, d * math.exp(-k * a) if d else 0.0)
+        return shift(f, k, a)
+    if not a:
+        return f
     poly = f[:-1]
     n = len(poly)
     out = []
@@ -154,35 +211,20 @@ def shift(f: F, k: float, a: float) -> F:
     return tuple(out) + (d * math.exp(-k * a) if d else 0.0,)
 
 
-def _degree(f: F) -> int:
-    if len(f) == 5:
-        return (3 if f[3] != 0.0 else 2 if f[2] != 0.0 else 1 if f[1] != 0.0
-                else 0 if f[0] != 0.0 else -1)
+def _degree(f: AnyF) -> int:
     for i in range(len(f) - 2, -1, -1):
         if f[i] != 0.0:
             return i
     return -1
 
 
-def upper_bound(f: F, k: float, a: float, b: float) -> float:
+def upper_bound(f: AnyF, k: float, a: float, b: float) -> float:
     """A cheap upper bound of ``f`` on [a, b] (used to skip root searches)."""
-    g = shift(f, k, a) if a else f
+    if len(f) == 5:
+        return _upper_bound5(f, k, a, b)
+    g = _shift_any(f, k, a) if a else f
     w = b - a
     out = g[0]
-    if len(g) == 5:
-        g1, g2, g3, gd = g[1], g[2], g[3], g[4]
-        if g1 > 0.0 or g2 > 0.0 or g3 > 0.0:
-            if math.isinf(w):
-                return INF
-            if g1 > 0.0:
-                out += g1 * w ** 1
-            if g2 > 0.0:
-                out += g2 * w ** 2
-            if g3 > 0.0:
-                out += g3 * w ** 3
-        if gd > 0.0:
-            out += gd
-        return out
     for i in range(1, len(g) - 1):
         if g[i] > 0.0:
             if math.isinf(w):
@@ -193,11 +235,30 @@ def upper_bound(f: F, k: float, a: float, b: float) -> float:
     return out
 
 
+def _upper_bound5(f: F, k: float, a: float, b: float) -> float:
+    g = shift(f, k, a) if a else f
+    w = b - a
+    out = g[0]
+    g1, g2, g3, gd = g[1], g[2], g[3], g[4]
+    if g1 > 0.0 or g2 > 0.0 or g3 > 0.0:
+        if math.isinf(w):
+            return INF
+        if g1 > 0.0:
+            out += g1 * w ** 1
+        if g2 > 0.0:
+            out += g2 * w ** 2
+        if g3 > 0.0:
+            out += g3 * w ** 3
+    if gd > 0.0:
+        out += gd
+    return out
+
+
 def _sign(x: float) -> int:
     return (x > 0.0) - (x < 0.0)
 
 
-def _limit_sign(f: F) -> int:
+def _limit_sign(f: AnyF) -> int:
     """Sign of ``f`` as τ -> ∞ (k > 0 makes the exponential vanish)."""
     deg = _degree(f)
     if deg >= 0:
@@ -207,11 +268,9 @@ def _limit_sign(f: F) -> int:
 
 def _refine(f: F, k: float, lo: float, hi: float, flo: float) -> float:
     """The root of ``f`` in [lo, hi] where ``f`` is monotonic and changes sign."""
-    if len(f) != 5:
-        return _refine_any(f, k, lo, hi, flo)
     # value(f) and value(f') written out (the same expressions, no calls): hot path
     c0, c1, c2, c3, d = f
-    s1, s2, s3, sd = f[1], 2.0 * c2, 3.0 * c3, -k * d      # deriv(f, k)
+    s1, s2, s3, sd = c1, 2.0 * c2, 3.0 * c3, -k * d      # deriv(f, k)
     exp = math.exp
     t = 0.5 * (lo + hi)
     for _ in range(_ITERATIONS):
@@ -234,12 +293,14 @@ def _refine(f: F, k: float, lo: float, hi: float, flo: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def _refine_any(f: F, k: float, lo: float, hi: float, flo: float) -> float:
+def _refine_any(f: AnyF, k: float, lo: float, hi: float, flo: float) -> float:
     """:func:`_refine` for any degree."""
-    df = deriv(f, k)
+    if len(f) == 5:
+        return _refine(f, k, lo, hi, flo)
+    df = _deriv_any(f, k)
     t = 0.5 * (lo + hi)
     for _ in range(_ITERATIONS):
-        ft = value(f, k, t)
+        ft = value_any(f, k, t)
         if ft == 0.0:
             return t
         if (ft < 0.0) == (flo < 0.0):
@@ -248,18 +309,18 @@ def _refine_any(f: F, k: float, lo: float, hi: float, flo: float) -> float:
             hi = t
         if hi - lo <= 1e-15 * max(1.0, abs(hi)):
             break
-        slope = value(df, k, t)
+        slope = value_any(df, k, t)
         step = t - ft / slope if slope != 0.0 else lo - 1.0
         t = step if lo < step < hi else 0.5 * (lo + hi)
     return 0.5 * (lo + hi)
 
 
-def _bracket_end(f: F, k: float, lo: float, want: int) -> float:
+def _bracket_end(f: AnyF, k: float, lo: float, want: int) -> float:
     """A finite ``hi`` > lo with sign(f(hi)) == want, on a monotonic tail."""
     step = max(1.0, abs(lo))
     hi = lo + step
     for _ in range(2000):
-        if _sign(value(f, k, hi)) == want:
+        if _sign(value_any(f, k, hi)) == want:
             return hi
         step *= 2.0
         hi = lo + step
@@ -268,9 +329,9 @@ def _bracket_end(f: F, k: float, lo: float, want: int) -> float:
     return INF
 
 
-def _critical(f: F, k: float, a: float, b: float) -> list[float]:
+def _critical(f: AnyF, k: float, a: float, b: float) -> list[float]:
     """Instants in (a, b) where ``f'`` changes sign."""
-    df = deriv(f, k)
+    df = _deriv_any(f, k)
     if df[-1] == 0.0 or k == 0.0:
         deg = _degree(df)
         if deg <= 0:
@@ -295,21 +356,14 @@ def _quadratic(c2: float, c1: float, c0: float) -> list[float]:
     return sorted(found)
 
 
-def _fold(f: F, k: float) -> F:
-    """With k == 0 the exponential is the constant d."""
-    if k == 0.0 and f[-1]:
-        return (f[0] + f[-1],) + f[1:-1] + (0.0,)
-    return f
-
-
-def roots(f: F, k: float, a: float, b: float) -> list[float]:
+def roots(f: AnyF, k: float, a: float, b: float) -> list[float]:
     """Instants in (a, b) where ``f`` changes sign, ascending (``b`` may be ∞)."""
+    if len(f) == 5:
+        return roots5(f, k, a, b)
     if b <= a:
         return []
-    if k == 0.0:
-        f = _fold(f, k)
-    if len(f) == 5:
-        return _roots5(f[0], f[1], f[2], f[3], f[4], k, a, b)
+    if k == 0.0 and f[-1]:            # with k == 0 the exponential is the constant d
+        f = (f[0] + f[-1],) + f[1:-1] + (0.0,)
     deg, d = _degree(f), f[-1]
     if deg <= 0:
         if d == 0.0:
@@ -320,6 +374,16 @@ def roots(f: F, k: float, a: float, b: float) -> list[float]:
         r = -math.log(-f[0] / d) / k
         return [r] if a < r < b else []
     return _roots_between(f, k, [a, *_critical(f, k, a, b), b])
+
+
+def roots5(f: F, k: float, a: float, b: float) -> list[float]:
+    """:func:`roots` of a piece's function (unboxed when compiled)."""
+    if b <= a:
+        return []
+    c0, c1, c2, c3, d = f
+    if k == 0.0 and d:                # with k == 0 the exponential is the constant d
+        c0, d = c0 + d, 0.0
+    return _roots5(c0, c1, c2, c3, d, k, a, b)
 
 
 def _roots5(c0: float, c1: float, c2: float, c3: float, d: float, k: float,
@@ -363,14 +427,14 @@ def _roots5(c0: float, c1: float, c2: float, c3: float, d: float, k: float,
     return _roots_between((c0, c1, c2, c3, d), k, [a, *critical, b])
 
 
-def _roots_between(f: F, k: float, cuts: list[float]) -> list[float]:
+def _roots_between(f: AnyF, k: float, cuts: list[float]) -> list[float]:
     """Sign changes of ``f`` on each stretch between consecutive ``cuts`` (on which it
     is monotonic); the last cut may be ∞."""
     found: list[float] = []
     fnext: float | None = None      # f at the previous stretch's (finite) end
     for i in range(len(cuts) - 1):
         lo, hi = cuts[i], cuts[i + 1]
-        flo = value(f, k, lo) if fnext is None else fnext
+        flo = value_any(f, k, lo) if fnext is None else fnext
         fnext = None
         if math.isinf(hi):
             want = _limit_sign(f)
@@ -379,16 +443,16 @@ def _roots_between(f: F, k: float, cuts: list[float]) -> list[float]:
             hi = _bracket_end(f, k, lo, want)
             if math.isinf(hi):
                 continue
-            fhi = value(f, k, hi)
+            fhi = value_any(f, k, hi)
         else:
-            fhi = fnext = value(f, k, hi)
+            fhi = fnext = value_any(f, k, hi)
         if flo == 0.0 or fhi == 0.0 or (flo < 0.0) == (fhi < 0.0):
             continue
-        found.append(_refine(f, k, lo, hi, flo))
+        found.append(_refine_any(f, k, lo, hi, flo))
     return found
 
 
-def first_true(conds: Sequence[F], k: float, a: float, b: float) -> float | None:
+def first_true(conds: Sequence[AnyF], k: float, a: float, b: float) -> float | None:
     """First τ in [a, b) at which every ``cond(τ) > 0``; ``None`` if never.
 
     The interval is cut at every sign change of every condition; the first stretch
@@ -397,6 +461,10 @@ def first_true(conds: Sequence[F], k: float, a: float, b: float) -> float | None
     """
     if b <= a:
         return None
+    if len(conds) == 1:
+        cond = conds[0]
+        if len(cond) == 5:
+            return _first_true5(cond, k, a, b)
     for cond in conds:
         if upper_bound(cond, k, a, b) <= 0.0:
             return None
@@ -407,14 +475,29 @@ def first_true(conds: Sequence[F], k: float, a: float, b: float) -> float | None
         hi = cuts[i + 1] if i < last else b
         mid = lo + 1.0 if math.isinf(hi) else 0.5 * (lo + hi)
         for c in conds:
-            if not value(c, k, mid) > 0.0:
+            if not value_any(c, k, mid) > 0.0:
                 break
         else:
             return lo
     return None
 
 
-def _all_roots(conds: Iterable[F], k: float, a: float, b: float) -> list[float]:
+def _first_true5(f: F, k: float, a: float, b: float) -> float | None:
+    """:func:`first_true` of one piece-sized condition (most are): taken apart once."""
+    if _upper_bound5(f, k, a, b) <= 0.0:
+        return None
+    found = roots5(f, k, a, b)
+    cuts = sorted({a, *found}) if found else [a]
+    last = len(cuts) - 1
+    for i, lo in enumerate(cuts):
+        hi = cuts[i + 1] if i < last else b
+        mid = lo + 1.0 if math.isinf(hi) else 0.5 * (lo + hi)
+        if value(f, k, mid) > 0.0:
+            return lo
+    return None
+
+
+def _all_roots(conds: Iterable[AnyF], k: float, a: float, b: float) -> list[float]:
     out: list[float] = []
     for cond in conds:
         out.extend(roots(cond, k, a, b))

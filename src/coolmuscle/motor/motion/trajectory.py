@@ -116,7 +116,7 @@ def _piecewise_turns(motion: Any, t0: int, t1: int) -> list[int]:
         a, b = max(rel0, p.start), min(rel1, p.end)
         if a >= b:
             continue
-        cuts = [0.0, *expoly.roots(p.vel(), p.k, a - p.start, b - p.start)]
+        cuts = [0.0, *expoly.roots5(p.vel(), p.k, a - p.start, b - p.start)]
         out.extend(t for t in (motion.to_ns(p, tau) for tau in cuts) if t0 < t < t1)
     return sorted(set(out))
 
