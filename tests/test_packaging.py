@@ -57,15 +57,20 @@ def run(cmd: list[str], env: dict[str, str], timeout: float = 600,
     return done.stdout
 
 
+def copy_checkout(tree: Path) -> None:
+    """The files a build reads, without this tree's compiled modules or caches."""
+    shutil.copytree(ROOT / "src", tree / "src", ignore=shutil.ignore_patterns(
+        "_compiled", "__pycache__", "*.egg-info", ".mypy_cache", ".accel-build.lock"))
+    for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, tree / name)
+
+
 @pytest.fixture(scope="module")
 def sdist(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``python -m build --sdist`` of a copy of the checkout (no build directory, no
     compiled modules or caches of this tree come along)."""
     tree = tmp_path_factory.mktemp("tree")
-    shutil.copytree(ROOT / "src", tree / "src", ignore=shutil.ignore_patterns(
-        "_compiled", "__pycache__", "*.egg-info", ".mypy_cache", ".accel-build.lock"))
-    for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE"):
-        shutil.copy2(ROOT / name, tree / name)
+    copy_checkout(tree)
     out = tmp_path_factory.mktemp("sdist")
     run([sys.executable, "-m", "build", "--sdist", "--outdir", str(out), str(tree)],
         clean_env())
@@ -80,16 +85,21 @@ def build_wheel(sdist: Path, out: Path, env: dict[str, str]) -> Path:
     return wheel
 
 
+def link_deps(python: Path) -> None:
+    """This environment's site-packages on ``python``'s path (the dependencies)."""
+    site = Path(run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                    clean_env()).strip())
+    deps = {sysconfig.get_path("purelib"), sysconfig.get_path("platlib")}
+    (site / "coolmuscle-test-deps.pth").write_text("\n".join(sorted(deps)) + "\n")
+
+
 def fresh_venv(where: Path, wheel: Path) -> Path:
     """A new virtual environment with ``wheel`` installed; its python."""
     run([sys.executable, "-m", "venv", "--without-pip", str(where)], clean_env())
     python = where / "bin" / "python"
     run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
          "--no-index", "--no-cache-dir", "--quiet", str(wheel)], clean_env())
-    site = Path(run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
-                    clean_env()).strip())
-    deps = {sysconfig.get_path("purelib"), sysconfig.get_path("platlib")}
-    (site / "coolmuscle-test-deps.pth").write_text("\n".join(sorted(deps)) + "\n")
+    link_deps(python)
     return python
 
 
@@ -158,3 +168,26 @@ def test_without_a_c_compiler_the_build_succeeds_and_the_sources_run(
     head, lines = sample(python)
     assert head == {"compiled": False, "reason": why}
     assert lines == reference
+
+
+def test_a_stale_compiled_module_in_the_tree_does_not_break_an_editable_install(
+        tmp_path: Path) -> None:
+    """``pip install -e .`` in a checkout whose ``src/coolmuscle/_compiled/`` keeps a
+    module an earlier build compiled and this one does not (a stale ``chain/daisy``
+    ``.so``): the compiled tree is build_accel's output, not a source package.  Before,
+    setuptools listed the stale folder as a package and build_accel then removed it:
+    "package directory ... does not exist", the install failed."""
+    tree = tmp_path / "tree"
+    copy_checkout(tree)
+    stale = tree / "src" / "coolmuscle" / "_compiled" / "coolmuscle" / "chain"
+    stale.mkdir(parents=True)
+    (stale / "daisy.cpython-311-x86_64-linux-gnu.so").write_bytes(b"\x7fELF stale")
+    run([sys.executable, "-m", "venv", "--without-pip", str(tmp_path / "venv")], clean_env())
+    python = tmp_path / "venv" / "bin" / "python"
+    run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
+         "--quiet", "-e", str(tree)], clean_env(COOLMUSCLE_COMPILE="0"))
+    link_deps(python)
+    assert version_lines(python)[1].startswith("hot modules: sources (")
+    where = run([str(python), "-c", "import coolmuscle.chain.daisy as d; print(d.__file__)"],
+                clean_env()).strip()
+    assert where == str(tree / "src" / "coolmuscle" / "chain" / "daisy.py")
