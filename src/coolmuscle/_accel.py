@@ -58,6 +58,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.supervision.push",
     "coolmuscle.motor.supervision.faults",
     "coolmuscle.motor.programs.bankcheck",
+    "coolmuscle.motor.supervision.origin",
     "coolmuscle.motor.supervision.supervisor",
     "coolmuscle.motor.motor",
     "coolmuscle.frontends.ethercat.cia402",
