@@ -61,6 +61,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.supervision.origin",
     "coolmuscle.motor.supervision.supervisor",
     "coolmuscle.motor.motor",
+    "coolmuscle.chain.bus",
     "coolmuscle.frontends.ethercat.cia402",
     "coolmuscle.frontends.ethercat.dictionary",
     "coolmuscle.frontends.ethercat.bridge.modes",
