@@ -18,6 +18,7 @@ from mypy_extensions import mypyc_attr
 
 from ..device.api import Event, EventListener
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+from ..errors import NoSuchMotorError
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
 
@@ -51,6 +52,26 @@ class ChainBus:
     _settings_cache: dict[tuple[int, int, int], LineSettings]
     _settings_now: LineSettings
     _settings_version: int      # ID1's params.version of _settings_now
+
+    # -- device API: identity ---------------------------------------------
+    @property
+    def motor_ids(self) -> tuple[int, ...]:
+        return tuple(self.motors)
+
+    def motor(self, motor_id: int) -> Motor | None:
+        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
+        return self.motors.get(motor_id)
+
+    def _require(self, motor_id: int) -> Motor:
+        motor = self.motors.get(motor_id)
+        if motor is None:
+            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
+                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
+        return motor
+
+    # -- device API: data (read by every line sent, for the Modbus mode: K81) ---
+    def get_param(self, motor: int, k: int) -> int:
+        return self._require(motor).k(k)
 
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:

@@ -21,7 +21,7 @@ from ..cml import ast
 from ..cml.parser import parse
 from ..device.api import CyclicState, MotorSnapshot, TargetStream
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      NoSuchMotorError, OutOfRangeError, StoreError)
+                      OutOfRangeError, StoreError)
 from ..device.hostline import HostLine, LineSettings
 from ..motor.programs.banks import BankUploads
 from .bus import ChainBus
@@ -132,22 +132,6 @@ class Chain(ChainBus):
         from .machine import Machine, apply_machine, load_machine
         apply_machine(machine if isinstance(machine, Machine) else load_machine(machine), self)
         self._changed()
-
-    # -- device API: identity ---------------------------------------------
-    @property
-    def motor_ids(self) -> tuple[int, ...]:
-        return tuple(self.motors)
-
-    def motor(self, motor_id: int) -> Motor | None:
-        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
-        return self.motors.get(motor_id)
-
-    def _require(self, motor_id: int) -> Motor:
-        motor = self.motors.get(motor_id)
-        if motor is None:
-            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
-                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
-        return motor
 
     # -- the host line ----------------------------------------------------
     def _source_ended(self, source: object) -> None:
@@ -426,9 +410,6 @@ class Chain(ChainBus):
             self.emit(io, "message", text, origin=ctx.origin)
 
     # -- device API: data -------------------------------------------------------
-    def get_param(self, motor: int, k: int) -> int:
-        return self._require(motor).k(k)
-
     def set_param(self, motor: int, k: int, value: int) -> None:
         self._require(motor).params.set(k, value)
 
