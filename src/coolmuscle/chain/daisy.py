@@ -15,15 +15,16 @@ import logging
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable
+from typing import TYPE_CHECKING, Callable
 
 from ..cml import ast
 from ..cml.parser import parse
-from ..device.api import CyclicState, Event, EventListener, MotorSnapshot, TargetStream
+from ..device.api import CyclicState, MotorSnapshot, TargetStream
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      NoSuchMotorError, OutOfRangeError, StoreError)
-from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+                      OutOfRangeError, StoreError)
+from ..device.hostline import HostLine, LineSettings
 from ..motor.programs.banks import BankUploads
+from .bus import ChainBus
 from .links import ChainLinks
 from ..motor.programs.coordinated import LINE_PAIRS, end_of_line, pair_line
 from ..cml.ast import inner_motor
@@ -35,7 +36,7 @@ from ..motor.motor import Motor
 from ..motor.context import Context
 from ..motor.status import Report
 from ..motor.state.store import Store, bad_state_message, snapshot_problem
-from ..sim.kernel import PRIO_IO, PRIO_REPORT, Kernel
+from ..sim.kernel import PRIO_IO, Kernel
 
 if TYPE_CHECKING:
     from .machine import Machine
@@ -43,12 +44,6 @@ if TYPE_CHECKING:
     from ..motor.core import MotorBus, MotorCore
 
 log = logging.getLogger(__name__)
-
-_NO_ECHO = int(Report.NO_ECHO)
-
-#: Origins whose replies are printed on the host line (docs/device-api.md).
-HOST_LINE_ORIGINS = frozenset({"host", "bank", "ladder", "motor"})
-
 
 #: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a host
 #: or PLC sends the same few lines over and over.  Bounded; errors are not kept.
@@ -82,8 +77,9 @@ class _Stream:
         self.closed = True
 
 
-class Chain:
-    """Motors 1..N behind one host line; the device API."""
+class Chain(ChainBus):
+    """Motors 1..N behind one host line; the device API (its event bus, bank waits and
+    host line settings: :class:`.bus.ChainBus`, compiled)."""
 
     def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
                  firmware: str = "cm2", state_dir: Path | str | None = None,
@@ -104,17 +100,15 @@ class Chain:
 
     def _build(self, motors: int, per_motor: list[str], pacing: bool,
                machine: "Path | str | Machine | None") -> None:
-        self._listeners: list[EventListener] = []
-        self._watchers: list[tuple[Callable[[], None], frozenset[int] | None]] = []
-        #: The watchers naming each motor, in the order they came (:meth:`poke` about one
-        #: motor looks only there while no watcher listens to every motor).
-        self._watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]] = {}
-        self._everywhere = 0            # watchers without ``motors``
+        self._listeners = []            # the attributes of ChainBus (chain/bus.py)
+        self._watchers = []
+        self._watching = {}
+        self._everywhere = 0
         self._observers: list[Callable[[], None]] = []
-        self._settings_cache: dict[tuple[int, int, int], LineSettings] = {}
+        self._settings_cache = {}
         self._settings_now = LineSettings()
-        self._settings_version = -1         # ID1's params.version of _settings_now
-        self.motors: dict[int, Motor] = {}
+        self._settings_version = -1
+        self.motors = {}
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
                 get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
@@ -139,37 +133,7 @@ class Chain:
         apply_machine(machine if isinstance(machine, Machine) else load_machine(machine), self)
         self._changed()
 
-    # -- device API: identity ---------------------------------------------
-    @property
-    def motor_ids(self) -> tuple[int, ...]:
-        return tuple(self.motors)
-
-    def motor(self, motor_id: int) -> Motor | None:
-        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
-        return self.motors.get(motor_id)
-
-    def _require(self, motor_id: int) -> Motor:
-        motor = self.motors.get(motor_id)
-        if motor is None:
-            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
-                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
-        return motor
-
     # -- the host line ----------------------------------------------------
-    def _line_settings(self) -> LineSettings:
-        first = self.motors[1]
-        version = first.params.version
-        if version == self._settings_version:       # ID1's K values unchanged since
-            return self._settings_now
-        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
-        found = self._settings_cache.get(key)    # read at every line sent: no new object
-        if found is None:
-            found = self._settings_cache[key] = LineSettings(
-                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400))
-        self._settings_now, self._settings_version = found, version
-        return found
-
     def _source_ended(self, source: object) -> None:
         """A host line sender went away: an upload it left open is dropped."""
         self.uploads.abandon("host", source)
@@ -252,16 +216,6 @@ class Chain:
         end_of_line(ctx)          # an "@" of a branch left without its partner (4.4)
 
     # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
-    @property
-    def paced(self) -> bool:
-        """Wire-time pacing is on: bytes take their time on the host line and the links."""
-        return self.host_line.pacing
-
-    def relay(self, src: int, dst: int, nbytes: int) -> int:
-        """When ``nbytes`` ID ``src`` sends now reach ID ``dst`` (now without pacing)."""
-        now = self.kernel.now
-        return self.links.arrival(src, dst, nbytes, now) if self.paced else now
-
     def _arrivals(self, routed: list[list[tuple[ast.Statement, int]]],
                   nbytes: int) -> dict[int, int]:
         """When the host line's text reaches each motor it addresses (and those between)."""
@@ -299,74 +253,6 @@ class Chain:
         for motor in self.motors.values():
             if motor.id != 1:
                 motor.params.set(65, value)
-
-    # -- bank waits (W#, program lines): re-checked on events, never polled -------
-    def watch(self, callback: Callable[[], None],
-              motors: Iterable[int] | None = None) -> Callable[[], None]:
-        """Call ``callback`` at every :meth:`poke` until the returned remover is called;
-        with ``motors``, only at pokes about one of them (or about nothing in particular):
-        a bank line waiting for motions is not woken by the other motors' milestones."""
-        entry = (callback, None if motors is None else frozenset(motors))
-        self._watchers.append(entry)
-        if entry[1] is None:
-            self._everywhere += 1
-        else:
-            for m in entry[1]:
-                self._watching.setdefault(m, []).append(entry)
-
-        def remove() -> None:
-            if entry in self._watchers:
-                self._watchers.remove(entry)
-                if entry[1] is None:
-                    self._everywhere -= 1
-                else:
-                    for m in entry[1]:
-                        self._watching[m].remove(entry)
-        return remove
-
-    def poke(self, motor: int | None = None) -> None:
-        """Something changed (a line, an input, a motion, a ladder scan): look again.
-        ``motor``: only the motion of that motor changed.  The watchers run in the order
-        they came, each once, those of this poke even if one of them removes another."""
-        if not self._watchers:
-            return
-        if motor is None or self._everywhere:
-            for callback, motors in list(self._watchers):
-                if motors is None or motor is None or motor in motors:
-                    callback()
-            return
-        naming = self._watching.get(motor)
-        if naming:                      # the same watchers, in the same order
-            for callback, _ in list(naming):
-                callback()
-
-    # -- events -------------------------------------------------------------
-    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
-             origin: str = "motor") -> None:
-        """Report a line: on the host line (per origin) and to every subscriber."""
-        if origin in HOST_LINE_ORIGINS:
-            hop_from = min(motor, len(self.motors))
-            if self.paced and hop_from > 1:     # back up the chain to ID1 (ch. 3 K65)
-                size = len(text) + len(self._line_settings().delimiter)
-                at = self.links.arrival(hop_from, 1, size, self.kernel.now)
-                self.kernel.schedule_at(at, lambda: self.host_line.send_line(text),
-                                        priority=PRIO_REPORT, name="chain-reply")
-            else:
-                self.host_line.send_line(text)
-        event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
-        for listener in list(self._listeners):
-            try:
-                listener(event)
-            except Exception:
-                log.exception("event listener failed")
-
-    def subscribe(self, listener: EventListener) -> Callable[[], None]:
-        self._listeners.append(listener)
-
-        def remove() -> None:
-            if listener in self._listeners:
-                self._listeners.remove(listener)
-        return remove
 
     # -- chain-wide commands and banks (cml-users-guide.txt 2.1.2) ------------
     def chain_command(self, motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
@@ -524,9 +410,6 @@ class Chain:
             self.emit(io, "message", text, origin=ctx.origin)
 
     # -- device API: data -------------------------------------------------------
-    def get_param(self, motor: int, k: int) -> int:
-        return self._require(motor).k(k)
-
     def set_param(self, motor: int, k: int, value: int) -> None:
         self._require(motor).params.set(k, value)
 

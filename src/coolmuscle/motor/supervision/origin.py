@@ -243,8 +243,8 @@ class OriginSearch:
         """The phase-0 point within one cycle of ``raw``, away from the stopper."""
         cycle, z0 = self._cycle(), self.motor.z_position()
         n = (raw - z0) / cycle
-        n = math.floor(n) if self.direction > 0 else math.ceil(n)
-        return z0 + n * cycle
+        whole = math.floor(n) if self.direction > 0 else math.ceil(n)
+        return z0 + whole * cycle
 
     def _z_reset(self) -> None:
         """Z window state and its next edges above and below the shaft."""

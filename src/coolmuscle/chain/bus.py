@@ -1,0 +1,170 @@
+"""The chain's event bus, its bank waits and its host line settings (compiled).
+
+Every move passes here: its arrival's status report (:meth:`ChainBus.emit`, on the host
+line and to the subscribers of the device API), the wake-ups of the bank lines that
+wait for it (:meth:`ChainBus.poke`, :meth:`ChainBus.watch`) and the K23/K70/K20
+settings of each line sent.  :class:`~coolmuscle.chain.daisy.Chain` is a
+:class:`ChainBus`; this part is compiled with the hot modules (coolmuscle/_accel.py,
+docs/performance.md "Eleventh round"), the chain itself stays a plain class (front
+ends and the trace recorder keep weak references to it, tests wrap its methods).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING, Callable, Final, Iterable
+
+from mypy_extensions import mypyc_attr
+
+from ..device.api import Event, EventListener
+from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+from ..errors import NoSuchMotorError
+from ..motor.status import Report
+from ..sim.kernel import PRIO_REPORT, Kernel
+
+if TYPE_CHECKING:
+    from ..motor.motor import Motor
+    from .links import ChainLinks
+
+log = logging.getLogger("coolmuscle.chain.daisy")
+
+_NO_ECHO: Final = int(Report.NO_ECHO)
+
+#: Origins whose replies are printed on the host line (docs/device-api.md).
+HOST_LINE_ORIGINS: Final = frozenset({"host", "bank", "ladder", "motor"})
+
+
+@mypyc_attr(allow_interpreted_subclasses=True)
+class ChainBus:
+    """Events, bank waits and line settings of a chain of motors (the chain sets the
+    attributes when it builds itself)."""
+
+    kernel: Kernel
+    motors: dict[int, Motor]
+    host_line: HostLine
+    links: ChainLinks
+    _listeners: list[EventListener]
+    _watchers: list[tuple[Callable[[], None], frozenset[int] | None]]
+    #: The watchers naming each motor, in the order they came (:meth:`poke` about one
+    #: motor looks only there while no watcher listens to every motor).
+    _watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]]
+    _everywhere: int            # watchers without ``motors``
+    _settings_cache: dict[tuple[int, int, int], LineSettings]
+    _settings_now: LineSettings
+    _settings_version: int      # ID1's params.version of _settings_now
+
+    # -- device API: identity ---------------------------------------------
+    @property
+    def motor_ids(self) -> tuple[int, ...]:
+        return tuple(self.motors)
+
+    def motor(self, motor_id: int) -> Motor | None:
+        """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
+        return self.motors.get(motor_id)
+
+    def _require(self, motor_id: int) -> Motor:
+        motor = self.motors.get(motor_id)
+        if motor is None:
+            raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
+                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
+        return motor
+
+    # -- device API: data (read by every line sent, for the Modbus mode: K81) ---
+    def get_param(self, motor: int, k: int) -> int:
+        return self._require(motor).k(k)
+
+    # -- the host line ----------------------------------------------------
+    def _line_settings(self) -> LineSettings:
+        first = self.motors[1]
+        version = first.params.version
+        if version == self._settings_version:       # ID1's K values unchanged since
+            return self._settings_now
+        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
+        found = self._settings_cache.get(key)    # read at every line sent: no new object
+        if found is None:
+            found = self._settings_cache[key] = LineSettings(
+                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
+                baud=BAUD_RATES.get(key[2], 38400))
+        self._settings_now, self._settings_version = found, version
+        return found
+
+    # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
+    @property
+    def paced(self) -> bool:
+        """Wire-time pacing is on: bytes take their time on the host line and the links."""
+        return self.host_line.pacing
+
+    def relay(self, src: int, dst: int, nbytes: int) -> int:
+        """When ``nbytes`` ID ``src`` sends now reach ID ``dst`` (now without pacing)."""
+        now = self.kernel.now
+        return self.links.arrival(src, dst, nbytes, now) if self.paced else now
+
+    # -- bank waits (W#, program lines): re-checked on events, never polled -------
+    def watch(self, callback: Callable[[], None],
+              motors: Iterable[int] | None = None) -> Callable[[], None]:
+        """Call ``callback`` at every :meth:`poke` until the returned remover is called;
+        with ``motors``, only at pokes about one of them (or about nothing in particular):
+        a bank line waiting for motions is not woken by the other motors' milestones."""
+        entry = (callback, None if motors is None else frozenset(motors))
+        self._watchers.append(entry)
+        if entry[1] is None:
+            self._everywhere += 1
+        else:
+            for m in entry[1]:
+                self._watching.setdefault(m, []).append(entry)
+
+        def remove() -> None:
+            if entry in self._watchers:
+                self._watchers.remove(entry)
+                if entry[1] is None:
+                    self._everywhere -= 1
+                else:
+                    for m in entry[1]:
+                        self._watching[m].remove(entry)
+        return remove
+
+    def poke(self, motor: int | None = None) -> None:
+        """Something changed (a line, an input, a motion, a ladder scan): look again.
+        ``motor``: only the motion of that motor changed.  The watchers run in the order
+        they came, each once, those of this poke even if one of them removes another."""
+        if not self._watchers:
+            return
+        if motor is None or self._everywhere:
+            for callback, motors in list(self._watchers):
+                if motors is None or motor is None or motor in motors:
+                    callback()
+            return
+        naming = self._watching.get(motor)
+        if naming:                      # the same watchers, in the same order
+            for callback, _ in list(naming):
+                callback()
+
+    # -- events -------------------------------------------------------------
+    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+             origin: str = "motor") -> None:
+        """Report a line: on the host line (per origin) and to every subscriber."""
+        if origin in HOST_LINE_ORIGINS:
+            hop_from = min(motor, len(self.motors))
+            if self.paced and hop_from > 1:     # back up the chain to ID1 (ch. 3 K65)
+                size = len(text) + len(self._line_settings().delimiter)
+                at = self.links.arrival(hop_from, 1, size, self.kernel.now)
+                self.kernel.schedule_at(at, lambda: self.host_line.send_line(text),
+                                        priority=PRIO_REPORT, name="chain-reply")
+            else:
+                self.host_line.send_line(text)
+        if not self._listeners:              # nobody subscribed: no event to hand out
+            return
+        event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
+        for listener in list(self._listeners):
+            try:
+                listener(event)
+            except Exception:
+                log.exception("event listener failed")
+
+    def subscribe(self, listener: EventListener) -> Callable[[], None]:
+        self._listeners.append(listener)
+
+        def remove() -> None:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+        return remove
