@@ -244,17 +244,14 @@ def _owned(tcp_port: int) -> bool:
 def _grid_lateness(times: list[float], rpi: float) -> list[float]:
     """How late each packet came after its slot on the producer's RPI grid (CIP Vol 1
     3-4.4: productions are due every RPI, in phase; io.py ``due`` keeps that phase after a
-    late one and skips, rather than bursts, a slot more than an RPI late).  The grid is
-    anchored at the earliest packet of the run relative to it, so one late production
-    counts once, not twice as it would in the intervals (a long one and a short one)."""
-    slots = [0]
-    for a, b in zip(times, times[1:]):
-        # a production up to 3/4 RPI late stays in its slot; one past the next slot is
-        # a skipped slot (2 RPIs or more, less a little jitter)
-        slots.append(slots[-1] + max(1, math.floor((b - a) / rpi + 0.25)))
-    offsets = [t - times[0] - slot * rpi for t, slot in zip(times, slots)]
-    anchor = min(offsets)
-    return [off - anchor for off in offsets]
+    late one and skips, rather than bursts, a slot more than an RPI late).  The grid's
+    phase is the circular mean of the packets' phases (most productions are on time);
+    a packet up to 3/4 RPI after its slot counts as late, so one late production counts
+    once, not twice as it would in the intervals (a long one and a short one).  A
+    producer that loses its phase spreads the phases and fails."""
+    turns = [2 * math.pi * ((t - times[0]) % rpi) / rpi for t in times]
+    phase = math.atan2(sum(map(math.sin, turns)), sum(map(math.cos, turns))) * rpi / (2 * math.pi)
+    return [(t - times[0] - phase + rpi / 4) % rpi - rpi / 4 for t in times]
 
 
 #: The suite shares two cores with other work: as root the adapter's producer thread runs
