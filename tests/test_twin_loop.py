@@ -17,8 +17,8 @@ a user runs it.  Then, with the commands a user types:
 One capture (about 20 s of wall time) serves every assertion: the module is marked
 ``realtime``, so its tests share one xdist worker and one capture (tests/conftest.py).
 
-The stand-in must answer as a real motor does, within a millisecond of each command and
-never stalled by the test machine (a real motor has its own CPU): the sim and the relay
+The stand-in must answer as a real motor does (within about a millisecond of each
+command: a real motor has its own CPU), not stalled by the test machine: the sim and the relay
 run at a real-time priority where ``chrt`` is allowed (CI runs as root), and a capture in
 which the stand-in answered a command later than :data:`STAND_IN_LAG_S` is not a real
 motor's session: it is taken again (at most :data:`CAPTURE_TRIES` times), and the test
@@ -37,6 +37,7 @@ import sys
 import time
 import tomllib
 from pathlib import Path
+
 import pytest
 
 from coolmuscle.tools.twin.session import read_session
