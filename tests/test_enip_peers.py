@@ -365,9 +365,11 @@ def test_pycomm3_default_route_path_set_is_accepted(service):
 
 
 def test_ch4_rpi_2ms_accepted_and_produced_on_time(monkeypatch):
-    """RPI 2 ms, the smallest the module takes: the T->O packets come every 2 ms
-    (median within 0.1 ms, 90 % within ± 0.5 ms over 1.5 s).  ethernetip itself
-    produces O->T every 8 ms at the fastest, so the multiplier is 4 (x64 = 128 ms)."""
+    """RPI 2 ms, the smallest the module takes: the T->O packets come every 2 ms, at
+    least 90 % of the slots filled, each packet judged against its slot on the RPI grid
+    (median within 0.1 ms, 90 % within ± 0.5 ms over 1.5 s; see ``_grid_lateness``).
+    ethernetip itself produces O->T every 8 ms at the fastest, so the multiplier is 4
+    (x64 = 128 ms)."""
     with enip_process(*RT) as (_proc, tcp_port, io_port):
         scanner = _Scanner(monkeypatch, tcp_port, io_port)
         try:
@@ -376,10 +378,13 @@ def test_ch4_rpi_2ms_accepted_and_produced_on_time(monkeypatch):
             scanner.set_output(struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0))
             scanner.conn.produce()
             time.sleep(1.5)
-            intervals = sorted(b - a for a, b in zip(scanner.times, scanner.times[1:]))
-            assert len(intervals) > 600            # ... but 2 ms is what it gets
-            assert abs(intervals[len(intervals) // 2] - 0.002) < 0.0001
-            assert sum(abs(iv - 0.002) <= 0.0005 for iv in intervals) >= 0.9 * len(intervals)
+            times = scanner.times[:]
+            span = times[-1] - times[0]
+            assert len(times) > 600 and len(times) >= 0.9 * span / 0.002   # ... but 2 ms
+            late = sorted(_grid_lateness(times, 0.002))
+            assert abs(late[len(late) // 2]) < 0.0001, late[len(late) // 2]
+            good = sum(abs(off) <= 0.0005 for off in late)
+            assert good >= 0.9 * len(late), (good, len(late), late[-5:])
             scanner.conn.stopProduce()
             assert scanner.conn.sendFwdCloseReq(101, 102, 128) == 0
         finally:
