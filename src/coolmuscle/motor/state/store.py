@@ -31,12 +31,14 @@ from __future__ import annotations
 
 import json
 import os
-import sqlite3
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Iterator, Mapping
 
 from ...errors import StoreError
+
+if TYPE_CHECKING:
+    import sqlite3        # imported where a store is opened: a run without one never needs it
 
 try:
     import fcntl
@@ -174,6 +176,7 @@ class Store:
 
     def integrity_check(self) -> str:
         """SQLite ``PRAGMA integrity_check``: ``"ok"`` or the problems found."""
+        import sqlite3
         try:
             rows = self._connection().execute("PRAGMA integrity_check").fetchall()
         except sqlite3.Error as exc:
@@ -219,6 +222,7 @@ class Store:
 
     @contextmanager
     def _transaction(self, begin: str) -> Iterator[sqlite3.Connection]:
+        import sqlite3
         conn = self._connection()
         try:
             conn.execute(begin)
@@ -273,6 +277,7 @@ def _writer_lock(path: str) -> int | None:
 
 
 def _open(path: str) -> sqlite3.Connection:
+    import sqlite3
     if path != ":memory:":
         try:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -307,6 +312,7 @@ def _open(path: str) -> sqlite3.Connection:
 def _create(path: str) -> None:
     """A new store appears whole: built under a temporary name, then renamed, so a
     crash while creating it never leaves a 0-byte or half-made file at ``path``."""
+    import sqlite3
     tmp = f"{path}.{os.getpid()}.new"
     try:
         for leftover in (tmp, tmp + "-wal", tmp + "-shm"):
