@@ -27,6 +27,10 @@ if _run_as_the_command():
 
     _install()
 
+from . import _dataclass_code  # noqa: E402
+
+_dataclass_code.install()  # the dataclasses' generated methods kept compiled between runs
+
 from . import _accel  # noqa: E402
 
 _accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
