@@ -11,7 +11,7 @@ signals are ignored until the process has exited (docs/reliability.md "signals")
 ``coolmuscle --version`` (or ``version``) answers at once (:mod:`.version`), and
 ``coolmuscle run SCRIPT`` with plain options (:func:`.runcmd.parse_run_args`) runs at
 once, without loading the command-line library (typer, rich) or anything the script
-does not use (docs/performance.md "Starting a run"); every other command line goes to
+does not use (docs/performance.md "Speed where users feel it"); every other command line goes to
 the typer application of :mod:`.cli`.  Both paths map errors the same way
 (:func:`.exits.guarded`).
 
