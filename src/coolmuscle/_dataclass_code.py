@@ -14,10 +14,8 @@ what ``exec`` of a string does) is the same code, so every class is exactly what
 :mod:`dataclasses` makes of it: same methods, signatures, annotations, ``repr``,
 equality, pickling.
 
-* Only the classes of ``coolmuscle.*`` modules go through it (told by the module
-  globals ``dataclasses`` passes); everything else's dataclasses are compiled as always,
-  and so are those of the mypyc-compiled modules (built before their module is in
-  ``sys.modules``, they get empty globals: 34 methods of a run's start).
+* Only the classes of ``coolmuscle.*`` modules go through it (:func:`_ours`);
+  everything else's dataclasses are compiled as always.
 * The file is read once, at the first dataclass of the process; new entries are written at
   exit (one ``os.replace``: concurrent processes never see half a file), not at all where
   byte code is not written (``PYTHONDONTWRITEBYTECODE``, ``-B``) or the folder is
@@ -31,6 +29,7 @@ from __future__ import annotations
 
 import __future__
 import builtins
+import dataclasses
 import importlib.util
 import marshal
 import os
@@ -48,6 +47,12 @@ HEADER = (importlib.util.MAGIC_NUMBER + bytes([sys.flags.optimize & 0xFF, marsha
 #: Every ``__future__`` feature's compiler flag (what ``exec`` inherits from its caller).
 _FUTURE_FLAGS: int = sum(getattr(__future__, name).compiler_flag
                          for name in __future__.all_feature_names)
+
+#: ``dataclasses._process_class`` (where the class being made is the local ``cls``) and
+#: how far up from ``exec`` it is looked for (``_create_fn`` <- ``_init_fn`` <- it).
+_PROCESS_CLASS: CodeType | None = getattr(getattr(dataclasses, "_process_class", None),
+                                          "__code__", None)
+_MAX_DEPTH = 6
 
 _state: dict[str, Any] = {"codes": None, "added": 0, "installed": False}
 
@@ -85,9 +90,26 @@ def _codes() -> dict[tuple[int, str], CodeType]:
     return codes  # type: ignore[no-any-return]
 
 
-def _ours(namespace: object) -> bool:
-    return isinstance(namespace, dict) and str(namespace.get("__name__", "")).startswith(
-        "coolmuscle.")
+def _ours(namespace: object, caller: FrameType) -> bool:
+    """A class of a coolmuscle module: told by the module globals :mod:`dataclasses`
+    passes, or, when those are not a module's (a mypyc-compiled module builds its
+    classes before it is in ``sys.modules``: an empty dict, then ``__builtins__``
+    only), by the class ``dataclasses._process_class`` (a few frames up) is making.
+    Not found: not ours."""
+    if not isinstance(namespace, dict):
+        return False
+    name = namespace.get("__name__")
+    if name is not None:
+        return str(name).startswith("coolmuscle.")
+    frame: FrameType | None = caller
+    for _ in range(_MAX_DEPTH):
+        if frame is None:
+            return False
+        if frame.f_code is _PROCESS_CLASS:
+            cls = frame.f_locals.get("cls")
+            return isinstance(cls, type) and cls.__module__.startswith("coolmuscle.")
+        frame = frame.f_back
+    return False
 
 
 def _caller_flags(frame: FrameType) -> int:
@@ -108,7 +130,7 @@ def cached_exec(source: Any, globals: Any = None, locals: Any = None, /,
         builtins.exec(source, globals, locals, **kwargs)
         return
     flags = _caller_flags(caller)
-    if not _ours(globals):
+    if not _ours(globals, caller):
         builtins.exec(compile(source, "<string>", "exec", flags, dont_inherit=True),
                       globals, locals)
         return
@@ -148,7 +170,6 @@ def install() -> None:
     if _state["installed"] or os.environ.get("COOLMUSCLE_DATACLASS_CACHE", "") == "0":
         return
     import atexit
-    import dataclasses
     dataclasses.exec = cached_exec       # type: ignore[attr-defined]
     atexit.register(save)
     _state["installed"] = True
