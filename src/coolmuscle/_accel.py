@@ -69,6 +69,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.frontends.ethercat.bridge.homing",
     "coolmuscle.frontends.ethercat.bridge.axis",
     "coolmuscle.frontends.ethercat.bridge.drive",
+    "coolmuscle.tools.script.record",
 )
 
 PACKAGE_DIR = Path(__file__).resolve().parent

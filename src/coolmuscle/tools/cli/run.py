@@ -16,7 +16,8 @@ import sys
 from pathlib import Path
 from typing import Any, Callable
 
-from ..script.runner import ScriptError, TranscriptEntry, load_script, run_script
+from ..script.record import LineWriter
+from ..script.runner import ScriptError, load_script, run_script
 from .usage import UsageError
 
 EXIT_FAILED = 1
@@ -232,10 +233,7 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
             except NoTraceRecorderError as exc:
                 raise ScriptError(f"cannot plot to {plot}: {exc}") from None
 
-        write = sys.stdout.write
-
-        def show(entry: TranscriptEntry) -> None:
-            write(entry.format() + "\n")
+        show = LineWriter(sys.stdout.write)       # compiled: a call per line received
 
         def warn(text: str) -> None:
             stderr_line(f"coolmuscle: warning: {text}")

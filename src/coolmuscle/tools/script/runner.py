@@ -12,6 +12,9 @@ This module owns:
   byte, and reporting the first mismatch with context;
 * recording a run back as a golden transcript (:meth:`RunResult.to_script`).
 
+The transcript's entries, their text and the recorder of the bytes received are
+:mod:`.record` (compiled: every line a motor sends goes through it).
+
 The runner talks to the chain through ``chain.kernel`` and ``chain.host_line``, and
 through the device API's ``set_input`` / ``set_analog`` for the input directives.
 """
@@ -29,12 +32,13 @@ from typing import Any, Callable, Literal
 
 from ...errors import CoolMuscleError
 from ...sim.kernel import seconds, to_seconds
+from .record import Direction as Direction, Recorder
+from .record import TranscriptEntry as TranscriptEntry, escape as escape
 
 #: Default timeout of ``@until`` (virtual seconds).
 DEFAULT_UNTIL_TIMEOUT = 10.0
 
 StepKind = Literal["send", "raw", "wait", "until", "expect", "comment", "input", "analog"]
-Direction = Literal[">", "<"]
 
 _ESCAPES = {"r": 13, "n": 10, "t": 9, "0": 0, "e": 27, "\\": 92}
 _DIRECTIVE = re.compile(r"@([A-Za-z]\w*)(?:[ \t](.*))?$", re.S)
@@ -78,33 +82,10 @@ def unescape(text: str) -> bytes:
     return out.encode("latin-1")
 
 
-#: Bytes that :func:`escape` shows as themselves: printable ASCII but the backslash.
-_PLAIN = re.compile(rb"[\x20-\x5b\x5d-\x7e]*")
-#: Every byte (as a latin-1 character) -> how :func:`escape` writes it.
-_ESCAPED = {code: ("\\\\" if code == 92 else chr(code) if 32 <= code < 127
-                   else {13: "\\r", 10: "\\n", 9: "\\t"}.get(code, f"\\x{code:02x}"))
-            for code in range(256)}
-
-
-def escape(data: bytes) -> str:
-    """Inverse of :func:`unescape`: printable ASCII as is, everything else escaped."""
-    if _PLAIN.fullmatch(data):          # a report or a reply: nothing to escape
-        return data.decode("ascii")
-    return data.decode("latin-1").translate(_ESCAPED)
-
-
 def split_lines(data: bytes) -> list[bytes]:
     """Split at CR, LF or CRLF, keeping the terminators; the last piece may be partial."""
     pieces = re.findall(rb"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+$", data)
     return [p for p in pieces if p]
-
-
-def _strip_end(data: bytes) -> bytes:
-    if data.endswith(b"\r\n"):
-        return data[:-2]
-    if data.endswith((b"\r", b"\n")):
-        return data[:-1]
-    return data
 
 
 # -- parsing ------------------------------------------------------------
@@ -256,20 +237,6 @@ def load_script(source: str | os.PathLike[str]) -> Script:
 
 # -- results ------------------------------------------------------------
 @dataclass(frozen=True)
-class TranscriptEntry:
-    """One line sent (``>``) or received (``<``) at virtual time ``time`` (ns)."""
-
-    time: int
-    direction: Direction
-    data: bytes
-    line_no: int | None = None
-
-    def format(self) -> str:
-        """``   1.100000 < Ux.1=8``: seconds, direction, bytes without their line end."""
-        return f"{to_seconds(self.time):11.6f} {self.direction} {escape(_strip_end(self.data))}"
-
-
-@dataclass(frozen=True)
 class Failure:
     """Why a run failed: ``mismatch``, ``unexpected`` (extra output), ``timeout``, ``error``."""
 
@@ -335,69 +302,6 @@ def _fmt_seconds(value: float) -> str:
 
 
 # -- running ------------------------------------------------------------
-class _Recorder:
-    """Listens to the host line: keeps the byte stream, complete lines and entries."""
-
-    def __init__(self, kernel: Any, on_entry: Callable[[TranscriptEntry], None] | None) -> None:
-        self.kernel = kernel
-        self.on_entry = on_entry
-        self.stream = bytearray()
-        self.entries: list[TranscriptEntry] = []
-        self.lines: list[str] = []   # complete received lines, without terminator
-        self._line = bytearray()
-        self._held: TranscriptEntry | None = None  # a CR-ended line that may get its LF
-        self.display_error: Exception | None = None
-
-    def emit(self, entry: TranscriptEntry) -> None:
-        self.entries.append(entry)
-        if self.on_entry is not None:
-            try:
-                self.on_entry(entry)
-            except Exception as exc:  # the display's failure, not the motor's: re-raised later
-                self.display_error = exc
-                self.on_entry = None
-
-    def flush_held(self) -> None:
-        if self._held is not None:
-            held, self._held = self._held, None
-            self.emit(held)
-
-    def on_bytes(self, data: bytes) -> None:
-        now = self.kernel.now
-        self.stream += data
-        if (self._held is None and not self._line and data[-2:] == b"\r\n"
-                and data.count(b"\r") == 1 and data.count(b"\n") == 1):
-            # one whole CR LF line (a report, a reply): what the loop below makes of it
-            self.lines.append(data[:-2].decode("latin-1"))
-            self.emit(TranscriptEntry(now, "<", bytes(data)))
-            return
-        for byte in data:
-            if byte == 0x0A and self._held is not None and not self._line:
-                held, self._held = self._held, None
-                self.emit(TranscriptEntry(held.time, "<", held.data + b"\n"))
-                continue
-            self.flush_held()
-            self._line.append(byte)
-            if byte in (0x0D, 0x0A):
-                entry = TranscriptEntry(now, "<", bytes(self._line))
-                self.lines.append(self._line[:-1].decode("latin-1"))
-                self._line.clear()
-                if byte == 0x0D:
-                    self._held = entry
-                else:
-                    self.emit(entry)
-
-    def sent(self, entry: TranscriptEntry) -> None:
-        self.flush_held()
-        self.emit(entry)
-
-    def finish(self) -> None:
-        self.flush_held()
-        if self._line:  # a partial line at the end of the run
-            self.emit(TranscriptEntry(self.kernel.now, "<", bytes(self._line)))
-            self._line.clear()
-
-
 class _Checker:
     """Matches expectations against the received stream, in order, byte for byte."""
 
@@ -464,7 +368,7 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
     script = source if isinstance(source, Script) else load_script(source)
     kernel = chain.kernel
     host_line = chain.host_line
-    recorder = _Recorder(kernel, on_entry)
+    recorder = Recorder(kernel, on_entry)
     checker = _Checker(recorder.stream)
     tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
               if trace is not None else None)
