@@ -52,6 +52,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.supervision.limits",
     "coolmuscle.device.hostline",
     "coolmuscle.motor.signals.io",
+    "coolmuscle.motor.state.memory",
     "coolmuscle.motor.signals.analog",
     "coolmuscle.motor.signals.analog_output",
     "coolmuscle.motor.status",
