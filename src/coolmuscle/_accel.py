@@ -59,6 +59,7 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.supervision.push",
     "coolmuscle.motor.supervision.faults",
     "coolmuscle.motor.programs.bankcheck",
+    "coolmuscle.motor.supervision.sensors",
     "coolmuscle.motor.supervision.origin",
     "coolmuscle.motor.supervision.supervisor",
     "coolmuscle.motor.motor",
