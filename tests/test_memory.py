@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import pickle
 
 import pytest
 
@@ -201,6 +203,15 @@ def test_memory_numbers_and_kinds_of_other_types_are_refused(mem: Memory) -> Non
     for bad_kind in (None, 1):
         with pytest.raises(ValueError):
             mem.get(bad_kind, 1)  # type: ignore[call-overload]
+
+
+def test_v_values_pickle_and_stay_frozen() -> None:
+    """Compiled too (coolmuscle/_accel.py): a V value pickles by its field, as the
+    frozen dataclass of the sources does."""
+    for value in (VNumber(-5), VString("ab"), VState("Px")):
+        assert pickle.loads(pickle.dumps(value)) == value
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            value.__setattr__(dataclasses.fields(value)[0].name, 1)
 
 
 # -- allocation (2.1.2) ------------------------------------------------------------

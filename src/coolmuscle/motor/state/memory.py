@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal, Mapping, Union, overload
 
+from ...cml.ast import Frozen
 from ...errors import OutOfRangeError
 from .firmware import REGISTER_KINDS, Firmware
 from .units import CONTINUOUS, resolution, valid_k37
@@ -50,21 +51,21 @@ class NoSuchRegisterError(OutOfRangeError, IndexError):
 # -- V values ------------------------------------------------------------------
 
 @dataclass(frozen=True, slots=True)
-class VNumber:
+class VNumber(Frozen):
     """A V register holding a number (6.2 V "1) use as a number")."""
 
     value: int
 
 
 @dataclass(frozen=True, slots=True)
-class VString:
+class VString(Frozen):
     """A V register holding up to 4 characters (6.2 V "2) use as character")."""
 
     text: str
 
 
 @dataclass(frozen=True, slots=True)
-class VState:
+class VState(Frozen):
     """A V register bound to a live motor state (6.2 V "3) internal state").
 
     ``name`` is canonical (``"Px"``, ``"ADIN"``, ``"CT"`` ...); the motor
