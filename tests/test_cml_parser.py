@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import importlib.util
+import pickle
 import sys
 from pathlib import Path
 from typing import Any
@@ -386,6 +389,19 @@ def test_manual_corpus_example(example: Example) -> None:
     result = parse(example.text)
     for line in result:
         assert [x.statements for x in parse(format_line(line))] == [line.statements]
+
+
+@settings(max_examples=200, deadline=None)
+@given(lines())
+def test_trees_pickle_copy_and_stay_frozen(line: Line) -> None:
+    """The tree's nodes are frozen dataclasses that pickle, copy and compare by value,
+    compiled too (coolmuscle/_accel.py: ast.Frozen)."""
+    assert pickle.loads(pickle.dumps(line)) == line
+    assert copy.deepcopy(line) == line and copy.copy(line) == line
+    assert dataclasses.replace(line) == line and hash(dataclasses.replace(line)) == hash(line)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        line.joined = not line.joined  # type: ignore[misc]
+    assert not hasattr(line, "__dict__")
 
 
 def test_2_2_2_typo_equals_query_is_rejected() -> None:

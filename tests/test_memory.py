@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import pickle
 
 import pytest
 
@@ -20,7 +22,7 @@ def mem() -> Memory:
 def refused(mem: Memory, kind: str, index: int, value: object) -> None:
     before = mem.get(kind, index)
     with pytest.raises(OutOfRangeError):
-        mem.set(kind, index, value)  # type: ignore[arg-type]
+        mem.set(kind, index, value)
     assert mem.get(kind, index) == before
 
 
@@ -73,11 +75,11 @@ def test_p_range_follows_k37(mem: Memory) -> None:
     mem.set("P", 0, 1_000_000_000)  # 2.1.1 "endless position"
     assert mem.get("P", 0) == 1_000_000_000
     refused(mem, "P", 1, -1_000_000_000)
-    mem.k37 = 8                    # 25000 ppr: 999,999,999
+    mem.set_k37(8)                 # 25000 ppr: 999,999,999
     mem.set("P", 1, 999_999_999)
     refused(mem, "P", 1, 1_000_000_001)
     with pytest.raises(OutOfRangeError):
-        mem.k37 = 9
+        mem.set_k37(9)
 
 
 def test_n_r_v_h_ranges(mem: Memory) -> None:
@@ -177,6 +179,41 @@ def test_v_rejects_other_types(mem: Memory) -> None:
     refused(mem, "P", 1, 2.0)
 
 
+def test_memory_numbers_and_kinds_of_other_types_are_refused(mem: Memory) -> None:
+    """What the memory checks at run time it checks compiled too (coolmuscle/_accel.py):
+    a bool or a float is not a memory number, a value or an allocation count."""
+    mem.set("P", 1, 7)
+    for bad_index in (True, 1.0, "1", None):
+        with pytest.raises(NoSuchRegisterError):
+            mem.get("P", bad_index)  # type: ignore[arg-type]
+        with pytest.raises(NoSuchRegisterError):
+            mem.set("P", bad_index, 5)
+        with pytest.raises(NoSuchRegisterError):
+            mem.number("P", bad_index)
+    assert mem.get("P", 1) == 7
+    for bad in (True, 2.0, None):
+        with pytest.raises(OutOfRangeError):
+            mem.set_v_number(1, bad)
+        with pytest.raises(OutOfRangeError):
+            mem.normalise("S", bad)
+    assert mem.get("V", 1) == VNumber(0)
+    for bad_count in (True, 300.0):
+        with pytest.raises(OutOfRangeError):
+            mem.allocate("P", bad_count)
+    for bad_kind in (None, 1):
+        with pytest.raises(ValueError):
+            mem.get(bad_kind, 1)  # type: ignore[call-overload]
+
+
+def test_v_values_pickle_and_stay_frozen() -> None:
+    """Compiled too (coolmuscle/_accel.py): a V value pickles by its field, as the
+    frozen dataclass of the sources does."""
+    for value in (VNumber(-5), VString("ab"), VState("Px")):
+        assert pickle.loads(pickle.dumps(value)) == value
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            value.__setattr__(dataclasses.fields(value)[0].name, 1)
+
+
 # -- allocation (2.1.2) ------------------------------------------------------------
 
 def test_2_1_2_allocation_example(mem: Memory) -> None:
@@ -263,7 +300,7 @@ def test_from_dict_checks_values(mem: Memory) -> None:
 
 
 def test_from_dict_uses_k37_for_p(mem: Memory) -> None:
-    mem.k37 = 8
+    mem.set_k37(8)
     mem.set("P", 1, 500_000_000)
     with pytest.raises(ValueError):
         Memory.from_dict(CM2, mem.to_dict())           # K37=3 default

@@ -36,6 +36,7 @@ from typing import Sequence
 
 #: The modules compiled, in the order hashed.  Leaves of the import graph first.
 MODULES: tuple[str, ...] = (
+    "coolmuscle.cml.ast",
     "coolmuscle.motor.state.param_table",
     "coolmuscle.motor.motion.expoly",
     "coolmuscle.motor.motion.profile",
@@ -51,12 +52,14 @@ MODULES: tuple[str, ...] = (
     "coolmuscle.motor.supervision.limits",
     "coolmuscle.device.hostline",
     "coolmuscle.motor.signals.io",
+    "coolmuscle.motor.state.memory",
     "coolmuscle.motor.signals.analog",
     "coolmuscle.motor.signals.analog_output",
     "coolmuscle.motor.status",
     "coolmuscle.motor.supervision.push",
     "coolmuscle.motor.supervision.faults",
     "coolmuscle.motor.programs.bankcheck",
+    "coolmuscle.motor.supervision.sensors",
     "coolmuscle.motor.supervision.origin",
     "coolmuscle.motor.supervision.supervisor",
     "coolmuscle.motor.motor",

@@ -2,7 +2,7 @@
 
 Every move passes here: its arrival's status report (:meth:`ChainBus.emit`, on the host
 line and to the subscribers of the device API), the wake-ups of the bank lines that
-wait for it (:meth:`ChainBus.poke`, :meth:`ChainBus.watch`) and the K23/K70/K20
+wait for it (:meth:`ChainBus.poke`, :meth:`ChainBus.watch`) and the K23/K70/K20/K81
 settings of each line sent.  :class:`~coolmuscle.chain.daisy.Chain` is a
 :class:`ChainBus`; this part is compiled with the hot modules (coolmuscle/_accel.py,
 docs/performance.md "Eleventh round"), the chain itself stays a plain class (front
@@ -49,7 +49,7 @@ class ChainBus:
     #: motor looks only there while no watcher listens to every motor).
     _watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]]
     _everywhere: int            # watchers without ``motors``
-    _settings_cache: dict[tuple[int, int, int], LineSettings]
+    _settings_cache: dict[tuple[int, int, int, bool], LineSettings]
     _settings_now: LineSettings
     _settings_version: int      # ID1's params.version of _settings_now
 
@@ -69,7 +69,7 @@ class ChainBus:
                                    f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
         return motor
 
-    # -- device API: data (read by every line sent, for the Modbus mode: K81) ---
+    # -- device API: data -------------------------------------------------------
     def get_param(self, motor: int, k: int) -> int:
         return self._require(motor).k(k)
 
@@ -79,12 +79,12 @@ class ChainBus:
         version = first.params.version
         if version == self._settings_version:       # ID1's K values unchanged since
             return self._settings_now
-        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20))
+        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0)
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
             found = self._settings_cache[key] = LineSettings(
                 echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400))
+                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3])
         self._settings_now, self._settings_version = found, version
         return found
 

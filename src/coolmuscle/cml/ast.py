@@ -13,12 +13,39 @@ Conventions
   executor fills in the default (the bank's motor, or the addressed motor).
 * Letters are stored upper-case; CML is case-insensitive (1.1).
 * Numbers are Python ints (CML is integer-only, 6.7).
+
+Compiled with the hot modules (coolmuscle/_accel.py: the program executor reads the
+nodes at every line).  Two things keep the classes the same compiled: every node is a
+:class:`Frozen`, and no field's annotation is quoted (``left: Expr``, not ``"Expr"``:
+``dataclasses`` would look a quoted name up in ``sys.modules``, where a compiled module
+is not yet while its classes are made).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, Union
+from dataclasses import Field, dataclass, fields
+from typing import Any, ClassVar, Literal, Union
+
+
+class Frozen:
+    """Base of the nodes (and of the V values, motor/state/memory.py): frozen, slotted
+    dataclasses, pickled by their field values.
+
+    ``slots=True`` gives a frozen dataclass these two methods, and the sources use its
+    own.  Compiled, mypyc keeps its class, not the one ``slots=True`` makes, and its
+    default pickling would set the fields through the frozen ``__setattr__``
+    (``FrozenInstanceError``); these make the same pickles as the sources.
+    """
+
+    __slots__ = ()
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
+
+    def __getstate__(self) -> list[object]:
+        return [getattr(self, f.name) for f in fields(self)]
+
+    def __setstate__(self, state: list[object]) -> None:
+        for f, value in zip(fields(self), state):
+            object.__setattr__(self, f.name, value)
 
 # --------------------------------------------------------------------------
 # Operands and expressions (6.7 arithmetic, 6.8 logic, 6.9 comparison)
@@ -29,21 +56,21 @@ REGISTER_KINDS: tuple[str, ...] = ("P", "S", "A", "M", "T", "V", "N", "R", "K", 
 
 
 @dataclass(frozen=True, slots=True)
-class Num:
+class Num(Frozen):
     """An integer literal, e.g. ``10000`` or ``-5000``."""
 
     value: int
 
 
 @dataclass(frozen=True, slots=True)
-class Str:
+class Str(Frozen):
     """A double-quoted string: up to 4 characters or a state name (2.2.1 "V")."""
 
     text: str
 
 
 @dataclass(frozen=True, slots=True)
-class Reg:
+class Reg(Frozen):
     """A register reference such as ``P2.1``, ``S.1``, ``V3``, ``K23.1``."""
 
     kind: str
@@ -57,7 +84,7 @@ class Reg:
 
 
 @dataclass(frozen=True, slots=True)
-class Input:
+class Input(Frozen):
     """An input reference ``I#.n``: 1 when the input signal is on, else 0."""
 
     index: int
@@ -65,45 +92,45 @@ class Input:
 
 
 @dataclass(frozen=True, slots=True)
-class BinOp:
+class BinOp(Frozen):
     """Arithmetic ``+ - * /`` (integer, division truncates, 6.7)."""
 
     op: Literal["+", "-", "*", "/"]
-    left: "Expr"
-    right: "Expr"
+    left: Expr
+    right: Expr
 
 
 @dataclass(frozen=True, slots=True)
-class Func:
+class Func(Frozen):
     """Math function ``U1``..``U6`` (6.7; cm-banks-rt3.txt 1.5)."""
 
     name: Literal["U1", "U2", "U3", "U4", "U5", "U6"]
-    arg: "Expr"
+    arg: Expr
 
 
 @dataclass(frozen=True, slots=True)
-class Compare:
+class Compare(Frozen):
     """Comparison ``== != > >= < <=`` (6.9)."""
 
     op: Literal["==", "!=", ">", ">=", "<", "<="]
-    left: "Expr"
-    right: "Expr"
+    left: Expr
+    right: Expr
 
 
 @dataclass(frozen=True, slots=True)
-class Logic:
+class Logic(Frozen):
     """Logical ``&&`` / ``||`` (6.8)."""
 
     op: Literal["&&", "||"]
-    left: "Expr"
-    right: "Expr"
+    left: Expr
+    right: Expr
 
 
 @dataclass(frozen=True, slots=True)
-class Not:
+class Not(Frozen):
     """Negation ``!!(operand)`` (6.8)."""
 
-    operand: "Expr"
+    operand: Expr
 
 
 Expr = Union[Num, Str, Reg, Input, BinOp, Func, Compare, Logic, Not]
@@ -116,7 +143,7 @@ Modifier = Literal["+", "-"] | None
 
 
 @dataclass(frozen=True, slots=True)
-class Assign:
+class Assign(Frozen):
     """``target = expr``, ``target += expr``, ``target -= expr`` (2.1.1, 6.2, 6.7).
 
     Also parameter setting ``K23.1=16`` (ch. 3) and ``H0``.
@@ -128,7 +155,7 @@ class Assign:
 
 
 @dataclass(frozen=True, slots=True)
-class Ref:
+class Ref(Frozen):
     """A register named alone: ``P1.1``, ``P2.1+``, ``S1.1``, ``T1.1``, ``V2.1``, ``R1.1-``.
 
     Direct mode: a query.  Program bank: P moves (``+`` relative), S/A/M select
@@ -141,7 +168,7 @@ class Ref:
 
 
 @dataclass(frozen=True, slots=True)
-class Move:
+class Move(Frozen):
     """``Y#.n`` (move, next line doesn't wait), ``Q#.n`` (push), ``Z#.n`` (push, no wait).
 
     2.2.2 "Y", "Q", "Z"; ``index`` is a P memory number.
@@ -154,7 +181,7 @@ class Move:
 
 
 @dataclass(frozen=True, slots=True)
-class Interp:
+class Interp(Frozen):
     """``@#.n`` with ``+`` (CW) or ``-`` (CCW): circular/linear interpolation (2.1.2 "@")."""
 
     index: int | None = None
@@ -181,7 +208,7 @@ ExecOp = Literal[
 
 
 @dataclass(frozen=True, slots=True)
-class Exec:
+class Exec(Frozen):
     """A one-symbol execution command (2.1.2, 6.5)."""
 
     op: ExecOp
@@ -189,7 +216,7 @@ class Exec:
 
 
 @dataclass(frozen=True, slots=True)
-class Output:
+class Output(Frozen):
     """``O#.n`` (on) / ``F#.n`` (off) (2.1.2)."""
 
     on: bool
@@ -198,7 +225,7 @@ class Output:
 
 
 @dataclass(frozen=True, slots=True)
-class OutputWord:
+class OutputWord(Frozen):
     """``O.n=X``: set 16 outputs at once (Modbus FC15 generation, 5.6.7)."""
 
     value: Expr
@@ -206,7 +233,7 @@ class OutputWord:
 
 
 @dataclass(frozen=True, slots=True)
-class Capture:
+class Capture(Frozen):
     """``#x.n``: store the current position in P memory x (2.1.2 "#")."""
 
     index: int
@@ -214,7 +241,7 @@ class Capture:
 
 
 @dataclass(frozen=True, slots=True)
-class StartBank:
+class StartBank(Frozen):
     """``[#.n`` program bank, ``[L#.n`` ladder bank, ``[LM#.n`` logic motion bank.
 
     ``index is None`` means resume the paused bank (``[``, ``[L``).
@@ -226,7 +253,7 @@ class StartBank:
 
 
 @dataclass(frozen=True, slots=True)
-class StopBank:
+class StopBank(Frozen):
     """``]L.n`` (pause; twice stops) and ``]LM.n`` (ladder / logic motion)."""
 
     kind: Literal["L", "LM"]
@@ -237,7 +264,7 @@ QueryLetter = Literal["A", "S", "M", "T", "V", "P", "N", "R", "L"]
 
 
 @dataclass(frozen=True, slots=True)
-class Query:
+class Query(Frozen):
     """A ``?`` query (6.6).
 
     * ``?.1``          -> ``letter=None, number=None`` (direct mode data)
@@ -254,7 +281,7 @@ class Query:
 
 
 @dataclass(frozen=True, slots=True)
-class Call:
+class Call(Frozen):
     """``C#`` call, ``J#`` jump, ``CL#`` ladder call, ``JL#`` ladder jump (2.2.2, 2.2.3)."""
 
     kind: Literal["C", "J", "CL", "JL"]
@@ -263,7 +290,7 @@ class Call:
 
 
 @dataclass(frozen=True, slots=True)
-class Loop:
+class Loop(Frozen):
     """``X#.n``: loop the following lines ``count`` times (0 = forever) (2.2.2 "X")."""
 
     count: int
@@ -271,14 +298,14 @@ class Loop:
 
 
 @dataclass(frozen=True, slots=True)
-class LoopEnd:
+class LoopEnd(Frozen):
     """``X.n-``: end of the innermost loop."""
 
     motor: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
-class Wait:
+class Wait(Frozen):
     """``W#.n``: in a branch, wait up to T# while the condition stays true (W0 forever)."""
 
     index: int
@@ -286,7 +313,7 @@ class Wait:
 
 
 @dataclass(frozen=True, slots=True)
-class BankBegin:
+class BankBegin(Frozen):
     """``B#.n`` / ``L#.n``: start of a bank definition (2.2.2 "B", 2.2.3 "L")."""
 
     ladder: bool
@@ -295,7 +322,7 @@ class BankBegin:
 
 
 @dataclass(frozen=True, slots=True)
-class ClearBanks:
+class ClearBanks(Frozen):
     """``B100`` / ``L100``: clear all program / ladder banks (cm-banks-rt3.txt 2.3, 3.2)."""
 
     ladder: bool
@@ -303,14 +330,14 @@ class ClearBanks:
 
 
 @dataclass(frozen=True, slots=True)
-class BankEnd:
+class BankEnd(Frozen):
     """``END`` / ``END.n``: end of a bank definition."""
 
     motor: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
-class Alloc:
+class Alloc(Frozen):
     """``\\P300`` / ``\\N200``: P/N/R data area allocation (2.1.2 "\\")."""
 
     kind: Literal["P", "N"]
@@ -318,7 +345,7 @@ class Alloc:
 
 
 @dataclass(frozen=True, slots=True)
-class Branch:
+class Branch(Frozen):
     """``condition, then, else`` with ``:`` junctions (2.2.2 "I"/"V", 4.2.2).
 
     ``then`` and ``orelse`` are tuples of statements joined by ``:``.
@@ -326,8 +353,8 @@ class Branch:
     """
 
     condition: Expr
-    then: tuple["Statement", ...]
-    orelse: tuple["Statement", ...] = ()
+    then: tuple[Statement, ...]
+    orelse: tuple[Statement, ...] = ()
 
 
 Statement = Union[
@@ -337,7 +364,7 @@ Statement = Union[
 
 
 @dataclass(frozen=True, slots=True)
-class Line:
+class Line(Frozen):
     """One logical line: statements separated by commas (2.2.2 ", (comma)").
 
     ``joined`` is true when the line ends with ``;``: in a program bank the next

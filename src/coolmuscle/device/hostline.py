@@ -60,14 +60,16 @@ class LineSettings:
     echo: bool                  # K23 without 8
     delimiter: bytes            # K70: 0 -> CR, 1 -> CRLF
     baud: int                   # K20
+    modbus: bool                # K81 not 0: COM0 may speak Modbus RTU (the mode decides)
 
     def __init__(self, echo: bool = True, delimiter: bytes = b"\r\n",
-                 baud: int = 38400) -> None:
+                 baud: int = 38400, modbus: bool = True) -> None:
         # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
         # __init__ runs interpreted, 20x slower (docs/performance.md).
         self.echo = echo
         self.delimiter = delimiter
         self.baud = baud
+        self.modbus = modbus
 
 
 class LineMode(Protocol):
@@ -90,7 +92,7 @@ class HostLine:
 
     ``on_line`` is called with each complete line (without its terminator) at
     the virtual time its last byte arrived.  ``settings`` returns the live
-    :class:`LineSettings` (from motor ID1's K20/K23/K70).
+    :class:`LineSettings` (from motor ID1's K20/K23/K70/K81).
     """
 
     def __init__(self, kernel: Kernel, on_line: Callable[[str], None],
@@ -113,7 +115,8 @@ class HostLine:
         self._rx_free_at = 0
         self.bytes_in = 0
         self.bytes_out = 0
-        #: COM0 in another protocol's mode (Modbus RTU); ``None``: always text.
+        #: COM0 in another protocol's mode (Modbus RTU); ``None``: always text.  It is
+        #: asked only while the settings say COM0 may speak it (``LineSettings.modbus``).
         self.mode: LineMode | None = None
 
     # -- output ---------------------------------------------------------
@@ -143,9 +146,10 @@ class HostLine:
 
     def send_line(self, text: str) -> None:
         """Send one reply line followed by the K70 delimiter (not in Modbus mode)."""
-        if self.mode is not None and self.mode.active():
+        settings = self._settings()
+        if settings.modbus and self.mode is not None and self.mode.active():
             return
-        self.write(text.encode("latin-1", "replace") + self._settings().delimiter)
+        self.write(text.encode("latin-1", "replace") + settings.delimiter)
 
     def _deliver(self, data: bytes) -> None:
         self.bytes_out += len(data)
@@ -176,7 +180,7 @@ class HostLine:
 
     def _receive(self, data: bytes, source: object = None) -> None:
         self.bytes_in += len(data)
-        if self.mode is not None and self.mode.active():
+        if self.mode is not None and self._settings().modbus and self.mode.active():
             self.mode.receive(data)
             return
         self.receive_text(data, source)

@@ -140,7 +140,7 @@ class Motor:
     def _param_changed(self, k: int, old: int, new: int) -> None:
         del old
         if k == 37:
-            self.memory.k37 = new
+            self.memory.set_k37(new)
         self.supervision.param_changed(k)
 
     def reports(self, flag: Report) -> bool:
@@ -702,7 +702,7 @@ class Motor:
                 self.memory = Memory.from_dict(self.firmware, memory, k37=self.k(37))
             except ValueError as exc:
                 log.warning("motor %d: saved data skipped: %s", self.id, exc)
-        self.memory.k37 = self.k(37)
+        self.memory.set_k37(self.k(37))
         banks = saved.get("banks")
         if isinstance(banks, dict):
             self.banks.load_dict(banks)

@@ -15,10 +15,9 @@ Real-time pacing is a thin layer on top (:mod:`coolmuscle.sim.realtime`).
 
 from __future__ import annotations
 
-import heapq
-import itertools
 import logging
 from dataclasses import dataclass
+from heapq import heappop, heappush
 from typing import Callable, Final
 
 from mypy_extensions import mypyc_attr
@@ -89,7 +88,7 @@ class Kernel:
         #: plain attribute, not a property: the model reads it dozens of times a move.
         self.now: int = int(start)
         self._queue: list[tuple[int, int, int, Timer]] = []
-        self._counter = itertools.count()
+        self._scheduled = 0             # events scheduled so far: ties run in that order
         self._events_run = 0
         self._observers: list[Callback] = []
 
@@ -117,7 +116,8 @@ class Kernel:
         """Run ``callback`` at absolute time ``at`` (not before now)."""
         when = max(int(at), self.now)
         timer = Timer(when, callback, name)
-        heapq.heappush(self._queue, (when, priority, next(self._counter), timer))
+        self._scheduled += 1
+        heappush(self._queue, (when, priority, self._scheduled, timer))
         return timer
 
     def call_soon(self, callback: Callback, *, priority: int = PRIO_LOGIC, name: str = "") -> Timer:
@@ -136,7 +136,7 @@ class Kernel:
     # -- running --------------------------------------------------------
     def _drop_cancelled(self) -> None:
         while self._queue and self._queue[0][3].cancelled:
-            heapq.heappop(self._queue)
+            heappop(self._queue)
 
     def peek(self) -> int | None:
         """Time of the next pending event, or ``None`` when nothing is scheduled."""
@@ -148,7 +148,7 @@ class Kernel:
         self._drop_cancelled()
         if not self._queue:
             return False
-        at, _prio, _count, timer = heapq.heappop(self._queue)
+        at, _prio, _count, timer = heappop(self._queue)
         self.now = at
         timer.cancelled = True
         self._events_run += 1
@@ -167,7 +167,7 @@ class Kernel:
         count = 0
         if until is not None:
             until = int(until)             # whole nanoseconds (a float is floored)
-        queue, pop, observers = self._queue, heapq.heappop, self._observers
+        queue, pop, observers = self._queue, heappop, self._observers
         while queue:                       # peek() and step() written out: the hot loop
             at, _prio, _count, timer = queue[0]
             if timer.cancelled:

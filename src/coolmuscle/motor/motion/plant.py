@@ -44,7 +44,6 @@ class Plant:
 
     def __setattr__(self, name: str, value: Any) -> None:
         object.__setattr__(self, name, value)
-        self.__dict__.pop("_drives", None)       # the drives made for the old values
         listener = self.__dict__.get("on_change")
         if name != "on_change" and listener is not None:
             listener()
@@ -64,26 +63,9 @@ class Plant:
         """The dynamics parameters for the resolution ``ppr`` (pulses per revolution).
 
         The loop never asks for more than the smaller of the motor's maximum speed
-        (scaled by the supply) and ``speed_limit`` (min⁻¹, K40).  The same arguments
-        give the same (immutable) Drive object until a field of the plant changes: a
-        move asks for it once, and the solved motions are looked up by it."""
-        key = (ppr, limit_percent_of_rated, enabled, speed_scale, extra_load_nm, walls,
-               speed_limit)
-        drives = self.__dict__.get("_drives")
-        if drives is None:
-            drives = self.__dict__["_drives"] = {}
-        found = drives.get(key)
-        if found is None:
-            if len(drives) >= 64:
-                drives.clear()
-            found = drives[key] = self._make_drive(ppr, limit_percent_of_rated, enabled,
-                                                   speed_scale, extra_load_nm, walls,
-                                                   speed_limit)
-        return found
-
-    def _make_drive(self, ppr: int, limit_percent_of_rated: float, enabled: bool,
-                    speed_scale: float, extra_load_nm: float, walls: tuple[float, float],
-                    speed_limit: float) -> Drive:
+        (scaled by the supply) and ``speed_limit`` (min⁻¹, K40).  A new (immutable)
+        Drive at each call: the supervisor keeps the ones it made until a field of the
+        plant changes (:meth:`~coolmuscle.motor.supervision.supervisor.Supervisor.drive`)."""
         per = self.nm_per_accel(ppr)
         return Drive(kp=self.kp,
                      a_limit=max(0.0, limit_percent_of_rated) / 100.0 * self.rated_torque / per,

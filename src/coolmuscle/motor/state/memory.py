@@ -9,6 +9,11 @@ Errors: a value outside its range raises :class:`OutOfRangeError` (error00); a
 memory number that does not exist raises :class:`NoSuchRegisterError`, which is
 both an ``OutOfRangeError`` (the motor reports error00 ``Out Of Range!!``) and an
 ``IndexError``.
+
+Compiled (coolmuscle/_accel.py): what the methods check at run time (a kind, a
+memory number, a value) is typed ``object``, so a float or a bool reaches the check
+and gets the error above instead of the compiled code's ``TypeError`` or a bool taken
+as 0 or 1.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Literal, Mapping, Union, overload
 
+from ...cml.ast import Frozen
 from ...errors import OutOfRangeError
 from .firmware import REGISTER_KINDS, Firmware
 from .units import CONTINUOUS, resolution, valid_k37
@@ -45,21 +51,21 @@ class NoSuchRegisterError(OutOfRangeError, IndexError):
 # -- V values ------------------------------------------------------------------
 
 @dataclass(frozen=True, slots=True)
-class VNumber:
+class VNumber(Frozen):
     """A V register holding a number (6.2 V "1) use as a number")."""
 
     value: int
 
 
 @dataclass(frozen=True, slots=True)
-class VString:
+class VString(Frozen):
     """A V register holding up to 4 characters (6.2 V "2) use as character")."""
 
     text: str
 
 
 @dataclass(frozen=True, slots=True)
-class VState:
+class VState(Frozen):
     """A V register bound to a live motor state (6.2 V "3) internal state").
 
     ``name`` is canonical (``"Px"``, ``"ADIN"``, ``"CT"`` ...); the motor
@@ -125,12 +131,14 @@ class Memory:
 
     ``k37`` (the current resolution) bounds P: ``±max position`` of K37, except
     exactly 1000000000, which means continuous rotation (2.1.1 P, ch. 3 K37).
-    The motor keeps it current (K37 change listener).
+    The motor keeps it current (K37 change listener, :meth:`set_k37`).
     """
+
+    _k37: int
 
     def __init__(self, firmware: Firmware, *, k37: int = 3) -> None:
         self._firmware = firmware
-        self.k37 = k37
+        self.set_k37(k37)
         self._alloc: dict[str, int] = {}
         self._data: dict[str, list[Any]] = {}
         #: The live cells by kind (index = memory number), read only: the ladder
@@ -147,11 +155,13 @@ class Memory:
 
     @property
     def k37(self) -> int:
-        """The K37 value P is checked against."""
+        """The K37 value P is checked against (:meth:`set_k37` changes it)."""
         return self._k37
 
-    @k37.setter
-    def k37(self, value: int) -> None:
+    def set_k37(self, value: int) -> None:
+        """Check P against K37 = ``value`` from now on; :class:`OutOfRangeError` if it is
+        not a resolution.  A method, not a property setter: compiled, mypyc 1.19's setter
+        wrapper loses an exception raised in the setter (a ``SystemError`` follows)."""
         if not valid_k37(value):
             raise OutOfRangeError(f"K37={value} is not a resolution")
         self._k37 = value
@@ -183,21 +193,23 @@ class Memory:
     @overload
     def get(self, kind: str, index: int) -> int | VValue: ...
 
-    def get(self, kind: str, index: int) -> int | VValue:
+    def get(self, kind: object, index: object) -> int | VValue:
         """The value of ``kind`` memory ``index`` (a :data:`VValue` for V)."""
+        return self._cell(kind, index)
+
+    def _cell(self, kind: object, index: object) -> int | VValue:
         kind = _kind(kind)
-        self._check_index(kind, index)
-        value: int | VValue = self._data[kind][index]
+        value: int | VValue = self._data[kind][self._check_index(kind, index)]
         return value
 
-    def number(self, kind: str, index: int) -> int:
+    def number(self, kind: str, index: object) -> int:
         """The value of a numeric memory (``S``, ``A``, ``P``, ``M``, ``T`` ...; not V)."""
         cells = self._data.get(kind)        # fast path: a canonical kind, a valid index
         if cells is not None and type(index) is int and 0 <= index < len(cells):
             found = cells[index]
             if type(found) is int:
                 return found
-        value = self.get(kind, index)
+        value = self._cell(kind, index)
         if not isinstance(value, int):
             raise TypeError(f"{kind}{index} holds {value!r}, not a number")
         return value
@@ -207,7 +219,7 @@ class Memory:
         ladder scanner; read only.  The list is replaced when the allocation changes."""
         return self._data[kind]
 
-    def set_v_number(self, index: int, value: int) -> None:
+    def set_v_number(self, index: int, value: object) -> None:
         """``V#=value`` with a number, as :meth:`set` checks it (fast path for ladder scans)."""
         cells = self._data["V"]
         if not (type(value) is int and -LIMIT_1E9 <= value <= LIMIT_1E9):
@@ -216,17 +228,16 @@ class Memory:
             raise NoSuchRegisterError(f"V{index} does not exist (V0..V{len(cells) - 1})")
         cells[index] = VNumber(value)
 
-    def set(self, kind: str, index: int, value: int | str | VValue) -> None:
+    def set(self, kind: object, index: object, value: object) -> None:
         """Store ``value``; nothing changes if it is refused.
 
         V accepts an int, a :data:`VValue`, or ``str`` (the text between the
         quotes of ``V#="..."``).  A takes the absolute value (6.2 A).
         """
         kind = _kind(kind)
-        self._check_index(kind, index)
-        self._data[kind][index] = self.normalise(kind, value)
+        self._data[kind][self._check_index(kind, index)] = self.normalise(kind, value)
 
-    def normalise(self, kind: str, value: int | str | VValue) -> int | VValue:
+    def normalise(self, kind: object, value: object) -> int | VValue:
         """The value as it would be stored, or :class:`OutOfRangeError`."""
         kind = _kind(kind)
         if kind == "V":
@@ -250,7 +261,7 @@ class Memory:
             raise OutOfRangeError(f"P={value} is beyond ±{top} (K37={self._k37})")
         return value
 
-    def _v_value(self, value: int | str | VValue) -> VValue:
+    def _v_value(self, value: object) -> VValue:
         if isinstance(value, (VNumber, VString, VState)):
             if isinstance(value, VNumber):
                 return self._v_value(value.value)
@@ -267,18 +278,19 @@ class Memory:
             raise OutOfRangeError(f"V={value} is out of range")
         return VNumber(value)
 
-    def _check_index(self, kind: str, index: int) -> None:
+    def _check_index(self, kind: str, index: object) -> int:
         top = len(self._data[kind]) - 1   # the cells are sized to limit(kind) + 1
         if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index <= top:
             raise NoSuchRegisterError(f"{kind}{index} does not exist ({kind}0..{kind}{top})")
+        return index
 
-    def items(self, kind: str) -> list[tuple[int, int | VValue]]:
+    def items(self, kind: object) -> list[tuple[int, int | VValue]]:
         """``(index, value)`` for every memory number of ``kind``, from 0."""
         return list(enumerate(self._data[_kind(kind)]))
 
     # -- allocation (2.1.2) ----------------------------------------------------
 
-    def allocate(self, kind: str, count: int) -> None:
+    def allocate(self, kind: object, count: object) -> None:
         """``\\P n`` or ``\\N n``: divide the 600 P+N+R memories (R type only).
 
         P is served first, then N; R gets the rest.  ``\\P`` keeps N if it still
@@ -368,7 +380,7 @@ class Memory:
 _CANONICAL_KINDS = frozenset(REGISTER_KINDS)
 
 
-def _kind(kind: str) -> str:
+def _kind(kind: object) -> str:
     if isinstance(kind, str) and kind in _CANONICAL_KINDS:   # fast path (ladder scans)
         return kind
     upper = kind.upper() if isinstance(kind, str) else ""

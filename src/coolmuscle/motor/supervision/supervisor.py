@@ -59,12 +59,16 @@ class Supervisor:
         self.geometry = Geometry()
         self.input_driven = [False] * (motor.io.input_count + 1)
         self._motion_listeners: list[MotionListener] = []
+        #: The drives made from the plant as it is (:meth:`drive`), by what else they
+        #: were made from.
+        self._drives: dict[tuple[int, float, float, float, tuple[float, float], int],
+                           Drive] = {}
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
         axis = self.motor.axis
         axis.before_resolve.append(self.thermal.advance)
-        self.motor.plant.on_change = axis.refresh
+        self.motor.plant.on_change = self._plant_changed
         for watcher in (*alarm_watchers(self.motor), self.push, self.origin):
             axis.add_watcher(watcher)
 
@@ -75,19 +79,36 @@ class Supervisor:
 
     # -- the drive ---------------------------------------------------------------
     def drive(self) -> Drive:
-        """Dynamics parameters now: plant, torque limit, machine, faults."""
+        """Dynamics parameters now: plant, torque limit, machine, faults.
+
+        The same values give the same (immutable) Drive object until a field of the
+        plant changes: a move asks for it once, and the solved motions are looked up
+        by it."""
         m, faults = self.motor, self.faults
+        plant = m.plant
         if faults.power_cable_broken:
             limit = 0.0
         elif self.push.active:
             limit = self.push.level_percent()
         else:
-            limit = self.torque_limit * m.plant.peak_torque / 100.0
+            limit = self.torque_limit * plant.peak_torque / 100.0
         ppr = m.resolution.pulses_per_rev
-        extra = faults.extra_load_percent / 100.0 * m.plant.rated_torque
-        return m.plant.drive(ppr, limit_percent_of_rated=limit, enabled=True,
-                             speed_scale=faults.speed_scale(), extra_load_nm=extra,
-                             walls=self.geometry.walls(ppr), speed_limit=m.k(40))
+        extra = faults.extra_load_percent / 100.0 * plant.rated_torque
+        scale, walls, speed_limit = faults.speed_scale(), self.geometry.walls(ppr), m.k(40)
+        key = (ppr, limit, scale, extra, walls, speed_limit)
+        found = self._drives.get(key)
+        if found is None:
+            if len(self._drives) >= 64:
+                self._drives.clear()
+            found = self._drives[key] = plant.drive(
+                ppr, limit_percent_of_rated=limit, enabled=True, speed_scale=scale,
+                extra_load_nm=extra, walls=walls, speed_limit=speed_limit)
+        return found
+
+    def _plant_changed(self) -> None:
+        """A field of the plant changed: new drives, and the motion re-solved at once."""
+        self._drives.clear()
+        self.motor.axis.refresh()
 
     def set_torque_limit(self, percent: int) -> None:
         """``M`` (2.1.1): the torque limit, % of the maximum torque, applies at once."""
