@@ -20,7 +20,7 @@ import time
 import aiohttp
 import pytest
 
-from coolmuscle.frontends.web.access import Access, expand_web_flag, parse_web_address
+from coolmuscle.tools.web.access import Access, expand_web_flag, parse_web_address
 from coolmuscle.errors import TransportError
 
 from web_support import ROOT, HostLine, ask, count_snapshots, serve, ws_frames
@@ -210,7 +210,7 @@ def test_token_required_off_loopback_and_checked():
 def test_non_loopback_bind_refuses_websocket_without_token():
     from coolmuscle.frontends.transports.service import ServiceThread
     from coolmuscle.chain import Chain
-    from coolmuscle.frontends.web.server import WebTransport
+    from coolmuscle.tools.web.server import WebTransport
     with ServiceThread(lambda: Chain(), lambda: [WebTransport("0.0.0.0", 0)]) as st:
         web = st.transports[0]
         token, port = web.access.token, web.info()["port"]
@@ -412,7 +412,7 @@ def test_a_connection_flood_is_capped_and_trickled_headers_time_out(monkeypatch)
     """At most MAX_CONNECTIONS connections at once (more are closed as they come: a
     flood once used up the file descriptors the motor's TCP and Modbus ports share); a
     connection whose request never completes is closed after IDLE_TIMEOUT."""
-    from coolmuscle.frontends.web import server as web_server
+    from coolmuscle.tools.web import server as web_server
     monkeypatch.setattr(web_server, "MAX_CONNECTIONS", 20)
     monkeypatch.setattr(web_server, "IDLE_TIMEOUT", 0.5)
     st = serve()
@@ -448,7 +448,7 @@ def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
     again to that page (found as "trace recording started" twice on run --web)."""
     import asyncio
 
-    from coolmuscle.frontends.web.hub import Client, Hub
+    from coolmuscle.tools.web.hub import Client, Hub
 
     async def body() -> tuple[list[str], list[str]]:
         hub = Hub(device=None, call=lambda fn, *a: fn(*a))
@@ -473,7 +473,7 @@ def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
 def test_the_page_beyond_max_pages_is_refused_and_api_info_says_why(monkeypatch):
     """docs/web.md Robustness: the 101st page's WebSocket gets 503; /api/info tells the
     page how many are open, so it can say so instead of only "reconnecting"."""
-    from coolmuscle.frontends.web import server as web_server
+    from coolmuscle.tools.web import server as web_server
     monkeypatch.setattr(web_server, "MAX_PAGES", 2)
     st = serve()
     try:

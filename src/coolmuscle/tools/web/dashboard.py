@@ -27,8 +27,8 @@ from typing import Any, Iterator
 
 from ...client.banks import compare_bank, parse_bank_listing
 from ...client.program import BankBlock, parse_program
-from ...frontends.web.server import WebTransport
-from ...frontends.web.toolbox import Note
+from .server import WebTransport
+from .toolbox import Note
 from ..check.lint import check_program
 
 

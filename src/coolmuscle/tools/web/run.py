@@ -18,8 +18,8 @@ import sys
 from typing import Any, Callable, TextIO
 
 from ...frontends.transports.service import Service
-from ...frontends.web.access import parse_web_address
-from ...frontends.web.server import WebTransport
+from .access import parse_web_address
+from .server import WebTransport
 from ...sim.kernel import seconds
 from ..script.runner import Script, Step, TranscriptEntry
 from ..cli.stopsignals import ignore_stop_signals, run_served

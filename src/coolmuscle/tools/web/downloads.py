@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from aiohttp import web
 
-from ..transports.base import Port
+from ...frontends.transports.base import Port
 from .toolbox import Toolbox
 
 #: Most samples (rows x motors) of one downloaded trace: the step grows for long

@@ -26,7 +26,7 @@ from typing import Any
 from aiohttp import WSMsgType, web
 
 from ...errors import TransportError
-from ..transports.base import Port, Transport
+from ...frontends.transports.base import Port, Transport
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
 from .downloads import Downloads
