@@ -10,8 +10,8 @@ Three front ends share one non-blocking file-descriptor pump (:class:`_FdPump`):
   mode: when ID1's K81 is 0 it is set to 1 (station address 1), as a user would
   before switching the host to Modbus (ch. 3 K81; it persists like any K write);
 * :class:`Com1Transport` (``com1``, ``coolmuscle sim --com1``): COM1 of the final
-  motor (the chain's :class:`~coolmuscle.chain.firmware_modbus.master.Com1Port`) on a device or a new
-  pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
+  motor (the chain's :class:`~coolmuscle.chain.firmware_modbus.master.Com1Port`) on a
+  device or a new pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
 
 Bytes received are delivered at the wall-clock instant they arrive (the real-time
 driver catches the kernel up first), so the 5.6.2 silent interval is measured in
