@@ -169,7 +169,7 @@ def tcp_side_by_side(seconds: float) -> None:
 
 
 def _rtu(body: bytes) -> bytes:
-    from coolmuscle.chain.modbus.rtu import crc16
+    from coolmuscle.chain.firmware_modbus.rtu import crc16
     return body + crc16(body)
 
 

@@ -412,7 +412,7 @@ def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> 
 def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
     """K78+54 "Analog Output" (5.6.7 FC03 table) reads the K35 output: 683 for the
     current position 512 (3.335 V), as the device snapshot publishes it."""
-    from coolmuscle.chain.modbus.registers import MotorMap, long_of
+    from coolmuscle.chain.firmware_modbus.registers import MotorMap, long_of
     chain = _chain()
     chain.set_param(1, 35, 2)
     chain.execute("S.1=10, A.1=100, P.1=512")

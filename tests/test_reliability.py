@@ -274,6 +274,7 @@ def _http_alive(port: int, timeout: float = 3.0) -> None:
 
 def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
     from coolmuscle.frontends.transports import create
+    from coolmuscle.tools.web.server import WebTransport
 
     rng = random.Random(8080)
     requests = [b"GET / HTTP/1.1\r\nHost: x\r\n\r\n",
@@ -282,7 +283,7 @@ def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
                 b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
                 b"\x16\x03\x01\x00\xa5", b"GET /" + b"A" * 9000 + b" HTTP/1.1\r\n\r\n"]
     with ServiceThread(lambda: Chain(), lambda: [create("tcp", port=0),
-                                                 create("web", port=0)]) as st_:
+                                                 WebTransport(port=0)]) as st_:
         cml, web = (t.info()["port"] for t in st_.transports)
         for _batch in range(15):
             with socket.create_connection(("127.0.0.1", web), timeout=5) as sock:

@@ -363,9 +363,9 @@ class Chain(ChainBus):
         if self.store is not None:
             self.store.close()
 
-    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.chain.modbus ----------
+    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.chain.firmware_modbus --
     def _attach_modbus(self) -> None:
-        from .modbus import Com1Port, ModbusSlave, RtuSlaveLine
+        from .firmware_modbus import Com1Port, ModbusSlave, RtuSlaveLine
         self.modbus = ModbusSlave(self)
         self.modbus_line = RtuSlaveLine(self, self.modbus)
         self.host_line.mode = self.modbus_line

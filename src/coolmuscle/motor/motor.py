@@ -28,9 +28,10 @@ from .motion.dynamics import Drive
 from .signals.encoder import ExternalEncoder, Gearing
 from .programs.evaluate import pack_string
 from .state.firmware import Firmware
-from .signals.io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
-                         OUT_ORIGIN_DONE, OUT_PUSH, OUT_PUSH_AT_LEVEL, OUT_ROTATION_PULSE,
-                         DigitalIO)
+from .signals.io import DigitalIO
+from .state.output_functions import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE,
+                                     OUT_MOTOR_FREE, OUT_ORIGIN_DONE, OUT_PUSH,
+                                     OUT_PUSH_AT_LEVEL, OUT_ROTATION_PULSE)
 from .signals.manual import ManualMotion
 from .state.memory import Memory, VNumber, VState, VString
 from .state.param_table import ParamTable

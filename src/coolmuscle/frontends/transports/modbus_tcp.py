@@ -2,7 +2,7 @@
 
 The motor itself speaks Modbus RTU (cml-users-guide.txt 5.6.1); PLCs, HMIs and
 scripts also expect Modbus TCP, so this server serves the same slave
-(:class:`coolmuscle.chain.modbus.slave.ModbusSlave`) with the same addresses, map,
+(:class:`coolmuscle.chain.firmware_modbus.slave.ModbusSlave`) with the same addresses, map,
 exceptions and broadcast rule.  It owns only the framing and the sockets:
 
 * an ADU is the 7-byte MBAP header (transaction id, protocol id 0, length, unit id)
@@ -62,7 +62,7 @@ class ModbusTcpTransport(StreamServer):
         self.closed_connections = 0
 
     async def start(self, port: Port) -> None:
-        from ...chain.modbus.slave import ModbusSlave, firmware_name, supports_modbus
+        from ...chain.firmware_modbus.slave import ModbusSlave, firmware_name, supports_modbus
 
         self.port = port
         device = port.device

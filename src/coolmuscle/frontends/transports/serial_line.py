@@ -10,8 +10,8 @@ Three front ends share one non-blocking file-descriptor pump (:class:`_FdPump`):
   mode: when ID1's K81 is 0 it is set to 1 (station address 1), as a user would
   before switching the host to Modbus (ch. 3 K81; it persists like any K write);
 * :class:`Com1Transport` (``com1``, ``coolmuscle sim --com1``): COM1 of the final
-  motor (the chain's :class:`~coolmuscle.chain.modbus.master.Com1Port`) on a device or a new
-  pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
+  motor (the chain's :class:`~coolmuscle.chain.firmware_modbus.master.Com1Port`) on a
+  device or a new pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
 
 Bytes received are delivered at the wall-clock instant they arrive (the real-time
 driver catches the kernel up first), so the 5.6.2 silent interval is measured in
@@ -203,7 +203,7 @@ class SerialTransport(_PumpedLine):
         self.path: str = path
 
     def _settings(self) -> tuple[int, str]:
-        from ...chain.modbus.rtu import byte_baud
+        from ...chain.firmware_modbus.rtu import byte_baud
         assert self.port is not None and self.port.device is not None
         device = self.port.device
         return byte_baud(device.get_param(1, 20)), "NEO"[device.get_param(1, 82) % 3]
@@ -247,7 +247,7 @@ class ModbusRtuTransport(Transport):
         self.station = 0
 
     async def start(self, port: Port) -> None:
-        from ...chain.modbus.slave import firmware_name, supports_modbus
+        from ...chain.firmware_modbus.slave import firmware_name, supports_modbus
         self.port = port
         if port.device is None or not supports_modbus(port.device):
             name = firmware_name(port.device) if port.device is not None else "?"

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .io import OUT_ROTATION_PULSE
 from ..motion.trajectory import Schmitt, Timeline, Track
+from ..state.output_functions import OUT_ROTATION_PULSE
 
 if TYPE_CHECKING:
     from ..core import MotorCore

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Mapping
 
-from ..signals.io import CM1_OUTPUT_FUNCTIONS, CML_OUTPUT_FUNCTIONS
+from .output_functions import CM1_OUTPUT_FUNCTIONS, CML_OUTPUT_FUNCTIONS
 from .params import ParamSpec, chosen, digitwise, per_channel, ranged, reserved
 from .units import RESOLUTIONS
 

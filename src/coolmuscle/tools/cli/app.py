@@ -419,7 +419,7 @@ def run(
 
 
 def _web_transport(address: str) -> Transport:
-    """``--web [HOST:]PORT`` (coolmuscle.frontends.web)."""
+    """``--web [HOST:]PORT`` (coolmuscle.tools.web)."""
     from ..web.run import web_transport
     try:
         return web_transport(address)
@@ -538,7 +538,7 @@ def _main(argv: list[str] | None) -> None:
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
     from ...frontends.enip.cli import optional_value_argv
-    from ...frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+    from ..web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
 
     def call() -> None:
         args = expand_web_flag(sys.argv[1:] if argv is None else argv)

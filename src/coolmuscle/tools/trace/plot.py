@@ -27,7 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from ...motor.signals import io  # noqa: E402
+from ...motor.state import output_functions as out  # noqa: E402
 from ...motor.status import ALARM_BITS, Ux  # noqa: E402
 from ...sim.kernel import NS_PER_S  # noqa: E402
 
@@ -88,12 +88,12 @@ def _changes(values: Sequence[float]) -> bool:
 
 
 #: Output functions (ch. 3 K34; CM1 Appendix A K34) as the timeline labels them.
-OUTPUT_FUNCTIONS = {io.OUT_NONE: "no function", io.OUT_IN_POSITION: "in-position",
-                    io.OUT_ALARM: "alarm", io.OUT_GENERAL: "general",
-                    io.OUT_ORIGIN_DONE: "origin done", io.OUT_MERGE_PULSE: "merge pulse",
-                    io.OUT_ROTATION_PULSE: "rotation pulse", io.OUT_MOTOR_FREE: "motor free",
-                    io.OUT_PUSH: "push", io.OUT_FOLLOWS_O1: "O1/F1", io.OUT_FOLLOWS_O2: "O2/F2",
-                    io.OUT_ANALOG: "analog", io.OUT_PUSH_AT_LEVEL: "push torque reached"}
+OUTPUT_FUNCTIONS = {out.OUT_NONE: "no function", out.OUT_IN_POSITION: "in-position",
+                    out.OUT_ALARM: "alarm", out.OUT_GENERAL: "general",
+                    out.OUT_ORIGIN_DONE: "origin done", out.OUT_MERGE_PULSE: "merge pulse",
+                    out.OUT_ROTATION_PULSE: "rotation pulse", out.OUT_MOTOR_FREE: "motor free",
+                    out.OUT_PUSH: "push", out.OUT_FOLLOWS_O1: "O1/F1", out.OUT_FOLLOWS_O2: "O2/F2",
+                    out.OUT_ANALOG: "analog", out.OUT_PUSH_AT_LEVEL: "push torque reached"}
 
 
 def _output_functions(motor: Any) -> list[int]:

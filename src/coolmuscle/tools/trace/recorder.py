@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 from ...motor.signals.analog_output import output_volts
-from ...motor.signals.io import OUT_ROTATION_PULSE
+from ...motor.state.output_functions import OUT_ROTATION_PULSE
 from ...motor.status import ALARM_BITS, Ux
 from ...sim.kernel import NS_PER_S
 

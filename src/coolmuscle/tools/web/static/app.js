@@ -1,6 +1,6 @@
 /* coolmuscle dashboard: one page, one WebSocket, every motor of the chain.
  *
- * The server (coolmuscle.frontends.web) sends "hello" (chain layout, recent log,
+ * The server (coolmuscle.tools.web) sends "hello" (chain layout, recent log,
  * a first snapshot), then "log" (lines exactly as the host line prints them, with
  * their virtual time), "snap" (every motor's values while something changes) and
  * "tick" (the virtual time, once a second).  Requests carry an id and get a

@@ -9,7 +9,7 @@ This module owns:
   measured in virtual time at the K20 baud rate;
 * :class:`RtuSlaveLine`, the host line's mode hook: while ID1's K81 is not 0
   (ch. 3 K84 table) the bytes of COM0 are Modbus RTU frames for
-  :class:`~coolmuscle.chain.modbus.slave.ModbusSlave`, text replies and reports are not
+  :class:`~coolmuscle.chain.firmware_modbus.slave.ModbusSlave`, text replies and reports are not
   sent, and nine ``F`` in a row escape to the RS-232 text line until K81 is
   written (5.6.9).
 

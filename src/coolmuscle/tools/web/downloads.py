@@ -13,12 +13,13 @@ from __future__ import annotations
 import asyncio
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable, Iterator
 
 from aiohttp import web
 
-from ..transports.base import Port
-from .toolbox import Toolbox
+from ...frontends.transports.base import Port
+from ..trace.recorder import TraceRecorder, parquet_available
+from .traces import plot, trace_rows, write_rows
 
 #: Most samples (rows x motors) of one downloaded trace: the step grows for long
 #: recordings (at least 1 ms, the step of ``coolmuscle run --trace``).
@@ -32,16 +33,15 @@ _TYPES = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "png":
 class Downloads:
     """``/api/trace.{csv,parquet}`` and ``/api/plot.png`` of one dashboard."""
 
-    def __init__(self, port: Port, toolbox: Toolbox | None, recorder: Callable[[], Any],
+    def __init__(self, port: Port, recorder: Callable[[], TraceRecorder | None],
                  title: str = "") -> None:
         self.port = port
-        self.toolbox = toolbox
         self._recorder = recorder
         self.title = title
         self._busy = asyncio.Lock()
 
     def _refusal(self) -> web.Response | None:
-        if self.toolbox is None or self._recorder() is None:
+        if self._recorder() is None:
             return _error(409, "nothing recorded: press Record first")
         if self._busy.locked():
             return _error(429, "a download is being prepared; try again in a moment")
@@ -52,8 +52,7 @@ class Downloads:
         refused = self._refusal()
         if refused is not None:
             return refused
-        assert self.toolbox is not None
-        if fmt == "parquet" and not self.toolbox.parquet_available():
+        if fmt == "parquet" and not parquet_available():
             return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
         async with self._busy:
             header, rows = await self._sample()
@@ -61,13 +60,13 @@ class Downloads:
         return _file(f"trace.{fmt}", body)
 
     async def _sample(self) -> tuple[list[str], list[list[float]]]:
-        assert self.toolbox is not None
-        recorder, device = self._recorder(), self.port.device
-        end = device.kernel.now
-        span = max(end - getattr(recorder, "start", 0), 0) / 1e9
-        motors = max(len(device.motor_ids), 1)
+        recorder = self._recorder()
+        assert recorder is not None
+        end = recorder.chain.kernel.now
+        span = max(end - recorder.start, 0) / 1e9
+        motors = max(len(recorder.motor_ids), 1)
         step = max(0.001, span * motors / MAX_TRACE_SAMPLES)
-        header, source = self.port.call(self.toolbox.trace_rows, recorder, step, end)
+        header, source = self.port.call(trace_rows, recorder, step, end)
         rows: list[list[float]] = []
         while True:
             chunk = self.port.call(_take, source, ROWS_PER_TURN)
@@ -76,28 +75,28 @@ class Downloads:
                 return header, rows
             await asyncio.sleep(0)
 
-    def _write(self, name: str, header: list[str], rows: list[list[float]]) -> bytes:
-        assert self.toolbox is not None
+    @staticmethod
+    def _write(name: str, header: list[str], rows: list[list[float]]) -> bytes:
         with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
             path = Path(tmp) / name
-            self.toolbox.write_rows(path, header, rows)
+            write_rows(path, header, rows)
             return path.read_bytes()
 
     async def plot(self, _request: web.Request) -> web.StreamResponse:
         refused = self._refusal()
         if refused is not None:
             return refused
-        toolbox, device = self.toolbox, self.port.device
-        assert toolbox is not None
+        recorder = self._recorder()
+        assert recorder is not None
         async with self._busy:
             with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
                 path = Path(tmp) / "plot.png"
-                self.port.call(toolbox.plot, device, path, self.title)
+                self.port.call(plot, recorder, path, self.title)
                 body = path.read_bytes()
         return _file("plot.png", body)
 
 
-def _take(rows: Any, count: int) -> list[list[float]]:
+def _take(rows: Iterator[list[float]], count: int) -> list[list[float]]:
     out = []
     for row in rows:
         out.append(row)

@@ -1,4 +1,8 @@
-"""Modbus for the virtual motor (cml-users-guide.txt 5.6): pure protocol logic, no I/O.
+"""The motor's own firmware Modbus (cml-users-guide.txt 5.6): pure protocol logic, no I/O.
+
+K81 hands COM0 to Modbus RTU and the final motor of a chain is the COM1 host: both are
+what the firmware does, so they live with the chain, written as clients of the device
+API (docs/architecture.md).
 
 * :mod:`.registers` -- the register map of 5.6.7 over the device API;
 * :mod:`.slave` -- request PDU -> response PDU: addressing (K81, K84), FC03/04/16,

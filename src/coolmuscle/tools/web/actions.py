@@ -17,8 +17,10 @@ import math
 from typing import Any, Callable
 
 from ...cml.parser import parse
+from ...device import Device
 from ...errors import CmlSyntaxError, CoolMuscleError
-from .toolbox import Toolbox
+from .banks import list_banks, upload_banks
+from .hub import Note
 
 log = logging.getLogger(__name__)
 
@@ -49,12 +51,10 @@ class RequestError(CoolMuscleError, ValueError):
 class Actions:
     """Handlers of page requests; ``call`` runs a model call at the current instant."""
 
-    def __init__(self, device: Any, call: Callable[..., Any],
-                 note: Callable[[list[Any]], None],
-                 extra: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] | None = None,
-                 toolbox: Toolbox | None = None) -> None:
+    def __init__(self, device: Device, call: Callable[..., Any], note: Note,
+                 extra: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] | None = None
+                 ) -> None:
         self.device = device
-        self.toolbox = toolbox
         self._call = call
         self._note = note           # adds a line to every page's console log
         self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
@@ -152,7 +152,7 @@ class Actions:
 
     def banks(self, request: dict[str, Any]) -> dict[str, Any]:
         motor = self._motor(request)
-        return {"banks": self._call(self._tools().list_banks, self.device, motor)}
+        return {"banks": self._call(list_banks, self.device, motor)}
 
     def bank_upload(self, request: dict[str, Any]) -> dict[str, Any]:
         motor, text = self._motor(request), request.get("text")
@@ -161,15 +161,8 @@ class Actions:
         if len(text) > MAX_BANK_TEXT:
             raise RequestError(f"bank text too long ({len(text)} characters, at most "
                                f"{MAX_BANK_TEXT})")
-        result: dict[str, Any] = self._call(self._tools().upload_banks, self.device, motor,
-                                            text, self._note)
+        result: dict[str, Any] = self._call(upload_banks, self.device, motor, text, self._note)
         return result
-
-    def _tools(self) -> Toolbox:
-        if self.toolbox is None:
-            raise RequestError("banks need the host tools "
-                               "(coolmuscle.tools.web.dashboard.WebDashboard)")
-        return self.toolbox
 
 
 def _is_int(value: Any) -> bool:

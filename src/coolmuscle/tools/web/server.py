@@ -7,7 +7,8 @@ Routes (aiohttp):
 * ``GET /api/info`` what the page needs before it connects (is a token required);
 * ``GET /ws`` the WebSocket: the live feed (:mod:`.hub`) out, requests (:mod:`.actions`) in;
 * ``GET /api/trace.csv``, ``/api/trace.parquet``, ``/api/plot.png`` the trace recorded
-  since the dashboard started (the chain's :class:`~coolmuscle.sim.trace.TraceRecorder`).
+  since the page's Record (the chain's
+  :class:`~coolmuscle.tools.trace.recorder.TraceRecorder`, :mod:`.traces`).
 
 The page is one more client of the device API (origin ``web``).  Access rules are in
 :mod:`.access`; a WebSocket message larger than ``MAX_MESSAGE`` closes that socket
@@ -25,13 +26,16 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
+from ...device import Device
 from ...errors import TransportError
-from ..transports.base import Port, Transport
+from ...frontends.transports.base import Port, Transport
+from ..trace.recorder import TraceRecorder
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
+from .banks import firmware_of
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
-from .toolbox import Toolbox
+from .traces import start_recording
 
 log = logging.getLogger(__name__)
 
@@ -82,10 +86,8 @@ class WebTransport(Transport):
     name = "web"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
-                 token: str | None = None, title: str = "", record: bool = False,
-                 toolbox: Toolbox | None = None) -> None:
+                 token: str | None = None, title: str = "", record: bool = False) -> None:
         super().__init__()
-        self.toolbox = toolbox
         self.record = record
         self.host = host
         self.requested_port = port
@@ -96,17 +98,18 @@ class WebTransport(Transport):
         self.actions: Actions | None = None
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
-        self._recorder: Any = None
+        self._recorder: TraceRecorder | None = None
+        self._device: Device | None = None
 
     # -- life cycle ---------------------------------------------------------------
     async def start(self, port: Port) -> None:
-        if port.device is None:
-            raise TransportError("web: needs the chain behind the host line (Port.device)")
-        self.port = port
         device = port.device
+        if device is None:
+            raise TransportError("web: needs the chain behind the host line (Port.device)")
+        self.port, self._device = port, device
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
-                               {"record": self._record_request}, self.toolbox)
+                               {"record": self._record_request})
         if self.record:
             self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
@@ -131,18 +134,17 @@ class WebTransport(Transport):
 
         Recording is off until asked (the page's "Record" button, ``record=True``):
         the recorder looks at every motor after every kernel event."""
-        if self._recorder is None and self.port is not None and self.toolbox is not None:
-            self._recorder = self.port.call(self.toolbox.start_recording, self.port.device)
+        if self._recorder is None and self.port is not None and self._device is not None:
+            self._recorder = self.port.call(start_recording, self._device)
             if self._recorder is not None and self.hub is not None:
-                self.hub.add_log([self.port.device.kernel.now, "note",
+                self.hub.add_log([self._device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
                 self.hub.broadcast(json.dumps({"t": "recording", "on": True}))
         return self._recorder is not None
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
-            raise ValueError("no trace recorder here (the host tools record: "
-                             "coolmuscle.tools.web.dashboard.WebDashboard)")
+            raise ValueError("no trace recorder here: only a simulated chain is recorded")
         return {"recording": True}
 
     def describe(self) -> str:
@@ -177,7 +179,7 @@ class WebTransport(Transport):
         app.router.add_get("/api/info", self._info)
         app.router.add_get("/ws", self._websocket)
         assert self.port is not None
-        downloads = Downloads(self.port, self.toolbox, lambda: self._recorder, self.title)
+        downloads = Downloads(self.port, lambda: self._recorder, self.title)
         app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
         app.router.add_get("/api/plot.png", downloads.plot)
         app.router.add_static("/static", STATIC, follow_symlinks=False)
@@ -217,11 +219,12 @@ class WebTransport(Transport):
                                   "max_pages": MAX_PAGES})
 
     def _hello(self) -> dict[str, Any]:
-        assert self.port is not None and self.hub is not None
-        device = self.port.device
-        firmware = getattr(getattr(device, "firmware", None), "name", "")
+        assert self.port is not None and self.hub is not None and self._device is not None
+        device = self._device
+        firmware = firmware_of(device)
         counts = self.port.call(_io_counts, device)
-        return {"t": "hello", "motors": list(device.motor_ids), "firmware": firmware,
+        return {"t": "hello", "motors": list(device.motor_ids),
+                "firmware": firmware.name if firmware else "",
                 "title": self.title, "time": device.kernel.now, "fields": SNAP_FIELDS,
                 "io": counts, "faults": FAULTS, "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()),
@@ -265,10 +268,10 @@ class WebTransport(Transport):
                 break
 
 
-def _io_counts(device: Any) -> dict[str, int]:
-    firmware = getattr(device, "firmware", None)
-    return {"inputs": int(getattr(firmware, "inputs", 6)),
-            "outputs": int(getattr(firmware, "outputs", 4))}
+def _io_counts(device: Device) -> dict[str, int]:
+    firmware = firmware_of(device)
+    return {"inputs": firmware.inputs if firmware else 6,
+            "outputs": firmware.outputs if firmware else 4}
 
 
 def _token(request: web.Request) -> str | None:

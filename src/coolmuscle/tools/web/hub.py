@@ -26,7 +26,7 @@ import json
 import logging
 from typing import Any, Callable
 
-from ...device import Event
+from ...device import Device, Event
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +42,9 @@ LOG_PERIOD = 0.05
 MAX_PENDING_LOG = 2000
 
 #: Columns of one motor's row in a ``snap`` frame (the page reads them by name).
+#: Adds a line ``[time_ns, kind, text, motor, origin]`` to every page's console log.
+Note = Callable[[list[Any]], None]
+
 SNAP_FIELDS = ("id", "position", "target", "speed", "torque", "status", "inputs",
                "outputs", "temperature", "analog", "analog_out", "voltage",
                "position_error", "enabled")
@@ -112,7 +115,7 @@ class Client:
 class Hub:
     """Fan-out of the chain's events and snapshots to every open page."""
 
-    def __init__(self, device: Any, call: Callable[..., Any]) -> None:
+    def __init__(self, device: Device, call: Callable[..., Any]) -> None:
         self.device = device
         self._call = call                     # runs a model call at "now" (Port.call)
         self.clients: set[Client] = set()
