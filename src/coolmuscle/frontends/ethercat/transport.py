@@ -27,7 +27,7 @@ from typing import Any
 
 from ...errors import TransportError
 from ..transports.base import Port, Transport
-from .esc import ETHERTYPE_ECAT
+from .engine.esc import ETHERTYPE_ECAT
 
 log = logging.getLogger(__name__)
 
@@ -201,7 +201,7 @@ class EthercatTransport(Transport):
         self._old_policy: tuple[int, os.sched_param] | None = None
 
     async def start(self, port: Port) -> None:
-        from .app import BridgeApp
+        from .bridge.app import BridgeApp
         self.port = port
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)

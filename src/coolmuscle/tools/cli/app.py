@@ -150,7 +150,7 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
                          modbus: tuple[str | None, str | None, str | None],
                          ) -> tuple[list[Transport], int, str]:
     """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
-    from ...frontends.ethercat.cli import EthercatUsageError, chain_firmware, sim_transport
+    from .ethercat import EthercatUsageError, chain_firmware, sim_transport
     if motors not in (1, 4):
         raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
     try:
@@ -500,7 +500,7 @@ def _main_options(
 
 
 def _register_subapps() -> None:
-    from ...frontends.ethercat.cli import app as ethercat_app
+    from .ethercat import app as ethercat_app
     app.add_typer(ethercat_app)
 
 

@@ -28,8 +28,8 @@ from collections import deque
 from typing import Any, Callable
 
 from ....motor.status import ALARM_BITS, Ux
-from .. import cia402
-from ..cia402 import State
+from . import cia402
+from .cia402 import State
 from . import cpio, csp, homing, modes
 
 log = logging.getLogger(__name__)

@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING, Any
 
 from ....motor.state.firmware import get_firmware
 from ....motor.state.memory import H_RANGE
-from ..dictionary import (DEVICE_STATE, VALUE_HIGH, VALUE_LOW, VALUE_RANGE, Dictionary,
+from ..engine.dictionary import (DEVICE_STATE, VALUE_HIGH, VALUE_LOW, VALUE_RANGE, Dictionary,
                           SdoAbort)
 from . import cpio, homing, modes
-from ..cia402 import State
+from .cia402 import State
 from .link import BAUD_CODE, CYCLE_CODE
 
 if TYPE_CHECKING:

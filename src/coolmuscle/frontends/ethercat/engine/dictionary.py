@@ -18,7 +18,7 @@ import logging
 import struct
 from typing import Callable
 
-from .objects import ARRAY, RECORD, STRING, Entry, Obj, Table
+from ..bridge.table import ARRAY, RECORD, STRING, Entry, Obj, Table
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ from typing import Any, NoReturn
 import typer
 
 from ...errors import CoolMuscleError
-from . import identity as ident
+from ...frontends.ethercat.bridge import identity as ident
 
 app = typer.Typer(name="ethercat", no_args_is_help=True,
                   help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
@@ -36,7 +36,7 @@ def chain_firmware(bridge: str) -> str:
 
 def sim_transport(iface: str, bridge: str) -> object:
     """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
-    from .transport import EthercatTransport
+    from ...frontends.ethercat.transport import EthercatTransport
     chain_firmware(bridge)
     return EthercatTransport(iface, ident.variant(bridge).code)
 
@@ -56,7 +56,7 @@ def _fail(text: str, code: int) -> NoReturn:
 def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Any:
     """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
     root's tools); a ``LabError`` is one line and exit status 1."""
-    from . import lab
+    from ...frontends.ethercat import lab
     run = lab.up if step == "up" else lab.down
     try:
         return run(namespace, master_if, slave_if)
@@ -91,7 +91,7 @@ def esi(
                                      help="Variants to describe (default: all)."),
 ) -> None:
     """Write the ESI file (ETG.2000 XML) to stdout: ``> CoolMuscleBridge.xml``."""
-    from .esi import esi_text
+    from ...frontends.ethercat.engine.esi import esi_text
     try:
         codes = tuple(ident.variant(b).code for b in bridge)
     except ValueError as exc:

@@ -14,8 +14,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from . import identity as ident
-from .objects import Obj, Table
+from ..bridge import identity as ident
+from ..bridge.table import Obj, Table
 
 EEPROM_BYTES = 2048
 CAT_STRINGS, CAT_GENERAL, CAT_FMMU, CAT_SM, CAT_TXPDO, CAT_RXPDO, CAT_END = \

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from .dictionary import (BAD_COMMAND, GENERAL, LENGTH_MISMATCH, NO_OBJECT, NO_SUBINDEX,
                          OUT_OF_MEMORY, TOGGLE, Dictionary, SdoAbort)
-from .objects import ARRAY, RECORD, STRING, VAR, Entry
+from ..bridge.table import ARRAY, RECORD, STRING, VAR, Entry
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from collections import deque
 from typing import Protocol
 
 from . import esm
-from . import identity as ident
+from ..bridge import identity as ident
 from .coe import CoeServer, UnsupportedService
 from .dictionary import Dictionary
 from .esc import Esc, SyncManager

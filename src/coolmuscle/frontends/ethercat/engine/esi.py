@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from . import identity as ident
-from .objects import STRING, VAR, Entry, Obj, Table, build_table
+from ..bridge import identity as ident
+from ..bridge.table import STRING, VAR, Entry, Obj, Table, build_table
 from .sii import COE_DETAILS, EEPROM_BYTES, build_sii
 
 ESI_VERSION = "1.6"

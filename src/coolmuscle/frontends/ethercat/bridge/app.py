@@ -18,13 +18,13 @@ from __future__ import annotations
 import logging
 from typing import Any, Callable
 
-from ...sim.kernel import PRIO_IO, Timer
-from . import esm
+from ....sim.kernel import PRIO_IO, Timer
+from ..engine import esm
 from . import identity as ident
-from .dictionary import Dictionary
-from .objects import Table, build_table
-from .sii import build_sii
-from .slave import SlaveStack
+from ..engine.dictionary import Dictionary
+from .table import Table, build_table
+from ..engine.sii import build_sii
+from ..engine.slave import SlaveStack
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +54,7 @@ class BridgeApp:
         self.drive: Any = None                  # every mode of ch. 6 and 7 (bridge/)
         self._cycle_timer: Timer | None = None
         if device is not None:
-            from .bridge.drive import BridgeDrive
+            from .drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     @staticmethod
