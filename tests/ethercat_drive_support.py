@@ -15,7 +15,7 @@ from typing import Any
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
 from coolmuscle.frontends.ethercat.engine.dictionary import SdoAbort
-from coolmuscle.frontends.ethercat.bridge.table import STRING
+from coolmuscle.frontends.ethercat.engine.od import STRING
 from coolmuscle.sim.kernel import Kernel
 
 MS = 1_000_000

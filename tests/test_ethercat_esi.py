@@ -13,9 +13,11 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.description import describe
+from coolmuscle.frontends.ethercat.bridge.esi import esi_text
+from coolmuscle.frontends.ethercat.bridge.table import build_table
 from coolmuscle.frontends.ethercat.engine.dictionary import NO_OBJECT, Dictionary, SdoAbort
-from coolmuscle.frontends.ethercat.engine.esi import esi_text
-from coolmuscle.frontends.ethercat.bridge.table import VAR, build_table
+from coolmuscle.frontends.ethercat.engine.od import VAR
 from coolmuscle.frontends.ethercat.engine.sii import build_sii, crc8, parse
 
 #: ETG.2000 EtherCATInfo DeviceType: the order of its child elements.
@@ -52,10 +54,10 @@ def test_esi_is_etg2000_shaped(esi):
 
 @pytest.mark.parametrize("code", ["EB01", "EB02", "EB12"])
 def test_esi_agrees_with_the_sii_image_and_the_dictionary(esi, code):
-    table = build_table(code)
-    image = build_sii(table)
+    slave = describe(code)
+    image = build_sii(slave)
     sii = parse(image)
-    od = Dictionary(table)
+    od = Dictionary(slave.table)
     device = devices(esi)[code]
     assert sii.crc_ok and crc8(image[:14]) == image[14]
     kind = device.find("Type")

@@ -91,7 +91,7 @@ def esi(
                                      help="Variants to describe (default: all)."),
 ) -> None:
     """Write the ESI file (ETG.2000 XML) to stdout: ``> CoolMuscleBridge.xml``."""
-    from ...frontends.ethercat.engine.esi import esi_text
+    from ...frontends.ethercat.bridge.esi import esi_text
     try:
         codes = tuple(ident.variant(b).code for b in bridge)
     except ValueError as exc:

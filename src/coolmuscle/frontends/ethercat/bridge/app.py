@@ -1,11 +1,12 @@
 """The bridge application: the four Cool Muscles behind the slave (manual 1.4, 6.3).
 
-:class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
-object dictionary built from the table, the SII image, and the 1 ms cycle
-(:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
-the output image into the drive of :mod:`.bridge` (CiA402 6.1, every mode of ch. 6
-and 7) and the device API's cyclic state into the input image (6041h, 6064h + 0x800 n),
-through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
+:class:`BridgeApp` is the slave stack's :class:`~..engine.slave.Application`.  It hands
+the engine the bridge's slave description (:mod:`.description`), owns the object
+dictionary built from its table, and the 1 ms cycle (:meth:`BridgeApp.cycle`, run in
+the model's thread by the transport) that turns the output image into the drive of
+:mod:`.drive` (CiA402 6.1, every mode of ch. 6 and 7) and the device API's cyclic
+state into the input image (6041h, 6064h + 0x800 n), through
+:class:`~..engine.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
 without touching the ESC.
 
 Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
@@ -20,11 +21,11 @@ from typing import Any, Callable
 
 from ....sim.kernel import PRIO_IO, Timer
 from ..engine import esm
-from . import identity as ident
 from ..engine.dictionary import Dictionary
-from .table import Table, build_table
-from ..engine.sii import build_sii
+from ..engine.od import Table
 from ..engine.slave import SlaveStack
+from . import identity as ident
+from .description import describe
 
 log = logging.getLogger(__name__)
 
@@ -41,11 +42,11 @@ class BridgeApp:
 
     def __init__(self, device: Any, bridge: str = ident.DEFAULT_VARIANT) -> None:
         self.device = device
-        self.table: Table = build_table(bridge)
-        self.variant = self.table.variant
+        self.variant = ident.variant(bridge)
+        self.description = describe(self.variant.code)
+        self.table: Table = self.description.table
         self.dictionary = Dictionary(self.table)
-        self.sii = build_sii(self.table)
-        self.stack = SlaveStack(self, self.sii)
+        self.stack = SlaveStack(self, self.description)
         ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
         self.operational = False
