@@ -227,12 +227,6 @@ class Esc:
         """New contents of the buffered read SyncManager ``sm`` (thread-safe swap)."""
         self._inputs[sm] = bytes(data)
 
-    def pdi_deactivate(self, sm: int, off: bool) -> None:
-        """PDI control bit 0 of an SM (the firmware refuses a bad configuration)."""
-        s = self.sm[sm]
-        s.pdi_control = (s.pdi_control | 0x01) if off else (s.pdi_control & ~0x01 & 0xFF)
-        self._sync_sm_regs(s)
-
     # -- time ------------------------------------------------------------------
     def watchdog_ns(self) -> int:
         """SM watchdog time: 0x0420 x (0x0400 + 2) x 40 ns; 0 = disabled."""
