@@ -17,12 +17,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip import cip, connmgr
-from coolmuscle.frontends.enip import encapsulation as enc
-from coolmuscle.frontends.enip.adapter import Cm1Module
-from coolmuscle.frontends.enip.io import ConnectionTable, multicast_address
-from coolmuscle.frontends.enip.objects import ObjectModel
-from coolmuscle.frontends.enip.router import Router
+from coolmuscle.frontends.enip.cip import messages as cip
+from coolmuscle.frontends.enip.cip import connmgr
+from coolmuscle.frontends.enip.cip import encapsulation as enc
+from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
+from coolmuscle.frontends.enip.cip.io import ConnectionTable, multicast_address
+from coolmuscle.frontends.enip.cm1.objects import ObjectModel
+from coolmuscle.frontends.enip.cip.router import Router
 from coolmuscle.sim.kernel import Kernel
 from enip_support import enip_service, ports
 

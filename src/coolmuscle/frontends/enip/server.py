@@ -28,13 +28,13 @@ from typing import Any
 from ...errors import TransportError
 from ..transports.base import Port
 from ..transports.stream_server import StreamServer
-from .adapter import Cm1Module
-from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
-from .encapsulation import INVALID_LENGTH, Frame
-from .io import DEFAULT_IO_PORT, ConnectionTable
-from .objects import ObjectModel
-from .producer import Producer
-from .router import Router
+from .cm1.adapter import Cm1Module
+from .cip.encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
+from .cip.encapsulation import INVALID_LENGTH, Frame
+from .cip.io import DEFAULT_IO_PORT, ConnectionTable
+from .cm1.objects import ObjectModel
+from .cip.producer import Producer
+from .cip.router import Router
 
 log = logging.getLogger(__name__)
 

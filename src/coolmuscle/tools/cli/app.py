@@ -187,7 +187,7 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
     """``--enip`` (docs/enip.md)."""
     if value is None:
         return []
-    from ...frontends.enip.cli import transports as enip_transports
+    from .enip import transports as enip_transports
     try:
         return enip_transports(value, io_port, firmware.value, priority)
     except TransportError as exc:
@@ -446,7 +446,7 @@ def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, 
 
 
 def _register_tools() -> None:
-    from ...frontends.enip.cli import register as register_enip
+    from .enip import register as register_enip
     from .host_commands import register
     register(app)
     register_enip(app)   # coolmuscle enip eds
@@ -537,7 +537,7 @@ def _main(argv: list[str] | None) -> None:
         if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
-    from ...frontends.enip.cli import optional_value_argv
+    from .enip import optional_value_argv
     from ...frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
 
     def call() -> None:

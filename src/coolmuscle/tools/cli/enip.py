@@ -24,7 +24,7 @@ enip_app = typer.Typer(name="enip", no_args_is_help=True, add_completion=False,
 @enip_app.command("eds")
 def eds_command() -> None:
     """Print the module's EDS file (for RSLogix / the scanner's tool)."""
-    from .eds import generate
+    from ...frontends.enip.cm1.eds import generate
     sys.stdout.write(generate())
 
 
@@ -48,7 +48,7 @@ def optional_value_argv(argv: list[str] | None) -> list[str] | None:
 
 def parse_enip(value: str) -> tuple[str, int]:
     """``HOST``, ``HOST:PORT`` or ``PORT`` -> (host, port); port 0 picks a free one."""
-    from .server import DEFAULT_PORT
+    from ...frontends.enip.server import DEFAULT_PORT
     host, sep, port_text = value.rpartition(":")
     if not sep:
         if value.isdigit():
@@ -71,6 +71,6 @@ def transports(value: str | None, io_port: int, firmware: str,
         return []
     if firmware != "cm1":
         raise TransportError("--enip is the CM1 EtherNet/IP module: use --firmware cm1")
-    from .server import EnipTransport
+    from ...frontends.enip.server import EnipTransport
     host, port = parse_enip(value)
     return [EnipTransport(host=host, port=port, io_port=io_port, priority=priority)]

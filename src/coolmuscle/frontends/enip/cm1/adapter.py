@@ -33,7 +33,7 @@ import logging
 import struct
 from typing import Any, Literal
 
-from ...errors import CoolMuscleError
+from ....errors import CoolMuscleError
 
 log = logging.getLogger(__name__)
 

@@ -17,11 +17,11 @@ import struct
 import time
 from typing import Callable
 
-from . import cip
-from .cip import CipError
+from . import messages as cip
+from .messages import CipError
 from .encapsulation import Item, Peer, sockaddr
 from .io import ConnectionTable, open_or_error
-from .objects import CONNECTION_MANAGER_CLASS, IDENTITY, ObjectModel
+from ..cm1.objects import CONNECTION_MANAGER_CLASS, IDENTITY, ObjectModel
 
 log = logging.getLogger(__name__)
 

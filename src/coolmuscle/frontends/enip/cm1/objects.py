@@ -25,8 +25,8 @@ import struct
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
-from . import cip
-from .cip import CipError
+from ..cip import messages as cip
+from ..cip.messages import CipError
 
 # -- static facts (also the EDS) -----------------------------------------------------
 

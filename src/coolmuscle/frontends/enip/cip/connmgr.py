@@ -12,9 +12,9 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, replace
 
-from . import cip
-from .cip import CipError
-from .objects import (ASSEMBLY_CLASS, EXCLUSIVE_OWNER, IDENTITY, ROUTER_CLASS,
+from . import messages as cip
+from .messages import CipError
+from ..cm1.objects import (ASSEMBLY_CLASS, EXCLUSIVE_OWNER, IDENTITY, ROUTER_CLASS,
                       ConnectionInfo)
 
 # extended status (CIP Vol 1 table 3-5.33)

@@ -27,12 +27,13 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Callable, Protocol
 
-from . import cip, connmgr
-from .cip import CipError
+from . import connmgr
+from . import messages as cip
+from .messages import CipError
 from .encapsulation import (ITEM_CONNECTED_DATA, ITEM_SEQUENCED_ADDRESS, ITEM_SOCKADDR_OT,
                             ITEM_SOCKADDR_TO, CpfError, Item, encode_cpf, parse_cpf,
                             parse_sockaddr, sockaddr)
-from .objects import MAX_CONNECTIONS
+from ..cm1.objects import MAX_CONNECTIONS
 
 log = logging.getLogger(__name__)
 
