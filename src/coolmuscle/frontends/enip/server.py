@@ -25,7 +25,7 @@ import logging
 import socket
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 from ...errors import TransportError
 from ..transports.base import Port
@@ -52,7 +52,7 @@ MAX_TCP_CLIENTS = 64
 
 
 class _Datagrams(asyncio.DatagramProtocol):
-    def __init__(self, handler: Any) -> None:
+    def __init__(self, handler: Callable[[bytes, tuple[str, int]], None]) -> None:
         self.handler = handler
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
@@ -303,7 +303,7 @@ class EnipTransport(StreamServer):
             log.exception("enip: reading the input image failed")
 
     @staticmethod
-    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Any) -> None:
+    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Callable[[], None]) -> None:
         try:
             loop.call_soon_threadsafe(fn)
         except RuntimeError:     # the loop is closing

@@ -157,7 +157,7 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
         fw = chain_firmware(bridge)
     except EthercatUsageError as exc:
         raise UsageError(f"--bridge: {exc}") from None
-    chosen: list[Transport] = [sim_transport(iface, bridge)]  # type: ignore[list-item]
+    chosen: list[Transport] = [sim_transport(iface, bridge)]
     if tcp or pty or pty_link or stdio or any(modbus):
         chosen += _transports(tcp, pty, pty_link, stdio, modbus)
     return chosen, 4, fw

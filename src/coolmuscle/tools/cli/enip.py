@@ -2,17 +2,21 @@
 ``coolmuscle enip eds``.
 
 ``--enip`` takes an optional value: alone it means 127.0.0.1 (port 44818);
-:func:`optional_value_argv` inserts that default before Typer parses the line.
+:func:`optional_value_argv` inserts that default before Typer parses the line.  The
+module is :mod:`coolmuscle.frontends.enip` (docs/enip.md).
 """
 
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 
 from ...errors import TransportError
+
+if TYPE_CHECKING:
+    from ...frontends.transports.base import Transport
 
 DEFAULT_HOST = "127.0.0.1"
 FLAG = "--enip"
@@ -65,7 +69,7 @@ def parse_enip(value: str) -> tuple[str, int]:
 
 
 def transports(value: str | None, io_port: int, firmware: str,
-               priority: int | None = None) -> list[Any]:
+               priority: int | None = None) -> list[Transport]:
     """The EtherNet/IP transport for ``--enip`` (the CM1 module only)."""
     if value is None:
         return []

@@ -17,15 +17,19 @@ not call the model; :meth:`cycle` runs in the model's thread.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Callable
 
+from ....device import Device
 from ....sim.kernel import PRIO_IO, Timer
 from ..engine import esm
-from ..engine.dictionary import Dictionary
+from ..engine.dictionary import Dictionary, WriteHook
 from ..engine.od import Table
 from ..engine.slave import SlaveStack
 from . import identity as ident
 from .description import describe
+
+if TYPE_CHECKING:
+    from .drive import BridgeDrive
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +42,12 @@ CYCLE_NS = 1_000_000
 
 
 class BridgeApp:
-    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4)."""
+    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4).
 
-    def __init__(self, device: Any, bridge: str = ident.DEFAULT_VARIANT) -> None:
+    Without a device (``None``) the slave answers on the wire with its dictionary only:
+    no drive, no cycles (the sans-IO tests of the engine use it so)."""
+
+    def __init__(self, device: Device | None, bridge: str = ident.DEFAULT_VARIANT) -> None:
         self.device = device
         self.variant = ident.variant(bridge)
         self.description = describe(self.variant.code)
@@ -52,15 +59,15 @@ class BridgeApp:
         self.operational = False
         for axis in range(ident.AXES):
             self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
-        self.drive: Any = None                  # every mode of ch. 6 and 7 (bridge/)
+        self.drive: BridgeDrive | None = None   # every mode of ch. 6 and 7 (drive.py)
         self._cycle_timer: Timer | None = None
         if device is not None:
             from .drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     @staticmethod
-    def _mode_written(axis: int) -> Any:
-        def hook(sub: int, value: Any) -> int | None:
+    def _mode_written(axis: int) -> WriteHook:
+        def hook(sub: int, value: int | str) -> int | None:
             """6.2.2 note 3: a mode that is not available is set to csp (8)."""
             return None if value in MODES else MODE_CSP
         return hook
@@ -109,6 +116,8 @@ class BridgeApp:
         if period_ns <= 0:
             raise ValueError(f"the bridge cycle must be a positive time, not {period_ns} ns")
         self.stop_cycles()
+        if self.device is None:
+            raise RuntimeError("the bridge cycles run on a device's kernel: none was given")
         kernel = self.device.kernel
 
         def tick() -> None:

@@ -15,7 +15,7 @@ behaviour): a K write the motor would refuse is refused with 06090031h (too high
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ....motor.state.firmware import get_firmware
 from ....motor.state.memory import H_RANGE
@@ -27,6 +27,8 @@ from .link import BAUD_CODE, CYCLE_CODE
 
 if TYPE_CHECKING:
     from .axis import AxisDrive
+    from .cml_mailbox import CmlMailbox
+    from .drive import BridgeDrive
 
 K_FIRST = 21                 # 60F6h subindex 1h = K21 (7.5)
 
@@ -49,7 +51,7 @@ def check_k(firmware: str, k: int, value: int) -> None:
     raise SdoAbort(VALUE_RANGE, f"K{k}={value}")
 
 
-def register(drive: Any) -> None:
+def register(drive: "BridgeDrive") -> None:
     """Attach every hook of ``drive`` (a :class:`~.drive.BridgeDrive`) to the dictionary."""
     od = drive.od
     for axis in drive.axes.values():
@@ -62,7 +64,7 @@ def register(drive: Any) -> None:
         od.set(0xF510 + n, 3, CYCLE_CODE)                   # "1: 1 msec"
 
 
-def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
+def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: "BridgeDrive") -> None:
     i = axis.idx
     od.on_write(i(0x6060), lambda sub, v: _mode(axis, int(v)))
     od.on_write(i(0x6098), lambda sub, v: _method(int(v)))
@@ -144,7 +146,7 @@ def _outputs(od: Dictionary, axis: "AxisDrive", sub: int, value: int) -> None:
     axis.requests.append(lambda: axis.set_outputs(physical & mask))
 
 
-def _cml(axis: "AxisDrive", mailbox: Any, text: str) -> None:
+def _cml(axis: "AxisDrive", mailbox: "CmlMailbox", text: str) -> None:
     """F58xh: a CML string, in CML mode (7.1.1)."""
     if axis.mode != modes.CML:
         raise SdoAbort(DEVICE_STATE, "CML strings need CML mode (6060h = 101)")

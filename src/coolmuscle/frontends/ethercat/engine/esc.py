@@ -255,7 +255,7 @@ class Esc:
             self.pdi.watchdog_expired()
 
     # -- frames ----------------------------------------------------------------
-    def process(self, frame: bytes, now: int = 0) -> bytearray | None:
+    def process(self, frame: bytes | bytearray | memoryview, now: int = 0) -> bytearray | None:
         """Process one Ethernet frame; return the frame to send on, None if not EtherCAT."""
         self._now = now
         if len(frame) < 16 or frame[12] != 0x88 or frame[13] != 0xA4:
