@@ -15,7 +15,7 @@ behaviour): a K write the motor would refuse is refused with 06090031h (too high
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from ....motor.state.firmware import get_firmware
 from ....motor.state.memory import H_RANGE
@@ -28,9 +28,20 @@ from .link import BAUD_CODE, CYCLE_CODE
 if TYPE_CHECKING:
     from .axis import AxisDrive
     from .cml_mailbox import CmlMailbox
-    from .drive import BridgeDrive
 
 K_FIRST = 21                 # 60F6h subindex 1h = K21 (7.5)
+
+
+class Drive(Protocol):
+    """What the hooks reach of the drive (:class:`~.drive.BridgeDrive`, which registers
+    them: it imports this module, so this module sees it through this protocol)."""
+
+    od: Dictionary
+    firmware: tuple[str, ...]
+    axes: dict[int, AxisDrive]
+    mailboxes: dict[int, CmlMailbox]
+
+    def system_info(self, sub: int) -> int: ...
 
 
 def signed32(value: int) -> int:
@@ -51,7 +62,7 @@ def check_k(firmware: str, k: int, value: int) -> None:
     raise SdoAbort(VALUE_RANGE, f"K{k}={value}")
 
 
-def register(drive: "BridgeDrive") -> None:
+def register(drive: Drive) -> None:
     """Attach every hook of ``drive`` (a :class:`~.drive.BridgeDrive`) to the dictionary."""
     od = drive.od
     for axis in drive.axes.values():
@@ -64,7 +75,7 @@ def register(drive: "BridgeDrive") -> None:
         od.set(0xF510 + n, 3, CYCLE_CODE)                   # "1: 1 msec"
 
 
-def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: "BridgeDrive") -> None:
+def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Drive) -> None:
     i = axis.idx
     od.on_write(i(0x6060), lambda sub, v: _mode(axis, int(v)))
     od.on_write(i(0x6098), lambda sub, v: _method(int(v)))
