@@ -399,8 +399,8 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
     import sys
 
     from coolmuscle.frontends.enip.cip import encapsulation as enc
-    from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
     from coolmuscle.frontends.enip.cip.producer import SWITCH_INTERVAL
+    from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
     from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
     held: dict[str, list[bool]] = {"write_output": [], "input_image": []}
     box: list = []
@@ -466,8 +466,8 @@ def test_adapter_closes_completely_with_class1_running(caplog):
 def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypatch):
     """At most MAX_TCP_CLIENTS encapsulation clients at once (docs/reliability.md
     "Bounds"): one more is closed as it arrives, the others keep their sessions."""
-    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from coolmuscle.frontends.enip import server as enip_server
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, frame
     monkeypatch.setattr(enip_server, "MAX_TCP_CLIENTS", 4)
     with enip_service() as st:

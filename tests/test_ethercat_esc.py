@@ -10,13 +10,13 @@ import struct
 
 import pytest
 
-from coolmuscle.frontends.ethercat.engine import esc as E
-from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.bridge import identity as ident
 from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge.table import build_table
+from coolmuscle.frontends.ethercat.engine import esc as E
+from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.engine.coe import CoeServer
 from coolmuscle.frontends.ethercat.engine.dictionary import Dictionary
-from coolmuscle.frontends.ethercat.bridge.table import build_table
 
 MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
 
