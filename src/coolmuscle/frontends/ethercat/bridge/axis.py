@@ -6,7 +6,7 @@ the requests the SDO hooks queued (K writes, outputs), reads the motor through t
 device API's ``cyclic_state``, applies a pending mode switch (6.2.2: at rest, 5 ms
 apart), runs the mode's controlword logic and publishes 6041h, 6061h, 6064h.
 
-* csp / hm / CPIO (CiA402): part 1's table :func:`..cia402.next_state`; into
+* csp / hm / CPIO (CiA402): the table :func:`.cia402.next_state`; into
   state B or C from A send ``(`` (motor enable, which also clears a latched alarm),
   into state A from B or C send ``)`` (motor free); a fault reset leaves the alarm
   latched until the next Switched on enables the motor (6.1.1 State C note 1).

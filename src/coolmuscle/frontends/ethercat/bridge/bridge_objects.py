@@ -1,9 +1,9 @@
 """The drive's behaviour on the object dictionary: the SDO hooks of 6000h-7FFFh and
 F5xxh (ethercat-bridge-users-guide.txt 6.2-6.5, 7.2-7.5, Appendix 6).
 
-The entries themselves (index, type, access, availability) are part 1's table
-(:mod:`..objects`); this module only attaches behaviour with
-:meth:`~..dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
+The entries themselves (index, type, access, availability) are the Appendix 6 table
+(:mod:`.table`); this module only attaches behaviour with
+:meth:`~..engine.dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
 thread: they check a value against the manual (abort codes of 5.4.1), answer from
 what the model thread last published, and queue the model calls on the axis'
 ``requests`` for its next cycle.

@@ -1,7 +1,7 @@
 """The drive behind the bridge: four :class:`~.axis.AxisDrive`, their CM ports and
 mailboxes (ethercat-bridge-users-guide.txt chapters 6 and 7).
 
-:class:`BridgeDrive` is what :class:`~..app.BridgeApp` runs each bridge cycle (in
+:class:`BridgeDrive` is what :class:`~.app.BridgeApp` runs each bridge cycle (in
 the model's thread): for every axis the cyclic CM-port exchange (counted on its
 :class:`~.link.CmLink`), the CML mailbox, then the axis.  It is a client of the
 motor model through the device API only.  ``outputs_received`` and
