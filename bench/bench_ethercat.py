@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
-from coolmuscle.frontends.ethercat.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp  # noqa: E402
 from coolmuscle.frontends.ethercat.lab import veth_pair  # noqa: E402
 from coolmuscle.frontends.ethercat.transport import EthercatTransport, FrameThread  # noqa: E402
 from coolmuscle.frontends.transports.service import ServiceThread  # noqa: E402

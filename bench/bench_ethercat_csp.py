@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
-from coolmuscle.frontends.ethercat.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp  # noqa: E402
 from coolmuscle.frontends.ethercat.transport import (  # noqa: E402
     MODEL_PRIORITY, CycleLateness)
 from coolmuscle.sim.kernel import Kernel  # noqa: E402

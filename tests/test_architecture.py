@@ -367,3 +367,55 @@ def test_a_plugin_named_against_the_layers_is_caught() -> None:
                "WebTransport"),)
     assert illegal_layer_imports(with_plugins(graph(False), upward)) != []
     assert illegal_layer_imports(with_plugins(graph(False), ())) == []
+
+
+# -- the fieldbus rooms: engines that never name the device they serve -----------------
+ETHERCAT_ENGINE = "coolmuscle.frontends.ethercat.engine"
+CIP = "coolmuscle.frontends.enip.cip"
+CM1 = "coolmuscle.frontends.enip.cm1"
+#: The words that name the product: the engine is configured by a slave description.
+PRODUCT_NAMES = re.compile(r"cool|muscle|bridge|EB0", re.IGNORECASE)
+
+
+def _within(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def imports_leaving(g: grimp.ImportGraph, package: str) -> set[tuple[str, str]]:
+    """(importer, imported) pairs where a module of ``package`` imports a coolmuscle
+    module outside it."""
+    return {(m, i) for m in g.modules if _within(m, package)
+            for i in g.find_modules_directly_imported_by(m) if not _within(i, package)}
+
+
+@pytest.mark.parametrize("type_checking", [False, True], ids=["runtime", "with-type-only"])
+def test_the_ethercat_engine_imports_only_itself(type_checking: bool) -> None:
+    """Not the bridge, not motor/, chain/ or device/: the engine is the bridge's, not
+    the other way round (KickCAT: "the simulator core never names a profile")."""
+    g = graph(type_checking)
+    assert len([m for m in g.modules if _within(m, ETHERCAT_ENGINE)]) >= 10
+    assert imports_leaving(g, ETHERCAT_ENGINE) == set()
+    bitten = graph.__wrapped__(type_checking)
+    bitten.add_import(importer=ETHERCAT_ENGINE + ".slave",
+                      imported="coolmuscle.frontends.ethercat.bridge.identity")
+    assert imports_leaving(bitten, ETHERCAT_ENGINE) == {
+        (ETHERCAT_ENGINE + ".slave", "coolmuscle.frontends.ethercat.bridge.identity")}
+
+
+def test_the_ethercat_engine_names_no_product() -> None:
+    import coolmuscle.frontends.ethercat.engine as engine
+    sources = sorted(Path(engine.__path__[0]).glob("*.py"))
+    assert len(sources) >= 10
+    named = {f"{p.name}:{n}": line.strip() for p in sources
+             for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+             if PRODUCT_NAMES.search(line)}
+    assert named == {}
+    assert PRODUCT_NAMES.search("the EB02 bridge")            # the pattern bites
+
+
+@pytest.mark.parametrize("type_checking", [False, True], ids=["runtime", "with-type-only"])
+def test_the_cip_machinery_imports_nothing_of_the_cm1_module(type_checking: bool) -> None:
+    g = graph(type_checking)
+    assert g.chain_exists(importer=CM1, imported=CIP, as_packages=True)     # cm1 uses cip
+    assert not g.chain_exists(importer=CIP, imported=CM1, as_packages=True)
+    assert {i for _m, i in imports_leaving(g, CIP)} <= {"coolmuscle.errors"}

@@ -22,7 +22,7 @@ import dataclasses, importlib, inspect, json, sys, types
 import coolmuscle
 for name in ("coolmuscle.chain.daisy", "coolmuscle.tools.script.runner",
              "coolmuscle.client", "coolmuscle.tools.cli.app",
-             "coolmuscle.frontends.enip.cip", "coolmuscle.frontends.ethercat.objects",
+             "coolmuscle.frontends.enip.cip.messages", "coolmuscle.frontends.ethercat.bridge.table",
              "coolmuscle.tools.twin.compare", "coolmuscle.chain.machine"):
     importlib.import_module(name)
 

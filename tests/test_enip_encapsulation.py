@@ -17,12 +17,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip import cip, connmgr
-from coolmuscle.frontends.enip import encapsulation as enc
-from coolmuscle.frontends.enip.adapter import Cm1Module
-from coolmuscle.frontends.enip.io import ConnectionTable, multicast_address
-from coolmuscle.frontends.enip.objects import ObjectModel
-from coolmuscle.frontends.enip.router import Router
+from coolmuscle.frontends.enip.cip import connmgr
+from coolmuscle.frontends.enip.cip import encapsulation as enc
+from coolmuscle.frontends.enip.cip import messages as cip
+from coolmuscle.frontends.enip.cip.io import ConnectionTable, multicast_address
+from coolmuscle.frontends.enip.cip.router import Router
+from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
+from coolmuscle.frontends.enip.cm1.objects import DESCRIPTION, ObjectModel
 from coolmuscle.sim.kernel import Kernel
 from enip_support import enip_service, ports
 
@@ -38,7 +39,7 @@ class Rig:
         self.chain = Chain(self.kernel, motors=1, firmware="cm1", state_dir=None)
         self.module = Cm1Module(self.chain)
         self.now = 1_000_000_000
-        self.table = ConnectionTable(self.module, "127.0.0.1", 2222)
+        self.table = ConnectionTable(self.module, DESCRIPTION, "127.0.0.1", 2222)
         objects = ObjectModel(self.module, output_owned=lambda: self.table.owner is not None)
         self.router = Router(objects, self.table, 44818, clock=lambda: self.now)
         self.sessions = enc.Sessions()

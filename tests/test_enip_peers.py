@@ -15,8 +15,8 @@ import time
 
 import pytest
 
-from coolmuscle.frontends.enip import objects
-from coolmuscle.frontends.enip.eds import generate
+from coolmuscle.frontends.enip.cm1 import objects
+from coolmuscle.frontends.enip.cm1.eds import generate
 from enip_support import KernelStamps, enip_process, enip_service, ports
 
 pycomm3 = pytest.importorskip("pycomm3")
@@ -305,7 +305,7 @@ def test_pycomm3_unconnected_send_is_unwrapped(service):
 def test_multicast_t_o_reaches_a_joined_member():
     """A hand-written originator (ours, not a peer): Forward_Open with T->O multicast; the
     reply's T->O sockaddr item names the group (CIP Vol 2 3-5.3); packets arrive there."""
-    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
     with enip_service() as st:
         tcp_port, io_port = ports(st)
@@ -398,9 +398,9 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
     set back when it stops."""
     import sys
 
-    from coolmuscle.frontends.enip import encapsulation as enc
-    from coolmuscle.frontends.enip.adapter import Cm1Module
-    from coolmuscle.frontends.enip.producer import SWITCH_INTERVAL
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip.producer import SWITCH_INTERVAL
+    from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
     from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
     held: dict[str, list[bool]] = {"write_output": [], "input_image": []}
     box: list = []
@@ -440,7 +440,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
 def test_adapter_closes_completely_with_class1_running(caplog):
     """Stopping the service while T->O packets flow ends the producer thread, closes the
     connections and frees the TCP, UDP 44818 and I/O ports; nothing is logged as failed."""
-    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, forward_open, frame, rr_data
     with enip_service() as st:
         transport = st.transports[0]
@@ -466,8 +466,8 @@ def test_adapter_closes_completely_with_class1_running(caplog):
 def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypatch):
     """At most MAX_TCP_CLIENTS encapsulation clients at once (docs/reliability.md
     "Bounds"): one more is closed as it arrives, the others keep their sessions."""
-    from coolmuscle.frontends.enip import encapsulation as enc
     from coolmuscle.frontends.enip import server as enip_server
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, frame
     monkeypatch.setattr(enip_server, "MAX_TCP_CLIENTS", 4)
     with enip_service() as st:

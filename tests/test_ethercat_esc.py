@@ -10,13 +10,13 @@ import struct
 
 import pytest
 
-from coolmuscle.frontends.ethercat import esc as E
-from coolmuscle.frontends.ethercat import esm
-from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.app import BridgeApp
-from coolmuscle.frontends.ethercat.coe import CoeServer
-from coolmuscle.frontends.ethercat.dictionary import Dictionary
-from coolmuscle.frontends.ethercat.objects import build_table
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge.table import build_table
+from coolmuscle.frontends.ethercat.engine import esc as E
+from coolmuscle.frontends.ethercat.engine import esm
+from coolmuscle.frontends.ethercat.engine.coe import CoeServer
+from coolmuscle.frontends.ethercat.engine.dictionary import Dictionary
 
 MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
 

@@ -15,10 +15,10 @@ import time
 
 import pytest
 
-from coolmuscle.frontends.ethercat import esc as E
-from coolmuscle.frontends.ethercat import esm
-from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.engine import esc as E
+from coolmuscle.frontends.ethercat.engine import esm
 
 scapy_ecat = pytest.importorskip("scapy.contrib.ethercat")
 from scapy.all import Ether, raw  # noqa: E402

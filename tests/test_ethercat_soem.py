@@ -12,8 +12,9 @@ import pytest
 from ethercat_support import link, needs_net_admin, run_master, serving
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.ethercat import esm, identity as ident
-from coolmuscle.frontends.ethercat.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 

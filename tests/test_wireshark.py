@@ -43,8 +43,8 @@ from wireshark_support import (
 )
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip import objects as enip_objects
-from coolmuscle.frontends.ethercat import identity as ident
+from coolmuscle.frontends.enip.cm1 import objects as enip_objects
+from coolmuscle.frontends.ethercat.bridge import identity as ident
 from coolmuscle.frontends.ethercat.lab import veth_pair
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport

@@ -3,13 +3,15 @@
 :class:`EnipTransport` is started by :class:`coolmuscle.transports.service.Service`
 like every other transport and lives in its asyncio loop, so every model call
 happens in the thread that drives the kernel, at the wall-clock instant now
-(``Port.call``).  It owns only sockets and timers:
+(``Port.call``).  It joins the CM1 module (:mod:`.cm1`: the module over the device
+API, its objects and description) to the CIP machinery (:mod:`.cip`) and owns only
+sockets and timers:
 
-* TCP: one :class:`~.encapsulation.Connection` per client; a frame longer than the
+* TCP: one :class:`~.cip.encapsulation.Connection` per client; a frame longer than the
   encapsulation limit is answered 0x0065 and the connection closed;
 * UDP on the TCP port number: ListIdentity / ListServices / ListInterfaces;
 * UDP I/O port (2222): O->T packets in; T->O packets out, sent on time by the
-  :class:`~.producer.Producer` thread; a loop timer runs the watchdogs.  The
+  :class:`~.cip.producer.Producer` thread; a loop timer runs the watchdogs.  The
   connection table is shared under one lock.
 
 ``port=0`` / ``io_port=0`` pick free ports (tests); the UDP list port then takes the
@@ -23,18 +25,18 @@ import logging
 import socket
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 from ...errors import TransportError
 from ..transports.base import Port
 from ..transports.stream_server import StreamServer
-from .adapter import Cm1Module
-from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
-from .encapsulation import INVALID_LENGTH, Frame
-from .io import DEFAULT_IO_PORT, ConnectionTable
-from .objects import ObjectModel
-from .producer import Producer
-from .router import Router
+from .cip.encapsulation import (INVALID_LENGTH, Connection, Frame, FrameReader, FramingError,
+                                Sessions, answer_datagram)
+from .cip.io import DEFAULT_IO_PORT, ConnectionTable
+from .cip.producer import Producer
+from .cip.router import Router
+from .cm1.adapter import Cm1Module
+from .cm1.objects import DESCRIPTION, ObjectModel
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +52,7 @@ MAX_TCP_CLIENTS = 64
 
 
 class _Datagrams(asyncio.DatagramProtocol):
-    def __init__(self, handler: Any) -> None:
+    def __init__(self, handler: Callable[[bytes, tuple[str, int]], None]) -> None:
         self.handler = handler
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
@@ -95,7 +97,7 @@ class EnipTransport(StreamServer):
         if device is None:
             raise TransportError("enip: no device behind this port")
         self.module = Cm1Module(device, self.motor)
-        self.table = ConnectionTable(self.module, self.host, 0, port.call)
+        self.table = ConnectionTable(self.module, DESCRIPTION, self.host, 0, port.call)
         objects = ObjectModel(self.module, host=self.host,
                               output_owned=lambda: self.table is not None
                               and self.table.owner is not None, reset=self._reset)
@@ -301,7 +303,7 @@ class EnipTransport(StreamServer):
             log.exception("enip: reading the input image failed")
 
     @staticmethod
-    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Any) -> None:
+    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Callable[[], None]) -> None:
         try:
             loop.call_soon_threadsafe(fn)
         except RuntimeError:     # the loop is closing

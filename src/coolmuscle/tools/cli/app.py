@@ -150,14 +150,14 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
                          modbus: tuple[str | None, str | None, str | None],
                          ) -> tuple[list[Transport], int, str]:
     """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
-    from ...frontends.ethercat.cli import EthercatUsageError, chain_firmware, sim_transport
+    from .ethercat import EthercatUsageError, chain_firmware, sim_transport
     if motors not in (1, 4):
         raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
     try:
         fw = chain_firmware(bridge)
     except EthercatUsageError as exc:
         raise UsageError(f"--bridge: {exc}") from None
-    chosen: list[Transport] = [sim_transport(iface, bridge)]  # type: ignore[list-item]
+    chosen: list[Transport] = [sim_transport(iface, bridge)]
     if tcp or pty or pty_link or stdio or any(modbus):
         chosen += _transports(tcp, pty, pty_link, stdio, modbus)
     return chosen, 4, fw
@@ -187,7 +187,7 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
     """``--enip`` (docs/enip.md)."""
     if value is None:
         return []
-    from ...frontends.enip.cli import transports as enip_transports
+    from .enip import transports as enip_transports
     try:
         return enip_transports(value, io_port, firmware.value, priority)
     except TransportError as exc:
@@ -446,7 +446,7 @@ def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, 
 
 
 def _register_tools() -> None:
-    from ...frontends.enip.cli import register as register_enip
+    from .enip import register as register_enip
     from .host_commands import register
     register(app)
     register_enip(app)   # coolmuscle enip eds
@@ -500,7 +500,7 @@ def _main_options(
 
 
 def _register_subapps() -> None:
-    from ...frontends.ethercat.cli import app as ethercat_app
+    from .ethercat import app as ethercat_app
     app.add_typer(ethercat_app)
 
 
@@ -537,7 +537,7 @@ def _main(argv: list[str] | None) -> None:
         if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
-    from ...frontends.enip.cli import optional_value_argv
+    from .enip import optional_value_argv
     from ..web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
 
     def call() -> None:

@@ -1,9 +1,9 @@
 """The drive's behaviour on the object dictionary: the SDO hooks of 6000h-7FFFh and
 F5xxh (ethercat-bridge-users-guide.txt 6.2-6.5, 7.2-7.5, Appendix 6).
 
-The entries themselves (index, type, access, availability) are part 1's table
-(:mod:`..objects`); this module only attaches behaviour with
-:meth:`~..dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
+The entries themselves (index, type, access, availability) are the Appendix 6 table
+(:mod:`.table`); this module only attaches behaviour with
+:meth:`~..engine.dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
 thread: they check a value against the manual (abort codes of 5.4.1), answer from
 what the model thread last published, and queue the model calls on the axis'
 ``requests`` for its next cycle.
@@ -15,20 +15,33 @@ behaviour): a K write the motor would refuse is refused with 06090031h (too high
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
 
 from ....motor.state.firmware import get_firmware
 from ....motor.state.memory import H_RANGE
-from ..dictionary import (DEVICE_STATE, VALUE_HIGH, VALUE_LOW, VALUE_RANGE, Dictionary,
+from ..engine.dictionary import (DEVICE_STATE, VALUE_HIGH, VALUE_LOW, VALUE_RANGE, Dictionary,
                           SdoAbort)
 from . import cpio, homing, modes
-from ..cia402 import State
+from .cia402 import State
 from .link import BAUD_CODE, CYCLE_CODE
 
 if TYPE_CHECKING:
     from .axis import AxisDrive
+    from .cml_mailbox import CmlMailbox
 
 K_FIRST = 21                 # 60F6h subindex 1h = K21 (7.5)
+
+
+class Drive(Protocol):
+    """What the hooks reach of the drive (:class:`~.drive.BridgeDrive`, which registers
+    them: it imports this module, so this module sees it through this protocol)."""
+
+    od: Dictionary
+    firmware: tuple[str, ...]
+    axes: dict[int, AxisDrive]
+    mailboxes: dict[int, CmlMailbox]
+
+    def system_info(self, sub: int) -> int: ...
 
 
 def signed32(value: int) -> int:
@@ -49,7 +62,7 @@ def check_k(firmware: str, k: int, value: int) -> None:
     raise SdoAbort(VALUE_RANGE, f"K{k}={value}")
 
 
-def register(drive: Any) -> None:
+def register(drive: Drive) -> None:
     """Attach every hook of ``drive`` (a :class:`~.drive.BridgeDrive`) to the dictionary."""
     od = drive.od
     for axis in drive.axes.values():
@@ -62,7 +75,7 @@ def register(drive: Any) -> None:
         od.set(0xF510 + n, 3, CYCLE_CODE)                   # "1: 1 msec"
 
 
-def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
+def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Drive) -> None:
     i = axis.idx
     od.on_write(i(0x6060), lambda sub, v: _mode(axis, int(v)))
     od.on_write(i(0x6098), lambda sub, v: _method(int(v)))
@@ -144,7 +157,7 @@ def _outputs(od: Dictionary, axis: "AxisDrive", sub: int, value: int) -> None:
     axis.requests.append(lambda: axis.set_outputs(physical & mask))
 
 
-def _cml(axis: "AxisDrive", mailbox: Any, text: str) -> None:
+def _cml(axis: "AxisDrive", mailbox: "CmlMailbox", text: str) -> None:
     """F58xh: a CML string, in CML mode (7.1.1)."""
     if axis.mode != modes.CML:
         raise SdoAbort(DEVICE_STATE, "CML strings need CML mode (6060h = 101)")

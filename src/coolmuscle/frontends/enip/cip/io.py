@@ -1,9 +1,12 @@
 """Class 1 implicit I/O and class 3 connections: the connection table (CIP Vol 1 3-4, Vol 2 3-3).
 
 Sans-socket: the server passes the monotonic time (ns) in and sends what comes out.
+What the adapter offers (identity, the one Class 1 connection, how many connections)
+is its :class:`~.description.AdapterDescription`; what it drives is a :class:`Module`.
 
-* Class 1 exclusive owner 0x66 -> 0x65 (manual ch. 4): O->T point-to-point, with the
-  32-bit run/idle header when its size says so (20 bytes) or modeless (16 bytes);
+* Class 1 exclusive owner of the offered connection (output -> input assembly): O->T
+  point-to-point, with the 32-bit run/idle header when its size says so (4 more
+  bytes) or modeless;
   T->O point-to-point to the originator's address (port 2222 or the port of its
   T->O sockaddr item) or multicast (CIP Vol 2 3-5.3 address, port of the server).
 * Every T->O production carries the sequenced address item (32-bit encapsulation
@@ -25,14 +28,15 @@ import ipaddress
 import logging
 import struct
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Literal, Protocol, TypeVar
 
-from . import cip, connmgr
-from .cip import CipError
+from . import connmgr
+from . import messages as cip
+from .description import AdapterDescription
 from .encapsulation import (ITEM_CONNECTED_DATA, ITEM_SEQUENCED_ADDRESS, ITEM_SOCKADDR_OT,
                             ITEM_SOCKADDR_TO, CpfError, Item, encode_cpf, parse_cpf,
                             parse_sockaddr, sockaddr)
-from .objects import MAX_CONNECTIONS
+from .messages import CipError
 
 log = logging.getLogger(__name__)
 
@@ -77,10 +81,29 @@ class Connection:
         return self.req.to_rpi * NS_PER_US
 
 
-class Module(Protocol):
-    """What the table drives in the module (:class:`.adapter.Cm1Module`)."""
+_T = TypeVar("_T")
 
-    io_state: Any
+
+class Call(Protocol):
+    """How the table reaches the model: ``call(fn, *args)`` runs ``fn`` in the model's
+    thread at the wall-clock instant now (``Port.call``) and returns what it returns."""
+
+    def __call__(self, fn: Callable[..., _T], /, *args: Any) -> _T: ...
+
+
+def direct(fn: Callable[..., _T], /, *args: Any) -> _T:
+    """A :class:`Call` for a caller already in the model's thread (tests)."""
+    return fn(*args)
+
+
+#: The I/O state the table gives the module (Identity status, CIP Vol 1 5A-2.2).
+IoState = Literal["none", "run", "idle", "faulted"]
+
+
+class Module(Protocol):
+    """What the table drives in the product's module: its images and I/O state."""
+
+    io_state: IoState
 
     def input_image(self) -> bytes: ...
 
@@ -103,9 +126,10 @@ def multicast_address(host: str) -> str:
 class ConnectionTable:
     """Open, close, consume, produce and time out connections."""
 
-    def __init__(self, module: Module, host: str, io_port: int,
-                 call: Callable[..., Any] = lambda fn, *a: fn(*a)) -> None:
+    def __init__(self, module: Module, adapter: AdapterDescription, host: str, io_port: int,
+                 call: Call = direct) -> None:
         self.module = module
+        self.adapter = adapter
         self.host = host
         self.io_port = io_port
         self.call = call
@@ -115,7 +139,7 @@ class ConnectionTable:
         self.timeouts = 0
         self.dropped = 0
         #: The input image productions send; refreshed by the loop (:meth:`refresh`).
-        self.image = bytes(8)
+        self.image = bytes(adapter.connection.input_size)
 
     # -- opening and closing ------------------------------------------------------------
     def _new_id(self) -> int:
@@ -131,13 +155,13 @@ class ConnectionTable:
         """Forward_Open: the reply body and the CPF items to send with it."""
         if req.triad in self.by_triad:
             raise req.failure(connmgr.DUPLICATE)
-        if len(self.by_triad) >= MAX_CONNECTIONS:
+        if len(self.by_triad) >= self.adapter.max_connections:
             raise req.failure(connmgr.OUT_OF_CONNECTIONS)
         if req.transport_class == 3:
-            connmgr.check_class3(req)
+            connmgr.check_class3(req, self.adapter.identity)
             conn = Connection(req, self._new_id(), req.to_id, peer_ip, session)
             return self._register(conn, now), []
-        header = connmgr.check_class1(req)
+        header = connmgr.check_class1(req, self.adapter.identity, self.adapter.connection)
         if self.owner is not None:
             raise req.failure(connmgr.OWNERSHIP_CONFLICT)
         conn = Connection(req, self._new_id(), req.to_id, peer_ip, 0, header)

@@ -1,13 +1,14 @@
 """The EtherCAT slave controller (ESC): a sans-IO core, frames in and frames out.
 
-Owns what a real ESC does in hardware (ETG.1000.4; the bridge's layout is
-ethercat-bridge-users-guide.txt 2.3): the register space, the 14 datagram commands
-with their working-counter rules and auto-increment addressing, the FMMUs, the
-SyncManagers (mailbox full/empty and repeat, buffered process data), the SII
-EEPROM interface, the DC receive-time registers a master reads, and the SM
-watchdog.  No socket, no clock inside: :meth:`Esc.process` takes a frame and the
-time ``now`` (ns) and returns the frame to send on; :meth:`Esc.tick` runs the
-watchdog.  It knows nothing of Cool Muscle.
+Owns what a real ESC does in hardware (ETG.1000.4, the ESC datasheet section II):
+the register space, the 14 datagram commands with their working-counter rules and
+auto-increment addressing, the FMMUs, the SyncManagers (mailbox full/empty and
+repeat, buffered process data), the SII EEPROM interface, the DC receive-time
+registers a master reads, and the SM watchdog.  No socket, no clock inside:
+:meth:`Esc.process` takes a frame and the time ``now`` (ns) and returns the frame to
+send on; :meth:`Esc.tick` runs the watchdog.  It knows nothing of the device behind
+it: what a real chip loads from its EEPROM at power-up (PDI control, station alias)
+it reads from the SII image it is given.
 
 The firmware side (the slave stack, :mod:`.slave`) is the :class:`Pdi`: the ESC
 calls it when the master writes AL control, fills the receive mailbox, empties the
@@ -62,8 +63,8 @@ REG_DC_RECV = 0x0900
 REG_DC_SYSTIME = 0x0910
 REG_DC_RECV_PU = 0x0918
 
-N_FMMU = 3          # manual 2.3: FMMU0 outputs, FMMU1 inputs, FMMU2 mailbox status
-N_SM = 4            # manual 2.3: SM0/SM1 mailbox, SM2/SM3 process data
+N_FMMU = 3          # FMMU0 outputs, FMMU1 inputs, FMMU2 mailbox status
+N_SM = 4            # SM0/SM1 mailbox, SM2/SM3 process data
 RAM_START = 0x1000
 RAM_SIZE = 8 * 1024
 MEM_SIZE = RAM_START + RAM_SIZE
@@ -167,10 +168,11 @@ class Esc:
         m[0x0005] = N_SM
         m[0x0006] = RAM_SIZE // 1024
         m[0x0007] = 0x0F              # ports 0 and 1: MII
-        struct.pack_into("<H", m, 0x0008, 0x0000)   # features: bit FMMUs, no DC (manual 2.3)
+        struct.pack_into("<H", m, 0x0008, 0x0000)   # features: bit FMMUs, no DC
         struct.pack_into("<H", m, REG_DL_STATUS, 0x5613)
         struct.pack_into("<H", m, REG_AL_STATUS, 0x0001)
-        m[REG_PDI_CONTROL] = 0x05     # PDI: SPI (the bridge's microcontroller)
+        if len(self.sii) >= 2:
+            m[REG_PDI_CONTROL:REG_PDI_CONTROL + 2] = self.sii[0:2]   # SII word 0: PDI
         struct.pack_into("<H", m, REG_WD_DIVIDER, 2498)      # 100 us units
         struct.pack_into("<H", m, REG_WD_PDI, 1000)
         struct.pack_into("<H", m, REG_WD_SM, 1000)           # 100 ms
@@ -225,12 +227,6 @@ class Esc:
         """New contents of the buffered read SyncManager ``sm`` (thread-safe swap)."""
         self._inputs[sm] = bytes(data)
 
-    def pdi_deactivate(self, sm: int, off: bool) -> None:
-        """PDI control bit 0 of an SM (the firmware refuses a bad configuration)."""
-        s = self.sm[sm]
-        s.pdi_control = (s.pdi_control | 0x01) if off else (s.pdi_control & ~0x01 & 0xFF)
-        self._sync_sm_regs(s)
-
     # -- time ------------------------------------------------------------------
     def watchdog_ns(self) -> int:
         """SM watchdog time: 0x0420 x (0x0400 + 2) x 40 ns; 0 = disabled."""
@@ -259,7 +255,7 @@ class Esc:
             self.pdi.watchdog_expired()
 
     # -- frames ----------------------------------------------------------------
-    def process(self, frame: bytes, now: int = 0) -> bytearray | None:
+    def process(self, frame: bytes | bytearray | memoryview, now: int = 0) -> bytearray | None:
         """Process one Ethernet frame; return the frame to send on, None if not EtherCAT."""
         self._now = now
         if len(frame) < 16 or frame[12] != 0x88 or frame[13] != 0xA4:

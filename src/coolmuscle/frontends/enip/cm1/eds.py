@@ -9,8 +9,8 @@ device.  ``coolmuscle enip eds > CoolMuscle1.eds`` writes it; tests check it wit
 
 from __future__ import annotations
 
-from .objects import (ASSEMBLIES, EXCLUSIVE_OWNER, IDENTITY, MAX_CONNECTIONS, AssemblyInfo,
-                      ConnectionInfo)
+from ..cip.description import AssemblyInfo, ConnectionInfo
+from .objects import ASSEMBLIES, EXCLUSIVE_OWNER, IDENTITY, MAX_CONNECTIONS
 
 #: Trigger and transport (CIP Vol 1 7-3.6.11.1): class 1, cyclic, exclusive owner.
 TRIGGER_EXCLUSIVE_OWNER = 0x04010002

@@ -1,17 +1,23 @@
 """``coolmuscle ethercat ...`` (lab up/down, esi) and the ``sim --ethercat`` helpers.
 
 Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typer``.
+The bridge is :mod:`coolmuscle.frontends.ethercat` (docs/ethercat.md): the ESI file
+comes from its description, the lab and the transport are its I/O.
 """
 
 from __future__ import annotations
 
 import sys
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Literal, NoReturn, overload
 
 import typer
 
 from ...errors import CoolMuscleError
-from . import identity as ident
+from ...frontends.ethercat.bridge import identity as ident
+
+if TYPE_CHECKING:
+    from ...frontends.ethercat.lab import Lab
+    from ...frontends.ethercat.transport import EthercatTransport
 
 app = typer.Typer(name="ethercat", no_args_is_help=True,
                   help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
@@ -34,9 +40,9 @@ def chain_firmware(bridge: str) -> str:
     return ",".join(v.firmware)
 
 
-def sim_transport(iface: str, bridge: str) -> object:
+def sim_transport(iface: str, bridge: str) -> EthercatTransport:
     """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
-    from .transport import EthercatTransport
+    from ...frontends.ethercat.transport import EthercatTransport
     chain_firmware(bridge)
     return EthercatTransport(iface, ident.variant(bridge).code)
 
@@ -53,10 +59,18 @@ def _fail(text: str, code: int) -> NoReturn:
     raise typer.Exit(code)
 
 
-def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Any:
+@overload
+def _lab(step: Literal["up"], namespace: str, master_if: str, slave_if: str) -> Lab: ...
+
+
+@overload
+def _lab(step: Literal["down"], namespace: str, master_if: str, slave_if: str) -> list[str]: ...
+
+
+def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list[str]:
     """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
     root's tools); a ``LabError`` is one line and exit status 1."""
-    from . import lab
+    from ...frontends.ethercat import lab
     run = lab.up if step == "up" else lab.down
     try:
         return run(namespace, master_if, slave_if)
@@ -91,7 +105,7 @@ def esi(
                                      help="Variants to describe (default: all)."),
 ) -> None:
     """Write the ESI file (ETG.2000 XML) to stdout: ``> CoolMuscleBridge.xml``."""
-    from .esi import esi_text
+    from ...frontends.ethercat.bridge.esi import esi_text
     try:
         codes = tuple(ident.variant(b).code for b in bridge)
     except ValueError as exc:

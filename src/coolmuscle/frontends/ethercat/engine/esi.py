@@ -1,23 +1,25 @@
-"""The ESI file (EtherCAT Slave Information, ETG.2000) of the bridge, from the object table.
+"""The ESI file (EtherCAT Slave Information, ETG.2000) of slaves, from their descriptions.
 
-``coolmuscle ethercat esi > CoolMuscleBridge.xml`` (manual 8.1.4 "Install ESI
-File").  Vendor, one Device per variant (EB01, EB02, EB12) with its identity, the
-dictionary (data types and the available objects with defaults and access), the
-FMMUs and SyncManagers of manual 2.3, the fixed PDOs of 6.3.3, the CoE mailbox
-(SDO information and complete access; PDO assignment and configuration are fixed)
-and the EEPROM configuration area.  The element order follows the ETG.2000
-EtherCATInfo schema.
+Vendor, the groups, one Device per :class:`~.description.SlaveDescription` with its
+identity, profile, the dictionary (data types and the available objects with defaults
+and access), the FMMUs and SyncManagers, the fixed PDOs of the PDO assignment, the CoE
+mailbox (SDO information and complete access; PDO assignment and configuration are
+fixed) and the EEPROM configuration area (the first 14 bytes of the SII image).  The
+element order follows the ETG.2000 EtherCATInfo schema.
 """
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from typing import Sequence
 
-from . import identity as ident
-from .objects import STRING, VAR, Entry, Obj, Table, build_table
+from .description import SlaveDescription
+from .od import STRING, VAR, Entry, Obj, Table
 from .sii import COE_DETAILS, EEPROM_BYTES, build_sii
 
 ESI_VERSION = "1.6"
+#: ESI ``Sm`` element text of SM0-SM3.
+SM_KINDS = ("MBoxOut", "MBoxIn", "Outputs", "Inputs")
 
 
 def _hex(value: int, digits: int = 8) -> str:
@@ -137,29 +139,24 @@ def _pdos(device: ET.Element, table: Table, tag: str, pdos: list[Obj], sm: int) 
             _sub(item, "DataType", entry.dtype.name)
 
 
-def _device(devices: ET.Element, table: Table) -> None:
-    v = table.variant
+def _device(devices: ET.Element, slave: SlaveDescription) -> None:
+    table, names = slave.table, slave.names
     device = _sub(devices, "Device", Physics="YY")
-    _sub(device, "Type", v.code, ProductCode=_hex(v.product_code), RevisionNo=_hex(ident.REVISION))
-    _sub(device, "Name", v.device_name, LcId="1033")
-    _sub(device, "GroupType", "CoolMuscle")
+    _sub(device, "Type", names.order, ProductCode=_hex(slave.identity.product_code),
+         RevisionNo=_hex(slave.identity.revision))
+    _sub(device, "Name", names.device, LcId="1033")
+    _sub(device, "GroupType", names.group_type)
     profile = _sub(device, "Profile")
-    _sub(profile, "ProfileNo", "402")
-    _sub(profile, "AddInfo", "2")
-    _sub(profile, "ChannelCount", str(ident.AXES))
+    _sub(profile, "ProfileNo", str(slave.profile))
+    _sub(profile, "AddInfo", str(slave.profile_info))
+    _sub(profile, "ChannelCount", str(slave.channels))
     dictionary = _sub(profile, "Dictionary")
     objects = table.available()
     _datatypes(dictionary, objects)
     _objects(dictionary, objects)
     for kind in ("Outputs", "Inputs", "MBoxState"):
         _sub(device, "Fmmu", kind)
-    out_len = table.image_bytes(table.rx_pdos())
-    in_len = table.image_bytes(table.tx_pdos())
-    for start, size, control, kind in (
-            (ident.MBX_OUT_START, ident.MBX_OUT_SIZE, ident.SM_CONTROL[0], "MBoxOut"),
-            (ident.MBX_IN_START, ident.MBX_IN_SIZE, ident.SM_CONTROL[1], "MBoxIn"),
-            (ident.PD_OUT_START, out_len, ident.SM_CONTROL[2], "Outputs"),
-            (ident.PD_IN_START, in_len, ident.SM_CONTROL[3], "Inputs")):
+    for (start, size, control), kind in zip(slave.sync_managers(), SM_KINDS):
         _sub(device, "Sm", kind, DefaultSize=str(size), StartAddress=_hex(start, 4),
              ControlByte=_hex(control, 2), Enable="1")
     _pdos(device, table, "RxPdo", table.rx_pdos(), 2)
@@ -170,33 +167,39 @@ def _device(devices: ET.Element, table: Table) -> None:
          PdoAssign="false", PdoConfig="false")
     eeprom = _sub(device, "Eeprom")
     _sub(eeprom, "ByteSize", str(EEPROM_BYTES))
-    _sub(eeprom, "ConfigData", build_sii(table)[:14].hex().upper())
+    _sub(eeprom, "ConfigData", build_sii(slave)[:14].hex().upper())
 
 
-def build_esi(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> "ET.ElementTree[ET.Element]":
-    """The EtherCATInfo tree with one Device per bridge variant."""
+def build_esi(slaves: Sequence[SlaveDescription]) -> "ET.ElementTree[ET.Element]":
+    """The EtherCATInfo tree with one Device per description (one vendor for all)."""
+    if not slaves:
+        raise ValueError("an ESI file describes at least one device")
+    vendors = {(s.identity.vendor_id, s.names.vendor) for s in slaves}
+    if len(vendors) > 1:
+        raise ValueError(f"one ESI file has one vendor, not {sorted(vendors)}")
     root = ET.Element("EtherCATInfo", {
         "xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
         "xsi:noNamespaceSchemaLocation": "EtherCATInfo.xsd", "Version": ESI_VERSION})
     vendor = _sub(root, "Vendor")
-    _sub(vendor, "Id", _hex(ident.VENDOR_ID))
-    _sub(vendor, "Name", ident.VENDOR_NAME)
+    _sub(vendor, "Id", _hex(slaves[0].identity.vendor_id))
+    _sub(vendor, "Name", slaves[0].names.vendor)
     descriptions = _sub(root, "Descriptions")
     groups = _sub(descriptions, "Groups")
-    group = _sub(groups, "Group")
-    _sub(group, "Type", "CoolMuscle")
-    _sub(group, "Name", "Cool Muscle")
+    for group_type, name in dict.fromkeys((s.names.group_type, s.names.group) for s in slaves):
+        group = _sub(groups, "Group")
+        _sub(group, "Type", group_type)
+        _sub(group, "Name", name)
     devices = _sub(descriptions, "Devices")
-    for code in bridges:
-        _device(devices, build_table(code))
+    for slave in slaves:
+        _device(devices, slave)
     tree: ET.ElementTree[ET.Element] = ET.ElementTree(root)
     ET.indent(tree, space="  ")
     return tree
 
 
-def esi_text(bridges: tuple[str, ...] = tuple(ident.VARIANTS)) -> str:
+def esi_text(slaves: Sequence[SlaveDescription]) -> str:
     """The ESI file as text (UTF-8 XML declaration included)."""
-    body: str = ET.tostring(build_esi(bridges).getroot(), encoding="unicode")
+    body: str = ET.tostring(build_esi(slaves).getroot(), encoding="unicode")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n"
 
 

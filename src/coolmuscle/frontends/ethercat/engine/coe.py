@@ -1,12 +1,12 @@
-"""CoE: the SDO server and SDO information service (manual 5.1.1, 5.4; ETG.1000.6 5.6).
+"""CoE: the SDO server and SDO information service (ETG.1000.6 5.6).
 
 Sans-IO: :meth:`CoeServer.handle` takes one CoE payload (the mailbox data after the
 mailbox header) and returns the CoE payloads to send back, in order.  Upload and
 download, expedited, normal and segmented, complete access, abort; SDO
 information: object list, object description, entry description (fragmented when
-a list does not fit one mailbox).  Every refusal is an abort code of manual 5.4.1
-raised as :class:`~.dictionary.SdoAbort` and encoded here, once.  Emergency
-messages are not sent: the manual lists 603Fh (error code) as N/A.
+a list does not fit one mailbox).  Every refusal is an SDO abort code raised as
+:class:`~.dictionary.SdoAbort` and encoded here, once.  Emergency messages are not
+sent (no emergency service is offered).
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ from dataclasses import dataclass
 
 from .dictionary import (BAD_COMMAND, GENERAL, LENGTH_MISMATCH, NO_OBJECT, NO_SUBINDEX,
                          OUT_OF_MEMORY, TOGGLE, Dictionary, SdoAbort)
-from .objects import ARRAY, RECORD, STRING, VAR, Entry
+from .od import ARRAY, RECORD, STRING, VAR, Entry
 
 log = logging.getLogger(__name__)
 
 SDO_REQUEST, SDO_RESPONSE, SDO_INFO = 2, 3, 8
-#: The longest value a download may announce (the longest object is 128 bytes).
+#: The longest value a download may announce (more is refused with 05040005h).
 MAX_TRANSFER = 4096
 _MBX_HEADER = 6
 
@@ -274,7 +274,7 @@ def _abort(index: int, sub: int, code: int) -> bytes:
 
 
 class UnsupportedService(Exception):
-    """A CoE service the bridge does not offer (answered with a mailbox error)."""
+    """A CoE service the server does not offer (answered with a mailbox error)."""
 
     def __init__(self, service: int) -> None:
         super().__init__(f"CoE service {service} not supported")

@@ -1,11 +1,12 @@
 """The bridge application: the four Cool Muscles behind the slave (manual 1.4, 6.3).
 
-:class:`BridgeApp` is the slave stack's :class:`~.slave.Application`.  It owns the
-object dictionary built from the table, the SII image, and the 1 ms cycle
-(:meth:`BridgeApp.cycle`, run in the model's thread by the transport) that turns
-the output image into the drive of :mod:`.bridge` (CiA402 6.1, every mode of ch. 6
-and 7) and the device API's cyclic state into the input image (6041h, 6064h + 0x800 n),
-through :class:`~.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
+:class:`BridgeApp` is the slave stack's :class:`~..engine.slave.Application`.  It hands
+the engine the bridge's slave description (:mod:`.description`), owns the object
+dictionary built from its table, and the 1 ms cycle (:meth:`BridgeApp.cycle`, run in
+the model's thread by the transport) that turns the output image into the drive of
+:mod:`.drive` (CiA402 6.1, every mode of ch. 6 and 7) and the device API's cyclic
+state into the input image (6041h, 6064h + 0x800 n), through
+:class:`~..engine.dictionary.Dictionary` hooks and :meth:`outputs` / :meth:`cycle`,
 without touching the ESC.
 
 Thread rule (docs/architecture.md rule 2): :meth:`state_change`, :meth:`outputs`,
@@ -16,15 +17,19 @@ not call the model; :meth:`cycle` runs in the model's thread.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Callable
 
-from ...sim.kernel import PRIO_IO, Timer
-from . import esm
+from ....device import Device
+from ....sim.kernel import PRIO_IO, Timer
+from ..engine import esm
+from ..engine.dictionary import Dictionary, WriteHook
+from ..engine.od import Table
+from ..engine.slave import SlaveStack
 from . import identity as ident
-from .dictionary import Dictionary
-from .objects import Table, build_table
-from .sii import build_sii
-from .slave import SlaveStack
+from .description import describe
+
+if TYPE_CHECKING:
+    from .drive import BridgeDrive
 
 log = logging.getLogger(__name__)
 
@@ -37,29 +42,32 @@ CYCLE_NS = 1_000_000
 
 
 class BridgeApp:
-    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4)."""
+    """EB01/EB02/EB12 behind one slave stack, served from a device (a Chain of 4).
 
-    def __init__(self, device: Any, bridge: str = ident.DEFAULT_VARIANT) -> None:
+    Without a device (``None``) the slave answers on the wire with its dictionary only:
+    no drive, no cycles (the sans-IO tests of the engine use it so)."""
+
+    def __init__(self, device: Device | None, bridge: str = ident.DEFAULT_VARIANT) -> None:
         self.device = device
-        self.table: Table = build_table(bridge)
-        self.variant = self.table.variant
+        self.variant = ident.variant(bridge)
+        self.description = describe(self.variant.code)
+        self.table: Table = self.description.table
         self.dictionary = Dictionary(self.table)
-        self.sii = build_sii(self.table)
-        self.stack = SlaveStack(self, self.sii)
+        self.stack = SlaveStack(self, self.description)
         ids = tuple(device.motor_ids) if device is not None else ()
         self.axes = [n for n in range(1, ident.AXES + 1) if n in ids]
         self.operational = False
         for axis in range(ident.AXES):
             self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
-        self.drive: Any = None                  # every mode of ch. 6 and 7 (bridge/)
+        self.drive: BridgeDrive | None = None   # every mode of ch. 6 and 7 (drive.py)
         self._cycle_timer: Timer | None = None
         if device is not None:
-            from .bridge.drive import BridgeDrive
+            from .drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
 
     @staticmethod
-    def _mode_written(axis: int) -> Any:
-        def hook(sub: int, value: Any) -> int | None:
+    def _mode_written(axis: int) -> WriteHook:
+        def hook(sub: int, value: int | str) -> int | None:
             """6.2.2 note 3: a mode that is not available is set to csp (8)."""
             return None if value in MODES else MODE_CSP
         return hook
@@ -108,6 +116,8 @@ class BridgeApp:
         if period_ns <= 0:
             raise ValueError(f"the bridge cycle must be a positive time, not {period_ns} ns")
         self.stop_cycles()
+        if self.device is None:
+            raise RuntimeError("the bridge cycles run on a device's kernel: none was given")
         kernel = self.device.kernel
 
         def tick() -> None:

@@ -1,15 +1,15 @@
 """The live object dictionary: values of the table's entries, access rules, hooks.
 
-One :class:`Dictionary` per bridge, built from :func:`.objects.build_table`.  Errors
-are wire codes: every refusal raises :class:`SdoAbort` with the abort code of
-ethercat-bridge-users-guide.txt 5.4.1, encoded once by the CoE server.
+One :class:`Dictionary` per slave, built from its object table (:mod:`.od`).  Errors
+are wire codes: every refusal raises :class:`SdoAbort` with an SDO abort code
+(ETG.1000.6 5.6.2.7, the codes of CiA 301), encoded once by the CoE server.
 
 The application attaches behaviour with :meth:`Dictionary.on_read` /
 :meth:`Dictionary.on_write` (a hook may raise :class:`SdoAbort`), and moves the
 process images with :meth:`pack_inputs` / :meth:`unpack_outputs` (the PDO mapping
-of 6.3.3 read from the table).  Reads and writes come from the ESC thread; values
-are single dict items, so a value the application sets from its own thread is seen
-whole.
+of the assigned PDOs, 1C12h/1C13h, read from the table).  Reads and writes come from
+the ESC thread; values are single dict items, so a value the application sets from
+its own thread is seen whole.
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ import logging
 import struct
 from typing import Callable
 
-from .objects import ARRAY, RECORD, STRING, Entry, Obj, Table
+from .od import ARRAY, RECORD, STRING, Entry, Obj, Table
 
 log = logging.getLogger(__name__)
 
-# Abort codes, manual 5.4.1.
+# SDO abort codes (ETG.1000.6 5.6.2.7; the codes of CiA 301).
 TOGGLE = 0x05030000
 TIMEOUT = 0x05040000
 BAD_COMMAND = 0x05040001
@@ -59,7 +59,7 @@ WriteHook = Callable[[int, "int | str"], "int | str | None"]
 
 
 class SdoAbort(Exception):
-    """An SDO request refused with an abort code (manual 5.4.1)."""
+    """An SDO request refused with an abort code (ETG.1000.6 5.6.2.7)."""
 
     def __init__(self, code: int, why: str = "") -> None:
         super().__init__(f"SDO abort 0x{code:08X}{': ' + why if why else ''}")
@@ -67,7 +67,7 @@ class SdoAbort(Exception):
 
 
 class Dictionary:
-    """Values and access rules of one bridge's objects."""
+    """Values and access rules of one slave's objects."""
 
     def __init__(self, table: Table) -> None:
         self.table = table

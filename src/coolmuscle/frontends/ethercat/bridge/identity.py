@@ -3,8 +3,8 @@
 The manual (ethercat-bridge-users-guide.txt 1.3) names the variants EB01, EB02 and
 EB12 but gives no EtherCAT vendor ID, product code, revision or mailbox sizes; the
 values chosen here are kept in this one place and recorded in docs/fidelity.md
-("EtherCAT bridge").  Everything else (SII image, object 1018h, ESI file) reads them
-from here.
+("EtherCAT bridge").  Everything else (object 1018h, and through the slave description
+of :mod:`.description` the SII image and the ESI file) reads them from here.
 """
 
 from __future__ import annotations
@@ -30,6 +30,12 @@ CYCLE_NS = 1_000_000        # 6.3: the cycle between master and bridge is 1 ms
 #: SM control bytes: mailbox write/read with ECAT interrupt, buffered write with the
 #: SM watchdog, buffered read (ESC datasheet 0x0804).
 SM_CONTROL = (0x26, 0x22, 0x64, 0x20)
+#: SII word 0 / ESC register 0x0140: the PDI is SPI (the bridge's microcontroller).
+PDI_CONTROL = 0x0005
+#: The device group of the SII general category and the ESI file.
+GROUP_TYPE, GROUP_NAME = "CoolMuscle", "Cool Muscle"
+#: CiA402 (the drive profile of chapter 6), AddInfo 2, one channel per axis.
+PROFILE, PROFILE_INFO = 402, 2
 
 
 @dataclass(frozen=True)

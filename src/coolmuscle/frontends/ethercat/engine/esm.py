@@ -1,14 +1,14 @@
-"""The EtherCAT state machine as a pure table (manual 5.2; ETG.1000.6 6.4.1).
+"""The EtherCAT state machine as a pure table (ETG.1000.6 6.4.1).
 
 No I/O, no clock: :func:`request` takes the current AL status, the value the master
 wrote to AL control (0x0120) and a check for the transition, and returns the new
 AL status and AL status code.
 
-* Valid steps: INIT->PRE-OP, PRE-OP->SAFE-OP, SAFE-OP->OP (5.2.1, IP/PS/SO) and every
+* Valid steps: INIT->PRE-OP, PRE-OP->SAFE-OP, SAFE-OP->OP (IP/PS/SO) and every
   step down (PI, SP, SI, OS, OP, OI).  Others (INIT->SAFE-OP, INIT->OP, PRE-OP->OP)
   answer 0011h "invalid requested state change"; a value that names no state
-  answers 0012h; BOOT answers 0013h (the bridge has no bootstrap state).  The
-  device stays where it is and sets the error indication (AL status bit 4, 5.2.2).
+  answers 0012h; BOOT answers 0013h (no bootstrap state is offered).  The
+  device stays where it is and sets the error indication (AL status bit 4).
 * While the error indication is set, a request without the acknowledge bit (AL
   control bit 4) may only go down; a request with it clears the indication first.
 """
@@ -23,13 +23,13 @@ NAMES = {INIT: "INIT", PREOP: "PRE-OP", BOOT: "BOOT", SAFEOP: "SAFE-OP", OP: "OP
 ERROR_FLAG = 0x10
 ACK = 0x10
 
-# AL status codes (manual 5.2.2).
+# AL status codes (ETG.1000.6, AL status code register 0x0134).
 NO_ERROR = 0x0000
 UNSPECIFIED = 0x0001
 INVALID_STATE_CHANGE = 0x0011
 UNKNOWN_STATE = 0x0012
 BOOT_NOT_SUPPORTED = 0x0013
-INVALID_MAILBOX_CONFIG = 0x0016      # ETG.1000.6: 0016h in PRE-OP (manual table: see fidelity)
+INVALID_MAILBOX_CONFIG = 0x0016      # ETG.1000.6: 0016h on the way to PRE-OP (fidelity.md)
 INVALID_SM_CONFIG = 0x0017
 SM_WATCHDOG = 0x001B
 INVALID_SM_TYPES = 0x001C

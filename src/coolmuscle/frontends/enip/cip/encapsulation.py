@@ -3,7 +3,7 @@
 Sans-IO in the manner of h11: :class:`FrameReader` is fed bytes and hands back
 :class:`Frame` objects; :class:`Connection` turns one request frame into the reply
 bytes (or none) and says when the TCP connection must close.  No socket and no
-clock live here; :mod:`.server` owns those, :mod:`.router` answers the CIP inside.
+clock live here; :mod:`..server` owns those, :mod:`.router` answers the CIP inside.
 
 Rules kept (CIP Vol 2 2-3, 2-4, 2-5):
 

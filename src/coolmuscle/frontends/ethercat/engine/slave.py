@@ -1,10 +1,13 @@
 """The slave stack: the firmware beside the ESC (what SOES is for a real chip).
 
-:class:`SlaveStack` is the ESC's :class:`~.esc.Pdi`.  It runs the state machine
-(:mod:`.esm`) with the configuration checks of manual 5.2 / ETG.1000.6, serves the
-mailbox (CoE through :class:`~.coe.CoeServer`, a mailbox error for the rest),
-moves the process images, and trips to SAFE-OP with 001Bh when the SM watchdog
-expires.  It runs in the frame thread and never waits for the application.
+:class:`SlaveStack` is the ESC's :class:`~.esc.Pdi`, configured by a
+:class:`~.description.SlaveDescription`: it writes the SII image from it, runs the
+state machine (:mod:`.esm`) with the configuration checks of ETG.1000.6 (the
+SyncManagers a master sets up must be the description's: mailbox addresses and
+sizes, process-data sizes, an SM watchdog not shorter than its cycle), serves the
+mailbox (CoE through :class:`~.coe.CoeServer`, a mailbox error for the rest), moves
+the process images, and trips to SAFE-OP with 001Bh when the SM watchdog expires.
+It runs in the frame thread and never waits for the application.
 
 The application plugs in through :class:`Application`: state change requests,
 the object dictionary (the mailbox service), output images in; it hands input
@@ -19,10 +22,11 @@ from collections import deque
 from typing import Protocol
 
 from . import esm
-from . import identity as ident
 from .coe import CoeServer, UnsupportedService
+from .description import SlaveDescription, SyncManagerLayout
 from .dictionary import Dictionary
 from .esc import Esc, SyncManager
+from .sii import build_sii
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +39,7 @@ MBXERR_SIZE_TOO_SHORT, MBXERR_INVALID_SIZE = 0x06, 0x08
 
 
 class Application(Protocol):
-    """What the device behind the slave provides (the bridge, or a test double)."""
+    """What the device behind the slave provides (its application, or a test double)."""
 
     dictionary: Dictionary
 
@@ -52,11 +56,13 @@ class Application(Protocol):
 class SlaveStack:
     """ESM, mailbox and process data between an :class:`Esc` and an :class:`Application`."""
 
-    def __init__(self, app: Application, sii: bytes) -> None:
+    def __init__(self, app: Application, description: SlaveDescription) -> None:
         self.app = app
+        self.description = description
         self.od = app.dictionary
-        self.esc = Esc(self, sii)
-        self.coe = CoeServer(self.od, ident.MBX_IN_SIZE)
+        self.sii = build_sii(description)
+        self.esc = Esc(self, self.sii)
+        self.coe = CoeServer(self.od, description.mailbox_in.size)
         self._queue: deque[bytes] = deque()
         self._waiting: bytes | None = None
         self._counter = 0
@@ -106,21 +112,19 @@ class SlaveStack:
             return esm.UNSPECIFIED
 
     def _config_check(self, current: int, requested: int) -> int:
-        sm = self.esc.sm
+        sm, d = self.esc.sm, self.description
         if (current, requested) == (esm.INIT, esm.PREOP):
-            if not (_matches(sm[0], ident.MBX_OUT_START, ident.MBX_OUT_SIZE, True)
-                    and _matches(sm[1], ident.MBX_IN_START, ident.MBX_IN_SIZE, False)
+            if not (_matches(sm[0], d.mailbox_out, d.mailbox_out.size, True)
+                    and _matches(sm[1], d.mailbox_in, d.mailbox_in.size, False)
                     and sm[0].mailbox and sm[1].mailbox):
                 return esm.INVALID_MAILBOX_CONFIG
         if (current, requested) == (esm.PREOP, esm.SAFEOP):
-            if not (_matches(sm[2], ident.PD_OUT_START, self.od.output_size, True)
-                    and not sm[2].mailbox):
+            if not (_matches(sm[2], d.outputs, d.output_size, True) and not sm[2].mailbox):
                 return esm.INVALID_OUTPUT_CONFIG
-            if not (_matches(sm[3], ident.PD_IN_START, self.od.input_size, False)
-                    and not sm[3].mailbox):
+            if not (_matches(sm[3], d.inputs, d.input_size, False) and not sm[3].mailbox):
                 return esm.INVALID_INPUT_CONFIG
             wd = self.esc.watchdog_ns()
-            if sm[2].control & 0x40 and 0 < wd < ident.CYCLE_NS:
+            if sm[2].control & 0x40 and 0 < wd < d.cycle_ns:
                 return esm.INVALID_WATCHDOG_CONFIG
         return 0
 
@@ -133,7 +137,7 @@ class SlaveStack:
     # -- process data -------------------------------------------------------
     def outputs_written(self, sm: int, data: bytes) -> None:
         if sm != 2 or self.state != esm.OP:
-            return                      # SAFE-OP: outputs are not taken (manual 5.2.1)
+            return                      # SAFE-OP: outputs are not taken (ETG.1000.6 6.4.1)
         self.od.unpack_outputs(data)
         try:
             self.app.outputs(data)
@@ -195,6 +199,8 @@ class SlaveStack:
             self.mailbox_received(0, data)
 
 
-def _matches(sm: SyncManager, start: int, length: int, master_writes: bool) -> bool:
-    return sm.enabled and sm.start == start and sm.length == length \
+def _matches(sm: SyncManager, layout: SyncManagerLayout, length: int,
+             master_writes: bool) -> bool:
+    """The master set SyncManager ``sm`` up where the description has it, with ``length``."""
+    return sm.enabled and sm.start == layout.start and sm.length == length \
         and sm.master_writes == master_writes

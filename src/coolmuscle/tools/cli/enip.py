@@ -2,17 +2,21 @@
 ``coolmuscle enip eds``.
 
 ``--enip`` takes an optional value: alone it means 127.0.0.1 (port 44818);
-:func:`optional_value_argv` inserts that default before Typer parses the line.
+:func:`optional_value_argv` inserts that default before Typer parses the line.  The
+module is :mod:`coolmuscle.frontends.enip` (docs/enip.md).
 """
 
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 
 from ...errors import TransportError
+
+if TYPE_CHECKING:
+    from ...frontends.transports.base import Transport
 
 DEFAULT_HOST = "127.0.0.1"
 FLAG = "--enip"
@@ -24,7 +28,7 @@ enip_app = typer.Typer(name="enip", no_args_is_help=True, add_completion=False,
 @enip_app.command("eds")
 def eds_command() -> None:
     """Print the module's EDS file (for RSLogix / the scanner's tool)."""
-    from .eds import generate
+    from ...frontends.enip.cm1.eds import generate
     sys.stdout.write(generate())
 
 
@@ -48,7 +52,7 @@ def optional_value_argv(argv: list[str] | None) -> list[str] | None:
 
 def parse_enip(value: str) -> tuple[str, int]:
     """``HOST``, ``HOST:PORT`` or ``PORT`` -> (host, port); port 0 picks a free one."""
-    from .server import DEFAULT_PORT
+    from ...frontends.enip.server import DEFAULT_PORT
     host, sep, port_text = value.rpartition(":")
     if not sep:
         if value.isdigit():
@@ -65,12 +69,12 @@ def parse_enip(value: str) -> tuple[str, int]:
 
 
 def transports(value: str | None, io_port: int, firmware: str,
-               priority: int | None = None) -> list[Any]:
+               priority: int | None = None) -> list[Transport]:
     """The EtherNet/IP transport for ``--enip`` (the CM1 module only)."""
     if value is None:
         return []
     if firmware != "cm1":
         raise TransportError("--enip is the CM1 EtherNet/IP module: use --firmware cm1")
-    from .server import EnipTransport
+    from ...frontends.enip.server import EnipTransport
     host, port = parse_enip(value)
     return [EnipTransport(host=host, port=port, io_port=io_port, priority=priority)]

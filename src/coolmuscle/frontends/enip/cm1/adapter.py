@@ -31,9 +31,11 @@ from __future__ import annotations
 
 import logging
 import struct
-from typing import Any, Literal
+from typing import Any, Callable, Literal
 
-from ...errors import CoolMuscleError
+from ....device import Device
+from ....errors import CoolMuscleError
+from ..cip.io import IoState
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +48,6 @@ ERR_TIMED_OUT = 0x0002
 ERR_NEVER = 0x0004
 
 SerialState = Literal["ok", "errors", "timeout", "absent"]
-IoState = Literal["none", "run", "idle", "faulted"]
 
 #: Control word value -> the CML action sent to the motor (3.2.3).
 ACTIONS = {3: "(", 4: ")", 5: "|"}
@@ -55,7 +56,7 @@ ACTIONS = {3: "(", 4: ")", 5: "|"}
 class Cm1Module:
     """The module between the EtherNet/IP objects and one motor of a device."""
 
-    def __init__(self, device: Any, motor: int = 1) -> None:
+    def __init__(self, device: Device, motor: int = 1) -> None:
         self.device = device
         self.motor = motor
         self._output = bytearray(OUTPUT_SIZE)
@@ -148,7 +149,7 @@ class Cm1Module:
         self.commands += 1
         self.device.execute(f"{command}.{self.motor}", origin="fieldbus")
 
-    def _guard(self, fn: Any, *args: Any) -> bool:
+    def _guard(self, fn: Callable[..., object], *args: Any) -> bool:
         """One exchange with the motor: an error reply sets bit 0 until the next success."""
         try:
             fn(*args)

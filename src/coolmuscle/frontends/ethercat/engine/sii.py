@@ -1,11 +1,11 @@
-"""The SII EEPROM image of the bridge (ETG.1000.6 5.4, ETG.2010), from the object table.
+"""The SII EEPROM image of a slave (ETG.1000.6 5.4, ETG.2010), from its description.
 
-Words 0-7: the ESC configuration area with its CRC-8 (polynomial 0x07, initial 0xFF)
-in word 7; words 8-15 the identity (1018h); 0x18-0x1C the standard mailbox
-(manual 2.3: SM0 out, SM1 in) and the mailbox protocols (CoE); 0x3E the EEPROM size.
-Categories from word 0x40: strings (10), general (30, with the CoE details),
-FMMU (40: outputs, inputs, mailbox status, manual 2.3), SyncManager (41),
-RxPDO (51) and TxPDO (50) from the PDO assignment (6.3.3), end (0xFFFF).
+Words 0-7: the ESC configuration area (word 0 the PDI control) with its CRC-8
+(polynomial 0x07, initial 0xFF) in word 7; words 8-15 the identity (1018h); 0x14-0x1C
+the bootstrap and standard mailbox (SM0 out, SM1 in) and the mailbox protocols (CoE);
+0x3E the EEPROM size.  Categories from word 0x40: strings (10), general (30, with the
+CoE details), FMMU (40: outputs, inputs, mailbox status), SyncManager (41), RxPDO (51)
+and TxPDO (50) from the PDO assignment of the description's table, end (0xFFFF).
 :func:`parse` reads an image back (tests compare it with the ESI and the dictionary).
 """
 
@@ -14,8 +14,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
-from . import identity as ident
-from .objects import Obj, Table
+from .description import SlaveDescription
+from .od import Obj, Table
 
 EEPROM_BYTES = 2048
 CAT_STRINGS, CAT_GENERAL, CAT_FMMU, CAT_SM, CAT_TXPDO, CAT_RXPDO, CAT_END = \
@@ -24,6 +24,10 @@ CAT_STRINGS, CAT_GENERAL, CAT_FMMU, CAT_SM, CAT_TXPDO, CAT_RXPDO, CAT_END = \
 #: CoE details (general category): SDO, SDO information, complete access (ETG.2010).
 COE_DETAILS = 0x01 | 0x02 | 0x20
 MBX_COE = 0x0004
+#: FMMU usage (category 40): outputs, inputs, mailbox status; 0xFF pads the category.
+FMMU_USAGE = bytes([1, 2, 3, 0xFF])
+#: The profile whose channel count goes into the general category (DS402 channels).
+DS402 = 402
 
 
 def crc8(data: bytes) -> int:
@@ -72,43 +76,37 @@ def _pdo_category(table: Table, pdos: list[Obj], sm: int, strings: _Strings) -> 
     return bytes(out)
 
 
-def build_sii(table: Table) -> bytes:
-    """The EEPROM image (2 KiB, erased bytes 0xFF) for the bridge of ``table``."""
-    v = table.variant
+def build_sii(slave: SlaveDescription) -> bytes:
+    """The EEPROM image (2 KiB, erased bytes 0xFF) of the slave ``slave`` describes."""
+    ident, table = slave.identity, slave.table
+    mbx_out, mbx_in = slave.mailbox_out, slave.mailbox_in
     head = bytearray(128)
-    struct.pack_into("<HHHH", head, 0, 0x0005, 0x0000, 0x0000, 0x0000)  # PDI: SPI
+    struct.pack_into("<HHHH", head, 0, slave.pdi_control, 0x0000, 0x0000, 0x0000)
     struct.pack_into("<H", head, 8, 0x0000)                               # station alias
     head[14] = crc8(bytes(head[:14]))
-    struct.pack_into("<IIII", head, 16, ident.VENDOR_ID, v.product_code, ident.REVISION,
-                     ident.SERIAL)
-    struct.pack_into("<HHHH", head, 0x14 * 2, ident.MBX_OUT_START, ident.MBX_OUT_SIZE,
-                     ident.MBX_IN_START, ident.MBX_IN_SIZE)               # bootstrap = std
-    struct.pack_into("<HHHHH", head, 0x18 * 2, ident.MBX_OUT_START, ident.MBX_OUT_SIZE,
-                     ident.MBX_IN_START, ident.MBX_IN_SIZE, MBX_COE)
+    struct.pack_into("<IIII", head, 16, ident.vendor_id, ident.product_code, ident.revision,
+                     ident.serial)
+    struct.pack_into("<HHHH", head, 0x14 * 2, mbx_out.start, mbx_out.size,
+                     mbx_in.start, mbx_in.size)                           # bootstrap = std
+    struct.pack_into("<HHHHH", head, 0x18 * 2, mbx_out.start, mbx_out.size,
+                     mbx_in.start, mbx_in.size, MBX_COE)
     struct.pack_into("<HH", head, 0x3E * 2, EEPROM_BYTES * 8 // 1024 - 1, 1)
 
     strings = _Strings()
-    name = strings.add(v.device_name)
-    group = strings.add("Cool Muscle")
-    order = strings.add(v.code)
+    name = strings.add(slave.names.device)
+    group = strings.add(slave.names.group)
+    order = strings.add(slave.names.order)
     general = bytearray(32)
     general[0], general[2], general[3] = group, order, name
     general[5] = COE_DETAILS
-    general[9] = ident.AXES                 # DS402 channels
+    general[9] = slave.channels if slave.profile == DS402 else 0      # DS402 channels
     general[11] = 0x00                      # flags
     rx = _pdo_category(table, table.rx_pdos(), 2, strings)
     tx = _pdo_category(table, table.tx_pdos(), 3, strings)
-    fmmu = bytes([1, 2, 3, 0xFF])           # outputs, inputs, mailbox status (2.3)
-    out_len = table.image_bytes(table.rx_pdos())
-    in_len = table.image_bytes(table.tx_pdos())
     sms = b"".join(struct.pack("<HHBBBB", start, length, control, 0, 1, kind)
-                   for start, length, control, kind in (
-                       (ident.MBX_OUT_START, ident.MBX_OUT_SIZE, ident.SM_CONTROL[0], 1),
-                       (ident.MBX_IN_START, ident.MBX_IN_SIZE, ident.SM_CONTROL[1], 2),
-                       (ident.PD_OUT_START, out_len, ident.SM_CONTROL[2], 3),
-                       (ident.PD_IN_START, in_len, ident.SM_CONTROL[3], 4)))
+                   for kind, (start, length, control) in enumerate(slave.sync_managers(), 1))
     body = (_category(CAT_STRINGS, strings.encode()) + _category(CAT_GENERAL, bytes(general))
-            + _category(CAT_FMMU, fmmu) + _category(CAT_SM, sms)
+            + _category(CAT_FMMU, FMMU_USAGE) + _category(CAT_SM, sms)
             + _category(CAT_TXPDO, tx) + _category(CAT_RXPDO, rx)
             + struct.pack("<H", CAT_END))
     image = bytes(head) + body

@@ -2,7 +2,8 @@
 
 Pure decoding and checking.  :func:`parse_open` turns the request data into an
 :class:`OpenRequest` and :func:`check_class1` / :func:`check_class3` hold it
-against what the module offers (:data:`~.objects.EXCLUSIVE_OWNER`); a refusal is a
+against what the adapter offers (its identity and connection, from its
+:class:`~.description.AdapterDescription`); a refusal is a
 ``CipError`` with general status 0x01 and the extended status of CIP Vol 1 table
 3-5.33, whose data is the unsuccessful reply body (triad, remaining path size).
 """
@@ -12,10 +13,10 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, replace
 
-from . import cip
-from .cip import CipError
-from .objects import (ASSEMBLY_CLASS, EXCLUSIVE_OWNER, IDENTITY, ROUTER_CLASS,
-                      ConnectionInfo)
+from . import messages as cip
+from .description import ConnectionInfo, IdentityInfo
+from .messages import CipError
+from .objects import ASSEMBLY_CLASS, ROUTER_CLASS
 
 # extended status (CIP Vol 1 table 3-5.33)
 DUPLICATE = 0x0100
@@ -150,14 +151,14 @@ def open_reply(req: OpenRequest, ot_id: int, to_id: int, ot_api: int, to_api: in
                        ot_api, to_api, 0, 0)
 
 
-def check_key(req: OpenRequest) -> None:
-    """The electronic key, zero fields as wildcards (CIP Vol 1 C-1.4.2)."""
+def check_key(req: OpenRequest, ours: IdentityInfo) -> None:
+    """The electronic key against identity ``ours``, zero fields as wildcards (CIP Vol 1
+    C-1.4.2)."""
     key = req.path.key
     if key is None:
         return
     vendor, dev_type, product, major, minor = struct.unpack("<HHHBB", key)
     compat, major = bool(major & 0x80), major & 0x7F
-    ours = IDENTITY
     if (vendor and vendor != ours.vendor_id) or (product and product != ours.product_code):
         raise req.failure(VENDOR_MISMATCH)
     if dev_type and dev_type != ours.device_type:
@@ -168,9 +169,10 @@ def check_key(req: OpenRequest) -> None:
         raise req.failure(REVISION_MISMATCH)
 
 
-def check_class1(req: OpenRequest, offer: ConnectionInfo = EXCLUSIVE_OWNER) -> bool:
-    """Check a class 1 exclusive-owner open; returns whether O->T carries the header."""
-    check_key(req)
+def check_class1(req: OpenRequest, ours: IdentityInfo, offer: ConnectionInfo) -> bool:
+    """Check a class 1 exclusive-owner open against ``offer``; returns whether O->T
+    carries the header."""
+    check_key(req, ours)
     if req.transport not in (0x01, 0x81):
         raise req.failure(BAD_TRANSPORT)
     path = req.path
@@ -191,25 +193,25 @@ def check_class1(req: OpenRequest, offer: ConnectionInfo = EXCLUSIVE_OWNER) -> b
         raise req.failure(BAD_OT_TYPE)
     if req.to.type not in (POINT_TO_POINT, MULTICAST):
         raise req.failure(BAD_TO_TYPE)
-    return _check_sizes(req)
+    return _check_sizes(req, offer)
 
 
-def _check_sizes(req: OpenRequest) -> bool:
-    out_size = 14 + SEQUENCE_SIZE
+def _check_sizes(req: OpenRequest, offer: ConnectionInfo) -> bool:
+    out_size = offer.output_size + SEQUENCE_SIZE
     if req.ot.size == out_size + HEADER_SIZE:
         header = True
     elif req.ot.size == out_size:
         header = False
     else:
         raise req.failure(BAD_OT_SIZE, out_size + HEADER_SIZE)
-    if req.to.size != 8 + SEQUENCE_SIZE:
-        raise req.failure(BAD_TO_SIZE, 8 + SEQUENCE_SIZE)
+    if req.to.size != offer.input_size + SEQUENCE_SIZE:
+        raise req.failure(BAD_TO_SIZE, offer.input_size + SEQUENCE_SIZE)
     return header
 
 
-def check_class3(req: OpenRequest) -> None:
+def check_class3(req: OpenRequest, ours: IdentityInfo) -> None:
     """A class 3 explicit connection to the Message Router (20 02 24 01)."""
-    check_key(req)
+    check_key(req, ours)
     if req.transport & 0x0F != 3 or not req.transport & 0x80:
         raise req.failure(BAD_TRANSPORT)
     if req.path.class_id != ROUTER_CLASS or req.path.instance not in (None, 1) \

@@ -3,132 +3,46 @@
 Every object of the manual's object list is here with index, subindex, name, data
 type, access, PDO mappability, default, range, availability (N/A objects are listed
 and marked, so the dictionary answers 06020000h / 06090011h for them) and the
-manual section that defines it.  The object dictionary (:mod:`.dictionary`), the
-SII image (:mod:`.sii`) and the ESI file (:mod:`.esi`) are all produced from
-:func:`build_table`, so they cannot disagree.
+manual section that defines it, in the engine's object-dictionary types
+(:mod:`..engine.od`).  The table goes to the engine inside the bridge's slave
+description (:mod:`.description`): the object dictionary, the SII image and the ESI
+file are all produced from it, so they cannot disagree.
 
-Part 1 (the device on the wire) gives the communication objects values; the drive
-objects (6000h-7FFFh, F000h-F594h) carry the manual's metadata and defaults, and
-their behaviour is attached by the bridge application through
-:class:`~.dictionary.Dictionary` hooks.  Axis n's objects are those of ID1 plus
-0x800 x (n-1) (Appendix 6 "The offset of object of ID2 against ID1 is 0x800").
+The communication objects get their values here; the drive objects (6000h-7FFFh,
+F000h-F594h) carry the manual's metadata and defaults, and their behaviour is
+attached by the bridge application through
+:class:`~..engine.dictionary.Dictionary` hooks (:mod:`.bridge_objects`).  Axis n's
+objects are those of ID1 plus 0x800 x (n-1) (Appendix 6 "The offset of object of ID2
+against ID1 is 0x800").
 """
 
 from __future__ import annotations
 
-import struct
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import replace
 
+from ..engine import od
+from ..engine.od import (ARRAY, BOOL, INT8, INT16, INT32, STRING, UINT8, UINT16, UINT32,
+                         DataType, Entry, Obj, Table)
 from . import identity as ident
 
-
-@dataclass(frozen=True)
-class DataType:
-    """A CoE basic data type (ETG.1000.6 table 64)."""
-
-    code: int
-    name: str
-    bits: int
-    fmt: str = ""            # struct format; "" for strings
-
-    def encode(self, value: int | str | bytes) -> bytes:
-        if not self.fmt:
-            return value.encode("latin-1") if isinstance(value, str) else bytes(value)
-        return struct.pack("<" + self.fmt, value)
-
-    def decode(self, data: bytes) -> int | str:
-        if not self.fmt:
-            return data.decode("latin-1")
-        value: int = struct.unpack("<" + self.fmt, data)[0]
-        return value
-
-    @property
-    def size(self) -> int:
-        return (self.bits + 7) // 8
-
-
-BOOL = DataType(0x0001, "BOOL", 1, "?")
-INT8 = DataType(0x0002, "SINT", 8, "b")
-INT16 = DataType(0x0003, "INT", 16, "h")
-INT32 = DataType(0x0004, "DINT", 32, "i")
-UINT8 = DataType(0x0005, "USINT", 8, "B")
-UINT16 = DataType(0x0006, "UINT", 16, "H")
-UINT32 = DataType(0x0007, "UDINT", 32, "I")
-STRING = DataType(0x0009, "STRING", 0)
-
-VAR, ARRAY, RECORD = 7, 8, 9
-
-
-@dataclass(frozen=True)
-class Entry:
-    """One subindex."""
-
-    sub: int
-    name: str
-    dtype: DataType
-    access: str = "ro"                    # "ro", "rw", "wo"
-    pdo: str = ""                         # "", "rx" (RxPDO mappable), "tx"
-    default: int | str = 0
-    low: int | None = None
-    high: int | None = None
-    available: bool = True
-    max_len: int = 0                      # strings: the longest value in bytes
-
-    @property
-    def bits(self) -> int:
-        if self.dtype is STRING:
-            return 8 * max(self.max_len, len(str(self.default)))
-        return self.dtype.bits
-
-
-@dataclass(frozen=True)
-class Obj:
-    """One object (index) of the dictionary."""
-
-    index: int
-    name: str
-    entries: tuple[Entry, ...]
-    code: int = VAR
-    section: str = "Appendix 6"
-    available: bool = True
-    axis: int = 0                         # 1..4 for per-axis objects, 0 for the bridge
-
-    def entry(self, sub: int) -> Entry | None:
-        for e in self.entries:
-            if e.sub == sub:
-                return e
-        return None
-
-    @property
-    def max_sub(self) -> int:
-        return max(e.sub for e in self.entries)
+#: Where an object's section is not given, it is the manual's object list.
+APPENDIX_6 = "Appendix 6"
 
 
 def var(index: int, name: str, dtype: DataType, access: str = "ro", default: int | str = 0,
-        *, pdo: str = "", available: bool = True, section: str = "Appendix 6",
-        low: int | None = None, high: int | None = None, max_len: int = 0) -> Obj:
-    return Obj(index, name, (Entry(0, name, dtype, access, pdo, default, low, high, True,
-                                   max_len),), VAR, section, available)
+        *, pdo: str = "", available: bool = True, section: str = APPENDIX_6,
+        max_len: int = 0) -> Obj:
+    """:func:`..engine.od.var`, defined in Appendix 6 unless ``section`` says otherwise."""
+    return od.var(index, name, dtype, access, default, pdo=pdo, available=available,
+                  section=section, max_len=max_len)
 
 
-def record(index: int, name: str, subs: list[Entry], *, code: int = RECORD,
-           section: str = "Appendix 6", available: bool = True,
-           count_type: DataType = UINT8, count_access: str = "ro",
-           count: int | None = None) -> Obj:
-    """An ARRAY/RECORD with subindex 0 'Number of entries' = the highest available sub."""
-    highest = max((e.sub for e in subs if e.available), default=0)
-    n = Entry(0, "Number of entries", count_type, count_access,
-              default=highest if count is None else count)
-    return Obj(index, name, (n, *subs), code, section, available)
-
-
-def _mapping(index: int, name: str, mapped: list[tuple[int, int, int]], available: bool,
-             section: str) -> Obj:
-    subs = [Entry(i + 1, f"Subindex {i + 1:03d}", UINT32, "ro",
-                  default=(idx << 16) | (sub << 8) | bits, available=available)
-            for i, (idx, sub, bits) in enumerate(mapped)]
-    return record(index, name, subs, available=available, section=section)
+def record(index: int, name: str, subs: list[Entry], *, code: int = od.RECORD,
+           section: str = APPENDIX_6, available: bool = True,
+           count_type: DataType = UINT8, count: int | None = None) -> Obj:
+    """:func:`..engine.od.record`, defined in Appendix 6 unless ``section`` says otherwise."""
+    return od.record(index, name, subs, code=code, section=section, available=available,
+                     count_type=count_type, count=count)
 
 
 # -- the communication area (1000h-1FFFh) -------------------------------------
@@ -152,19 +66,19 @@ def _communication(v: ident.Variant) -> list[Obj]:
         n, d = axis + 1, 0x800 * axis
         rx, tx = 0x1600 + 0x10 * axis, 0x1A00 + 0x10 * axis
         objs += [
-            _mapping(rx, f"ID{n} csp/csv RxPDO mapping",
+            od.mapping(rx, f"ID{n} csp/csv RxPDO mapping",
                      [(0x6040 + d, 0, 16), (0x6060 + d, 0, 8), (0x607A + d, 0, 32),
                       (0x60FF + d, 0, 32)], False, "Appendix 6"),
-            _mapping(rx + 1, f"ID{n} csp RxPDO mapping",
+            od.mapping(rx + 1, f"ID{n} csp RxPDO mapping",
                      [(0x6040 + d, 0, 16), (0x607A + d, 0, 32)], True, "6.3.3"),
-            _mapping(rx + 2, f"ID{n} csv RxPDO mapping",
+            od.mapping(rx + 2, f"ID{n} csv RxPDO mapping",
                      [(0x6040 + d, 0, 16), (0x60FF + d, 0, 32)], False, "Appendix 6"),
-            _mapping(tx, f"ID{n} csp/csv TxPDO mapping",
+            od.mapping(tx, f"ID{n} csp/csv TxPDO mapping",
                      [(0x6041 + d, 0, 16), (0x6061 + d, 0, 8), (0x6064 + d, 0, 32),
                       (0x606C + d, 0, 32)], False, "Appendix 6"),
-            _mapping(tx + 1, f"ID{n} csp TxPDO mapping",
+            od.mapping(tx + 1, f"ID{n} csp TxPDO mapping",
                      [(0x6041 + d, 0, 16), (0x6064 + d, 0, 32)], True, "6.3.3"),
-            _mapping(tx + 2, f"ID{n} csv TxPDO mapping",
+            od.mapping(tx + 2, f"ID{n} csv TxPDO mapping",
                      [(0x6041 + d, 0, 16), (0x606C + d, 0, 32)], False, "Appendix 6"),
         ]
     objs.append(record(0x1C00, "Sync manager communication type", [
@@ -326,57 +240,6 @@ def _manufacturer(v: ident.Variant) -> list[Obj]:
     return objs
 
 
-@dataclass(frozen=True)
-class Table:
-    """The bridge's objects, in index order, for one variant."""
-
-    variant: ident.Variant
-    objects: tuple[Obj, ...] = field(default_factory=tuple)
-
-    @cached_property
-    def by_index(self) -> dict[int, Obj]:
-        return {o.index: o for o in self.objects}
-
-    def get(self, index: int) -> Obj | None:
-        return self.by_index.get(index)
-
-    def available(self) -> list[Obj]:
-        return [o for o in self.objects if o.available]
-
-    def rx_pdos(self) -> list[Obj]:
-        """The RxPDOs assigned to SM2 (1C12h), in order."""
-        return self._assigned(0x1C12)
-
-    def tx_pdos(self) -> list[Obj]:
-        """The TxPDOs assigned to SM3 (1C13h), in order."""
-        return self._assigned(0x1C13)
-
-    def _assigned(self, index: int) -> list[Obj]:
-        assign = self.get(index)
-        assert assign is not None
-        out = []
-        for e in assign.entries[1:]:
-            pdo = self.get(int(e.default))
-            assert pdo is not None
-            out.append(pdo)
-        return out
-
-    def pdo_entries(self, pdo: Obj) -> list[tuple[Obj, Entry]]:
-        """The (object, entry) pairs a mapping object maps, in order."""
-        out = []
-        for e in pdo.entries[1:]:
-            if not e.available:
-                continue
-            value = int(e.default)
-            target = self.get(value >> 16)
-            assert target is not None, hex(value)
-            entry = target.entry((value >> 8) & 0xFF)
-            assert entry is not None
-            out.append((target, entry))
-        return out
-
-    def image_bytes(self, pdos: list[Obj]) -> int:
-        return sum(entry.bits for pdo in pdos for _o, entry in self.pdo_entries(pdo)) // 8
 
 
 def build_table(code: str = ident.DEFAULT_VARIANT) -> Table:
@@ -387,4 +250,4 @@ def build_table(code: str = ident.DEFAULT_VARIANT) -> Table:
         objs += _axis(axis, v.firmware[axis])
     objs += _manufacturer(v)
     objs.sort(key=lambda o: o.index)
-    return Table(v, tuple(objs))
+    return Table(tuple(objs))

@@ -1,10 +1,11 @@
 """The Message Router: one CIP request in, one reply out (CIP Vol 1 2-4, 5A-3).
 
-It implements :class:`.encapsulation.Target`: ListIdentity's identity item,
-unconnected requests (SendRRData) and class 3 requests (SendUnitData).  An
-Unconnected_Send (0x52) is unwrapped once (its route ignored: the module is the end
-node).  Requests to the Connection Manager (class 6 instance 1) go to the table of
-:mod:`.io`; every other service goes to :class:`.objects.ObjectModel`.  Each
+It implements :class:`.encapsulation.Target`: ListIdentity's identity item (read
+from the Identity object), unconnected requests (SendRRData) and class 3 requests
+(SendUnitData).  An Unconnected_Send (0x52) is unwrapped once (its route ignored: the
+adapter is the end node).  Requests to the Connection Manager (class 6 instance 1) go
+to the table of :mod:`.io`; every other service goes to the object service
+(:class:`.objects.ObjectService`).  Each
 ``CipError`` is encoded here, once; any other exception is logged and answered
 general status 0x02 (resource unavailable), so no traceback reaches a client.
 """
@@ -17,11 +18,11 @@ import struct
 import time
 from typing import Callable
 
-from . import cip
-from .cip import CipError
+from . import messages as cip
 from .encapsulation import Item, Peer, sockaddr
-from .io import ConnectionTable, open_or_error
-from .objects import CONNECTION_MANAGER_CLASS, IDENTITY, ObjectModel
+from .io import Call, ConnectionTable, direct, open_or_error
+from .messages import CipError
+from .objects import CONNECTION_MANAGER_CLASS, IDENTITY_CLASS, ObjectService
 
 log = logging.getLogger(__name__)
 
@@ -31,9 +32,8 @@ Clock = Callable[[], int]
 class Router:
     """Answers CIP for the encapsulation layer."""
 
-    def __init__(self, objects: ObjectModel, table: ConnectionTable, tcp_port: int,
-                 clock: Clock = time.monotonic_ns,
-                 call: Callable[..., object] = lambda fn, *a: fn(*a)) -> None:
+    def __init__(self, objects: ObjectService, table: ConnectionTable, tcp_port: int,
+                 clock: Clock = time.monotonic_ns, call: Call = direct) -> None:
         self.objects = objects
         self.table = table
         self.tcp_port = tcp_port
@@ -44,17 +44,17 @@ class Router:
 
     # -- encapsulation Target --------------------------------------------------------------
     def identity_item(self, local: tuple[str, int]) -> bytes:
-        """CIP Vol 2 2-4.3.2: version, socket address, identity, name, state."""
+        """CIP Vol 2 2-4.3.2: version, socket address, identity (vendor, device type,
+        product code, revision, status, serial, name: Identity attributes 1-7), state."""
         try:
             address = int(ipaddress.IPv4Address(local[0]))
         except ValueError:
             address = 0
-        ident = IDENTITY
-        status = self.call(self.objects.module.identity_status)
-        return (struct.pack("<H", 1) + sockaddr(self.tcp_port, address)
-                + struct.pack("<HHHBBHI", ident.vendor_id, ident.device_type,
-                              ident.product_code, *ident.revision, status, ident.serial)
-                + cip.short_string(ident.product_name) + b"\x03")
+        identity = self.call(self._identity)
+        return struct.pack("<H", 1) + sockaddr(self.tcp_port, address) + identity + b"\x03"
+
+    def _identity(self) -> bytes:
+        return b"".join(self.objects.get(IDENTITY_CLASS, 1, n) for n in range(1, 8))
 
     def unconnected(self, request: bytes, peer: Peer,
                     nested: bool = False) -> tuple[bytes, list[Item]]:
@@ -105,7 +105,7 @@ class Router:
         if req.service & cip.REPLY_BIT:
             raise CipError(cip.SERVICE_NOT_SUPPORTED)
         data = self.call(self.objects.handle, req)
-        return cip.encode_reply(req.service, data=data)  # type: ignore[arg-type]
+        return cip.encode_reply(req.service, data=data)
 
     def _connection_manager(self, req: cip.Request, peer: Peer) -> tuple[bytes, list[Item]]:
         self.requests += 1
@@ -125,7 +125,7 @@ class Router:
 
 def _embedded(data: bytes) -> bytes:
     """The request inside an Unconnected_Send (CIP Vol 1 3-5.5.2); its route is ignored:
-    this module is the end node."""
+    this adapter is the end node."""
     if len(data) < 4:
         raise CipError(cip.NOT_ENOUGH_DATA)
     size = struct.unpack_from("<H", data, 2)[0]
