@@ -10,7 +10,8 @@
 
 The long versions (20 x 1,000, 100+ kill -9 rounds, a 10-hour trace) are in
 bench/bench_reliability.py.  Full disk, corrupted state and signals have their
-own files (tests/test_hardening_*.py).
+own files (tests/test_store_full_disk.py, test_store_validation.py,
+test_cli_signals.py).
 """
 
 from __future__ import annotations

@@ -8,6 +8,7 @@ attempt to 'catch up' to its calculated position").
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -16,10 +17,11 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
+from coolmuscle.motor.motion import dynamics
 from coolmuscle.motor.motion import expoly as xp
 from coolmuscle.motor.motion.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
 from coolmuscle.motor.motor import Motor
-from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.sim.kernel import NS_PER_S, ms, seconds
 
 
 def _chain(firmware: str = "cm2", **plant: float) -> tuple[Chain, Motor]:
@@ -279,3 +281,35 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
         assert a.pos[0] - 1_000_000 == pytest.approx(b.pos[0], abs=1e-6)
         assert xp.value(a.err(), a.k, 0.0) == pytest.approx(xp.value(b.err(), b.k, 0.0),
                                                           abs=1e-6)
+
+
+# -- a command faster than the top speed --------------------------------------------------
+# With K56 raised (ch. 3 K56) and S beyond the top speed, a move reversed while the shaft
+# runs at full speed was braked through zero speed onto the command's speed with no
+# top-speed exit: the shaft passed v_max and the modes after it chattered (sat -> track
+# -> vmax, 1 ns each) until the 2000-piece safety net held the motor still.  The braking
+# mode now ends at the top speed like the others.
+FASTER_THAN_TOP_SPEED = ["K56.1=32767", "S.1=7027", "A.1=7698", "P.1=1", "^.1",
+                         "P.1+=-500000", "^.1", "P.1+=-1", "^.1"]
+
+
+@pytest.mark.parametrize("gap_ms", [50, 200, 1000])
+def test_the_fuzzed_sequence_stays_far_below_the_piece_limit(
+        gap_ms: int, caplog: pytest.LogCaptureFixture) -> None:
+    counts: list[int] = []
+    dynamics.clear_solutions()
+    chain = Chain(motors=2)
+    for motor in chain.motors.values():          # every motion each axis solves
+        axis = motor.axis
+        axis.trajectory_listeners.append(
+            lambda axis=axis: counts.append(len(axis.motion.pieces)))
+    with caplog.at_level(logging.WARNING):
+        for line in FASTER_THAN_TOP_SPEED:
+            chain.host_line.feed((line + "\r").encode())
+            chain.kernel.run(until=chain.kernel.now + ms(gap_ms))
+        chain.kernel.run(until=chain.kernel.now + ms(120_000))
+    assert "piece limit" not in caplog.text
+    assert counts and max(counts) < 100, max(counts)
+    axis_speed = max(abs(chain.motors[1].axis.motion.velocity_at(chain.kernel.now - ms(t)))
+                     for t in range(0, 100, 10))
+    assert axis_speed == 0.0                           # standing (the K56 alarm or arrived)

@@ -1,4 +1,4 @@
-"""Issue 16 items 1-3: the motor's one host line shared by several clients.
+"""The motor's one host line shared by several clients.
 
 Each client's lines are assembled apart and run whole, in turn with the others
 (docs/reliability.md "fairness"); an upload ``B#.n`` (cml-users-guide.txt 2.2.2)

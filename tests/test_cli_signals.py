@@ -1,4 +1,4 @@
-"""Issue 16 item 8: every stop signal at every moment of ``coolmuscle sim``.
+"""Every stop signal at every moment of ``coolmuscle sim``.
 
 SIGINT, SIGTERM and SIGHUP during start-up (imports, store, transports), while
 serving, under load and during ``$`` (cml-users-guide.txt 2.1.2): one line, no
