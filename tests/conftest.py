@@ -30,14 +30,14 @@ The shared fixtures (what they build is in tests/fixtures.py, plain Python):
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Any, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import pytest
 from hypothesis import settings
 
 if TYPE_CHECKING:       # imported when a fixture is used: this file loads nothing else
     from coolmuscle.chain.daisy import Chain
-    from fixtures import ServedSim
+    from fixtures import ChainFactory, ServedSim, SimFactory
 
 settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
 if os.environ.get("CI"):
@@ -52,7 +52,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 @pytest.fixture
-def make_chain() -> Iterator[Callable[..., Chain]]:
+def make_chain() -> Iterator[ChainFactory]:
     """``make_chain(**options)``: :func:`fixtures.new_chain`, closed after the test."""
     from fixtures import new_chain
     made: list[Chain] = []
@@ -66,13 +66,13 @@ def make_chain() -> Iterator[Callable[..., Chain]]:
 
 
 @pytest.fixture
-def chain(make_chain: Callable[..., Chain]) -> Chain:
+def chain(make_chain: ChainFactory) -> Chain:
     """One CM2 on its own, no state."""
     return make_chain()
 
 
 @pytest.fixture
-def served_sim(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[..., ServedSim]]:
+def served_sim(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimFactory]:
     """``served_sim(*args, tcp=True, modbus_tcp=False, pty=False, state=None)``: a ready
     ``coolmuscle sim`` (:class:`fixtures.ServedSim`); none is left running after the
     test."""

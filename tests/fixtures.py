@@ -98,6 +98,10 @@ def new_chain(motors: int = 1, firmware: str = "cm2", *, kernel: Kernel | None =
     return chain
 
 
+#: The type of the ``make_chain`` fixture (tests/conftest.py): :func:`new_chain`'s arguments.
+ChainFactory = Callable[..., Chain]
+
+
 def collect_events(chain: Chain, kinds: Sequence[str] | None = None) -> list[Event]:
     """The list the chain's events are appended to from now on (only ``kinds`` when
     given: "status", "alarm", "message", "reply", ...)."""
@@ -233,3 +237,8 @@ class ServedSim(Program):
     def stop(self, signum: int = signal.SIGINT, timeout: float = 20) -> int:
         """A stop signal, as a user would send it; the exit status."""
         return self.signal(signum, timeout)
+
+
+#: The type of the ``served_sim`` fixture (tests/conftest.py): :class:`ServedSim`'s
+#: arguments after the log.
+SimFactory = Callable[..., ServedSim]

@@ -422,3 +422,17 @@ def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
     words = MotorMap(chain, 1, chain.get_param(1, 78), little=False).read_holding(
         chain.get_param(1, 78) + 54, 2)
     assert long_of(words[0], words[1], False) == 683
+
+
+def test_trace_analog_out_uses_the_k35_of_each_instant(chain: Chain) -> None:
+    # ch. 3 K35 changed midway: the first part of the trace keeps its own K35
+    trace = record(chain)
+    chain.execute("K35.1=2, S.1=10, A.1=100, P.1=5000")   # position output
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    early = trace.sample(1, seconds(0.5)).analog_out
+    chain.execute("K35.1=8")                               # torque output
+    chain.kernel.run(until=seconds(7))
+    assert trace.sample(1, seconds(0.5)).analog_out == early
+    assert early != 2.5                                    # a position reads off centre
+    assert trace.sample(1, seconds(6.5)).analog_out == 2.5  # torque 0 at rest: centre

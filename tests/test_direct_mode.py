@@ -1,7 +1,9 @@
 """Direct mode through the device API: listings, saving as a power cycle, routing.
 
-cml-users-guide.txt 2.1.2 "$" (save), ch. 3 (K changes persist by themselves),
-6.6 (?P ?N ?R ?999), 1.1 (motor IDs on a chain).
+cml-users-guide.txt 2.1.2 "$" (save), ch. 3 (K changes persist by themselves; K37
+40-70 without incremental motion; K20 asked about under K23 16), 6.6 (?P ?N ?R ?999),
+1.1 (motor IDs on a chain); docs/fidelity.md ("K37 = 40..70", "K20 with K23 including
+16").
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.errors import NoSuchMotorError
 from coolmuscle.sim.kernel import seconds
+from fixtures import ChainFactory, collect_events
 
 
 def test_6_6_position_listing_has_200_values_four_to_a_line() -> None:
@@ -140,3 +143,56 @@ def test_a_branch_statement_for_an_absent_id_does_not_run_on_this_motor() -> Non
     assert chain.execute("P5.1") == ["P5.1=0"]
     chain.execute("V1.1, P5.2=77, P5.2=66")
     assert chain.execute("P5.2") == ["P5.2=77"]
+
+
+# -- K37 --------------------------------------------------------------------------------
+def test_ch3_k37_40_to_70_incremental_motion_cannot_be_executed(
+        make_chain: ChainFactory) -> None:
+    # K37: "When it is set to 40-70, the incremental motion cannot be executed."
+    # "Continuous motion (P=1000000000) is still available in any resolution."
+    chain = make_chain(setup="K23.1=17, K37.1=43, S.1=10, A.1=100")
+    assert chain.execute("P.1+=100") == ["error00.1: Out Of Range!!"]
+    assert chain.execute("P.1-=100") == ["error00.1: Out Of Range!!"]
+    assert chain.execute("P.1") == ["P.1=0"]
+    for line in ("P1.1=500", "S1.1=10", "A1.1=100", "B1.1", "S1.1, A1.1, P1.1+", "?96.1",
+                 "END"):
+        chain.execute(line)
+    said = collect_events(chain, ["status", "alarm", "message", "reply"])
+    chain.execute("[1.1")
+    chain.kernel.run(until=seconds(2))
+    assert "error00.1: Out Of Range!!" in [e.text for e in said]       # from the bank
+    assert chain.execute("?96.1") == ["Px.1=0"]          # it did not move
+    chain.execute("P.1=1000000000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(3))
+    assert chain.execute("?97.1") == ["Sx.1=10"]          # continuous rotation runs
+    # at K37 = 3 the same lines move
+    chain2 = make_chain(setup="S.1=10, A.1=100")
+    chain2.execute("P.1+=100")
+    assert chain2.execute("P.1") == ["P.1=100"]
+
+
+# -- K20 / K23 16 ----------------------------------------------------------------------
+def test_ch3_k23_16_k20_change_asks_change_baud_rate_y_n(chain: Chain) -> None:
+    # K23 16 confirmation messages: "Change Baud Rate ?? XXX kbps (Y/N)  Confirmation
+    # message when the baud rate is changed by K20"; K20 table 1 = 9.6 kbps
+    chain.execute("K23.1=17, S.1=10, A.1=100, P.1=1000")
+    assert chain.execute("K20.1=1") == ["Change Baud Rate ?? 9.6 kbps (Y/N)"]
+    assert chain.motors[1].k(20) == 0                     # not changed before the answer
+    assert chain.execute("Y") == []                        # the answer, not the Y command
+    assert chain.execute("K20.1") == ["K20.1=1"]
+    chain.kernel.run(until=seconds(1))
+    assert chain.execute("?96.1") == ["Px.1=0"]           # no Y motion was started
+    assert chain.execute("K20.1=4") == ["Change Baud Rate ?? 115.2 kbps (Y/N)"]
+    assert chain.execute("n") == []
+    assert chain.execute("K20.1") == ["K20.1=1"]
+    # another line instead of an answer cancels the change and runs
+    assert chain.execute("K20.1=0") == ["Change Baud Rate ?? 38.4 kbps (Y/N)"]
+    assert chain.execute("?99.1") == ["Ux.1=8"]
+    assert chain.execute("K20.1") == ["K20.1=1"]
+    assert chain.execute("K20.1=6") == ["error00.1: Out Of Range!!"]
+
+
+def test_ch3_k20_without_k23_16_changes_at_once(chain: Chain) -> None:
+    assert chain.execute("K20.1=2") == []
+    assert chain.execute("K20.1") == ["K20.1=2"]

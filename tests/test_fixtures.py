@@ -9,14 +9,12 @@ import os
 import socket
 import time
 from pathlib import Path
-from typing import Callable
-
 import pytest
 import serial
 from pymodbus.client import ModbusTcpClient
 
-from coolmuscle.chain.daisy import Chain
-from fixtures import ServedSim, closed_port, collect_events, free_port, wait_until
+from fixtures import (ChainFactory, ServedSim, SimFactory, closed_port, collect_events, free_port,
+                      wait_until)
 
 
 def test_a_served_sim_answers_on_its_free_ports_and_is_gone_after_close(tmp_path: Path) -> None:
@@ -40,7 +38,7 @@ def test_a_served_sim_answers_on_its_free_ports_and_is_gone_after_close(tmp_path
 
 
 def test_a_pty_link_and_a_state_directory_are_in_the_banner(
-        served_sim: Callable[..., ServedSim], tmp_path: Path) -> None:
+        served_sim: SimFactory, tmp_path: Path) -> None:
     link, state = tmp_path / "cm-link", tmp_path / "state"
     sim = served_sim(tcp=False, pty=link, state=state)
     assert sim.pty == str(link) and link.is_symlink()
@@ -56,7 +54,7 @@ def test_a_sim_that_cannot_start_says_why(tmp_path: Path) -> None:
 
 
 def test_make_chain_passes_its_options_and_runs_the_setup(
-        make_chain: Callable[..., Chain], tmp_path: Path) -> None:
+        make_chain: ChainFactory, tmp_path: Path) -> None:
     chain = make_chain(3, "rt3", state_dir=tmp_path, plant={"load_inertia": 1e-4},
                        setup=["K23.1=17", "P1.2=500"])
     assert sorted(chain.motors) == [1, 2, 3] and chain.firmware.name == "rt3"

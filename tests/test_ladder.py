@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 
 from bank_support import Rig, rig
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from fixtures import ChainFactory, collect_events
+from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
 
 MS = NS_PER_MS
@@ -322,3 +323,28 @@ def test_the_same_go_again_does_not_replan() -> None:
     assert r.motor().axis.profile is profile
     r.type("A.1=50", "^.1")
     assert r.motor().axis.profile is not profile
+
+
+def test_2_2_3_ladder_v_alone_displays_the_state_value(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=["K23.1=17, K63.1=100", 'V4.1="Ux"', "L1.1", "V4.1", "END"])
+    said = collect_events(chain, ["status", "alarm", "message", "reply"])
+    chain.execute("[L1.1")
+    chain.kernel.run(until=seconds(0.15))
+    assert [e.text for e in said] == ["V4.1=8", "V4.1=8"]
+
+
+def test_rt3_3_6_logic_motion_bank_scans_every_1_ms_and_its_sine_has_that_period(
+        make_chain: ChainFactory) -> None:
+    # RT3 3.6: "These banks execute on 1 ms intervals and are independent of K87" and of
+    # its 6-step example: "in this case the timing is less than 1ms"
+    chain = make_chain(firmware="rt3", setup=["K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10",
+                                              "L1", "V1=V1+V2", "V3=U2(V1)", "END"])
+    trace = record(chain)
+    chain.execute("[LM1")
+    chain.kernel.run(until=seconds(2.5))
+    motor = chain.motors[1]
+    assert motor.logic_motion.scans == 2501
+    # V1 grows by 10 a ms: U2 = 10000 cos(2π V1/10000) repeats every 1000 ms
+    ups = [t for t in range(seconds(0.5), seconds(2.5), 1_000_000)
+           if trace.sample(1, t).target < 0 <= trace.sample(1, t + 1_000_000).target]
+    assert len(ups) == 2 and math.isclose((ups[1] - ups[0]) / NS_PER_S, 1.0, abs_tol=0.002)

@@ -1,7 +1,7 @@
 """Output functions K34 with the output logic of K33, and the K23 output reports.
 
-cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K73;
-6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and push motion (9) belong to other models.
+cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K55
+(in position before the target), K73; 6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and push motion (9) belong to other models.
 """
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 import pytest
 
 from bank_support import Rig, rig
+from fixtures import ChainFactory, collect_events
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
 
@@ -199,3 +200,31 @@ def test_cm1_k26_and_k33_are_one_logic_for_every_input_and_output() -> None:
     assert chain.execute("?50.1") == ["OUT.1=00"]               # K33=0: both normally open
     chain.execute("K33.1=1")
     assert chain.execute("?50.1") == ["OUT.1=03"]               # both normally closed
+
+
+def test_ch3_k55_in_position_is_detected_before_reaching_the_target(
+        make_chain: ChainFactory) -> None:
+    # K55: "in-position is detected when the current position is within the set range
+    # against the target position" ... "In-Position may be detected before reaching the
+    # target position"; "K55=5 ... In-position signals will be sent out between 995 and
+    # 1005, when the target position is 1000."
+    chain = make_chain()
+    events = collect_events(chain)
+    trace = record(chain)
+    chain.execute("K23.1=1, K34.1=1, K55.1=100, S.1=10, A.1=10, P.1=10000")  # out 1: in-pos
+    chain.execute("^.1")
+    end_of_command = chain.motors[1].axis.profile.end_ns
+    chain.kernel.run(until=seconds(12))
+    at = next(e.time for e in events if e.text == "Ux.1=8")
+    assert at < end_of_command - seconds(0.02)            # the command still runs then
+    assert abs(trace.sample(1, at).position - 10000) <= 100
+    assert abs(trace.sample(1, at - 1000).position - 10000) > 100
+    assert trace.sample(1, at).command < 10000
+    # the in-position output (K34 function 1) is on from that instant
+    chain2 = make_chain()
+    chain2.execute("K34.1=1, K55.1=100, S.1=10, A.1=10, P.1=10000")
+    chain2.execute("^.1")
+    chain2.kernel.run(until=at - 1000)
+    assert chain2.execute("?51.1") == ["OUT1.1=0"] and chain2.execute("?99.1") == ["Ux.1=0"]
+    chain2.kernel.run(until=at)
+    assert chain2.execute("?51.1") == ["OUT1.1=1"] and chain2.execute("?99.1") == ["Ux.1=8"]
