@@ -11,6 +11,8 @@ tests/conftest.py wraps the parts that need a teardown as pytest fixtures
   that is read for its banner; :class:`ServedSim` is ``coolmuscle sim`` on free ports
   (``--tcp 0``, ``--modbus-tcp 0``, a new pty or a pty link) and reads where it serves
   from its banner, so no test depends on a fixed port being free;
+* :func:`run_coolmuscle` runs ``coolmuscle ARGS`` to its end, with
+  :func:`coolmuscle_env` (this checkout's sources);
 * :func:`wait_until` polls a condition in wall time (a process, a socket, a thread:
   what virtual time does not drive);
 * :func:`free_port` (a port that was free a moment ago, for a program that cannot say
@@ -47,6 +49,15 @@ def coolmuscle_env(**extra: str) -> dict[str, str]:
     env = {**os.environ, "PYTHONPATH": str(SRC), "COLUMNS": "200", **extra}
     env.pop("COOLMUSCLE_DEBUG", None)
     return env
+
+
+def run_coolmuscle(*args: str, timeout: float = 60, cwd: Path | None = None,
+                   env: Mapping[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """``coolmuscle ARGS`` run to its end in a process of its own (stdin closed): exit
+    status, stdout and stderr as text."""
+    return subprocess.run([sys.executable, "-m", "coolmuscle", *args], capture_output=True,
+                          text=True, timeout=timeout, cwd=cwd, stdin=subprocess.DEVNULL,
+                          env=dict(env if env is not None else coolmuscle_env()))
 
 
 # -- waiting --------------------------------------------------------------------------

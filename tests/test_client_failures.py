@@ -4,7 +4,9 @@
   timeout (a TCP proxy that stops forwarding, like a pulled cable; also behind socat);
 * a garbled reply is reported (event, log, exception text) and never hangs the client;
 * a connection that drops raises :class:`TransportError` at once;
-* an alarm in polling mode (K23 without 1) surfaces as :class:`AlarmError` too.
+* an alarm in polling mode (K23 without 1) surfaces as :class:`AlarmError` too;
+* a refused value is a :class:`CoolMuscleError` that is also a ``ValueError``; a
+  ``socket://`` URL without a port names the form it needs.
 """
 
 from __future__ import annotations
@@ -20,10 +22,12 @@ from typing import Any, Iterator
 
 import pytest
 
+import coolmuscle
 from client_targets import InProcess, Tcp
 from coolmuscle.client import MotorEvent, connect
-from coolmuscle.errors import (AlarmError, CoolMuscleTimeout, ProtocolError,
-                               TransportError)
+from coolmuscle.errors import (AlarmError, CoolMuscleError, CoolMuscleTimeout,
+                               InvalidArgumentError, ProtocolError, TransportError)
+from fixtures import ROOT, run_coolmuscle
 
 
 class FreezingProxy:
@@ -229,3 +233,26 @@ def test_connect_to_nothing_is_a_transport_error() -> None:
         connect("socket://127.0.0.1:1")
     with pytest.raises(TransportError):
         connect("/dev/does-not-exist")
+
+
+# -- the exception tree and bad URLs -----------------------------------------------------
+def test_public_names_and_the_exception_tree() -> None:
+    assert coolmuscle.Ux.IN_POSITION == 8 and coolmuscle.Version.__name__ == "Version"
+    assert coolmuscle.CoolMuscleError is CoolMuscleError
+    with coolmuscle.connect("coolmuscle://?mode=fast") as m:
+        with pytest.raises(CoolMuscleError) as info:
+            m.write_param(20, 99)
+        assert isinstance(info.value, (InvalidArgumentError, ValueError))
+        with pytest.raises(CoolMuscleError):
+            m.write_param(23, 99999)
+        version = m.version
+        assert (version.motor, version.series) == (1, "CM2")
+
+
+def test_socket_url_without_a_port_names_the_form() -> None:
+    with pytest.raises(TransportError, match=r"socket://HOST:PORT"):
+        coolmuscle.connect("socket://127.0.0.1")
+    done = run_coolmuscle("upload", str(ROOT / "examples" / "2.1-operation.cml"), "--port",
+                          "socket://127.0.0.1")
+    assert done.returncode == 1 and "socket://HOST:PORT" in done.stderr + done.stdout
+    assert "NoneType" not in done.stderr + done.stdout

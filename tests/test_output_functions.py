@@ -1,7 +1,8 @@
 """Output functions K34 with the output logic of K33, and the K23 output reports.
 
 cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K55
-(in position before the target), K73; 6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and push motion (9) belong to other models.
+(in position before the target), K73; 6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and
+push motion (9) belong to other models.
 """
 
 from __future__ import annotations
