@@ -96,9 +96,10 @@ def closed_port(host: str = "127.0.0.1") -> Iterator[int]:
 def new_chain(motors: int = 1, firmware: str = "cm2", *, kernel: Kernel | None = None,
               state_dir: Path | str | None = None, machine: Path | str | Machine | None = None,
               pacing: bool = False, plant: Mapping[str, float] | None = None,
-              setup: str | Iterable[str] = ()) -> Chain:
+              traced: bool = False, setup: str | Iterable[str] = ()) -> Chain:
     """A chain as the tests build it: ``plant`` sets fields of every motor's plant (a
-    load, friction: motor/motion/plant.py), then each line of ``setup`` runs as CML."""
+    load, friction: motor/motion/plant.py), each line of ``setup`` runs as CML, then
+    ``traced`` starts its trace recorder (``record(chain)`` gives it back)."""
     chain = Chain(kernel, motors, firmware=firmware, state_dir=state_dir, machine=machine,
                   pacing=pacing)
     for motor in chain.motors.values():
@@ -106,6 +107,9 @@ def new_chain(motors: int = 1, firmware: str = "cm2", *, kernel: Kernel | None =
             setattr(motor.plant, name, value)
     for line in [setup] if isinstance(setup, str) else setup:
         chain.execute(line)
+    if traced:
+        from coolmuscle.tools.trace.recorder import record
+        record(chain)
     return chain
 
 
