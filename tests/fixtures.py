@@ -13,8 +13,8 @@ tests/conftest.py wraps the parts that need a teardown as pytest fixtures
   from its banner, so no test depends on a fixed port being free;
 * :func:`run_coolmuscle` runs ``coolmuscle ARGS`` to its end, with
   :func:`coolmuscle_env` (this checkout's sources);
-* :func:`wait_until` polls a condition in wall time (a process, a socket, a thread:
-  what virtual time does not drive);
+* :func:`wait_until` (and :func:`wait_until_async` in a coroutine) polls a condition
+  in wall time (a process, a socket, a thread: what virtual time does not drive);
 * :func:`free_port` (a port that was free a moment ago, for a program that cannot say
   which port it got) and :func:`closed_port` (a port that refuses connections while the
   ``with`` block lasts).
@@ -22,6 +22,7 @@ tests/conftest.py wraps the parts that need a teardown as pytest fixtures
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import re
@@ -70,6 +71,17 @@ def wait_until(predicate: Callable[[], object], timeout: float = 5.0,
         if time.monotonic() >= deadline:
             return bool(predicate())
         time.sleep(step)
+    return True
+
+
+async def wait_until_async(predicate: Callable[[], object], timeout: float = 5.0,
+                           step: float = 0.01) -> bool:
+    """:func:`wait_until` inside a coroutine: the event loop runs while it waits."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() >= deadline:
+            return bool(predicate())
+        await asyncio.sleep(step)
     return True
 
 

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import asyncio
 import re
-import time
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from fixtures import wait_until_async
 
 MOTORS = 15
 QUERIES = 200
@@ -113,10 +113,8 @@ async def _clients(port: int, st_: ServiceThread) -> list[list[bytes]]:
 
     go = asyncio.Event()
     tasks = asyncio.gather(*(client(c, go) for c in range(1, MOTORS + 1)))
-    deadline = time.monotonic() + 10
-    while transport.clients < MOTORS:
-        assert time.monotonic() < deadline, "clients did not connect"
-        await asyncio.sleep(0.01)
+    assert await wait_until_async(lambda: transport.clients >= MOTORS, 10), \
+        "clients did not connect"
     st_.call(lambda: start_banks(st_.service.chain))
     go.set()
     return await asyncio.wait_for(tasks, 60)

@@ -27,7 +27,7 @@ from client_targets import InProcess, Tcp
 from coolmuscle.client import MotorEvent, connect
 from coolmuscle.errors import (AlarmError, CoolMuscleError, CoolMuscleTimeout,
                                InvalidArgumentError, ProtocolError, TransportError)
-from fixtures import ROOT, run_coolmuscle
+from fixtures import ROOT, run_coolmuscle, wait_until
 
 
 class FreezingProxy:
@@ -103,10 +103,7 @@ def test_silence_behind_a_socat_pty_times_out_in_time(proxy: FreezingProxy,
     socat = subprocess.Popen(["socat", f"PTY,link={link},raw,echo=0",
                               f"TCP:127.0.0.1:{proxy.port}"])
     try:
-        deadline = time.monotonic() + 5
-        while not link.exists():
-            assert time.monotonic() < deadline, "socat did not create its pty"
-            time.sleep(0.01)
+        assert wait_until(link.exists, 5, 0.01), "socat did not create its pty"
         with connect(str(link), timeout=0.5) as m:
             m.write_param(23, 0)                      # polling mode this time
             m.move_to(200000, speed=10, accel=100)
@@ -228,9 +225,9 @@ def test_an_alarm_while_polling_is_an_alarm_error() -> None:
         assert caught.value.status == 4 and "Ux.1=4" in str(caught.value)
 
 
-def test_connect_to_nothing_is_a_transport_error() -> None:
+def test_connect_to_nothing_is_a_transport_error(closed_port: int) -> None:
     with pytest.raises(TransportError, match="cannot open"):
-        connect("socket://127.0.0.1:1")
+        connect(f"socket://127.0.0.1:{closed_port}")
     with pytest.raises(TransportError):
         connect("/dev/does-not-exist")
 

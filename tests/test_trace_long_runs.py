@@ -21,6 +21,7 @@ from pathlib import Path
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.tools.script.runner import run_script
 from coolmuscle.tools.trace.recorder import FIELDS
+from fixtures import wait_until
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -94,10 +95,10 @@ def test_ctrl_c_stops_at_once_and_leaves_a_valid_file(tmp_path: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "run", str(script), "--trace",
                              str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, env=ENV)
-    deadline = time.monotonic() + 30
-    while not out.exists() or out.stat().st_size < 100_000:
-        assert time.monotonic() < deadline and proc.poll() is None
-        time.sleep(0.05)
+    def grown() -> bool:
+        return out.exists() and out.stat().st_size >= 100_000
+    wait_until(lambda: grown() or proc.poll() is not None, 30, 0.05)
+    assert grown() and proc.poll() is None, proc.poll()
     proc.send_signal(signal.SIGINT)
     start = time.monotonic()
     _, stderr = proc.communicate(timeout=20)
