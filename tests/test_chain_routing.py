@@ -18,7 +18,7 @@ from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
-from fixtures import wait_until_async
+from fixtures import ChainFactory, wait_until_async
 
 MOTORS = 15
 QUERIES = 200
@@ -166,8 +166,8 @@ def test_ch3_k65_paced_chain_interleaves_fifteen_hosts_in_time_order() -> None:
     assert first[15] > first[1]
 
 
-def test_queries_for_absent_ids_go_unanswered() -> None:
-    chain = Chain(motors=15)
+def test_queries_for_absent_ids_go_unanswered(make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=15)
     out: list[bytes] = []
     chain.host_line.add_listener(out.append)
     chain.execute("K23.1=24")   # no echo, messages on

@@ -14,7 +14,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bank_support import Rig, rig
-from coolmuscle.chain.daisy import Chain
 from fixtures import ChainFactory, collect_events
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
@@ -198,35 +197,37 @@ def test_4_5_1_cm2_ladder_assignments_are_silent_a_register_alone_displays() -> 
     assert r.chain.execute("S.1") == ["S.1=10"] and r.chain.execute("V3.1") == ["V3.1=21"]
 
 
-def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path)
+def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path)
     for line in ("K63.1=10", "K62.1=2", "L2.1", "V1.1=V1.1+V2.1;", "END", "V2.1=1", "$.1"):
         first.execute(line)
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     second.kernel.run(until=seconds(0.095))
     assert second.get_register(1, "V", 1) == 10
     second.close()
 
 
-def test_rt3_3_5_1_k85_starts_a_logic_bank_at_power_up(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path, firmware="rt3")
+def test_rt3_3_5_1_k85_starts_a_logic_bank_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path, firmware="rt3")
     for line in ("K87.1=1", "K85.1=1", 'V1="AIN4"', "V2=4", "S0.1=0", "A0.1=50",
                  "P0.1=1000000000", "L1.1", "S0.1=V1.1/V2.1;", "^.1", "END.1", "$.1"):
         first.execute(line)
     first.close()
-    second = Chain(state_dir=tmp_path, firmware="rt3")
+    second = make_chain(state_dir=tmp_path, firmware="rt3")
     second.set_analog(1, 800)
     second.kernel.run(until=seconds(1))
     assert second.execute("?97.1") == ["Sx.1=200"]      # 7.2: analog 800 / 4
     second.close()
 
 
-def test_k62_with_a_missing_bank_starts_nothing(tmp_path: Path) -> None:
-    chain = Chain(state_dir=tmp_path)
+def test_k62_with_a_missing_bank_starts_nothing(tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(state_dir=tmp_path)
     chain.execute("K62.1=3")
     chain.close()
-    again = Chain(state_dir=tmp_path)
+    again = make_chain(state_dir=tmp_path)
     assert again.motors[1].ladder.state == "idle"
     again.close()
 

@@ -108,18 +108,19 @@ def test_a_relative_xdg_data_home_is_ignored(monkeypatch: pytest.MonkeyPatch,
     assert cli.default_state_dir() == tmp_path / "abs/coolmuscle/state"
 
 
-def test_one_chain_per_state_directory_in_one_process(tmp_path: Path) -> None:
+def test_one_chain_per_state_directory_in_one_process(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
     """Two chains saving into one store would overwrite each other's snapshots (each `$`
     writes the whole motor): the second is refused while the first is open, with the
     holder's pid, and gets the state once the first has closed."""
-    first = Chain(state_dir=tmp_path)
+    first = make_chain(state_dir=tmp_path)
     first.execute("K42.1=111")
     first.execute("P5.1=555")
     assert first.execute("$.1") == ["saved.1"]
     with pytest.raises(StoreError, match=rf"in use: another coolmuscle \(pid {os.getpid()}\)"):
-        Chain(state_dir=tmp_path)
+        make_chain(state_dir=tmp_path)
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     assert second.execute("K42.1") == ["K42.1=111"] and second.execute("P5.1") == ["P5.1=555"]
     second.close()
     with Store(tmp_path / "coolmuscle.sqlite3") as reader:    # readers are never refused
@@ -150,11 +151,12 @@ def test_a_second_sim_on_the_same_state_is_refused_and_the_first_keeps_saving(
     assert chain.execute("K42.1") == ["K42.1=111"] and chain.execute("P5.1") == ["P5.1=555"]
 
 
-def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(tmp_path: Path) -> None:
+def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
     """A `$` snapshot replaced by 100,000 nested arrays: the documented one-line
     "unreadable ... move the file aside" StoreError (it was an internal error:
     RecursionError), and the file is left as it was."""
-    chain = Chain(state_dir=tmp_path)
+    chain = make_chain(state_dir=tmp_path)
     assert chain.execute("$.1") == ["saved.1"]
     chain.close()
     path = tmp_path / "coolmuscle.sqlite3"
@@ -162,5 +164,5 @@ def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(tmp_pat
         db.execute("UPDATE snapshot SET data = ?", ("[" * 100_000 + "]" * 100_000,))
     before = path.read_bytes()
     with pytest.raises(StoreError, match=r"unreadable \(nested too deeply\); move the file"):
-        Chain(state_dir=tmp_path)
+        make_chain(state_dir=tmp_path)
     assert path.read_bytes() == before

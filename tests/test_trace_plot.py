@@ -19,7 +19,6 @@ import matplotlib.figure
 import pytest
 
 from coolmuscle.tools.cli import app as cli
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.signals.encoder import Gearing
 from coolmuscle.tools.trace.plot import status_class
 from coolmuscle.tools.trace import recorder as trace_module
@@ -27,7 +26,7 @@ from coolmuscle.sim.kernel import NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError
 from coolmuscle.tools.trace.recorder import record, trace as start_trace
 from coolmuscle.tools.trace.plot import plot as plot_chain
-from fixtures import ROOT, run_coolmuscle
+from fixtures import ChainFactory, ROOT, run_coolmuscle
 
 EXAMPLES = ROOT / "examples"
 
@@ -50,8 +49,9 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
     return rows[0], rows[1:]
 
 
-def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) -> None:
-    chain = Chain()
+def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     handle = start_trace(chain, tmp_path / "run.csv", step=0.01)
     chain.set_param(1, 34, 77)
     chain.set_param(1, 24, 2000)
@@ -80,8 +80,8 @@ def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) 
     assert float(last[col["m1.position"]]) == pytest.approx(6000, abs=0.01)
 
 
-def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
-    chain = Chain()
+def test_trace_analog_out_follows_k35(tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     rec = record(chain)
     chain.set_param(1, 35, 2)                    # current position, ±1024 pulses
     chain.execute("S.1=10, A.1=100, P.1=512")
@@ -92,10 +92,11 @@ def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
 
 
 def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any,
+        make_chain: ChainFactory) -> None:
     monkeypatch.setattr(trace_module, "parquet_available", lambda: False)
     with pytest.raises(TraceFormatError, match="pyarrow"):
-        start_trace(Chain(), tmp_path / "run.parquet")
+        start_trace(make_chain(), tmp_path / "run.parquet")
     script = tmp_path / "s.cml"
     script.write_text("?96.1\n")
     with pytest.raises(SystemExit) as info:
@@ -106,8 +107,8 @@ def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
     assert not (tmp_path / "run.parquet").exists()
 
 
-def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
-                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_parquet_columns_and_types_with_pyarrow(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, make_chain: ChainFactory) -> None:
     """The Parquet writer against a stand-in for pyarrow (it is an optional
     dependency): one int64 or float64 array per column, written to the path."""
     written: dict[str, Any] = {}
@@ -128,7 +129,7 @@ def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
     monkeypatch.setitem(sys.modules, "pyarrow", pa)
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", pq)
     monkeypatch.setattr(trace_module, "parquet_available", lambda: True)
-    chain = Chain()
+    chain = make_chain()
     handle = start_trace(chain, tmp_path / "run.parquet", step=0.1)
     chain.execute("S.1=100, A.1=100, P.1=1000")
     chain.execute("^.1")
@@ -155,10 +156,10 @@ def test_cli_run_writes_trace_and_plot(tmp_path: Path, capsys: Any) -> None:
     capsys.readouterr()
 
 
-def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
+def test_plot_grows_with_the_number_of_motors(tmp_path: Path, make_chain: ChainFactory) -> None:
     heights = []
     for motors in (1, 15):
-        chain = Chain(motors=motors)
+        chain = make_chain(motors=motors)
         record(chain)
         for mid in chain.motor_ids:
             chain.set_param(mid, 34, 1)
