@@ -135,9 +135,6 @@ class Axis:
     def command_velocity(self) -> float:
         return self.sign * self.profile.velocity_at(self.kernel.now)
 
-    def command_acceleration(self) -> float:
-        return self.sign * self.profile.acceleration_at(self.kernel.now)
-
     def mode(self) -> str:
         """The dynamics mode now (``track``, ``sat``, ``contact``, ...)."""
         return self.motion.mode_at(self.kernel.now)
