@@ -96,4 +96,3 @@ def closed_port() -> Iterator[int]:
     from fixtures import closed_port
     with closed_port() as port:
         yield port
-

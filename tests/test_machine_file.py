@@ -186,4 +186,3 @@ def test_a_machine_file_that_is_not_utf8_is_refused_in_one_line(tmp_path: Path) 
     path.write_bytes(b'name = "\xff"\n')
     with pytest.raises(MachineFileError, match="not UTF-8 text"):
         load_machine(path)
-
