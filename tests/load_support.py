@@ -20,7 +20,6 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -28,10 +27,7 @@ from types import TracebackType
 from typing import Any, Mapping
 
 from coolmuscle.motor.state.store import Store
-
-#: The banner item that gives the TCP port of ``coolmuscle sim --tcp 0``.
-TCP_BANNER = "tcp: 127.0.0.1:"
-
+from fixtures import ServedSim
 
 def connect(port: int, timeout: float = 10.0) -> socket.socket:
     """A client of ``127.0.0.1:port``, Nagle off (each query leaves at once)."""
@@ -120,22 +116,18 @@ def round_trip(sock: socket.socket, query: bytes, reply: bytes, timeout: float =
 
 
 def start_sim(state: Path, env: Mapping[str, str],
-              *extra: str) -> tuple[subprocess.Popen[str], int]:
-    """``coolmuscle sim --tcp 0 --state STATE`` as a process, and its TCP port (from the
-    banner on stderr; stderr stays open for the caller)."""
-    proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                             "--state", str(state), *extra], stderr=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, text=True, env=dict(env))
-    assert proc.stderr is not None
-    while True:
-        line = proc.stderr.readline()
-        if not line:
-            raise RuntimeError(f"sim ended before it was ready (exit {proc.wait()})")
-        if TCP_BANNER in line:
-            return proc, int(line.split(TCP_BANNER)[1].split()[0])
+              *extra: str) -> tuple[subprocess.Popen[bytes], int]:
+    """``coolmuscle sim --tcp 0 --state STATE`` as a process (:class:`fixtures.ServedSim`;
+    what it prints goes to ``sim.log`` beside STATE), and its TCP port from the banner;
+    ``RuntimeError`` when it ended before it was ready."""
+    try:
+        sim = ServedSim(state.parent / "sim.log", *extra, state=state, env=env)
+    except AssertionError as exc:
+        raise RuntimeError(f"sim ended before it was ready: {exc}") from None
+    return sim.proc, sim.port
 
 
-def save_then_kill(proc: subprocess.Popen[str], port: int, last: int, seconds: float,
+def save_then_kill(proc: subprocess.Popen[Any], port: int, last: int, seconds: float,
                    pause: float = 0.0) -> int:
     """Save ``P1.1`` = ``last`` + 1, + 2, ... (``P1.1=n`` then ``$.1``, each answered
     ``saved.1``) for ``seconds``, send one more save and ``kill -9`` the sim ``pause``

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
+from fixtures import ChainFactory
 
 MOTORS = (1, 2, 3)
 
@@ -84,8 +85,8 @@ def test_poke_calls_the_watchers_concerned_in_order(operations: list[tuple]) -> 
     chain.close()
 
 
-def test_a_watcher_removed_during_a_poke_still_runs_in_that_poke() -> None:
-    chain = Chain(motors=2)
+def test_a_watcher_removed_during_a_poke_still_runs_in_that_poke(make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=2)
     calls: list[str] = []
     removers: dict[str, Callable[[], None]] = {}
 

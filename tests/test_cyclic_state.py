@@ -12,6 +12,7 @@ from coolmuscle.errors import NoSuchMotorError
 from coolmuscle.sim.kernel import NS_PER_MS
 
 import pytest
+from fixtures import ChainFactory
 
 
 def same(chain: Chain, motor: int) -> None:
@@ -54,6 +55,6 @@ def test_the_cyclic_state_is_the_snapshot_of_the_same_instant(
             same(chain, 1)
 
 
-def test_no_such_motor() -> None:
+def test_no_such_motor(make_chain: ChainFactory) -> None:
     with pytest.raises(NoSuchMotorError):
-        Chain(motors=1).cyclic_state(2)
+        make_chain(motors=1).cyclic_state(2)

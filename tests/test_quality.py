@@ -7,7 +7,8 @@
   ``_meets_its_protocol*`` functions in chain/daisy.py and motor/motor.py, and every call
   that hands the chain or the motor to a part).
 * ``ruff`` (pinned in the ``test`` extra) lints the repository with the rules of
-  ``[tool.ruff]`` (pycodestyle, pyflakes, bugbear; lines up to 100 characters).
+  ``[tool.ruff]`` (pycodestyle, pyflakes, bugbear, import order, pyupgrade; lines up to
+  100 characters).
 
 A new error in either fails the suite; each test also shows that its tool, with the
 project's settings, finds an error in a module written to have one.

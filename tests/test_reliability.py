@@ -10,7 +10,8 @@
 
 The long versions (20 x 1,000, 100+ kill -9 rounds, a 10-hour trace) are in
 bench/bench_reliability.py.  Full disk, corrupted state and signals have their
-own files (tests/test_hardening_*.py).
+own files (tests/test_store_full_disk.py, test_store_validation.py,
+test_cli_signals.py).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim
+from fixtures import wait_until_async
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -160,10 +162,7 @@ def test_twenty_clients_on_the_real_chain_lose_nothing_and_keep_order() -> None:
         async def main() -> list[list[bytes]]:
             go = asyncio.Event()
             tasks = asyncio.gather(*(client(n, go) for n in range(clients)))
-            deadline = time.monotonic() + 10
-            while st_.transports[0].clients < clients:
-                assert time.monotonic() < deadline
-                await asyncio.sleep(0.01)
+            assert await wait_until_async(lambda: st_.transports[0].clients >= clients, 10)
             go.set()
             return await asyncio.wait_for(tasks, 90)
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 from ethercat_support import run_master
-from modbus_support import wait_for
+from fixtures import wait_until
 from web_support import ask, serve, ws_frames
 from wireshark_support import (
     Frame,
@@ -378,7 +378,7 @@ def test_modbus_tcp_function_codes_and_exceptions_dissect_as_sent_5_6_7(tmp_path
                     (client.read_coils(0, count=8, device_id=1), 1),
                     (client.write_register(200, 7, device_id=1), 6),
                 ]
-                assert wait_for(lambda: st.call(lambda: st.chain.snapshot(1).position) == 2000)
+                assert wait_until(lambda: st.call(lambda: st.chain.snapshot(1).position) == 2000)
             finally:
                 client.close()
     finally:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Generator, TypeVar
 
 from ..errors import (AlarmError, CoolMuscleTimeout, InvalidArgumentError, MotionInterruptedError,
-                      OutOfRangeError, ProtocolError)
+                      ProtocolError)
 from ..motor.status import ALARM_BITS, Report, Ux
 from . import args
 from .protocol import Exchange, MotorEvent, Protocol
@@ -293,9 +293,3 @@ def wait_in_position(session: Session, motor: int, timeout: float) -> Op[Ux]:
         since = session.protocol.status_seen.get(motor, (since, 0))[0]
         if settled(motor, parse_int_reply(line, "Ux", motor)):
             return Ux(parse_int_reply(line, "Ux", motor))
-
-
-def check_range(ok: bool, message: str) -> None:
-    """Raise :class:`OutOfRangeError` (the motor's error00) before sending anything."""
-    if not ok:
-        raise OutOfRangeError(message)

@@ -135,9 +135,6 @@ class Axis:
     def command_velocity(self) -> float:
         return self.sign * self.profile.velocity_at(self.kernel.now)
 
-    def command_acceleration(self) -> float:
-        return self.sign * self.profile.acceleration_at(self.kernel.now)
-
     def mode(self) -> str:
         """The dynamics mode now (``track``, ``sat``, ``contact``, ...)."""
         return self.motion.mode_at(self.kernel.now)
@@ -153,7 +150,7 @@ class Axis:
         plan from rest once it has begun: the shaft follows that plan (the motion is
         solved on it), the stored profile equals it within float noise, and a cycle
         that repeats the reversal then starts each repeat from the same numbers (and
-        finds its plan planned: docs/performance.md "Sixth round")."""
+        finds its plan planned: docs/performance.md "Where the time goes")."""
         return self._command_at(t_ns).state_at(t_ns)
 
     def _command_end(self, now: int) -> int | None:
@@ -210,7 +207,7 @@ class Axis:
             # the planner runs the command on to its end, then starts from rest.  The
             # shaft follows the old command as solved until that end, and the new move
             # is solved from there, from rest (the same numbers for each repeat of a
-            # cycle: docs/performance.md "Why every chain move was solved afresh").
+            # cycle: docs/performance.md "Where the time goes").
             rest = planner.plan_moves(self._command_state(end), raw, end)
             self.profile = profile
             self._rest = (profile, rest)

@@ -224,10 +224,6 @@ class SubPath:
 Path = Line | Arc | SubPath
 
 
-def _angle(center: Point, p: Point, rx: float, ry: float) -> float:
-    return math.atan2((p[1] - center[1]) / ry, (p[0] - center[0]) / rx)
-
-
 def _sweep(theta0: float, theta1: float, cw: bool, full_if_equal: bool) -> float:
     d = (theta1 - theta0) % (2 * math.pi)
     if cw:

@@ -234,11 +234,6 @@ class ExternalEncoder:
         state = self._state(t) if self.type else None
         return self.offset if state is None else self._count_of(state)
 
-    def reset_count(self, value: int = 0) -> None:
-        """Set the count (e.g. an input function that resets counters)."""
-        self.offset = 0
-        self.offset = value - self.count()
-
     def frequency(self) -> float:
         """Encoder pulses per second now (RT3 ``Fx``)."""
         if self.clock is not None:

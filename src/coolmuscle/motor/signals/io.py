@@ -137,8 +137,3 @@ class DigitalIO:
             if self.output_port(n):
                 word |= 1 << (n - 1)
         return word
-
-    def general_word(self) -> int:
-        """Ports of the general-use outputs only (the K23 function 4 report)."""
-        return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
-                   if self.command_of(n) is not None and self.output_port(n))

@@ -1,4 +1,4 @@
-"""Issue 16 items 7 and 10: saved state is validated; the XDG rule for the state dir.
+"""Saved state is validated; the XDG rule for the state dir.
 
 A store whose ``$`` snapshot (cml-users-guide.txt 2.1.2) or automatic K save
 (ch. 3) holds something the motor never writes stops start-up with one line that
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sqlite3
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -22,10 +22,9 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.errors import StoreError
 from coolmuscle.motor.state.store import Store
 from coolmuscle.tools.cli import app as cli
+from fixtures import ChainFactory, SimFactory, coolmuscle_env, run_coolmuscle
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
-ENV.pop("COOLMUSCLE_DEBUG", None)
+ENV = coolmuscle_env(COLUMNS="300")
 
 
 def make_store(state: Path) -> Path:
@@ -47,9 +46,8 @@ def edit_snapshot(path: Path, change: dict) -> None:
 
 
 def start_sim(state: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                           "--state", str(state)], capture_output=True, text=True, env=ENV,
-                          timeout=30)
+    """``sim --tcp 0 --state STATE`` that is expected to refuse to start."""
+    return run_coolmuscle("sim", "--tcp", "0", "--state", str(state), timeout=30, env=ENV)
 
 
 CORRUPTIONS = {
@@ -110,18 +108,19 @@ def test_a_relative_xdg_data_home_is_ignored(monkeypatch: pytest.MonkeyPatch,
     assert cli.default_state_dir() == tmp_path / "abs/coolmuscle/state"
 
 
-def test_one_chain_per_state_directory_in_one_process(tmp_path: Path) -> None:
+def test_one_chain_per_state_directory_in_one_process(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
     """Two chains saving into one store would overwrite each other's snapshots (each `$`
     writes the whole motor): the second is refused while the first is open, with the
     holder's pid, and gets the state once the first has closed."""
-    first = Chain(state_dir=tmp_path)
+    first = make_chain(state_dir=tmp_path)
     first.execute("K42.1=111")
     first.execute("P5.1=555")
     assert first.execute("$.1") == ["saved.1"]
     with pytest.raises(StoreError, match=rf"in use: another coolmuscle \(pid {os.getpid()}\)"):
-        Chain(state_dir=tmp_path)
+        make_chain(state_dir=tmp_path)
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     assert second.execute("K42.1") == ["K42.1=111"] and second.execute("P5.1") == ["P5.1=555"]
     second.close()
     with Store(tmp_path / "coolmuscle.sqlite3") as reader:    # readers are never refused
@@ -129,49 +128,35 @@ def test_one_chain_per_state_directory_in_one_process(tmp_path: Path) -> None:
 
 
 def test_a_second_sim_on_the_same_state_is_refused_and_the_first_keeps_saving(
-        tmp_path: Path) -> None:
+        tmp_path: Path, served_sim: SimFactory, make_chain: ChainFactory) -> None:
     """Two ``coolmuscle sim --state DIR``: the second ends at once with one line and
     exit 1; what the first saved (an automatic K save and a ``$``) is there after it
     stops.  (An attack found both answering ``saved.1`` and the first's saves lost.)"""
     import socket
-    cmd = [sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0", "--state", str(tmp_path)]
-    first = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                             stdin=subprocess.DEVNULL, text=True, env=ENV)
-    try:
-        assert first.stderr is not None
-        port = None
-        for _ in range(50):
-            line = first.stderr.readline()
-            if "tcp: 127.0.0.1:" in line:
-                port = int(line.split("tcp: 127.0.0.1:")[1].split()[0])
-                break
-        assert port is not None
-        second = subprocess.run(cmd, capture_output=True, text=True, env=ENV, timeout=60,
-                                stdin=subprocess.DEVNULL)
-        assert second.returncode == 1, second.stderr
-        lines = second.stderr.strip().splitlines()
-        assert len(lines) == 1 and "is in use: another coolmuscle" in lines[0], lines
-        assert f"pid {first.pid}" in lines[0] and "Traceback" not in second.stderr
-        with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
-            sock.sendall(b"K42.1=111\r\nP5.1=555\r\n$.1\r\n")
-            got = b""
-            while b"saved.1" not in got:
-                chunk = sock.recv(1024)
-                assert chunk, got
-                got += chunk
-    finally:
-        first.terminate()
-        first.wait(30)
-    chain = Chain(state_dir=tmp_path)
+    first = served_sim(state=tmp_path, env=ENV)
+    second = start_sim(tmp_path)
+    assert second.returncode == 1, second.stderr
+    lines = second.stderr.strip().splitlines()
+    assert len(lines) == 1 and "is in use: another coolmuscle" in lines[0], lines
+    assert f"pid {first.pid}" in lines[0] and "Traceback" not in second.stderr
+    with socket.create_connection(("127.0.0.1", first.port), timeout=5) as sock:
+        sock.sendall(b"K42.1=111\r\nP5.1=555\r\n$.1\r\n")
+        got = b""
+        while b"saved.1" not in got:
+            chunk = sock.recv(1024)
+            assert chunk, got
+            got += chunk
+    assert first.stop(signal.SIGTERM, 30) == 0
+    chain = make_chain(state_dir=tmp_path)
     assert chain.execute("K42.1") == ["K42.1=111"] and chain.execute("P5.1") == ["P5.1=555"]
-    chain.close()
 
 
-def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(tmp_path: Path) -> None:
+def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
     """A `$` snapshot replaced by 100,000 nested arrays: the documented one-line
     "unreadable ... move the file aside" StoreError (it was an internal error:
     RecursionError), and the file is left as it was."""
-    chain = Chain(state_dir=tmp_path)
+    chain = make_chain(state_dir=tmp_path)
     assert chain.execute("$.1") == ["saved.1"]
     chain.close()
     path = tmp_path / "coolmuscle.sqlite3"
@@ -179,5 +164,5 @@ def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(tmp_pat
         db.execute("UPDATE snapshot SET data = ?", ("[" * 100_000 + "]" * 100_000,))
     before = path.read_bytes()
     with pytest.raises(StoreError, match=r"unreadable \(nested too deeply\); move the file"):
-        Chain(state_dir=tmp_path)
+        make_chain(state_dir=tmp_path)
     assert path.read_bytes() == before

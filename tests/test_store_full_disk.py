@@ -1,4 +1,4 @@
-"""Issue 16 item 6: a full disk (a small tmpfs the test mounts and always unmounts).
+"""The store on a full disk (a small tmpfs the test mounts and always unmounts).
 
 ``$`` (cml-users-guide.txt 2.1.2) on a full disk tells the host ``not saved.n: ...``
 instead of ``saved.n``; a K write (ch. 3 "saved automatically") that cannot be
@@ -16,7 +16,7 @@ from typing import Iterator
 
 import pytest
 
-from coolmuscle.chain.daisy import Chain
+from fixtures import ChainFactory
 
 
 @pytest.fixture
@@ -45,9 +45,9 @@ def fill(directory: Path) -> None:
         os.close(fd)
 
 
-def test_full_disk_is_told_and_loses_nothing_saved(small_disk: Path,
-                                                    caplog: pytest.LogCaptureFixture) -> None:
-    chain = Chain(state_dir=small_disk)
+def test_full_disk_is_told_and_loses_nothing_saved(
+        small_disk: Path, caplog: pytest.LogCaptureFixture, make_chain: ChainFactory) -> None:
+    chain = make_chain(state_dir=small_disk)
     host: list[bytes] = []
     chain.host_line.add_listener(host.append)
     chain.host_line.feed(b"K23.1=16\rP1.1=111\r$.1\r")
@@ -69,7 +69,7 @@ def test_full_disk_is_told_and_loses_nothing_saved(small_disk: Path,
     assert chain.get_param(1, 37) == 1                 # holds in memory
     chain.close()
     os.unlink(small_disk / "filler")
-    again = Chain(state_dir=small_disk)                # power cycle: the last good $
+    again = make_chain(state_dir=small_disk)           # power cycle: the last good $
     try:
         assert again.get_register(1, "P", 1) == 111
         assert again.get_param(1, 23) == 16

@@ -1,4 +1,4 @@
-"""Issue 16 item 9: ``coolmuscle run --trace`` on long runs.
+"""``coolmuscle run --trace`` on long runs.
 
 The trace streams to its file as virtual time passes, with memory that does not
 grow with the run; ``--trace-step`` sets the grid; while the motors are at rest
@@ -21,6 +21,7 @@ from pathlib import Path
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.tools.script.runner import run_script
 from coolmuscle.tools.trace.recorder import FIELDS
+from fixtures import ChainFactory, wait_until
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
@@ -55,8 +56,8 @@ def test_a_long_idle_wait_is_fast_small_and_exact(tmp_path: Path) -> None:
     assert float(rows[-1][pos]) == 100.0          # and the value held to the end
 
 
-def test_trace_step_sets_the_grid(tmp_path: Path) -> None:
-    chain = Chain()
+def test_trace_step_sets_the_grid(tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     run_script(MOVES, chain, trace=tmp_path / "t.csv", trace_step=0.01)
     _, rows = read_rows(tmp_path / "t.csv")
     times = [round(float(r[0]) * 1000) for r in rows]
@@ -64,9 +65,9 @@ def test_trace_step_sets_the_grid(tmp_path: Path) -> None:
     assert len(on_grid) >= 100 and len(times) < 400
 
 
-def test_memory_does_not_grow_with_the_run(tmp_path: Path) -> None:
+def test_memory_does_not_grow_with_the_run(tmp_path: Path, make_chain: ChainFactory) -> None:
     def peak(repeats: int) -> int:
-        chain = Chain()
+        chain = make_chain()
         tracemalloc.start()
         run_script(MOVES * repeats, chain, trace=tmp_path / f"m{repeats}.csv", trace_step=0.01)
         _, top = tracemalloc.get_traced_memory()
@@ -94,10 +95,10 @@ def test_ctrl_c_stops_at_once_and_leaves_a_valid_file(tmp_path: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "run", str(script), "--trace",
                              str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, env=ENV)
-    deadline = time.monotonic() + 30
-    while not out.exists() or out.stat().st_size < 100_000:
-        assert time.monotonic() < deadline and proc.poll() is None
-        time.sleep(0.05)
+    def grown() -> bool:
+        return out.exists() and out.stat().st_size >= 100_000
+    wait_until(lambda: grown() or proc.poll() is not None, 30, 0.05)
+    assert grown() and proc.poll() is None, proc.poll()
     proc.send_signal(signal.SIGINT)
     start = time.monotonic()
     _, stderr = proc.communicate(timeout=20)

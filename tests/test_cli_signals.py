@@ -1,4 +1,4 @@
-"""Issue 16 item 8: every stop signal at every moment of ``coolmuscle sim``.
+"""Every stop signal at every moment of ``coolmuscle sim``.
 
 SIGINT, SIGTERM and SIGHUP during start-up (imports, store, transports), while
 serving, under load and during ``$`` (cml-users-guide.txt 2.1.2): one line, no
@@ -11,7 +11,6 @@ caught-signal mask shows our handlers (docs/reliability.md "signals").
 
 from __future__ import annotations
 
-import os
 import signal
 import socket
 import subprocess
@@ -19,61 +18,65 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
 from coolmuscle.motor.state.store import Store
-from load_support import signal_and_wait
+from fixtures import Program, coolmuscle_env
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}
-ENV.pop("COOLMUSCLE_DEBUG", None)
+ENV = coolmuscle_env(COLUMNS="300")
 
 STOP_LINES = ("coolmuscle: stopped", "coolmuscle: interrupted")
 
 
-def start(tmp_path: Path) -> tuple[subprocess.Popen[str], Path]:
-    link = tmp_path / "cm-link"
-    proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                             "--pty-link", str(link), "--state", str(tmp_path / "state")],
-                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
-                            env=ENV)
-    return proc, link
+@pytest.fixture
+def started() -> Iterator[list[Program]]:
+    """The sims a test starts; none is left running after it."""
+    sims: list[Program] = []
+    yield sims
+    for sim in sims:
+        sim.close()
 
 
-def finish(proc: subprocess.Popen[str], link: Path) -> str:
-    _, stderr = proc.communicate(timeout=30)
-    assert "Traceback" not in stderr, stderr
-    stops = [line for line in stderr.splitlines() if line.startswith(STOP_LINES)]
-    assert len(stops) == 1, stderr
-    assert proc.returncode in (0, 130, 128 + signal.SIGTERM, 128 + signal.SIGHUP), \
-        (proc.returncode, stderr)
+def start(started: list[Program], run_dir: Path) -> tuple[Program, Path]:
+    """``sim --tcp 0 --pty-link LINK --state DIR``, not waited for."""
+    link = run_dir / "cm-link"
+    sim = Program(["sim", "--tcp", "0", "--pty-link", str(link), "--state",
+                   str(run_dir / "state")], run_dir / f"sim{len(started)}.log", env=ENV)
+    started.append(sim)
+    return sim, link
+
+
+def finish(sim: Program, link: Path) -> str:
+    code = sim.proc.wait(timeout=30)
+    said = sim.text
+    assert "Traceback" not in said, said
+    stops = [line for line in said.splitlines() if line.startswith(STOP_LINES)]
+    assert len(stops) == 1, said
+    assert code in (0, 130, 128 + signal.SIGTERM, 128 + signal.SIGHUP), (code, said)
     assert not link.is_symlink(), "the --pty-link symlink was left behind"
-    return stderr
+    return said
 
 
-def wait_ready(proc: subprocess.Popen[str]) -> int:
-    assert proc.stderr is not None
-    while True:
-        line = proc.stderr.readline()
-        assert line, "sim ended before it was ready"
-        if "tcp: 127.0.0.1:" in line:
-            return int(line.split("tcp: 127.0.0.1:")[1].split()[0])
+def wait_ready(sim: Program) -> int:
+    """The TCP port of its banner."""
+    return int(sim.wait_for(r"tcp: 127\.0\.0\.1:(\d+)").group(1))
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 @pytest.mark.parametrize("delay", [0.25, 0.4, 0.6, 0.9])
-def test_a_signal_during_start_up_is_one_clean_line(tmp_path: Path, sig: int,
-                                                    delay: float) -> None:
+def test_a_signal_during_start_up_is_one_clean_line(started: list[Program], tmp_path: Path,
+                                                    sig: int, delay: float) -> None:
     # the interpreter's own start-up, measured now (the machine may be loaded): no
     # program can handle a signal before its first line runs
     began = time.monotonic()
     subprocess.run([sys.executable, "-c", "import coolmuscle"], env=ENV, check=True)
     interpreter = time.monotonic() - began
-    proc, link = start(tmp_path)
+    sim, link = start(started, tmp_path)
     time.sleep(max(delay, 2 * interpreter))
-    proc.send_signal(sig)
-    finish(proc, link)
+    sim.proc.send_signal(sig)
+    finish(sim, link)
 
 
 def handlers_installed(pid: int) -> bool:
@@ -94,7 +97,8 @@ SWEEP = (0.0, 0.001, 0.002, 0.004, 0.007, 0.01, 0.015, 0.02, 0.03, 0.04, 0.055, 
          0.11, 0.14, 0.17, 0.2, 0.25, 0.3, 0.4, 0.5)
 
 
-def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(tmp_path: Path) -> None:
+def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(
+        started: list[Program], tmp_path: Path) -> None:
     """Issue 28 defect 1: SIGINT 50 ms after ``sim --tcp 0 --state DIR`` started printed a
     traceback ending in ``SignalStop: SIGINT`` with exit 1 (the handler raised while the
     package, runpy or the entry module were still loading, outside any code that catches
@@ -103,30 +107,31 @@ def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(tmp_path
     ``coolmuscle: stopped`` and 0; never a traceback."""
     seen = set()
     for n, delay in enumerate(SWEEP):
-        proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                                 "--state", str(tmp_path / f"state{n}")],
-                                stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
-                                env=ENV)
-        while not handlers_installed(proc.pid):
-            assert proc.poll() is None, proc.communicate()
+        sim = Program(["sim", "--tcp", "0", "--state", str(tmp_path / f"state{n}")],
+                      tmp_path / f"sim{n}.log", env=ENV)
+        started.append(sim)
+        while not handlers_installed(sim.pid):
+            assert sim.proc.poll() is None, sim.text
         time.sleep(delay)
-        _, stderr = signal_and_wait(proc)
-        lines = stderr.splitlines()
-        assert "Traceback" not in stderr and "Exception" not in stderr, (delay, stderr)
-        if proc.returncode == 130:
-            assert lines == ["coolmuscle: interrupted"], (delay, stderr)
+        code = sim.signal(signal.SIGINT, 30)
+        said = sim.text
+        lines = said.splitlines()
+        assert "Traceback" not in said and "Exception" not in said, (delay, said)
+        if code == 130:
+            assert lines == ["coolmuscle: interrupted"], (delay, said)
         else:
-            assert proc.returncode == 0, (delay, proc.returncode, stderr)
-            assert lines[-1] == "coolmuscle: stopped" and "ready" in lines[0], (delay, stderr)
-            assert not any(line.startswith(STOP_LINES) for line in lines[:-1]), (delay, stderr)
-        seen.add(proc.returncode)
+            assert code == 0, (delay, code, said)
+            assert lines[-1] == "coolmuscle: stopped" and "ready" in lines[0], (delay, said)
+            assert not any(line.startswith(STOP_LINES) for line in lines[:-1]), (delay, said)
+        seen.add(code)
     assert 130 in seen, "no SIGINT of the sweep came before the server was up"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
-def test_a_signal_while_serving_under_load_and_a_second_one(tmp_path: Path, sig: int) -> None:
-    proc, link = start(tmp_path)
-    port = wait_ready(proc)
+def test_a_signal_while_serving_under_load_and_a_second_one(started: list[Program],
+                                                           tmp_path: Path, sig: int) -> None:
+    sim, link = start(started, tmp_path)
+    port = wait_ready(sim)
     stop = threading.Event()
 
     def load() -> None:
@@ -141,21 +146,21 @@ def test_a_signal_while_serving_under_load_and_a_second_one(tmp_path: Path, sig:
     thread = threading.Thread(target=load)
     thread.start()
     time.sleep(0.5)
-    proc.send_signal(sig)
+    sim.proc.send_signal(sig)
     time.sleep(0.01)
-    proc.send_signal(signal.SIGINT)          # a second one during the stop
+    sim.proc.send_signal(signal.SIGINT)      # a second one during the stop
     stop.set()
     thread.join(5)
-    stderr = finish(proc, link)
-    assert proc.returncode == 0, stderr
+    said = finish(sim, link)
+    assert sim.proc.returncode == 0, said
     with Store(tmp_path / "state" / "coolmuscle.sqlite3") as store:   # a whole $, not half
         assert store.integrity_check() == "ok"
         assert store.load(1)["memory"]["P"][1] == 5
 
 
 @pytest.mark.parametrize("first", [signal.SIGTERM, signal.SIGHUP])
-def test_a_second_signal_at_any_moment_of_the_stop_changes_nothing(tmp_path: Path,
-                                                                    first: int) -> None:
+def test_a_second_signal_at_any_moment_of_the_stop_changes_nothing(
+        started: list[Program], tmp_path: Path, first: int) -> None:
     """The second signal lands anywhere from the event loop's wake-up to the exit (at
     0 to 50 ms): one stop line, exit 0, the link removed, every time.  (The loop's own
     signal handlers, taken off, put the default ones back for an instant: a SIGINT
@@ -163,13 +168,13 @@ def test_a_second_signal_at_any_moment_of_the_stop_changes_nothing(tmp_path: Pat
     for n, delay in enumerate((0.0, 0.0005, 0.001, 0.002, 0.004, 0.008, 0.015, 0.03, 0.05)):
         run_dir = tmp_path / str(n)
         run_dir.mkdir()
-        proc, link = start(run_dir)
-        wait_ready(proc)
-        proc.send_signal(first)
+        sim, link = start(started, run_dir)
+        wait_ready(sim)
+        sim.proc.send_signal(first)
         time.sleep(delay)
-        proc.send_signal(signal.SIGINT)
-        stderr = finish(proc, link)
-        assert proc.returncode == 0, (delay, stderr)
+        sim.proc.send_signal(signal.SIGINT)
+        said = finish(sim, link)
+        assert sim.proc.returncode == 0, (delay, said)
 
 
 def test_a_stop_signal_that_python_wraps_is_still_one_stop_line(capsys) -> None:

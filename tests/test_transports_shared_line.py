@@ -1,4 +1,4 @@
-"""Issue 16 items 1-3: the motor's one host line shared by several clients.
+"""The motor's one host line shared by several clients.
 
 Each client's lines are assembled apart and run whole, in turn with the others
 (docs/reliability.md "fairness"); an upload ``B#.n`` (cml-users-guide.txt 2.2.2)
@@ -21,6 +21,7 @@ from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from load_support import Flood, round_trip
+from fixtures import wait_until
 from modbus_support import Wire, frame
 
 MANUAL = {"K78_1": 100, "K79_1": 200, "K80_1": 300, "K81_1": 1}
@@ -55,10 +56,7 @@ def read_until(sock: socket.socket, marker: bytes, count: int = 1,
 
 
 def wait_clients(st_: ServiceThread, n: int) -> None:
-    deadline = time.monotonic() + 5
-    while st_.transports[0].clients < n:
-        assert time.monotonic() < deadline
-        time.sleep(0.01)
+    assert wait_until(lambda: st_.transports[0].clients >= n, 5, 0.01), "clients not connected"
 
 
 # -- item 1: a client is dropped only for its own failure to read --------------------
@@ -123,10 +121,8 @@ def test_a_tcp_half_line_and_a_pty_line_are_never_one_line(served: ServiceThread
         pty.write(b"?96.1\r")
         assert pty.read_until(b"Px.1=0\r\n").endswith(b"Px.1=0\r\n")
         a.sendall(b"\r")
-        deadline = time.monotonic() + 5
-        while served.call(lambda: served.chain.get_register(1, "P", 1)) != 12:
-            assert time.monotonic() < deadline, "P1.1=12 was not run as its own line"
-            time.sleep(0.02)
+        assert wait_until(lambda: served.call(lambda: served.chain.get_register(1, "P", 1))
+                          == 12), "P1.1=12 was not run as its own line"
     finally:
         pty.close()
 
@@ -211,11 +207,9 @@ def test_an_open_upload_takes_only_its_owners_lines(served: ServiceThread) -> No
     b.sendall(b"?96.1\r")
     read_until(b, b"Px.1=", timeout=3)
     a.sendall(b"\r")
-    deadline = time.monotonic() + 3
-    while served.call(lambda: served.chain.motors[1].banks.listing(False, 1)) != ["S.1=10"]:
-        assert time.monotonic() < deadline, \
-            served.call(lambda: served.chain.motors[1].banks.listing(False, 1))
-        time.sleep(0.02)
+    def bank_1() -> list[str]:
+        return served.call(lambda: served.chain.motors[1].banks.listing(False, 1))
+    assert wait_until(lambda: bank_1() == ["S.1=10"], 3), bank_1()
 
 
 def test_modbus_register_write_during_a_cml_upload_is_a_register_write() -> None:
@@ -235,10 +229,8 @@ def test_the_lines_of_a_client_that_sends_and_closes_all_run(served: ServiceThre
     wait_clients(served, 1)
     a.sendall(b"".join(b"P%d.1=%d\r" % (i, i) for i in range(1, 201)) + b"B1.1\r")
     a.close()
-    deadline = time.monotonic() + 5
-    while served.call(lambda: served.chain.get_register(1, "P", 200)) != 200:
-        assert time.monotonic() < deadline, "lines sent before the close were lost"
-        time.sleep(0.02)
+    assert wait_until(lambda: served.call(lambda: served.chain.get_register(1, "P", 200))
+                      == 200), "lines sent before the close were lost"
     b = connect(served)
     b.sendall(b"?96.1\r")
     assert b"Px.1=" in read_until(b, b"Px.1=", timeout=3)     # the upload ended with A
