@@ -33,7 +33,7 @@ _dataclass_code.install()  # the dataclasses' generated methods kept compiled be
 
 from . import _accel  # noqa: E402
 
-_accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
+_accel.choose(__path__[0])  # the compiled hot modules or the sources (the build stamp)
 
 __version__ = "0.1.0"
 
