@@ -37,7 +37,8 @@ _accel.choose(__path__[0])  # the compiled hot modules or the sources (the build
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "connect", "connect_async", "Ux", "Version", "CoolMuscleError"]
+__all__ = ["__version__", "connect", "connect_async", "Ux", "Version", "CoolMuscleError",
+           "register_url_handler"]
 
 
 def __getattr__(name: str) -> object:
@@ -55,6 +56,12 @@ def __getattr__(name: str) -> object:
         return CoolMuscleError
     raise AttributeError(f"module 'coolmuscle' has no attribute {name!r}")
 
-from .frontends.urlhandler import register as _register_url_handler  # noqa: E402
 
-_register_url_handler()  # serial.serial_for_url("coolmuscle://...")
+
+def register_url_handler() -> None:
+    """Make ``serial.serial_for_url("coolmuscle://...")`` work: pyserial's documented
+    ``serial.protocol_handler_packages`` gets coolmuscle's handler package (once).
+    :func:`connect` does it itself for a ``coolmuscle://`` URL (docs/transports.md)."""
+    from .frontends.urlhandler import register
+
+    register()
