@@ -1,5 +1,5 @@
 """Importing coolmuscle changes nothing in the process (coolmuscle/__init__.py, the package
-docstring); the public names, loaded on first use.
+docstring): the public names, loaded on first use; one version.
 
 A library's import must leave its user's process as it was: no patched module
 (:mod:`dataclasses`, pyserial and its loader), no signal handler, no exit hook, no
@@ -18,12 +18,14 @@ import json
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
 import coolmuscle
 
+ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(coolmuscle.__file__).resolve().parent
 
 #: What "the process's state" is: every value of dataclasses' and builtins' namespaces,
@@ -189,3 +191,20 @@ def test_import_coolmuscle_loads_nothing_heavy_and_the_names_load_on_use() -> No
     }
     assert set(coolmuscle.__all__) <= set(out["dir"])
     assert out["missing"] == "module 'coolmuscle' has no attribute 'NoSuchName'"
+
+
+def test_one_version_read_by_the_build_and_printed_by_the_command() -> None:
+    """pyproject.toml has no version of its own: setuptools reads ``coolmuscle.__version__``
+    (statically, without importing the package), and ``coolmuscle --version`` prints it."""
+    from setuptools.config.expand import read_attr
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert "version" not in project["project"] and "version" in project["project"]["dynamic"]
+    attr = project["tool"]["setuptools"]["dynamic"]["version"]["attr"]
+    assert attr == "coolmuscle.__version__"
+    assert read_attr(attr, package_dir={"": "src"}, root_dir=ROOT) == coolmuscle.__version__
+    env = {k: v for k, v in os.environ.items() if k != "COOLMUSCLE_PURE"}
+    env["PYTHONPATH"] = str(PACKAGE.parent)
+    done = subprocess.run([sys.executable, "-m", "coolmuscle", "--version"], env=env,
+                          capture_output=True, text=True, check=True, timeout=60)
+    assert done.stdout.splitlines()[0] == f"coolmuscle {coolmuscle.__version__}"

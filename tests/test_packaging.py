@@ -136,6 +136,9 @@ def test_a_wheel_built_with_a_compiler_installs_and_runs_the_compiled_modules(
     assert not wheel.name.endswith("-py3-none-any.whl"), wheel.name   # a platform wheel
     python = fresh_venv(tmp_path / "venv", wheel)
 
+    metadata = run([str(python), "-c", "import importlib.metadata as m; "
+                    "print(m.version('coolmuscle'))"], clean_env()).strip()
+    assert metadata == coolmuscle.__version__          # pyproject reads it from the package
     assert version_lines(python) == [
         f"coolmuscle {coolmuscle.__version__}",
         f"hot modules: compiled ({len(accel.MODULES)} modules built with the package by "
