@@ -299,7 +299,7 @@ def test_a_current_build_is_left_as_it_is(stamp: dict[str, object],
     assert path.read_bytes() == before
 
 
-def test_without_a_c_compiler_the_sources_run_and_the_manifest_says_why(
+def test_without_a_c_compiler_the_sources_run_and_the_stamp_says_why(
         tmp_path: Path, build_env: pytest.MonkeyPatch) -> None:
     build_env.setenv("CC", "/no/such/cc -pthread")
     assert compiler.missing() == "no C compiler (/no/such/cc not found)"
