@@ -63,6 +63,9 @@ def _raw_socket(port: int, seconds: float) -> list[float]:
 
 def _raw_inprocess(seconds: float) -> list[float]:
     import serial
+
+    from coolmuscle import register_url_handler
+    register_url_handler()
     with serial.serial_for_url("coolmuscle://?mode=fast", timeout=1) as port:
         def step() -> None:
             port.write(QUERY)

@@ -46,10 +46,11 @@ pip_install() {  # pip_install ARGS...   quiet, its output added to $VENV/pip.lo
 }
 
 venv_install() {  # venv_install EXTRAS   (e.g. "" or "test")
-    # An editable install: the build compiles the model's hot modules with mypyc into
-    # src/coolmuscle/_compiled/ (setup.py, docs/performance.md "Compiled hot modules").
-    # Once a hot module changes (an edit, a git pull), they are stale and the sources
-    # run: then the package is installed again, which compiles them again.
+    # An editable install: the build compiles the model's hot modules with mypyc beside
+    # their sources in src/coolmuscle/ (setup.py, docs/performance.md "Compiled hot
+    # modules").  Once a hot module changes (an edit, a git pull), its build stamp is
+    # refused and the sources run: then the package is installed again, which compiles
+    # them again (or only records the new times when the bytes are the same).
     need_python
     [ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
     need_compiler

@@ -21,7 +21,7 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import coolmuscle  # noqa: F401  (registers the coolmuscle:// URL handler)
+import coolmuscle
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.cml.parser import parse
 from coolmuscle.errors import CmlSyntaxError
@@ -60,6 +60,7 @@ def test_2_1_transcript_over_pyserial_socket_url(served: ServiceThread) -> None:
 
 
 def test_2_1_transcript_over_the_coolmuscle_url() -> None:
+    coolmuscle.register_url_handler()
     with serial.serial_for_url(f"coolmuscle://?scale={SCALE:g}", timeout=1) as port:
         play_over_serial(port, TRANSCRIPT)
 

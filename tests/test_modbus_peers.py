@@ -205,7 +205,9 @@ def test_5_6_6_com1_against_a_pymodbus_server_as_io_slave(tmp_path: Path) -> Non
 
 def test_pymodbus_client_on_the_coolmuscle_url() -> None:
     """pymodbus opens ports with ``serial_for_url``, so it can drive an in-process chain."""
-    import coolmuscle  # noqa: F401  (registers the coolmuscle:// handler)
+    import coolmuscle
+
+    coolmuscle.register_url_handler()
 
     client = ModbusSerialClient("coolmuscle://?motors=2", baudrate=38400, timeout=2, retries=0)
     assert client.connect()

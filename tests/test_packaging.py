@@ -8,7 +8,7 @@ the dependencies come from this environment's site-packages through a ``.pth`` f
 which adds the path but not the editable install's own ``.pth``).  There:
 
 * with a C compiler, ``coolmuscle --version`` says compiled, every hot module is a
-  ``.so`` from the wheel, and a reference run (a guide example, three golden
+  ``.so`` from the wheel beside its source, and a reference run (a guide example, three golden
   transcripts with 1 ms traces, a csp stream, a 15-motor bank: tests/accel_worker.py
   ``--sample``) gives the same bytes compiled, with ``COOLMUSCLE_PURE=1``, and as this
   checkout's sources;
@@ -60,7 +60,8 @@ def run(cmd: list[str], env: dict[str, str], timeout: float = 600,
 def copy_checkout(tree: Path) -> None:
     """The files a build reads, without this tree's compiled modules or caches."""
     shutil.copytree(ROOT / "src", tree / "src", ignore=shutil.ignore_patterns(
-        "_compiled", "__pycache__", "*.egg-info", ".mypy_cache", ".accel-build.lock"))
+        "_compiled", "*.so", "_build_stamp.py", "__pycache__", "*.egg-info", ".mypy_cache",
+        ".accel-build.lock"))
     for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE"):
         shutil.copy2(ROOT / name, tree / name)
 
@@ -135,20 +136,24 @@ def test_a_wheel_built_with_a_compiler_installs_and_runs_the_compiled_modules(
     assert not wheel.name.endswith("-py3-none-any.whl"), wheel.name   # a platform wheel
     python = fresh_venv(tmp_path / "venv", wheel)
 
+    metadata = run([str(python), "-c", "import importlib.metadata as m; "
+                    "print(m.version('coolmuscle'))"], clean_env()).strip()
+    assert metadata == coolmuscle.__version__          # pyproject reads it from the package
     assert version_lines(python) == [
         f"coolmuscle {coolmuscle.__version__}",
-        f"hot modules: compiled ({len(accel.MODULES)} modules built from the current "
-        "sources by mypyc 1.19.0)"]
+        f"hot modules: compiled ({len(accel.MODULES)} modules built with the package by "
+        "mypyc 1.19.0)"]
     files = module_files(python)
-    venv_lib = tmp_path / "venv" / "lib"
+    site = tmp_path / "venv" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" \
+        / "site-packages" / "coolmuscle"
     assert set(files) == set(accel.MODULES)
-    for name, path in files.items():
-        assert path.endswith(".so") and "/site-packages/coolmuscle/_compiled/" in path \
-            and Path(path).is_relative_to(venv_lib), (name, path)
+    for name, path in files.items():          # mypyc's layout: beside the source
+        source = site / accel.source_relpath(name)
+        assert path.startswith(str(source)[:-3] + ".cpython-") and path.endswith(".so") \
+            and source.is_file(), (name, path)
 
     head, lines = sample(python)
-    assert head == {"compiled": True,
-                    "reason": "built from the current sources by mypyc 1.19.0"}
+    assert head == {"compiled": True, "reason": "built with the package by mypyc 1.19.0"}
     assert lines == reference
     head, lines = sample(python, COOLMUSCLE_PURE="1")
     assert head == {"compiled": False, "reason": "COOLMUSCLE_PURE is set"}
@@ -170,24 +175,28 @@ def test_without_a_c_compiler_the_build_succeeds_and_the_sources_run(
     assert lines == reference
 
 
-def test_a_stale_compiled_module_in_the_tree_does_not_break_an_editable_install(
+def test_stale_compiled_files_in_the_tree_do_not_break_or_enter_an_editable_install(
         tmp_path: Path) -> None:
-    """``pip install -e .`` in a checkout whose ``src/coolmuscle/_compiled/`` keeps a
-    module an earlier build compiled and this one does not (a stale ``chain/daisy``
-    ``.so``): the compiled tree is build_accel's output, not a source package.  Before,
-    setuptools listed the stale folder as a package and build_accel then removed it:
-    "package directory ... does not exist", the install failed."""
+    """``pip install -e .`` (here without compiling) in a checkout holding compiled files
+    an earlier build left: an extension module beside a source that is no longer
+    compiled (``chain/daisy``, a damaged one) and the folder of the layout before the
+    build stamp (``_compiled/``, which setuptools would list as a package).  The build
+    removes both: the sources run and ``--version`` says why."""
     tree = tmp_path / "tree"
     copy_checkout(tree)
-    stale = tree / "src" / "coolmuscle" / "_compiled" / "coolmuscle" / "chain"
-    stale.mkdir(parents=True)
-    (stale / "daisy.cpython-311-x86_64-linux-gnu.so").write_bytes(b"\x7fELF stale")
+    package = tree / "src" / "coolmuscle"
+    (package / "chain" / "daisy.cpython-311-x86_64-linux-gnu.so").write_bytes(b"\x7fELF stale")
+    old = package / "_compiled" / "coolmuscle" / "chain"
+    old.mkdir(parents=True)
+    (old / "daisy.cpython-311-x86_64-linux-gnu.so").write_bytes(b"\x7fELF stale")
     run([sys.executable, "-m", "venv", "--without-pip", str(tmp_path / "venv")], clean_env())
     python = tmp_path / "venv" / "bin" / "python"
     run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
          "--quiet", "-e", str(tree)], clean_env(COOLMUSCLE_COMPILE="0"))
     link_deps(python)
-    assert version_lines(python)[1].startswith("hot modules: sources (")
+    assert version_lines(python)[1] == \
+        "hot modules: sources (not compiled at install time: COOLMUSCLE_COMPILE=0)"
     where = run([str(python), "-c", "import coolmuscle.chain.daisy as d; print(d.__file__)"],
                 clean_env()).strip()
-    assert where == str(tree / "src" / "coolmuscle" / "chain" / "daisy.py")
+    assert where == str(package / "chain" / "daisy.py")
+    assert not list(package.rglob("*.so")) and not (package / "_compiled").exists()

@@ -17,9 +17,11 @@ options:
 - ``scale=X``                    realtime only: virtual seconds per wall second (default 1)
 - ``logging=debug|info|warning|error``  log handler activity
 
-Registered by ``import coolmuscle`` (``serial.protocol_handler_packages``)::
+Registered with pyserial by :func:`coolmuscle.register_url_handler`
+(``serial.protocol_handler_packages``; :mod:`coolmuscle.frontends.urlhandler`)::
 
     import coolmuscle, serial
+    coolmuscle.register_url_handler()
     port = serial.serial_for_url("coolmuscle://?motors=2&mode=fast", timeout=1)
     port.write(b"?96.1\\r")
 

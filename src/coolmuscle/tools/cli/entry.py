@@ -1,5 +1,10 @@
 """The ``coolmuscle`` command's first code: stop signals first, then a quick start.
 
+What the command needs for its start is done here, by the program, never by importing
+coolmuscle: the stop-signal handlers (the first statement of :func:`main`) and the cache
+of the methods :mod:`dataclasses` writes (:mod:`coolmuscle._dataclass_code`, before the
+model's modules load).
+
 ``python -m coolmuscle`` and the ``coolmuscle`` script start here, so that a SIGINT,
 SIGTERM or SIGHUP at any moment of start-up (while the model is imported, the store
 opened, the transports started) ends the program with one line and the normal
@@ -39,6 +44,8 @@ def main(argv: list[str] | None = None) -> None:
             sys.stdout.write(version_text())
         guarded(version)
         return
+    from ..._dataclass_code import install as keep_dataclass_code
+    keep_dataclass_code()     # this process's classes: their methods not compiled again
     kwargs: dict[str, Any] | None = None
     full_main: Callable[[list[str] | None], None] | None = None
 

@@ -1,7 +1,8 @@
 """Stop signals (SIGINT, SIGTERM, SIGHUP) of the ``coolmuscle`` command: one clean line.
 
 From the instant :func:`install_startup_handlers` runs (the first code of the command:
-``coolmuscle/__init__.py`` when started as the command) every stop signal ends the
+:func:`coolmuscle.tools.cli.entry.main`, and ``python -m coolmuscle`` before it loads
+the entry module) every stop signal ends the
 program with one line and ``128 + N`` (130 for Ctrl-C), whatever is running:
 
 * inside :func:`.exits.guarded` (a :class:`Guard`), where the command's work and
