@@ -93,6 +93,11 @@ class CyclicState:
 
 EventListener = Callable[[Event], None]
 
+#: Builds a device as :class:`coolmuscle.chain.daisy.Chain` does: ``factory(kernel,
+#: motors, firmware=..., state_dir=..., pacing=..., machine=...)`` (the command line, the
+#: ``coolmuscle://`` URL and the twin take one; tests and embedders hand their own).
+ChainFactory = Callable[..., "Device"]
+
 
 @runtime_checkable
 class TargetStream(Protocol):
