@@ -26,7 +26,6 @@ from ..cml import ast
 from ..cml.ast import inner_motor
 from ..cml.parser import parse
 from ..device.api import CyclicState, EventListener, MotorSnapshot, TargetStream
-from ..device.trace import TraceFeed
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
                       OutOfRangeError, StoreError)
 from ..motor.context import Context
@@ -44,6 +43,7 @@ from .bus import ChainBus, ChainCommands
 
 if TYPE_CHECKING:
     from ..device.api import Device
+    from ..device.trace import TraceFeed
     from ..motor.core import MotorBus, MotorCore
     from .machine import Machine
 
@@ -505,6 +505,7 @@ class Chain:
 
     def trace_feed(self) -> TraceFeed:
         """Record every motor from now on (:class:`coolmuscle.device.trace.TraceFeed`)."""
+        from ..device.trace import TraceFeed      # traces are optional: loaded when used
         return TraceFeed(self.kernel, self.motors, self.observe)
 
     # -- device API: Modbus (5.6) -------------------------------------------------
