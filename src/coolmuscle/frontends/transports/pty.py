@@ -26,10 +26,10 @@ import os
 import termios
 import tty
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport
+from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport
 
 log = logging.getLogger(__name__)
 
@@ -95,9 +95,9 @@ class PtyTransport(Transport):
         self._pending = bytearray()
         self._writer_armed = False
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._unsubscribe: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
         self._symlink = SymLink(self.link) if self.link is not None else None
-        self._lane: Any = None
+        self._lane: Lane | None = None
         self.bytes_discarded = 0
 
     # -- life cycle -----------------------------------------------------

@@ -30,6 +30,7 @@ import termios
 import tty
 from typing import Any, Callable
 
+from ...device.api import Com1Line, Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port, Transport
 from .pty import PtyTransport
@@ -167,7 +168,7 @@ class _PumpedLine(Transport):
         self.path = path
         self._dev: _Device | None = None
         self._pump: _FdPump | None = None
-        self._unsubscribe: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
 
     def _send(self, data: bytes) -> None:
         if self._pump is not None:
@@ -204,14 +205,12 @@ class SerialTransport(_PumpedLine):
 
     def _settings(self) -> tuple[int, str]:
         from ...chain.firmware_modbus.rtu import byte_baud
-        assert self.port is not None and self.port.device is not None
+        assert self.port is not None
         device = self.port.device
         return byte_baud(device.get_param(1, 20)), "NEO"[device.get_param(1, 82) % 3]
 
     async def start(self, port: Port) -> None:
         self.port = port
-        if port.device is None:
-            raise TransportError(f"{self.name}: no device behind this port")
         self._dev = _Device(self.path, self._settings)
         self._pump = _FdPump(self._dev.fd, self._received, f"serial {self.path}")
         self._unsubscribe = port.add_listener(self._send)
@@ -225,9 +224,9 @@ class SerialTransport(_PumpedLine):
         return f"serial: {self.path}"
 
 
-def ensure_modbus_mode(device: Any) -> int:
+def ensure_modbus_mode(device: Device) -> int:
     """Put COM0 in Modbus mode (K81.1=1 when it is 0); return the station address."""
-    k81: int = device.get_param(1, 81)
+    k81 = device.get_param(1, 81)
     if k81 == 0:
         device.set_param(1, 81, 1)
         k81 = 1
@@ -249,9 +248,9 @@ class ModbusRtuTransport(Transport):
     async def start(self, port: Port) -> None:
         from ...chain.firmware_modbus.slave import firmware_name, supports_modbus
         self.port = port
-        if port.device is None or not supports_modbus(port.device):
-            name = firmware_name(port.device) if port.device is not None else "?"
-            raise TransportError(f"modbus-rtu: firmware {name} has no Modbus")
+        if not supports_modbus(port.device):
+            raise TransportError(f"modbus-rtu: firmware {firmware_name(port.device)} has no "
+                                 "Modbus")
         self.station = port.call(ensure_modbus_mode, port.device)
         await self.inner.start(port)
 
@@ -276,16 +275,15 @@ class Com1Transport(_PumpedLine):
         super().__init__(None)
         self.where = where
         self._fds: tuple[int, int] | None = None
-        self._com1: Any = None
+        self._com1: Com1Line | None = None
 
     def _settings(self) -> tuple[int, str]:
+        assert self._com1 is not None
         return self._com1.baud(), self._com1.parity()
 
     async def start(self, port: Port) -> None:
         self.port = port
-        self._com1 = getattr(port.device, "com1", None)
-        if self._com1 is None:
-            raise TransportError("com1: this chain has no COM1 port")
+        com1 = self._com1 = port.device.com1
         if self.where == "pty":
             try:
                 master, slave, self.path = _new_pty()
@@ -297,10 +295,10 @@ class Com1Transport(_PumpedLine):
             self._dev = _Device(self.where, self._settings)
             self.path, fd = self.where, self._dev.fd
         self._pump = _FdPump(fd, self._received, f"com1 {self.path}")
-        self._unsubscribe = self._com1.add_listener(self._send)
+        self._unsubscribe = com1.add_listener(self._send)
 
     def _received(self, data: bytes) -> None:
-        assert self.port is not None
+        assert self.port is not None and self._com1 is not None
         if self._dev is not None:
             self._dev.follow_settings()
         self.port.call(self._com1.feed, data)

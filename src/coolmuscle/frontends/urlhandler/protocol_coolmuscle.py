@@ -43,8 +43,9 @@ from typing import TYPE_CHECKING, Any, Callable
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 from serial.serialutil import to_bytes  # type: ignore[attr-defined]  # not in its stubs
 
+from ...device.api import Device
 from ...errors import CoolMuscleError
-from ...sim.kernel import NS_PER_S, seconds
+from ...sim.kernel import NS_PER_S, Kernel, seconds
 from ...sim.realtime import FastClock, RealtimeClock
 from ..transports.base import split_after_line_ends
 
@@ -65,14 +66,15 @@ _BOOL = {"on": True, "1": True, "true": True, "yes": True,
          "off": False, "0": False, "false": False, "no": False}
 
 
-def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
+def _default_chain_factory(kernel: Kernel | None, motors: int, *, firmware: str,
+                           state_dir: Path | None, pacing: bool) -> Device:
     from ...chain.daisy import Chain
-    return Chain(*args, **kwargs)
+    return Chain(kernel, motors, firmware=firmware, state_dir=state_dir, pacing=pacing)
 
 
 #: Builds the chain behind each port: ``factory(kernel, motors, firmware=..., state_dir=...,
 #: pacing=...)``.  Tests and embedders may replace it.
-chain_factory: Callable[..., Any] = _default_chain_factory
+chain_factory: Callable[..., Device] = _default_chain_factory
 
 
 def parse_url(url: str) -> dict[str, Any]:
@@ -141,7 +143,7 @@ class Serial(SerialBase):
     _timeout: float | None
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self.chain: Any = None
+        self.chain: Device | None = None
         self.options: dict[str, Any] = {}
         self._clock: RealtimeClock | FastClock | None = None
         self._cond = threading.Condition(threading.RLock())
@@ -203,7 +205,7 @@ class Serial(SerialBase):
             raise ValueError(f"invalid baudrate: {self._baudrate!r}")
 
     @property
-    def kernel(self) -> Any:
+    def kernel(self) -> Kernel | None:
         """The chain's kernel (``kernel.now`` is the virtual time in ns)."""
         return self.chain.kernel if self.chain is not None else None
 
@@ -281,9 +283,12 @@ class Serial(SerialBase):
         payload: bytes = to_bytes(data)
         with self._cond:
             self._catch_up()
+            chain = self.chain
             for piece in split_after_line_ends(payload):  # a failing line costs only itself
+                if chain is None:             # closed by another thread meanwhile
+                    break
                 try:
-                    self.chain.host_line.feed(piece)
+                    chain.host_line.feed(piece)
                 except Exception:  # front-end entry point: the model's failure is logged
                     log.exception("virtual chain failed on input %r", piece[:64])
             self._cond.notify_all()  # a reader may need to re-plan (pacing scheduled events)

@@ -31,13 +31,14 @@ import typer
 from rich.console import Console
 
 from .version import version_text
+from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from .usage import UsageError
 from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
                           clear_stop, install_startup_handlers, run_served, stop_line)
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
-from ..script.runner import load_script
+from ..script.runner import Script, load_script
 from ...frontends.transports.base import Transport
 
 log = logging.getLogger("coolmuscle")
@@ -72,13 +73,13 @@ class Firmware(str, enum.Enum):
     cm1 = "cm1"
 
 
-def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
+def _default_chain_factory(*args: Any, **kwargs: Any) -> Device:
     from ...chain.daisy import Chain
     return Chain(*args, **kwargs)
 
 
 #: Builds the chain for ``sim`` and ``run`` (same signature as ``Chain``); replaceable in tests.
-chain_factory: Callable[..., Any] = _default_chain_factory
+chain_factory: ChainFactory = _default_chain_factory
 
 
 def default_state_dir() -> Path:
@@ -101,7 +102,7 @@ def _show_path(path: Path) -> str:
 
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
-                machine: Path | None = None, per_motor: str | None = None) -> Any:
+                machine: Path | None = None, per_motor: str | None = None) -> Device:
     return make_chain(chain_factory, motors, per_motor or firmware.value, state, pace, machine)
 
 
@@ -199,7 +200,7 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
 MAX_TIME_SCALE = 1e6
 
 
-async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
+async def _serve(chain: Device, chosen: list[Transport], motors: int, firmware: Firmware,
                  state: Path | None, scale: float, stop: asyncio.Event,
                  label: str | None = None) -> None:
     """Start the transports, print the banner, serve until ``stop`` (run by
@@ -215,7 +216,7 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         where = "   ".join(t.describe() for t in chosen)
         shown = _show_path(state) if state is not None else "none, not saved"
         err.print(f"{where}   (state: {shown})", markup=False)
-        station = _modbus_station(chain)
+        station = chain.modbus_station()
         if station:
             asked = any(t.name == "modbus-rtu" for t in chosen)
             err.print(_modbus_notice(station, state, asked), markup=False)
@@ -255,11 +256,6 @@ def _reset_state(state: Path | None) -> None:
             store.delete(motor_id)
     err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
               markup=False)
-
-
-def _modbus_station(chain: Any) -> int:
-    line = getattr(chain, "modbus_line", None)
-    return line.station() if line is not None and line.active() else 0
 
 
 @app.command()
@@ -427,8 +423,8 @@ def _web_transport(address: str) -> Transport:
         raise UsageError(f"--web: {exc}") from None
 
 
-def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
-             make_chain: Callable[[], Any]) -> None:
+def _run_web(script: Script, address: str, until: float | None, others: tuple[object, ...],
+             make_chain: Callable[[], Device]) -> None:
     """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
     from .run import check_run_times
     from ..web.run import run_script_web

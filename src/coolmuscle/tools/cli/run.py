@@ -14,8 +14,9 @@ import logging
 import re
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
+from ...device.api import ChainFactory, Device
 from ..script.record import LineWriter
 from ..script.runner import ScriptError, load_script, run_script
 from .usage import UsageError
@@ -117,8 +118,8 @@ def xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
     return [(x, y)]
 
 
-def make_chain(factory: Callable[..., Any], motors: int, firmware: str, state: Path | None,
-               pace: bool, machine: Path | None = None) -> Any:
+def make_chain(factory: ChainFactory, motors: int, firmware: str, state: Path | None,
+               pace: bool, machine: Path | None = None) -> Device:
     """The chain of a run or a served simulation (``--state`` made when missing)."""
     from ...errors import TransportError
     if state is not None:
@@ -134,7 +135,7 @@ def make_chain(factory: Callable[..., Any], motors: int, firmware: str, state: P
     return factory(None, motors, firmware=firmware, state_dir=state, pacing=pace, **extra)
 
 
-def default_chain(*args: Any, **kwargs: Any) -> Any:
+def default_chain(*args: Any, **kwargs: Any) -> Device:
     from ...chain.daisy import Chain
     return Chain(*args, **kwargs)
 
@@ -199,7 +200,7 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                 motors: int | None = None, firmware: str | None = None,
                 state: Path | None = None, check: bool = False, pace: bool = False,
                 record: Path | None = None, machine: Path | None = None,
-                chain_factory: Callable[..., Any] = default_chain) -> int:
+                chain_factory: ChainFactory = default_chain) -> int:
     """Run a script in fast virtual time, print every line, check expectations.
 
     Returns the exit status (0, or :data:`EXIT_FAILED` for a failed run); bad usage

@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from ...device.api import Device  # noqa: E402
 from ...motor.state import output_functions as out  # noqa: E402
 from ...motor.status import ALARM_BITS, Ux  # noqa: E402
 from ...sim.kernel import NS_PER_S  # noqa: E402
@@ -36,7 +37,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from matplotlib.typing import ColorType
 
-    from ...chain import Chain
     from .recorder import Sample, TraceRecorder
 
 #: Status classes of the timeline bar, in priority order (6.6 ?99).
@@ -94,11 +94,6 @@ OUTPUT_FUNCTIONS = {out.OUT_NONE: "no function", out.OUT_IN_POSITION: "in-positi
                     out.OUT_ROTATION_PULSE: "rotation pulse", out.OUT_MOTOR_FREE: "motor free",
                     out.OUT_PUSH: "push", out.OUT_FOLLOWS_O1: "O1/F1", out.OUT_FOLLOWS_O2: "O2/F2",
                     out.OUT_ANALOG: "analog", out.OUT_PUSH_AT_LEVEL: "push torque reached"}
-
-
-def _output_functions(motor: Any) -> list[int]:
-    """The function of each output of ``motor`` now (its K34 through its firmware)."""
-    return [motor.io.output_function(n) for n in range(1, motor.io.output_count + 1)]
 
 
 def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
@@ -159,12 +154,7 @@ def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
 
 def interpolated_pairs(recorder: "TraceRecorder") -> list[tuple[int, int]]:
     """(X, Y) IDs of every pair of motors that followed an interpolation path (4.4)."""
-    pairs: list[tuple[int, int]] = []
-    for motor in recorder.chain.motors.values():
-        path = getattr(motor, "path", None)
-        if path is not None and (path.x.id, path.y.id) not in pairs:
-            pairs.append((path.x.id, path.y.id))
-    return sorted(pairs)
+    return recorder.feed.interpolated_pairs()
 
 
 def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | None = None,
@@ -174,7 +164,7 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     ``xy``: pairs of motor IDs whose XY path is drawn beside the time panels (default:
     the pairs that interpolated; ``[]`` for none).
     """
-    end_ns = recorder.chain.kernel.now
+    end_ns = recorder.feed.now
     span = max((end_ns - recorder.start) / NS_PER_S, 1e-3)
     times = recorder.times(step or span / MAX_POINTS, end_ns)
     t = [x / NS_PER_S for x in times]
@@ -182,13 +172,13 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     multi = len(motors) > 1
     data = {mid: [recorder.sample(mid, x) for x in times] for mid in motors}
     colors = dict(zip(motors, _palette(len(motors))))
-    inputs = {mid: recorder.chain.motors[mid].io.input_count for mid in motors}
-    bit_rows = {mid: _bit_rows(data[mid], mid, inputs[mid], multi,
-                               _output_functions(recorder.chain.motors[mid]))
+    traces = recorder.traces
+    bit_rows = {mid: _bit_rows(data[mid], mid, traces[mid].input_count, multi,
+                               traces[mid].output_functions())
                 for mid in motors}
     occurring = {status_class(s.status) for d in data.values() for s in d}
     show_analog = any(_changes([s.analog_in for s in data[m]])
-                      or recorder.chain.motors[m].k(35) != 0 for m in motors)
+                      or recorder.chain.get_param(m, 35) != 0 for m in motors)
     show_encoder = any(_changes([s.encoder for s in d]) for d in data.values())
     timeline_rows = len(motors) + sum(len(r) for r in bit_rows.values())
 
@@ -217,12 +207,11 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
-        _draw_stoppers(ax["position"], recorder.chain.motors[mid], colors[mid], multi)
+        _draw_stoppers(ax["position"], mid, traces[mid].stoppers(), colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
-    _speed_axis(ax["speed"], {recorder.chain.motors[m].resolution.pulses_per_rev
-                              for m in motors})
+    _speed_axis(ax["speed"], {traces[m].pulses_per_rev for m in motors})
     if show_analog:
         ax["analog"].set_ylabel("analog [V]")
         ax["analog"].set_ylim(-0.1, 5.1)
@@ -309,22 +298,16 @@ def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: "Axes", motor: object, color: object, multi: bool) -> None:
+def _draw_stoppers(ax: "Axes", motor: int, stoppers: Sequence[float], color: object,
+                   multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
     motor's user coordinates."""
-    geometry = getattr(motor, "geometry", None)
-    axis = getattr(motor, "axis", None)
-    if geometry is None or axis is None:
-        return
-    ppr = motor.resolution.pulses_per_rev  # type: ignore[attr-defined]
-    for raw in geometry.walls(ppr):
-        if math.isfinite(raw):
-            where = axis.to_user(raw)
-            ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
-            name = f"ID{motor.id} stopper" if multi else "stopper"  # type: ignore[attr-defined]
-            ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
-                        xycoords=("axes fraction", "data"), fontsize="x-small",
-                        va="bottom", color=color)
+    for where in stoppers:
+        ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
+        name = f"ID{motor} stopper" if multi else "stopper"
+        ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+                    xycoords=("axes fraction", "data"), fontsize="x-small",
+                    va="bottom", color=color)
 
 
 def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
@@ -348,7 +331,7 @@ def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
         ax["position"].legend(loc="upper right", fontsize="small")
 
 
-def plot(chain: "Chain", path: str | Path, title: str = "",
+def plot(chain: Device, path: str | Path, title: str = "",
          xy: Sequence[tuple[int, int]] | None = None) -> Path:
     """Plot what ``chain``'s trace recorder holds (position, speed, torque, status and
     I/O), and the XY path of ``xy`` pairs (default: the pairs that interpolated, 4.4)."""

@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 import numpy.typing as npt
 
-from ...chain.machine import DRIVE_KEYS, LOAD_KEYS, Machine, parse_machine
+from ...chain.machine import Machine, parse_machine
 from .compare import load_machine_arg
 from .params import FitError, Param, parse_params, with_values
 from .plot import Panel, Series
@@ -232,11 +232,7 @@ def _start_values(session: Session, base: Machine | None, params: list[Param]) -
         out = []
         specs = {a.motor: a for a in (base.axes if base is not None else [])}
         for p in params:
-            motor = chain.motor(p.motor)
-            assert motor is not None
-            key = p.kind.key
-            attr = LOAD_KEYS.get(key) or DRIVE_KEYS.get(key)
-            plant_value = float(getattr(motor.plant, attr)) if attr else 0.0
+            plant_value = chain.machine_data(p.motor).get(p.kind.key, 0.0)
             value = p.value(specs.get(p.motor), plant_value)
             if value is None:
                 value = _stopper_guess(session, p)
