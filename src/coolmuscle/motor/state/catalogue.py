@@ -248,7 +248,7 @@ class KParameter:
         if spec.kind == "reserved":
             return f"not defined (reads {spec.default})"
         if spec.kind == "choice":
-            return "one of " + ", ".join(str(v) for v in sorted(spec.choices))
+            return "one of " + _runs(sorted(spec.choices))
         if spec.kind == "digits":
             width = len(spec.digit_ranges)
             return f"{spec.min:0{width}d}..{spec.max:0{width}d} digit by digit"
@@ -267,6 +267,18 @@ class KParameter:
         """``Rotation Pulse Output (pulses; 10..50000; factory 1000)``."""
         unit = f"{self.unit}; " if self.unit not in ("", "-") else ""
         return f"{self.name} ({unit}{self.range_text()}; factory {self.default})"
+
+
+def _runs(values: list[int]) -> str:
+    """``0..8, 10, 20..28``: consecutive values as a range."""
+    runs: list[list[int]] = []
+    for value in values:
+        if runs and value == runs[-1][-1] + 1:
+            runs[-1].append(value)
+        else:
+            runs.append([value])
+    return ", ".join(f"{r[0]}..{r[-1]}" if len(r) > 2 else ", ".join(map(str, r))
+                     for r in runs)
 
 
 def _profile(firmware: str | Firmware) -> Firmware:
