@@ -10,9 +10,12 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import serial
+
+if TYPE_CHECKING:
+    from coolmuscle.tools.desk import DeskLine
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "COLUMNS": "200"}
@@ -85,3 +88,15 @@ def read_quiet(port: serial.Serial, quiet: float = 0.3, limit: float = 10.0) -> 
             got += chunk
             last = time.monotonic()
     return bytes(got)
+
+
+def virtual_line(setup: list[str], motors: int = 1, firmware: str = "cm2") -> "DeskLine":
+    """A desk line to an in-process virtual chain (``coolmuscle://?mode=fast``) after the
+    ``setup`` lines were typed on it."""
+    from coolmuscle.client.banks import send_line
+    from coolmuscle.tools.desk import DeskLine
+
+    line = DeskLine(f"coolmuscle://?motors={motors}&firmware={firmware}&mode=fast")
+    for text in setup:
+        line.run(send_line(line.session, 1, text))
+    return line

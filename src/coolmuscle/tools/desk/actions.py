@@ -112,7 +112,7 @@ def do_restore(file: Path, port: str, bauds: Sequence[int] | None, save: bool, o
                say: Say, progress: Say | None = None) -> int:
     """Write the backup ``file`` to the motors on ``port``; one line per part."""
     image = load_backup(file)
-    report = restore(image, port, bauds=bauds, save=save, progress=progress)
+    report = restore(image, port, bauds=bauds, save=save, name=str(file), progress=progress)
     for line in report.lines():
         out.write(line + "\n")
     if not report.ok:

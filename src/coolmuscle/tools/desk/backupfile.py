@@ -40,6 +40,7 @@ from .image import LINE_PARAMS, ChainImage, MotorImage
 __all__ = ["render_backup", "parse_backup", "load_backup", "motor_lines", "line_lines"]
 
 _TITLE = re.compile(r"#\s*==\s*(ID\d+ : .*)")
+_HOLDS = re.compile(r"# ID(\d+) holds P(\d+) N(\d+) R(\d+):.*")
 _SOURCE = re.compile(r"# coolmuscle backup of (.*?)(?: at (\d+) bit/s)?, (\S+): \d+ motors?")
 _K = re.compile(r"K(\d+)\.(\d+)=(-?\d+)")
 _DATA = re.compile(r"([PNRSAMTVH])(\d*)\.(\d+)=(.*)")
@@ -70,9 +71,9 @@ def motor_lines(image: MotorImage) -> list[str]:
 
 def _allocation_lines(image: MotorImage) -> list[str]:
     """``\\P`` and ``\\N`` (2.1.2): they name no motor ID, so they reach ID1 only."""
-    if not image.profile.can_allocate:
+    alloc = image.allocation
+    if alloc is None or not image.profile.can_allocate:
         return []
-    alloc = image.allocation()
     if image.motor != 1:
         return [f"# ID{image.motor} holds P{alloc['P']} N{alloc['N']} R{alloc['R']}: "
                 "\\P and \\N (2.1.2) name no motor ID and reach ID1 only"]
@@ -183,6 +184,12 @@ class _Reader:
                 raise self.fail(number, f"ID{version.motor} twice")
             self.motors[version.motor] = _Motor(version.text, number)
             return
+        holds = _HOLDS.fullmatch(text)
+        if holds is not None:
+            motor = self.owner(int(holds.group(1)), number)
+            for kind, count in zip("PNR", holds.groups()[1:]):
+                motor.alloc[kind] = (int(count), number)
+            return
         source = _SOURCE.fullmatch(text)
         if source is not None:
             self.source = source.group(1)
@@ -257,7 +264,15 @@ def _checked(reader: _Reader, motor_id: int, motor: _Motor) -> MotorImage:
     return MotorImage(motor_id, motor.title,
                       {k: v for k, (v, _n) in sorted(motor.params.items())},
                       {name: text for name, (text, _n) in motor.data.items()},
-                      {label: tuple(lines) for label, (lines, _n) in motor.banks.items()})
+                      {label: tuple(lines) for label, (lines, _n) in motor.banks.items()},
+                      _allocation(memory, motor))
+
+
+def _allocation(memory: Memory, motor: _Motor) -> dict[str, int] | None:
+    """The P, N, R counts the file states (``\\P``/``\\N`` or the ``holds`` line)."""
+    if not motor.alloc or not memory.firmware.can_allocate:
+        return None
+    return {kind: memory.limit(kind) for kind in ("P", "N", "R")}
 
 
 def _memory(reader: _Reader, motor: _Motor, profile: Firmware) -> Memory:
@@ -270,6 +285,10 @@ def _memory(reader: _Reader, motor: _Motor, profile: Firmware) -> Memory:
                 memory.allocate(kind, count)
             except OutOfRangeError as exc:
                 raise reader.fail(number, f"\\{kind}{count}: {exc}") from None
+    if "R" in motor.alloc and memory.limit("R") != motor.alloc["R"][0]:
+        count, number = motor.alloc["R"]
+        raise reader.fail(number, f"R{count} does not add up with P{memory.limit('P')} "
+                                  f"N{memory.limit('N')} (2.1.2)")
     return memory
 
 

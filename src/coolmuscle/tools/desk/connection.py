@@ -103,13 +103,13 @@ class DeskLine:
         if self.scan.baud is not None:
             self.port.parity = "NEO"[k82 % 3]    # K82: 0 none, 1 even, 2 odd
 
-    def restore(self, backup: ChainImage, *, save: bool = False,
+    def restore(self, backup: ChainImage, *, save: bool = False, name: str = "the backup",
                 progress: Progress | None = None) -> RestoreReport:
-        """Write ``backup`` to the motors of this line (:mod:`.restore`)."""
+        """Write ``backup`` (``name`` in messages) to the motors of this line (:mod:`.restore`)."""
         live_ids = ChainImage(tuple(MotorImage(m.motor, m.title) for m in self.scan.motors))
-        check_restorable(backup, live_ids, self.url)     # the IDs and titles, before reading
+        check_restorable(backup, live_ids, self.url, name)     # IDs and titles, before reading
         live = self.read_chain(backup.ids, progress)
-        check_restorable(backup, live, self.url)
+        check_restorable(backup, live, self.url, name)
         self._at_rest(backup.ids)
         parts = plan_restore(backup, live, save=save)
         return run_restore(self.run, self.session, parts, backup,
@@ -125,10 +125,11 @@ def backup(port: str, *, bauds: Sequence[int] | None = None,
 
 
 def restore(image: ChainImage, port: str, *, bauds: Sequence[int] | None = None,
-            save: bool = False, progress: Progress | None = None) -> RestoreReport:
+            save: bool = False, name: str = "the backup",
+            progress: Progress | None = None) -> RestoreReport:
     """Write ``image`` to the motors on PORT (:meth:`DeskLine.restore`)."""
     with DeskLine(port, bauds=bauds, ids=image.ids or None, progress=progress) as line:
-        return line.restore(image, save=save, progress=progress)
+        return line.restore(image, save=save, name=name, progress=progress)
 
 
 def factory_image(like: ChainImage, firmware: str | None = None) -> ChainImage:

@@ -6,8 +6,10 @@ chain.  Values are kept as the motor prints them (6.6), so that a restore writes
 exactly what was read and a comparison is a comparison of the motor's own answers:
 
 * ``params``: K number -> value, the numbers the firmware defines (``?90``; ch. 3);
+* ``allocation``: how many P, N, R memories the motor has (2.1.2, R type), ``None``
+  when not known (a backup file that does not say);
 * ``data``: register name -> value text, in the order a restore writes them: the P, N,
-  R memories (their counts are the ``\\P``/``\\N`` allocation, 2.1.2), S, A, M, T, V,
+  R memories, S, A, M, T, V,
   ``H0`` where the motor answers it (5.6.7), then the direct-mode data ``P S A M``
   (6.6 ``?.n``; named without a number);
 * ``banks``: ``B1``/``L2`` -> the bank's lines as ``?1000`` lists them (an empty bank
@@ -50,6 +52,7 @@ class MotorImage:
     params: Mapping[int, int] = field(default_factory=dict)
     data: Mapping[str, str] = field(default_factory=dict)
     banks: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    allocation: Mapping[str, int] | None = None
 
     @property
     def version(self) -> Version:
@@ -71,7 +74,7 @@ class MotorImage:
         """K``number`` of this motor's firmware (meaning, range, factory value)."""
         return k_parameter(self.firmware, number)
 
-    def allocation(self) -> dict[str, int]:
+    def counted_allocation(self) -> dict[str, int]:
         """How many P, N, R memories the data holds (2.1.2)."""
         counts = {kind: 0 for kind in ("P", "N", "R")}
         for name in self.data:

@@ -14,6 +14,8 @@ and a web page read a motor the same way.  The queries (6.6; nothing is changed)
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ...client.banks import all_banks
 from ...client.ops import Op, Session, exchange, fenced, listing, params
 from ...errors import MotorError, ProtocolError
@@ -109,4 +111,7 @@ def read_motor(session: Session, motor: int) -> Op[MotorImage]:
     values = yield from read_params(session, motor, profile)
     data = yield from read_data(session, motor, profile)
     banks = yield from read_banks(session, motor)
-    return MotorImage(motor, title, values, data, banks)
+    image = MotorImage(motor, title, values, data, banks)
+    if profile.can_allocate:
+        return replace(image, allocation=image.counted_allocation())
+    return image

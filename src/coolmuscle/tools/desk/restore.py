@@ -106,26 +106,35 @@ class RestoreReport:
         return next((o for o in self.outcomes if o.status == "failed"), None)
 
     def lines(self) -> list[str]:
-        out = [o.line() for o in self.outcomes if o.status != "not written"]
+        """A line per part up to the one that failed; then the parts not written."""
+        out: list[str] = []
+        for outcome in self.outcomes:
+            out.append(outcome.line())
+            if outcome.status == "failed":
+                break
         skipped = [o.part.name for o in self.outcomes if o.status == "not written"]
         if skipped:
-            out.append("not written: " + ", ".join(skipped) + "; nothing saved")
+            out.append("not written: " + ", ".join(skipped) + "; nothing saved ($ not "
+                       "sent)")
         return out
 
 
 # -- what to send ------------------------------------------------------------------------
 
-def check_restorable(backup: ChainImage, live: ChainImage, where: str) -> None:
-    """Refuse a backup whose motors are not on the line, or of another firmware."""
+def check_restorable(backup: ChainImage, live: ChainImage, where: str,
+                     name: str = "the backup") -> None:
+    """Refuse a backup (called ``name`` in the message) whose motors are not on the line
+    ``where``, or are of another firmware."""
     missing = [m for m in backup.ids if m not in live.ids]
     if missing:
         raise FirmwareMismatchError(
-            f"{backup.source or 'the backup'} holds {_ids(backup.ids)}, {where} answers "
+            f"{name} holds {_ids(backup.ids)}, {where} answers "
             f"{_ids(live.ids)}: {_ids(tuple(missing))} not on the line; nothing written")
     for saved in backup.motors:
         motor = live.motor(saved.motor)
         if (saved.firmware, saved.version.motor_type) == \
                 (motor.firmware, motor.version.motor_type):
+            _check_allocation(saved, motor, name, where)
             continue
         other = [k for k in saved.params if not same_parameter(k, saved.firmware,
                                                                 motor.firmware)]
@@ -137,9 +146,22 @@ def check_restorable(backup: ChainImage, live: ChainImage, where: str) -> None:
         applies = (", ".join(f"K{k}" for k in other) + " do not apply there"
                    if other else "its K parameters are the same ones")
         raise FirmwareMismatchError(
-            f"{backup.source or 'the backup'} holds ID{saved.motor} of {saved.firmware} "
+            f"{name} holds ID{saved.motor} of {saved.firmware} "
             f"({saved.title}), {where}'s ID{saved.motor} is {motor.firmware} "
             f"({motor.title}): {applies}{other_data}; nothing written")
+
+
+def _check_allocation(saved: MotorImage, motor: MotorImage, name: str, where: str) -> None:
+    """``\\P``/``\\N`` name no motor ID (2.1.2): another motor's allocation cannot be set."""
+    if saved.motor == 1 or saved.allocation is None or motor.allocation is None:
+        return
+    if dict(saved.allocation) != dict(motor.allocation):
+        alloc = " ".join(f"{k}{v}" for k, v in saved.allocation.items())
+        now = " ".join(f"{k}{v}" for k, v in motor.allocation.items())
+        raise FirmwareMismatchError(
+            f"{name} holds ID{saved.motor} with {alloc}, {where}'s "
+            f"ID{saved.motor} has {now}: \\P and \\N (2.1.2) reach ID1 only; nothing "
+            "written")
 
 
 def _ids(ids: tuple[int, ...]) -> str:
@@ -156,10 +178,10 @@ def _k_part(saved: MotorImage, motor: MotorImage) -> Part:
 def _data_part(saved: MotorImage, motor: MotorImage) -> Part:
     m = saved.motor
     lines: list[str] = []
-    realloc = saved.allocation() != motor.allocation() and saved.profile.can_allocate
-    if realloc and m == 1:
-        alloc = saved.allocation()
-        lines += [f"\\P{alloc['P']}", f"\\N{alloc['N']}"]
+    alloc = saved.allocation
+    realloc = alloc is not None and dict(alloc) != dict(motor.allocation or {})
+    if realloc and alloc is not None:
+        lines += [f"\\P{alloc['P']}", f"\\N{alloc['N']}"]      # ID1 only: check_restorable
     for name, value in saved.data.items():
         resized = realloc and name[0] in "PNR" and name[1:].isdigit()
         if resized or motor.data.get(name) != value:
@@ -223,9 +245,8 @@ def _send(session: Session, motor: int, lines: tuple[str, ...], outcome: Outcome
         batch = lines[start:start + BATCH]
         try:
             yield from fenced(session, motor, batch)
-        except MotorError as error:
-            outcome.problems.append(f"{error.motor_line(motor)} among "
-                                    f"{batch[0]} .. {batch[-1]}")
+        except MotorError as error:        # the motor's errorNN.n line (ch. 3 K23 16)
+            outcome.problems.append(f"{error} among {batch[0]} .. {batch[-1]}")
         outcome.sent += len(batch)
 
 
@@ -242,27 +263,42 @@ def _data_check(saved: MotorImage, session: Session) -> Op[list[str]]:
                 for name, value in saved.data.items() if got.get(name) != value]
     extra = [name for name in got if name not in saved.data and name[1:].isdigit()
              and name[0] in "PNR"]
-    if extra:
+    if extra and saved.allocation is not None:
         problems.append(f"the motor holds {len(extra)} memories the backup has not "
                         f"({extra[0]}..{extra[-1]}: its allocation, 2.1.2)")
     return problems
 
 
+def _bank_difference(label: str, motor: int, saved: tuple[str, ...],
+                     got: tuple[str, ...]) -> str | None:
+    """The first line where a bank read back differs from the backup, or ``None``."""
+    want, have = canonical_lines(list(saved), motor), canonical_lines(list(got), motor)
+    if want == have:
+        return None
+    i = next(i for i in range(max(len(want), len(have)))
+             if i >= len(want) or i >= len(have) or want[i] != have[i])
+    backup = repr(want[i]) if i < len(want) else "nothing"
+    reads = repr(have[i]) if i < len(have) else "nothing"
+    return f"bank {label}.{motor} line {i + 1} reads {reads}, the backup has {backup}"
+
+
 def _banks_check(saved: MotorImage, session: Session) -> Op[list[str]]:
     got = yield from read_banks(session, saved.motor)
     m = saved.motor
-    problems = [f"bank {label}.{m} differs from the backup" for label, body in saved.banks.items()
-                if not _same_bank(body, got.get(label, ()), m)]
+    problems = [diff for label, body in saved.banks.items()
+                if (diff := _bank_difference(label, m, body, got.get(label, ()))) is not None]
     problems += [f"bank {label}.{m} is not in the backup and is not empty"
                  for label, body in got.items() if label not in saved.banks and body]
     return problems
 
 
 def _bank_upload(session: Session, part: Part, outcome: Outcome) -> Op[None]:
+    """The banks sent as ``upload`` sends a file (2.2.2, each line paced by its echo)."""
+    assert part.motor is not None
     program = parse_program("\n".join(part.lines) + "\n", "backup")
-    result = yield from upload(session, program, verify=True)
+    result = yield from upload(session, program, verify=False)
     outcome.sent = result.sent
-    outcome.problems += result.report()
+    outcome.problems += [str(error) for _line, error in result.errors]   # errorNN.n: ...
 
 
 def _write_only(text: str) -> Exchange:
@@ -343,11 +379,11 @@ def run_restore(run: Run, session: Session, parts: list[Part], backup: ChainImag
     """Send ``parts`` in order through ``run`` (a driver's), stopping at the first part
     that fails; every part gets its outcome in the report."""
     control = control or LineControl()
-    report = RestoreReport([Outcome(part, "not written") for part in parts])
+    report = RestoreReport([Outcome(part, "not written" if part.lines else "unchanged")
+                            for part in parts])
     for outcome in report.outcomes:
         part = outcome.part
         if not part.lines:
-            outcome.status = "unchanged"
             continue
         if progress is not None:
             progress(f"{part.name}: {len(part.lines)} line(s)")

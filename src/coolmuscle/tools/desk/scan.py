@@ -317,8 +317,10 @@ def _nothing(url: str, rates: Sequence[int], motor: int, timeout: float) -> str:
     if not rates:
         return (f"no motor answers on {url} (?85.{motor} within {timeout:g} s); is "
                 "something serving that address?")
-    tried = ", ".join(str(r) for r in rates[:-1]) + (" or " if len(rates) > 1 else "") + \
-        str(rates[-1])
+    if len(rates) == 1:
+        return (f"no motor answers on {url} at {rates[0]} bit/s (?85.{motor} within "
+                f"{timeout:g} s); a wrong --baud? (without it every K20 rate is tried)")
+    tried = ", ".join(str(r) for r in rates[:-1]) + f" or {rates[-1]}"
     return (f"no motor answers on {url} at {tried} bit/s (?85.{motor} within {timeout:g} s "
             "at each); check the cable, the power and the port")
 
