@@ -115,3 +115,36 @@ def test_bad_options(option: str, value: str, message: str,
                      capsys: pytest.CaptureFixture[str]) -> None:
     code, _out, err = cli(capsys, "scan", "coolmuscle://?mode=fast", option, value)
     assert (code, err) == (2, f"coolmuscle: error: {message}\n")
+
+
+class _OtherTitle:
+    """A port whose motor answers ``?85.1`` with a title in a form 6.6 does not show and
+    ``K20.1`` with 0; nothing else (a socket: no wire)."""
+
+    def __init__(self) -> None:
+        self.timeout = 0.05
+        self._out = bytearray()
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._out)
+
+    def write(self, data: bytes) -> int:
+        answers = {b"?85.1\r": b"ID1 : Motor X v9 (custom)\r\n", b"K20.1\r": b"K20.1=0\r\n"}
+        self._out += answers.get(data, b"")
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        data, self._out[:] = bytes(self._out[:size]), self._out[size:]
+        if not data:
+            time.sleep(self.timeout)
+        return data
+
+    def reset_input_buffer(self) -> None:
+        self._out.clear()
+
+
+def test_a_title_of_another_form_is_shown_with_an_unknown_firmware() -> None:
+    from coolmuscle.tools.desk.scan import scan_port
+    result = scan_port(_OtherTitle(), "socket://bench:4001", timeout=0.05)
+    assert result.lines() == ["ID1  K20=0 (38400 bit/s)  ?  ID1 : Motor X v9 (custom)"]

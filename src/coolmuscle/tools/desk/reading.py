@@ -14,12 +14,14 @@ and a web page read a motor the same way.  The queries (6.6; nothing is changed)
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 from ...client.banks import all_banks
 from ...client.ops import Op, Session, exchange, fenced, listing, params
 from ...errors import MotorError, ProtocolError
 from ...motor.state.firmware import Firmware
+from .errors import DeskError
 from .image import DIRECT_KINDS, MEMORY_KINDS, MotorImage, split_items
 
 __all__ = ["version_title", "read_params", "read_data", "read_banks", "read_motor",
@@ -27,9 +29,10 @@ __all__ = ["version_title", "read_params", "read_data", "read_banks", "read_moto
 
 
 def version_title(session: Session, motor: int, timeout: float | None = None) -> Op[str]:
-    """``?85.n``: the version title (6.6)."""
+    """``?85.n``: the version title (6.6), or a line that starts ``IDn :`` in another form."""
+    start = re.compile(rf"ID{motor}\s*:")
     ex = yield from exchange(session, (f"?85.{motor}",),
-                             lambda line: line.kind == "version" and line.motor == motor,
+                             lambda line: start.match(line.text) is not None,
                              motor, "?85 version title", timeout)
     return ex.lines[-1].text
 
@@ -107,7 +110,12 @@ def read_motor(session: Session, motor: int) -> Op[MotorImage]:
     """Everything a backup holds of motor ID ``motor``."""
     title = yield from version_title(session, motor)
     image = MotorImage(motor, title)
-    profile = image.profile
+    try:
+        profile = image.profile
+    except ProtocolError:
+        raise DeskError(f"ID{motor} answers ?85 with {title!r}, which does not say its "
+                        "firmware (6.6 ?85: ID1 : CM2v3.10R.1 #...); cm2, rt3 and cm1 are "
+                        "known") from None
     values = yield from read_params(session, motor, profile)
     data = yield from read_data(session, motor, profile)
     banks = yield from read_banks(session, motor)

@@ -84,8 +84,12 @@ class FoundMotor:
 
     @property
     def firmware(self) -> str:
-        """The profile the title suggests: ``cm2``, ``rt3`` or ``cm1`` (6.6 ?85)."""
-        return self.version.profile()
+        """The profile the title suggests: ``cm2``, ``rt3`` or ``cm1`` (6.6 ?85); ``?``
+        for a title not in the form of 6.6."""
+        try:
+            return self.version.profile()
+        except ProtocolError:
+            return "?"
 
     def line(self) -> str:
         """``ID1  K20=0 (38400 bit/s)  cm2  ID1 : CM2v3.10R.1 #0802A12345``."""
@@ -166,11 +170,12 @@ class Lines:
 
 
 def _title_of(motor: int) -> Callable[[str], bool]:
+    """The ``?85`` answer of ``motor``: ``ID1 : CM2v3.10R.1 #0802A12345`` (6.6), or any
+    line that starts ``ID1 :`` (a title of a form 6.6 does not show)."""
+    start = re.compile(rf"ID{motor}\s*:")
+
     def is_title(text: str) -> bool:
-        try:
-            return parse_version(text).motor == motor
-        except ProtocolError:
-            return False
+        return start.match(text) is not None
     return is_title
 
 
