@@ -4,11 +4,18 @@ it, a refusal naming the line."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.desk import BackupFileError, load_backup, parse_backup, render_backup
+from coolmuscle.client.aio_driver import AsyncDriver
+from coolmuscle.client.banks import send_line
+from coolmuscle.client.ops import Session
+from coolmuscle.client.sync import open_port
+from coolmuscle.tools.desk import (BackupFileError, MotorImage, load_backup, parse_backup,
+                                   render_backup)
+from coolmuscle.tools.desk.reading import read_motor
 from desk_support import virtual_line
 
 SETUP = ["K23.1=17", "K24.1=2000", "P15.1=100", 'V1.1="a,b"', 'V2.1="Px"', "H0.1=12",
@@ -106,3 +113,22 @@ def test_files_that_are_no_backup(tmp_path: Path) -> None:
         with pytest.raises(BackupFileError) as caught:
             load_backup(path)
         assert str(caught.value) == message.format(p=path)
+
+
+def test_the_reading_operations_run_on_the_asyncio_driver_too() -> None:
+    async def read() -> MotorImage:
+        port = open_port("coolmuscle://?mode=fast")
+        driver = AsyncDriver(port, Session(timeout=5))
+        driver.start()
+        try:
+            await driver.run(send_line(driver.session, 1, "K24.1=2000"))
+            return await driver.run(read_motor(driver.session, 1))
+        finally:
+            driver.close()
+            port.close()
+
+    line = virtual_line(["K24.1=2000"])
+    try:
+        assert asyncio.run(read()) == line.run(read_motor(line.session, 1))
+    finally:
+        line.close()
