@@ -30,7 +30,6 @@ from pathlib import Path
 
 from ...client.replies import parse_version
 from ...cml.parser import parse
-from ...device.hostline import BAUD_RATES
 from ...errors import CmlSyntaxError, OutOfRangeError, ProtocolError
 from ...motor.state.firmware import Firmware
 from ...motor.state.memory import Memory
@@ -325,10 +324,3 @@ def load_backup(path: str | Path) -> ChainImage:
             from None
     return parse_backup(text, str(path))
 
-
-def rate_of(image: ChainImage) -> int:
-    """The host rate ID1's K20 gives (ch. 3 K20), 38400 when not known."""
-    try:
-        return BAUD_RATES.get(image.motor(1).params.get(20, 0), 38400)
-    except LookupError:
-        return 38400

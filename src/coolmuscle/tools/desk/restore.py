@@ -25,7 +25,7 @@ which failed with what, and which were not written.  Nothing is saved then.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal, TypeVar
+from typing import Any, Callable, Literal
 
 from ...client.banks import save as save_op
 from ...client.banks import upload
@@ -42,7 +42,6 @@ from .reading import read_banks, read_data, read_params
 __all__ = ["Part", "Outcome", "RestoreReport", "plan_restore", "run_restore",
            "check_restorable", "BATCH"]
 
-T = TypeVar("T")
 Run = Callable[[Op[Any]], Any]
 Status = Literal["unchanged", "verified", "failed", "not written", "saved"]
 
