@@ -1,4 +1,4 @@
-"""Restore (coolmuscle.tools.desk.restore) on in-process virtual chains: the order of the
+"""Restore (coolmuscle.tools.desk.restorer) on in-process virtual chains: the order of the
 parts, only what differs is sent, each part read back; a part the motor refuses stops
 the restore and the report says what was and was not written; a backup of another
 firmware, or of motors that are not on the line, is refused before anything is sent."""
@@ -119,3 +119,17 @@ def test_an_existing_backup_is_not_overwritten(tmp_path: Path,
                          "--force")
     assert code == 0 and kept.read_text().startswith("# coolmuscle backup of ")
     assert [p.name for p in tmp_path.iterdir()] == ["motor.cml"]      # no temporary left
+
+
+def test_k65_of_the_other_motors_follows_a_change_of_id1s() -> None:
+    saved = virtual_line(["K65.1=5", "K65.2=0"], motors=2)      # ID1's is copied (ch. 3 K65)
+    backup = saved.read_chain()
+    saved.close()
+    assert (backup.motor(1).params[65], backup.motor(2).params[65]) == (5, 0)
+    line = virtual_line([], motors=2)
+    try:
+        report = line.restore(backup)
+        assert report.ok, report.lines()
+        assert report.lines()[3] == "ID2 K parameters: 1 line(s) written, read back equal"
+    finally:
+        line.close()

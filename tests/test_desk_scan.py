@@ -15,7 +15,7 @@ from coolmuscle.device.uart import as_read_at
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.tools.desk import NoMotorError, scan, scan_bound
-from coolmuscle.tools.desk.scan import probe_pieces
+from coolmuscle.tools.desk.linescan import probe_pieces
 
 RATES = (9600, 19200, 38400, 57600, 115200, 230400)
 
@@ -145,6 +145,6 @@ class _OtherTitle:
 
 
 def test_a_title_of_another_form_is_shown_with_an_unknown_firmware() -> None:
-    from coolmuscle.tools.desk.scan import scan_port
+    from coolmuscle.tools.desk.linescan import scan_port
     result = scan_port(_OtherTitle(), "socket://bench:4001", timeout=0.05)
     assert result.lines() == ["ID1  K20=0 (38400 bit/s)  ?  ID1 : Motor X v9 (custom)"]

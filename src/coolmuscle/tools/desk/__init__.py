@@ -1,11 +1,11 @@
 """The desk for a real motor (docs/real-motor.md): find the motors on a line, back them
 up to a file, restore them, compare.
 
-* :mod:`.scan` - ``coolmuscle scan``: IDs, K20 rate, firmware (queries only);
+* :mod:`.linescan` - ``coolmuscle scan``: IDs, K20 rate, firmware (queries only);
 * :mod:`.image` - a motor as a backup holds it (:class:`MotorImage`, :class:`ChainImage`);
 * :mod:`.reading` - reading a motor: sans-IO operations for any client driver;
 * :mod:`.backupfile` - the backup file, a ``coolmuscle run`` script, written and checked;
-* :mod:`.restore` - the parts of a restore, in order, each read back;
+* :mod:`.restorer` - the parts of a restore, in order, each read back;
 * :mod:`.diff` - ``coolmuscle params diff``;
 * :mod:`.connection` - the blocking entry points (:class:`DeskLine`, :func:`backup`,
   :func:`restore`, :func:`factory_image`);
@@ -21,8 +21,8 @@ from .connection import DeskLine, backup, factory_image, restore
 from .diff import Difference, diff_images, format_diff
 from .errors import BackupFileError, DeskError, FirmwareMismatchError, NoMotorError
 from .image import ChainImage, MotorImage
-from .restore import Outcome, Part, RestoreReport, plan_restore, run_restore
-from .scan import FoundMotor, ScanResult, scan, scan_bound
+from .restorer import Outcome, Part, RestoreReport, plan_restore, run_restore
+from .linescan import FoundMotor, ScanResult, scan, scan_bound
 
 __all__ = ["scan", "scan_bound", "ScanResult", "FoundMotor", "DeskLine", "backup", "restore",
            "factory_image", "ChainImage", "MotorImage", "render_backup", "parse_backup",

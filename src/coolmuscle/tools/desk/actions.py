@@ -21,7 +21,7 @@ from .connection import DeskLine, backup, factory_image, restore
 from .diff import diff_images, format_diff
 from .errors import DeskError
 from .image import ChainImage
-from .scan import scan
+from .linescan import scan
 
 __all__ = ["parse_ids", "parse_bauds", "do_scan", "do_backup", "do_restore", "do_diff"]
 

@@ -1,7 +1,7 @@
 """The backup file: a chain's motors as a ``coolmuscle run`` script (docs/real-motor.md).
 
 :func:`render_backup` writes a :class:`~.image.ChainImage` as the lines a host would type
-to set the motors up again, in the order :mod:`.restore` writes them, so that
+to set the motors up again, in the order :mod:`.restorer` writes them, so that
 ``coolmuscle run motor.cml`` plays it on a virtual chain (docs/scripts.md) and
 ``coolmuscle restore`` plays it on a real one::
 

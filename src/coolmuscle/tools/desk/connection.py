@@ -1,9 +1,9 @@
 """The desk's blocking entry points: a line to a chain, a backup, a restore, the images a
 diff compares (docs/real-motor.md).  A web page runs them in a worker thread; the
-sans-IO parts they are made of (:mod:`.reading`, :mod:`.restore`) run on its asyncio
+sans-IO parts they are made of (:mod:`.reading`, :mod:`.restorer`) run on its asyncio
 driver as well.
 
-:class:`DeskLine` opens PORT, finds the rate and the motors with a scan (:mod:`.scan`,
+:class:`DeskLine` opens PORT, finds the rate and the motors with a scan (:mod:`.linescan`,
 queries only) and keeps the port at that rate with a client session
 (:class:`coolmuscle.client.driver.SyncDriver`) to read and write through.
 """
@@ -21,8 +21,8 @@ from .errors import DeskError
 from .image import ChainImage, MotorImage
 from .ports import open_port, port_url
 from .reading import read_motor
-from .restore import LineControl, RestoreReport, check_restorable, plan_restore, run_restore
-from .scan import REPLY_TIMEOUT, SCAN_ORDER, ScanResult, scan_port
+from .restorer import LineControl, RestoreReport, check_restorable, plan_restore, run_restore
+from .linescan import REPLY_TIMEOUT, SCAN_ORDER, ScanResult, scan_port
 
 __all__ = ["DeskLine", "backup", "restore", "factory_image", "listing_timeout"]
 
@@ -105,7 +105,7 @@ class DeskLine:
 
     def restore(self, backup: ChainImage, *, save: bool = False, name: str = "the backup",
                 progress: Progress | None = None) -> RestoreReport:
-        """Write ``backup`` (``name`` in messages) to the motors of this line (:mod:`.restore`)."""
+        """Write ``backup`` (``name`` in messages) to the motors of this line (:mod:`.restorer`)."""
         live_ids = ChainImage(tuple(MotorImage(m.motor, m.title) for m in self.scan.motors))
         check_restorable(backup, live_ids, self.url, name)     # IDs and titles, before reading
         live = self.read_chain(backup.ids, progress)

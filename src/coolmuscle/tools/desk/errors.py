@@ -3,7 +3,7 @@
 :class:`DeskError` is bad input (the command's exit status 2, docs/real-motor.md): no
 motor on the port, a wrong baud rate, a backup of another firmware, a value out of
 range in a backup, an unreadable file.  A restore that fails part-way is not an
-exception but a :class:`~.restore.RestoreReport` that says what was and was not
+exception but a :class:`~.restorer.RestoreReport` that says what was and was not
 written.
 """
 

@@ -13,7 +13,8 @@ The order of the writes (docs/real-motor.md "Restore"), one *part* at a time:
    kept through a power cycle only once saved; K parameters keep themselves, ch. 3).
 
 Only what differs from the motor is sent.  Each part is read back (the queries of
-:mod:`.reading`) and compared with the backup before the next part starts; a part that
+:mod:`.reading`) and compared with the backup before the next part starts (a motor's K
+parameters also when none was written: ID1's K65 is copied to every motor); a part that
 fails (an error the motor reports, a value that reads back otherwise, a timeout) stops
 the restore, and the :class:`RestoreReport` says which parts were written and verified,
 which failed with what, and which were not written.  Nothing is saved then.
@@ -82,8 +83,8 @@ class Outcome:
         if self.status == "not written":
             return f"{part.name}: not written ({total} line{'s' if total != 1 else ''})"
         if self.status == "failed":
-            return (f"{part.name}: FAILED after {self.sent} of {total} line(s): "
-                    + "; ".join(self.problems))
+            done = f" after {self.sent} of {total} line(s)" if total else ""
+            return f"{part.name}: FAILED{done}: " + "; ".join(self.problems)
         if self.status == "saved":
             return f"{part.name}: saved"
         notes = "".join(f"; {note}" for note in self.notes)
@@ -167,11 +168,21 @@ def _ids(ids: tuple[int, ...]) -> str:
     return ", ".join(f"ID{i}" for i in ids)
 
 
-def _k_part(saved: MotorImage, motor: MotorImage) -> Part:
+def _k_part(saved: MotorImage, motor: MotorImage, k65_copied: bool) -> Part:
+    """The K that differ; K65 also when ID1's changes, which copies it here (ch. 3 K65)."""
     m = saved.motor
     lines = tuple(f"K{k}.{m}={v}" for k, v in saved.params.items()
-                  if k not in LINE_PARAMS and motor.params.get(k) != v)
+                  if k not in LINE_PARAMS and (motor.params.get(k) != v
+                                               or (k == 65 and k65_copied and m != 1)))
     return Part(m, "K parameters", lines)
+
+
+def _k65_changes(backup: ChainImage, live: ChainImage) -> bool:
+    """Whether the restore writes ID1's K65 (which every motor then takes, ch. 3 K65)."""
+    if 1 not in backup.ids or 1 not in live.ids:
+        return False
+    saved = backup.motor(1).params.get(65)
+    return saved is not None and saved != live.motor(1).params.get(65)
 
 
 def _data_part(saved: MotorImage, motor: MotorImage) -> Part:
@@ -218,9 +229,11 @@ def _line_part(backup: ChainImage, live: ChainImage) -> Part:
 def plan_restore(backup: ChainImage, live: ChainImage, *, save: bool = False) -> list[Part]:
     """The parts of a restore, in order (module docstring); empty parts included."""
     parts: list[Part] = []
+    k65 = _k65_changes(backup, live)
     for saved in backup.motors:
         motor = live.motor(saved.motor)
-        parts += [_k_part(saved, motor), _data_part(saved, motor), _banks_part(saved, motor)]
+        parts += [_k_part(saved, motor, k65), _data_part(saved, motor),
+                  _banks_part(saved, motor)]
     parts.append(_line_part(backup, live))
     if save:
         parts += [Part(m, "save", (f"$.{m}",)) for m in backup.ids]
@@ -363,6 +376,9 @@ def _part_op(session: Session, part: Part, backup: ChainImage, control: LineCont
         return
     assert part.motor is not None
     saved = backup.motor(part.motor)
+    if not part.lines:         # K parameters as in the backup: still so after the parts
+        outcome.problems += yield from _k_check(saved, session)    # before (K65, ch. 3)
+        return
     if part.kind == "banks":
         yield from _bank_upload(session, part, outcome)
         outcome.problems += yield from _banks_check(saved, session)
@@ -382,17 +398,17 @@ def run_restore(run: Run, session: Session, parts: list[Part], backup: ChainImag
                             for part in parts])
     for outcome in report.outcomes:
         part = outcome.part
-        if not part.lines:
+        if not part.lines and part.kind != "K parameters":
             continue
         if progress is not None:
             progress(f"{part.name}: {len(part.lines)} line(s)")
-        outcome.status = "verified"
+        outcome.status = "verified" if part.lines else "unchanged"
         try:
             run(_part_op(session, part, backup, control, outcome))
         except CoolMuscleError as exc:
             outcome.problems.append(str(exc))
             outcome.status = "failed"
-        if outcome.problems and outcome.status == "verified":
+        if outcome.problems:
             outcome.status = "failed"
         if outcome.status == "failed":
             break
