@@ -182,9 +182,22 @@ class Port:
         except Exception:
             log.exception("host line failed to end a host's lane")
 
-    def add_listener(self, listener: ByteListener) -> Callable[[], None]:
-        """Receive every byte the motor sends; returns an unsubscribe function."""
-        return self.host_line.add_listener(listener)
+    def add_listener(self, listener: ByteListener,
+                     lane: "Lane | None" = None) -> Callable[[], None]:
+        """Receive every byte the motor sends; returns an unsubscribe function.
+
+        ``lane``: the host this listener reads for (its port's rate, :meth:`set_host_baud`)."""
+        if lane is None:
+            return self.host_line.add_listener(listener)
+        return self.host_line.add_listener(listener, lane.source)
+
+    def set_host_baud(self, lane: "Lane", baud: Callable[[], int | None]) -> None:
+        """How to read the baud rate ``lane``'s host set on its port (the pty: the
+        client's termios speed); with wire pacing the host line garbles the bytes both
+        ways while it differs from K20 (``HostLine.set_host_baud``)."""
+        setter = getattr(self.host_line, "set_host_baud", None)
+        if setter is not None:
+            setter(lane.source, baud)
 
     def discard_partial(self) -> bool:
         """Forget a partly received line of the default host (see report)."""

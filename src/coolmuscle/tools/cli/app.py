@@ -475,6 +475,14 @@ def _register_capture() -> None:
 _register_capture()  # capture (coolmuscle.tools.capture, docs/user-guide.md)
 
 
+def _register_desk() -> None:
+    from ..desk.commands import register
+    register(app)
+
+
+_register_desk()  # scan, backup, restore, params diff (coolmuscle.tools.desk, docs/real-motor.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version, and whether the hot modules run compiled or as sources."""
