@@ -39,7 +39,9 @@ from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..sim.kernel import PRIO_IO, Kernel
 
 if TYPE_CHECKING:
+    from .banklines import BankLineObservers
     from .machine import Machine
+    from ..device.banklines import BankLineListener
     from ..device.api import Device
     from ..motor.core import MotorBus, MotorCore
 
@@ -105,6 +107,7 @@ class Chain(ChainBus):
         self._watching = {}
         self._everywhere = 0
         self._observers: list[Callable[[], None]] = []
+        self._bank_lines: BankLineObservers | None = None   # observe_bank_lines
         self._settings_cache = {}
         self._settings_now = LineSettings()
         self._settings_version = -1
@@ -148,6 +151,14 @@ class Chain(ChainBus):
         are observed with ``kernel.add_observer``."""
         self._observers.append(observer)
         return lambda: self._observers.remove(observer) if observer in self._observers else None
+
+    def observe_bank_lines(self, listener: "BankLineListener") -> Callable[[], None]:
+        """Tell ``listener`` of every bank line run from now on (device/banklines.py);
+        returns its remover.  Unobserved, the banks run as if this did not exist."""
+        if self._bank_lines is None:
+            from .banklines import BankLineObservers
+            self._bank_lines = BankLineObservers(self.kernel, self.motors)
+        return self._bank_lines.add(listener)
 
     def _changed(self) -> None:
         """State may have changed outside a kernel event: let the observers look."""
