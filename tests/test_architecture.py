@@ -51,7 +51,8 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
         ("cli.run", "term"),             # what run does; the terminal and its upload
         ("script",),                     # scripts, transcripts
         ("check", "trace", "accel"),     # the linter, traces and plots, compiled modules
-        ("cli.usage", "cli.stopsignals", "cli.version"),   # what every command shares
+        ("cli.usage", "cli.stopsignals", "cli.version",    # what every command shares,
+         "ci"),                                             # and the CI formats they write
     ),
     "coolmuscle.frontends": (
         ("transports.__init__",),        # the registry: names every front end
