@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-__all__ = ["Case", "Suite", "junit_tree", "write_junit"]
+__all__ = ["Case", "Suite", "junit_tree", "write_junit", "path_problem"]
 
 Outcome = Literal["passed", "failure", "error", "skipped"]
 
@@ -100,3 +100,13 @@ def write_junit(path: Path, suites: Sequence[Suite]) -> Path:
     path = path.expanduser()
     junit_tree(suites).write(path, encoding="utf-8", xml_declaration=True)
     return path
+
+
+def path_problem(path: Path) -> str | None:
+    """Why ``path`` cannot take the report (checked before a run), or ``None``."""
+    path = path.expanduser()
+    if not path.parent.is_dir():
+        return f"directory {path.parent} does not exist"
+    if path.is_dir():
+        return f"{path} is a directory"
+    return None
