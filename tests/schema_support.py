@@ -18,7 +18,7 @@ import json
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,7 @@ _ATTLIST = re.compile(r"<!ATTLIST\s+([\w.-]+)\s+([\w.-]+)\s+CDATA\s+(#REQUIRED|#
 _COMMENT = re.compile(r"<!--.*?-->", re.S)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sarif_validator() -> jsonschema.Draft4Validator:
     schema = json.loads(SARIF_SCHEMA.read_text(encoding="utf-8"))
     return jsonschema.Draft4Validator(schema, format_checker=jsonschema.Draft4Validator
@@ -115,7 +115,7 @@ class Dtd:
             self._element(child, f"{where}/{child.tag}[{index}]")
 
 
-@lru_cache(maxsize=None)
+@cache
 def cobertura_dtd() -> Dtd:
     return Dtd.read(COBERTURA_DTD)
 

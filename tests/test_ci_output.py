@@ -15,11 +15,11 @@ from typing import Any
 
 import jsonschema
 import pytest
-from cli_support import cli
-from schema_support import validate_sarif
 
+from cli_support import cli
 from coolmuscle.tools.ci.github import annotation
 from coolmuscle.tools.ci.junit import Case, Suite, write_junit
+from schema_support import validate_sarif
 
 ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "check"
