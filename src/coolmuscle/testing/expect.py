@@ -18,21 +18,43 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 from ..motor.status import ALARM_BITS, Ux
 from ..sim.kernel import NS_PER_S, seconds
 
 if TYPE_CHECKING:
-    from ..tools.trace.recorder import Sample
-    from .rig import ChainRig
+    from ..chain.daisy import Chain
+    from ..tools.trace.recorder import Sample, TraceRecorder
 
-__all__ = ["MotionAssertionError", "MotorExpect"]
+__all__ = ["MotionAssertionError", "MotorExpect", "Recorded"]
 
 #: Rows of the trace piece a failure shows.
 PIECE_ROWS = 9
 #: Virtual time a piece reaches back before the instant it is about.
 PIECE_SPAN_S = 0.5
+
+
+class Recorded(Protocol):
+    """What the assertions read of a chain under test (:class:`~.rig.ChainRig`)."""
+
+    chain: Chain
+    recorder: TraceRecorder
+    start_ns: int
+
+    @property
+    def now(self) -> float: ...
+
+    def seconds(self, t: int) -> float: ...
+
+    def temperatures(self, motor: int) -> list[tuple[int, int]]: ...
+
+    def running_line(self, at: int, motor: int) -> str | None: ...
+
+    def line_at(self, at: int, motor: int) -> str | None: ...
+
+    def failure_plot(self) -> Path | None: ...
 
 
 class MotionAssertionError(AssertionError):
@@ -51,9 +73,9 @@ def _num(value: float) -> str:
 
 
 class MotorExpect:
-    """The assertions on one motor of a :class:`~.rig.ChainRig`."""
+    """The assertions on one motor of a :class:`Recorded`."""
 
-    def __init__(self, rig: ChainRig, motor: int) -> None:
+    def __init__(self, rig: Recorded, motor: int) -> None:
         if motor not in rig.chain.motor_ids:
             raise ValueError(f"motor {motor} is not on the chain "
                              f"(IDs {list(rig.chain.motor_ids)})")
@@ -179,7 +201,7 @@ class MotorExpect:
         return _table(self.rig, self.motor, times, at)
 
 
-def _table(rig: ChainRig, motor: int, times: Sequence[int], at: int) -> list[str]:
+def _table(rig: Recorded, motor: int, times: Sequence[int], at: int) -> list[str]:
     header = ("time s", "target", "position", "speed pps", "torque %", "Ux", "outputs",
               "bank line")
     rows = [header]
