@@ -37,8 +37,7 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.testing import served
 from coolmuscle.testing.rig import build_chain
-from coolmuscle.testing.served import (closed_port, free_port, wait_until,
-                                       wait_until_async)
+from coolmuscle.testing.served import closed_port, free_port, wait_until, wait_until_async
 
 __all__ = ["ROOT", "SRC", "coolmuscle_env", "run_coolmuscle", "wait_until",
            "wait_until_async", "free_port", "closed_port", "new_chain", "ChainFactory",

@@ -109,6 +109,7 @@ class MotorExpect:
     # -- assertions ---------------------------------------------------------------------
     def position(self, target: float, *, within: float = 0, by: float) -> None:
         """At ``by`` seconds the position (pulses, ?96) is ``target`` ± ``within``."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         value = self.sample(by).position
         if abs(value - target) > within:
             self.fail(f"position at {by:g} s is {_num(value)} pulses, expected {_num(target)}"
@@ -116,6 +117,7 @@ class MotorExpect:
 
     def in_position(self, *, by: float) -> None:
         """At ``by`` seconds the motor is in position (Ux bit 8, 6.6 ?99)."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         t = self._ns(by)
         status = self.sample(by).status
         if not status & Ux.IN_POSITION:
@@ -128,6 +130,7 @@ class MotorExpect:
 
     def no_alarm(self, *, during: tuple[float, float] | None = None) -> None:
         """No alarm bit (ch. 3 K56, K57) in Ux during the stretch (the whole run by default)."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         t0, t1 = self._window(during)
         for t in self._times(t0, t1):
             status = self.rig.recorder.sample(self.motor, t).status
@@ -146,12 +149,14 @@ class MotorExpect:
     def peak_torque_below(self, limit: float, *,
                           during: tuple[float, float] | None = None) -> None:
         """|torque| stays below ``limit`` % of rated (?98) during the stretch."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         self._peak("torque", "%", limit, during,
                    lambda t: self.rig.recorder.sample(self.motor, t).torque)
 
     def peak_speed_below(self, limit: float, *,
                          during: tuple[float, float] | None = None) -> None:
         """|speed| stays below ``limit`` pulses per second during the stretch."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         self._peak("speed", "pps", limit, during,
                    lambda t: self.rig.recorder.sample(self.motor, t).speed)
 
@@ -159,6 +164,7 @@ class MotorExpect:
                                during: tuple[float, float] | None = None) -> None:
         """The driver temperature (°C, ?71) stays below ``limit`` during the stretch
         (read after every kernel event of the run, at most every 10 ms)."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         t0, t1 = self._window(during)
         readings = [(c, t) for t, c in self.rig.temperatures(self.motor) if t0 <= t <= t1]
         worst, at = max(readings, default=(-math.inf, t0))
@@ -169,6 +175,7 @@ class MotorExpect:
     def output(self, number: int, *, on: bool = True, between: tuple[float, float]) -> None:
         """Output ``number`` (1..) is on (or off) the whole time from ``between[0]`` to
         ``between[1]`` seconds, as the port reads (?50, K33 applied)."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         bit = 1 << (number - 1)
         t0, t1 = self._window(between)
         for t in self._times(t0, t1):
@@ -181,6 +188,7 @@ class MotorExpect:
     # -- failing ----------------------------------------------------------------------
     def fail(self, what: str, at: int) -> None:
         """Raise :class:`MotionAssertionError` about ``at`` (kernel ns)."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         parts = [f"motor {self.motor}: {what}"]
         running = self.rig.running_line(at, self.motor)
         if running:

@@ -161,6 +161,7 @@ class ChainRig:
 
     def expect_reply(self, line: str, expected: bytes | str, within: float = 0.05) -> None:
         """The bytes the motor sends back for ``line`` are exactly ``expected``."""
+        __tracebackhide__ = True     # pytest shows the test's line, not this
         from .expect import MotionAssertionError
         want = expected.encode("latin-1") if isinstance(expected, str) else expected
         got = self.reply(line, within)
