@@ -1,6 +1,7 @@
 """The import graph of docs/architecture.md, enforced (grimp, import-linter's engine).
 
-- layers: tools > client > frontends > chain > device > motor > cml > sim > errors; a
+- layers: testing > tools > client > frontends > chain > device > motor > cml > sim >
+  errors; a
   module imports only from its own layer or below (type-only imports included);
 - rooms: inside tools/, frontends/, chain/ and motor/ the sub-packages (and the modules
   beside them) are ordered too (``ROOMS``): a room imports only rooms below it, the rooms
@@ -28,7 +29,7 @@ from pathlib import Path
 import grimp
 import pytest
 
-LAYERS = ("coolmuscle.tools", "coolmuscle.client", "coolmuscle.frontends", "coolmuscle.chain",
+LAYERS = ("coolmuscle.testing", "coolmuscle.tools", "coolmuscle.client", "coolmuscle.frontends", "coolmuscle.chain",
           "coolmuscle.device", "coolmuscle.motor", "coolmuscle.cml", "coolmuscle.sim",
           "coolmuscle.errors")
 #: The one documented exception: an AlarmError decodes its Ux with the motor's status flags.
@@ -42,6 +43,12 @@ CLOCKS = frozenset({"time", "asyncio", "socket", "threading"})
 #: below its layer; ``name.__init__`` is a package's own module alone.  A module is in the
 #: room of the longest name it starts with.
 ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
+    "coolmuscle.testing": (
+        ("plugin",),                     # the pytest plug-in: the fixtures
+        ("rig",),                        # a chain under test
+        ("expect", "coverage", "lab"),   # assertions, bank coverage, the EtherCAT lab
+        ("banks", "served", "ledger"),   # bank files, sims as processes, what was started
+    ),
     "coolmuscle.tools": (
         ("cli.entry",),                  # the command's first code
         ("cli.app",),                    # the typer application: every sub-command
@@ -51,7 +58,8 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
         ("cli.run", "term"),             # what run does; the terminal and its upload
         ("script",),                     # scripts, transcripts
         ("check", "trace", "accel"),     # the linter, traces and plots, compiled modules
-        ("cli.usage", "cli.stopsignals", "cli.version"),   # what every command shares
+        ("cli.usage", "cli.stopsignals", "cli.version",    # what every command shares,
+         "ci"),                                             # and the CI formats they write
     ),
     "coolmuscle.frontends": (
         ("transports.__init__",),        # the registry: names every front end
@@ -60,7 +68,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
     ),
     "coolmuscle.chain": (
         ("daisy",),                      # Chain: the device API
-        ("bus", "firmware_modbus", "machine"),
+        ("bus", "firmware_modbus", "machine", "banklines"),
         ("links",),
     ),
     "coolmuscle.motor": (
@@ -79,7 +87,10 @@ ALLOWED_INSIDE = {("coolmuscle.motor.core", "coolmuscle.motor.signals.io"),
                   ("coolmuscle.motor.core", "coolmuscle.motor.supervision.thermal")}
 
 #: Entry-point groups and the module that loads each (pyproject.toml).
-ENTRY_POINT_LOADERS = {"coolmuscle.transports": "coolmuscle.frontends.transports"}
+ENTRY_POINT_LOADERS: dict[str, str | None] = {
+    "coolmuscle.transports": "coolmuscle.frontends.transports",
+    "pytest11": None,                   # pytest loads it, from outside the package
+}
 #: Groups whose entry points the installer's scripts load, from outside the package.
 SCRIPT_GROUPS = ("scripts", "gui-scripts")
 PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"

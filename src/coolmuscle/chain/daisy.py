@@ -42,6 +42,8 @@ from ..sim.kernel import PRIO_IO, Kernel
 from .bus import ChainBus, ChainCommands
 
 if TYPE_CHECKING:
+    from .banklines import BankLineObservers
+    from ..device.banklines import BankLineListener
     from ..device.api import Device
     from ..device.trace import TraceFeed
     from ..motor.core import MotorBus, MotorCore
@@ -102,6 +104,7 @@ class Chain:
         self.host_line = self.bus.host_line
         self.links = self.bus.links
         self._observers: list[Callable[[], None]] = []
+        self._bank_lines: BankLineObservers | None = None   # observe_bank_lines
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
                       if self.state_dir else None)
@@ -166,6 +169,14 @@ class Chain:
         are observed with ``kernel.add_observer``."""
         self._observers.append(observer)
         return lambda: self._observers.remove(observer) if observer in self._observers else None
+
+    def observe_bank_lines(self, listener: "BankLineListener") -> Callable[[], None]:
+        """Tell ``listener`` of every bank line run from now on (device/banklines.py);
+        returns its remover.  Unobserved, the banks run as if this did not exist."""
+        if self._bank_lines is None:
+            from .banklines import BankLineObservers
+            self._bank_lines = BankLineObservers(self.kernel, self.motors)
+        return self._bank_lines.add(listener)
 
     def _changed(self) -> None:
         """State may have changed outside a kernel event: let the observers look."""

@@ -133,6 +133,16 @@ def parse_url(url: str) -> dict[str, Any]:
     return options
 
 
+def on_chain(chain: Any, *, mode: str = "fast", timeout: float | None = 1.0) -> Serial:
+    """An open port whose far end is ``chain``, a chain the caller built and keeps:
+    closing the port leaves the chain open (the test plug-in's ``cm_chain.port()``)."""
+    port = Serial(timeout=timeout)
+    port._given_chain = chain
+    port.port = f"coolmuscle://?mode={mode}"
+    port.open()
+    return port
+
+
 class Serial(SerialBase):
     """A pyserial port whose far end is a virtual Cool Muscle chain."""
 
@@ -150,6 +160,7 @@ class Serial(SerialBase):
         self._rx = bytearray()
         self._unsubscribe: Callable[[], None] | None = None
         self._cancel = False
+        self._given_chain: Any = None        # on_chain(): the caller's chain, kept open
         super().__init__(*args, **kwargs)
 
     # -- open / close ---------------------------------------------------
@@ -168,8 +179,9 @@ class Serial(SerialBase):
             except OSError as exc:
                 raise SerialException(f"coolmuscle: cannot use state directory: {exc}") from exc
         try:
-            chain = chain_factory(None, options["motors"], firmware=options["firmware"],
-                                  state_dir=options["state"], pacing=options["pacing"])
+            chain = self._given_chain or chain_factory(
+                None, options["motors"], firmware=options["firmware"],
+                state_dir=options["state"], pacing=options["pacing"])
         except (CoolMuscleError, OSError, ValueError) as exc:
             raise SerialException(f"coolmuscle: cannot start the virtual chain: {exc}") from exc
         with self._cond:
@@ -193,7 +205,7 @@ class Serial(SerialBase):
             chain, self.chain = self.chain, None
             self.is_open = False
             self._cond.notify_all()
-        if chain is not None:
+        if chain is not None and chain is not self._given_chain:
             try:
                 chain.close()
             except Exception:

@@ -283,13 +283,21 @@ class Unit:
     statements: tuple[ast.Statement, ...]
     quiet: bool      # ladder: the line ends with ";", results are not displayed
     first: int       # index of its first stored line
+    last: int        # index of its last stored line (lines joined to the first)
 
     def __init__(self, statements: tuple[ast.Statement, ...], quiet: bool,
-                 first: int) -> None:
+                 first: int, last: int | None = None) -> None:
         # written out: a generated __init__ runs interpreted (profile.Segment)
         self.statements = statements
         self.quiet = quiet
         self.first = first
+        self.last = first if last is None else last
+
+
+#: Told when a unit of a bank starts: ``(bank, first, last)``, the indexes of the
+#: unit's first and last stored line.  Off (``None``) unless someone observes the
+#: bank lines run (the test plug-in's bank coverage, docs/testing-your-project.md).
+LineObserver = Callable[[int, int, int], None]
 
 
 def _merge_condition(cond: ast.Line, line: ast.Line) -> ast.Line:
@@ -305,20 +313,22 @@ def _flow(line: ast.Line) -> bool:
     return any(isinstance(s, (ast.Call, ast.Loop, ast.LoopEnd)) for s in line.statements)
 
 
-def merged_lines(bank: Bank) -> list[tuple[int, ast.Line]]:
-    """Stored lines with each condition-only line merged into the line after it."""
-    out: list[tuple[int, ast.Line]] = []
+def merged_lines(bank: Bank) -> list[tuple[int, int, ast.Line]]:
+    """Stored lines with each condition-only line merged into the line after it:
+    (index of the first stored line, of the last, the line)."""
+    out: list[tuple[int, int, ast.Line]] = []
     pending: tuple[int, ast.Line] | None = None
     for index, line in enumerate(bank):
         if pending is not None:
-            out.append((pending[0], _merge_condition(pending[1], line)))
+            out.append((pending[0], index, _merge_condition(pending[1], line)))
             pending = None
         elif condition_only(line):
             pending = (index, line)
         else:
-            out.append((index, line))
+            out.append((index, index, line))
     if pending is not None:
-        out.append((pending[0], ast.Line(pending[1].statements, False, pending[1].source)))
+        out.append((pending[0], pending[0],
+                    ast.Line(pending[1].statements, False, pending[1].source)))
     return out
 
 
@@ -327,20 +337,22 @@ def program_units(bank: Bank) -> list[Unit]:
     units: list[Unit] = []
     statements: list[ast.Statement] = []
     first = 0
-    for index, line in merged_lines(bank):
+    last = 0
+    for index, end, line in merged_lines(bank):
         if not statements:
             first = index
+        last = end
         statements.extend(line.statements)
         if not line.joined or _flow(line):
-            units.append(Unit(tuple(statements), False, first))
+            units.append(Unit(tuple(statements), False, first, last))
             statements = []
     if statements:
-        units.append(Unit(tuple(statements), False, first))
+        units.append(Unit(tuple(statements), False, first, last))
     return units
 
 
 def ladder_units(bank: Bank, displays: bool = True) -> list[Unit]:
     """Ladder bank: every line on its own; ``;`` only silences its results (RT3 1.1).
     ``displays=False`` (CM2): assignments never display (docs/fidelity.md)."""
-    return [Unit(line.statements, line.joined or not displays, index)
-            for index, line in merged_lines(bank)]
+    return [Unit(line.statements, line.joined or not displays, index, end)
+            for index, end, line in merged_lines(bank)]

@@ -28,8 +28,9 @@ from ...errors import MotorError, NoLadderBankError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
 from .compiled import Compiled, compile_statement
-from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, Watch, holds,
-                       ladder_units, run_plain, target_motor, timer_ns, wait_branch)
+from .bankexec import (HOLD, STEP_NS, LineGen, LineObserver, Request, Runner, Sleep, Unit,
+                       Watch, holds, ladder_units, run_plain, target_motor, timer_ns,
+                       wait_branch)
 from .direct import assign_value
 from ..state.memory import VState
 from .queries import display_reply, format_value, register_name
@@ -69,6 +70,7 @@ class LadderRunner:
         self._running_id = 0
         self._code_cache: dict[int, list[_Code]] = {}
         self._code_version = -1
+        self._line_observer: LineObserver | None = None
         self._period = self.period_ns()
         if not motion:
             motor.params.on_change(self._param_changed)
@@ -130,6 +132,20 @@ class LadderRunner:
         number = self.motor.k(self.motor.firmware.ladder_bank_k)
         if number > 0 and self.motor.banks.get(True, number) is not None:
             self.start(number)
+
+    @property
+    def line_observer(self) -> LineObserver | None:
+        """Told of every line a scan reaches (bank coverage); ``None``: nobody asks.
+
+        Setting it recompiles the banks: observed, each line's statements are preceded
+        by one that reports the line (:func:`_reporting`); unobserved, the compiled
+        statements are as they were, so the scans cost nothing more."""
+        return self._line_observer
+
+    @line_observer.setter
+    def line_observer(self, observer: LineObserver | None) -> None:
+        self._line_observer = observer
+        self._code_version = -1
 
     # -- scheduling -----------------------------------------------------------------
     def _cancel(self) -> None:
@@ -236,11 +252,14 @@ class LadderRunner:
             bank = self.motor.banks.get(True, number)
             if bank is None:
                 return None
+            observer = self._line_observer
             code = self._code_cache[number] = [
-                (stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
-                                         _assigned), unit.quiet)
-                for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
-                for stmt in unit.statements]
+                entry for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
+                for entry in ([] if observer is None or not unit.statements
+                               else [_reporting(observer, number, unit)])
+                + [(stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
+                                            _assigned), unit.quiet)
+                   for stmt in unit.statements]]
         return code
 
     def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,
@@ -379,6 +398,16 @@ class LadderRunner:
             runner.resume()
         else:
             runner.start(stmt.index, self.ctx)
+
+
+def _reporting(observer: LineObserver, bank: int, unit: Unit) -> _Code:
+    """A statement that only tells ``observer`` the line is reached: it takes no step
+    and returns no flow, so the scan goes on exactly as without it."""
+    first, last = unit.first, unit.last
+
+    def report() -> None:
+        observer(bank, first, last)
+    return unit.statements[0], report, unit.quiet
 
 
 def _assigned(target: "MotorCore", reg: ast.Reg, value: int | str | None) -> str:

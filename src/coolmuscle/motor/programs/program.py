@@ -26,9 +26,9 @@ from ...errors import MotorError, NoProgramBankError, OutOfRangeError
 from ...sim.kernel import PRIO_LOGIC, Timer
 from ..state import units as units_mod
 from .bankcheck import expr_steps, statement_steps
-from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
-                       holds, program_units, run_plain, target_motor, timer_ns,
-                       wait_branch)
+from .bankexec import (HOLD, STEP_NS, LineGen, LineObserver, MotionWait, Request, Runner,
+                       Sleep, Unit, holds, program_units, run_plain, target_motor,
+                       timer_ns, wait_branch)
 from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
                           report_leftovers, request)
 from ..motion.planner import Limits
@@ -156,6 +156,8 @@ class ProgramExecutor:
         #: (2.1.2 "*": "Program Bank operates from the beginning with command [").
         self.restart_bank: int | None = None
         self.ctx = _bank_context(motor)
+        #: Told of every line that starts (bank coverage); ``None``: nobody asks.
+        self.line_observer: LineObserver | None = None
 
     @property
     def active(self) -> bool:
@@ -358,6 +360,9 @@ class ProgramExecutor:
     def _start_unit(self, frame: Frame) -> None:
         run = _Run(frame, frame.pc, frame.units[frame.pc], self.kernel.now)
         self._current = run
+        observer = self.line_observer
+        if observer is not None:
+            observer(frame.bank, run.unit.first, run.unit.last)
         self.runner.run(self._unit(run))
 
     def _unit_done(self, flow: object) -> None:

@@ -395,6 +395,9 @@ def run(
         None, "--web", metavar="[[HOST:]PORT]",
         help="Play the script in real time and show it on the web dashboard "
              "(docs/web.md); starts when a page connects."),
+    junit: Optional[Path] = typer.Option(
+        None, "--junit", metavar="FILE.xml",
+        help="Also write the verdict as JUnit XML (the failing line of the script)."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     if web is not None:
@@ -402,14 +405,14 @@ def run(
         script = load_script(file)
         motors, fw, machine = header_defaults(file, motors, firmware.value if firmware else None,
                                               machine)
-        _run_web(script, web, until, (check, record, trace, plot),
+        _run_web(script, web, until, (check, record, trace, plot, junit),
                  lambda: _make_chain(motors, Firmware(fw), state.expanduser() if state else None,
                                      pace, machine))
         return
     code = run_command(file, until=until, trace=trace, trace_step=trace_step, plot=plot, xy=xy,
                        motors=motors, firmware=firmware.value if firmware else None,
                        state=state, check=check, pace=pace, record=record, machine=machine,
-                       chain_factory=chain_factory)
+                       chain_factory=chain_factory, junit=junit)
     if code:
         raise typer.Exit(code)
 
@@ -430,8 +433,9 @@ def _run_web(script: Script, address: str, until: float | None, others: tuple[ob
     from ..web.run import run_script_web
     check_run_times(until)
     if any(o not in (None, False) for o in others):
-        raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
-                         "are for fast runs (the page downloads the trace and the plot)")
+        raise UsageError("--web shows the run live: --check, --record, --trace, --plot "
+                         "and --junit are for fast runs (the page downloads the trace "
+                         "and the plot)")
     _web_transport(address)                       # a bad address is a usage error
     chain = make_chain()
     try:

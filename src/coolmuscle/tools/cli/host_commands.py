@@ -23,6 +23,8 @@ __all__ = ["register"]
 class Format(str, Enum):
     human = "human"
     json = "json"
+    sarif = "sarif"
+    github = "github"
 
 
 class FirmwareChoice(str, Enum):
@@ -33,8 +35,12 @@ class FirmwareChoice(str, Enum):
 
 def check(
     files: List[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
-    output: Format = typer.Option(Format.human, "--format", help="human or json (schema: "
-                                  "docs/check-schema.json)."),
+    output: Format = typer.Option(Format.human, "--format", help="human, json (schema: "
+                                  "docs/check-schema.json), sarif (SARIF 2.1.0) or github "
+                                  "(GitHub Actions annotations)."),
+    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml",
+                                         help="Also write JUnit XML (a case per finding, "
+                                              "with its file and line)."),
     firmware: Optional[FirmwareChoice] = typer.Option(
         None, "--firmware", help="Firmware the file is for (default: its '# coolmuscle: "
         "firmware=' comment, else cm2)."),
@@ -47,6 +53,7 @@ def check(
     from ..check.lint import check_program
     from ..check.output import format_human, to_json
 
+    _junit_path(junit)
     reports = []
     for path in files:
         if path.is_char_device() or path.is_block_device():  # /dev/zero fills the memory
@@ -64,16 +71,33 @@ def check(
                              "cm2, rt3 or cm1") from None
         _check_script_lines(path, report)
         reports.append(report)
+    ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
     if output is Format.json:
-        document = to_json(reports, strict=strict)
-        sys.stdout.write(json.dumps(document, indent=2) + "\n")
-        ok = document["ok"]
+        sys.stdout.write(json.dumps(to_json(reports, strict=strict), indent=2) + "\n")
+    elif output is Format.sarif:
+        from ..check.ci import to_sarif
+        sys.stdout.write(json.dumps(to_sarif(reports, strict=strict), indent=2) + "\n")
+    elif output is Format.github:
+        from ..check.ci import github_lines
+        lines = github_lines(reports, strict=strict) + [format_human(r)[-1] for r in reports]
+        sys.stdout.write("".join(line + "\n" for line in lines))
     else:
         for report in reports:
             sys.stdout.write("\n".join(format_human(report)) + "\n")
-        ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
+    if junit is not None:
+        from ..ci.junit import write_junit
+        from ..check.ci import junit_suites
+        write_junit(junit, junit_suites(reports, strict=strict))
     if not ok:
         raise typer.Exit(1)
+
+
+def _junit_path(path: Path | None) -> None:
+    """``--junit`` that cannot be written is bad usage, found before anything runs."""
+    from ..ci.junit import path_problem
+    problem = None if path is None else path_problem(path)
+    if problem is not None:
+        raise UsageError(f"cannot write --junit {path}: {problem}")
 
 
 def _check_script_lines(path: Path, report: Any) -> None:

@@ -57,6 +57,9 @@ def compare(
     noise: float = typer.Option(1.0, "--noise", metavar="UNITS",
                                 help="Noise of a polled value beyond its rounding "
                                      "(default 1 unit)."),
+    junit: Optional[Path] = typer.Option(
+        None, "--junit", metavar="FILE.xml",
+        help="Also write JUnit XML: a case per line received, with its capture line."),
 ) -> None:
     """Replay a captured session on the virtual motor and report every difference."""
     from .compare import Tolerance, compare_session
@@ -65,6 +68,8 @@ def compare(
         _positive(value, option)
     if report is not None:
         check_output(report, "--report", REPORT_SUFFIXES)
+    if junit is not None:
+        check_output(junit, "--junit", (".xml",))
     _plot_check(plot)
     tolerance = Tolerance(time_abs=time_tolerance, time_rel=time_relative, noise=noise)
     result = compare_session(session, machine, tolerance)
@@ -95,6 +100,11 @@ def compare(
             text = result.to_html()
         write_atomic(report, text.encode("utf-8"))
         write(f"wrote {report}\n")
+    if junit is not None:
+        from ..ci.junit import write_junit
+        from .compare import junit_suite
+        write_junit(junit, [junit_suite(result, session)])
+        write(f"wrote {junit}\n")
     write(f"coolmuscle: {result.verdict_line()}\n")
     if not result.ok:
         raise typer.Exit(1)
