@@ -23,7 +23,8 @@ import argparse
 import asyncio
 import socket
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from coolmuscle import connect, connect_async
 from coolmuscle.chain.daisy import Chain

@@ -16,14 +16,15 @@ from __future__ import annotations
 import shutil
 import subprocess
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.client import CoolMuscle, connect
-from coolmuscle.sim.kernel import seconds
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from coolmuscle.sim.kernel import seconds
 from fixtures import wait_until
 
 TARGETS = ("inproc", "tcp", "pty")

@@ -30,7 +30,8 @@ The shared fixtures (what they build is in tests/fixtures.py, plain Python):
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Any, Iterator
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from hypothesis import settings

@@ -9,8 +9,9 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import TYPE_CHECKING
 
 import serial
 
@@ -90,7 +91,7 @@ def read_quiet(port: serial.Serial, quiet: float = 0.3, limit: float = 10.0) -> 
     return bytes(got)
 
 
-def virtual_line(setup: list[str], motors: int = 1, firmware: str = "cm2") -> "DeskLine":
+def virtual_line(setup: list[str], motors: int = 1, firmware: str = "cm2") -> DeskLine:
     """A desk line to an in-process virtual chain (``coolmuscle://?mode=fast``) after the
     ``setup`` lines were typed on it."""
     from coolmuscle.client.banks import send_line

@@ -22,12 +22,14 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping
+from typing import Any
 
 from coolmuscle.motor.state.store import Store
 from fixtures import ServedSim
+
 
 def connect(port: int, timeout: float = 10.0) -> socket.socket:
     """A client of ``127.0.0.1:port``, Nagle off (each query leaves at once)."""
@@ -55,7 +57,7 @@ class Flood:
         if line is not None:
             self._threads.append(threading.Thread(target=self._pump, daemon=True))
 
-    def __enter__(self) -> "Flood":
+    def __enter__(self) -> Flood:
         self.sock.settimeout(self.poll)
         for thread in self._threads:
             thread.start()
@@ -75,7 +77,7 @@ class Flood:
             try:
                 self.sock.sendall(data)
                 self.sent += self.batch
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 continue
             except OSError:
                 return
@@ -85,7 +87,7 @@ class Flood:
             try:
                 if not self.sock.recv(1 << 16):
                     return
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 continue
             except OSError:
                 return

@@ -18,7 +18,6 @@ from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 from fixtures import ChainFactory, collect_events
 
-
 #: Output 1 is the alarm output (K34 function 2); reports and messages on (K23 17).
 ALARM_OUTPUT = "K34.1=2, K23.1=17"
 

@@ -13,8 +13,15 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.signals.analog import (Constant, Ramp, Sine, Table, TorqueSensor,
-                                             adc, source_from_config)
+from coolmuscle.motor.signals.analog import (
+    Constant,
+    Ramp,
+    Sine,
+    Table,
+    TorqueSensor,
+    adc,
+    source_from_config,
+)
 from coolmuscle.motor.signals.analog_control import SAMPLE_NS, TICK_NS, friction_nm
 from coolmuscle.motor.signals.analog_output import output_volts, volts_to_register
 from coolmuscle.sim.kernel import seconds

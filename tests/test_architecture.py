@@ -23,13 +23,14 @@ import importlib.util
 import re
 import sys
 import tomllib
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import grimp
 import pytest
 
-LAYERS = ("coolmuscle.testing", "coolmuscle.tools", "coolmuscle.client", "coolmuscle.frontends", "coolmuscle.chain",
+LAYERS = ("coolmuscle.testing", "coolmuscle.tools", "coolmuscle.client", "coolmuscle.frontends",
+          "coolmuscle.chain",
           "coolmuscle.device", "coolmuscle.motor", "coolmuscle.cml", "coolmuscle.sim",
           "coolmuscle.errors")
 #: The one documented exception: an AlarmError decodes its Ux with the motor's status flags.
@@ -97,7 +98,7 @@ PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
 _PLUGIN = re.compile(r"(coolmuscle(?:\.\w+)+):(\w+(?:\.\w+)*)")
 
 
-@lru_cache(maxsize=None)
+@cache
 def graph(type_checking: bool, external: bool = False) -> grimp.ImportGraph:
     return grimp.build_graph("coolmuscle", exclude_type_checking_imports=not type_checking,
                              include_external_packages=external, cache_dir=None)
@@ -312,7 +313,7 @@ def _defines(tree: ast.Module, name: str) -> bool:
     return False
 
 
-@lru_cache(maxsize=None)
+@cache
 def plugins() -> tuple[tuple[str | None, str, str], ...]:
     """Every plug-in named by a string: ``(loader, module, attribute)``.
 
@@ -352,7 +353,7 @@ def with_plugins(g: grimp.ImportGraph,
     return g
 
 
-@lru_cache(maxsize=None)
+@cache
 def plugged(type_checking: bool) -> grimp.ImportGraph:
     return with_plugins(graph(type_checking), plugins())
 

@@ -12,9 +12,9 @@ import pytest
 
 from bank_support import Rig, enters_window
 from bank_support import rig as _rig
-from fixtures import ChainFactory, collect_events
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 

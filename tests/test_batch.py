@@ -19,16 +19,16 @@ import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
+from cli_support import cli
 from coolmuscle.tools.batch.engine import chunks
 from dask_support import dask_cluster as dask_cluster_of
-from load_support import signal_and_wait
-from cli_support import cli
 from fixtures import wait_until
+from load_support import signal_and_wait
 
 DATA = Path(__file__).parent / "data" / "batch"
 SRC = Path(__file__).resolve().parent.parent / "src"

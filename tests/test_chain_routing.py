@@ -15,9 +15,9 @@ import re
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
-from coolmuscle.sim.kernel import seconds
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from coolmuscle.sim.kernel import seconds
 from fixtures import ChainFactory, wait_until_async
 
 MOTORS = 15

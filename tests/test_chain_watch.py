@@ -4,7 +4,7 @@ concerned, once, in the order the watchers came, whatever is added or removed on
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from hypothesis import given, settings
 from hypothesis import strategies as st

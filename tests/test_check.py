@@ -16,14 +16,14 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.client.program import parse_program
 from coolmuscle.tools.check.lint import RULES, check_program
 from coolmuscle.tools.check.output import format_human, to_json
+from coolmuscle.tools.cli import app as cli
 from fixtures import run_coolmuscle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -266,7 +266,7 @@ def _ask(port: int, line: bytes) -> bytes:
                 if not chunk:
                     break
                 got += chunk
-        except socket.timeout:
+        except TimeoutError:
             pass
         return got
 

@@ -13,10 +13,10 @@ from typing import Any
 import pytest
 
 from client_targets import Tcp
-from coolmuscle.tools.cli import app as cli
 from coolmuscle import connect, connect_async
 from coolmuscle.client import UploadError, parse_program
 from coolmuscle.errors import NotAllowedInBankError
+from coolmuscle.tools.cli import app as cli
 from fixtures import run_coolmuscle
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,16 +17,23 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
 import coolmuscle
 from client_targets import InProcess, Tcp
 from coolmuscle.client import MotorEvent, connect
-from coolmuscle.errors import (AlarmError, CoolMuscleError, CoolMuscleTimeout,
-                               InvalidArgumentError, ProtocolError, TransportError)
+from coolmuscle.errors import (
+    AlarmError,
+    CoolMuscleError,
+    CoolMuscleTimeout,
+    InvalidArgumentError,
+    ProtocolError,
+    TransportError,
+)
 from fixtures import ROOT, run_coolmuscle, wait_until
 
 

@@ -4,14 +4,14 @@ origin search (cml-users-guide.txt 5.3; ethercat-bridge-users-guide.txt 6.3, 6.4
 
 from __future__ import annotations
 
-from hypothesis import given, settings, strategies as st
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device import CyclicState, Device
 from coolmuscle.errors import NoSuchMotorError
 from coolmuscle.sim.kernel import NS_PER_MS
-
-import pytest
 from fixtures import ChainFactory
 
 

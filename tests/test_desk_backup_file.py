@@ -13,8 +13,13 @@ from coolmuscle.client.aio_driver import AsyncDriver
 from coolmuscle.client.banks import send_line
 from coolmuscle.client.ops import Session
 from coolmuscle.client.sync import open_port
-from coolmuscle.tools.desk import (BackupFileError, MotorImage, load_backup, parse_backup,
-                                   render_backup)
+from coolmuscle.tools.desk import (
+    BackupFileError,
+    MotorImage,
+    load_backup,
+    parse_backup,
+    render_backup,
+)
 from coolmuscle.tools.desk.reading import read_motor
 from desk_support import virtual_line
 

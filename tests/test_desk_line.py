@@ -11,8 +11,8 @@ on a pty of its own, wire-paced at the K20 rate, torn down after each test) and 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 

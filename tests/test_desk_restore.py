@@ -11,8 +11,7 @@ import pytest
 
 from cli_support import cli
 from coolmuscle.client.ops import fenced
-from coolmuscle.tools.desk import (FirmwareMismatchError, parse_backup, plan_restore,
-                                   render_backup)
+from coolmuscle.tools.desk import FirmwareMismatchError, parse_backup, plan_restore, render_backup
 from coolmuscle.tools.desk.connection import AT_REST
 from desk_support import virtual_line
 

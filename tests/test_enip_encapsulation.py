@@ -378,8 +378,9 @@ def test_fuzz_cip_parsers_raise_only_cip_errors(rig, data):
 
 def test_fuzz_live_server_other_client_untouched():
     """Garbage over real sockets (TCP 44818-style and UDP I/O) while a pycomm3 client works."""
-    from pycomm3 import CIPDriver
     import random
+
+    from pycomm3 import CIPDriver
     rng = random.Random(13)
     with enip_service() as service:
         tcp_port, io_port = ports(service)

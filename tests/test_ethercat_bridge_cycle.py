@@ -15,7 +15,6 @@ import struct
 import time
 
 import pytest
-from ethercat_support import needs_net_admin
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.bridge.app import CYCLE_NS, BridgeApp
@@ -24,6 +23,7 @@ from coolmuscle.frontends.ethercat.transport import CycleLateness, EthercatTrans
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.sim.kernel import Kernel
 from coolmuscle.sim.realtime import RealtimeClock
+from ethercat_support import needs_net_admin
 
 MS = 1_000_000
 

@@ -12,11 +12,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ethercat_drive_support import Bench
 
-from coolmuscle.frontends.ethercat.engine.dictionary import (DEVICE_STATE, LENGTH_HIGH,
-                                                              NO_SUBINDEX, VALUE_HIGH, VALUE_LOW,
-                                                              VALUE_RANGE)
+from coolmuscle.frontends.ethercat.engine.dictionary import (
+    DEVICE_STATE,
+    LENGTH_HIGH,
+    NO_SUBINDEX,
+    VALUE_HIGH,
+    VALUE_LOW,
+    VALUE_RANGE,
+)
+from ethercat_drive_support import Bench
 
 STOPPERS = Path(__file__).parent / "data" / "ethercat_stoppers.toml"
 NULL = "Null\r\n"

@@ -9,7 +9,6 @@ from __future__ import annotations
 import struct
 
 import pytest
-from ethercat_support import link, needs_net_admin, run_master, serving
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.bridge import identity as ident
@@ -17,6 +16,7 @@ from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
 from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
+from ethercat_support import link, needs_net_admin, run_master, serving
 
 pytestmark = [needs_net_admin, pytest.mark.realtime]
 

@@ -9,12 +9,20 @@ import os
 import socket
 import time
 from pathlib import Path
+
 import pytest
 import serial
 from pymodbus.client import ModbusTcpClient
 
-from fixtures import (ChainFactory, ServedSim, SimFactory, closed_port, collect_events, free_port,
-                      wait_until)
+from fixtures import (
+    ChainFactory,
+    ServedSim,
+    SimFactory,
+    closed_port,
+    collect_events,
+    free_port,
+    wait_until,
+)
 
 
 def test_a_served_sim_answers_on_its_free_ports_and_is_gone_after_close(tmp_path: Path) -> None:

@@ -10,7 +10,7 @@ the right rate.
 from __future__ import annotations
 
 import time
-from typing import Iterator
+from collections.abc import Iterator
 
 import pytest
 import serial

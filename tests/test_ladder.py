@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bank_support import Rig, rig
-from fixtures import ChainFactory, collect_events
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 STEP = 250_000

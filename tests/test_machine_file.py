@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.tools.cli import app as cli
 from fixtures import ChainFactory
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))

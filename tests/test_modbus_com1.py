@@ -11,7 +11,6 @@ import pytest
 
 from coolmuscle.chain.firmware_modbus.master import RESPONSE_TIMEOUT_NS
 from coolmuscle.sim.kernel import ms
-
 from modbus_support import Wire, frame
 
 

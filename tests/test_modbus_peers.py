@@ -12,8 +12,9 @@ import re
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator, Protocol
+from typing import Any, Protocol
 
 import pytest
 import serial
@@ -23,7 +24,6 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.serial_line import Com1Transport, ModbusRtuTransport
 from coolmuscle.frontends.transports.service import ServiceThread
-
 from modbus_support import needs_mbpoll, needs_socat, socat_pty_pair, wait_for
 
 pytestmark = pytest.mark.peer

@@ -14,12 +14,9 @@ from pathlib import Path
 import pytest
 
 import coolmuscle.chain.firmware_modbus
-
 from coolmuscle.chain.daisy import Chain
-
 from coolmuscle.chain.firmware_modbus.rtu import silent_interval_ns
 from coolmuscle.sim.kernel import ms, seconds
-
 from modbus_support import Wire, crc, frame, gap_ns
 
 #: 5.6.7 "In case of using the following parameter settings": K78=100, K79=200, K80=300, K81=1.

@@ -10,9 +10,9 @@ from __future__ import annotations
 import pytest
 
 from bank_support import Rig, rig
-from fixtures import ChainFactory, collect_events
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 

@@ -8,12 +8,12 @@ from typing import Any
 
 import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.tools.trace.plot import interpolated_pairs
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace.recorder import record
+from coolmuscle.tools.cli import app as cli
+from coolmuscle.tools.trace.plot import interpolated_pairs
 from coolmuscle.tools.trace.plot import plot as plot_chain
+from coolmuscle.tools.trace.recorder import record
 from fixtures import ChainFactory
 
 TRANSCRIPTS = Path(__file__).parent / "transcripts"

@@ -22,8 +22,8 @@ import random
 import socket
 import struct
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 import serial
@@ -33,8 +33,8 @@ from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
-from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim
 from fixtures import wait_until_async
+from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "300"}

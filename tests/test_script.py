@@ -11,10 +11,18 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from coolmuscle.device.hostline import byte_time_ns
-from coolmuscle.tools.script.runner import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry,
-                                     escape, load_script, parse_script, run_script,
-                                     split_lines, unescape)
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.script.runner import (
+    DEFAULT_UNTIL_TIMEOUT,
+    ScriptError,
+    TranscriptEntry,
+    escape,
+    load_script,
+    parse_script,
+    run_script,
+    split_lines,
+    unescape,
+)
 from fakes import ROUNDTRIP, FakeChain
 from fixtures import ROOT, ChainFactory
 

@@ -14,19 +14,19 @@ import types
 from pathlib import Path
 from typing import Any
 
-import matplotlib.image
 import matplotlib.figure
+import matplotlib.image
 import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.motor.signals.encoder import Gearing
-from coolmuscle.tools.trace.plot import status_class
-from coolmuscle.tools.trace import recorder as trace_module
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError
-from coolmuscle.tools.trace.recorder import record, trace as start_trace
+from coolmuscle.tools.cli import app as cli
+from coolmuscle.tools.trace import recorder as trace_module
 from coolmuscle.tools.trace.plot import plot as plot_chain
-from fixtures import ChainFactory, ROOT, run_coolmuscle
+from coolmuscle.tools.trace.plot import status_class
+from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError, record
+from coolmuscle.tools.trace.recorder import trace as start_trace
+from fixtures import ROOT, ChainFactory, run_coolmuscle
 
 EXAMPLES = ROOT / "examples"
 

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.frontends import transports
 from coolmuscle.errors import TransportError
+from coolmuscle.frontends import transports
 from coolmuscle.frontends.transports.base import Port, split_after_line_ends
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.stdio import StdioTransport

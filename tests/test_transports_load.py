@@ -11,16 +11,16 @@ from __future__ import annotations
 import socket
 import struct
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
+import coolmuscle.frontends.transports.tcp as tcp_module
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.base import DEFAULT_MAX_BUFFER
 from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.service import ServiceThread
-import coolmuscle.frontends.transports.tcp as tcp_module
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from fixtures import wait_until
 from load_support import Flood, connect, round_trip

@@ -11,7 +11,7 @@ from __future__ import annotations
 import socket
 import threading
 import time
-from typing import Iterator
+from collections.abc import Iterator
 
 import pytest
 import serial
@@ -20,8 +20,8 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
-from load_support import Flood, round_trip
 from fixtures import wait_until
+from load_support import Flood, round_trip
 from modbus_support import Wire, frame
 
 MANUAL = {"K78_1": 100, "K79_1": 200, "K80_1": 300, "K81_1": 1}

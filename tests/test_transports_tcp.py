@@ -7,7 +7,8 @@ import re
 import socket
 import struct
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 import serial

@@ -11,11 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.chain.machine import load_machine
 from cli_support import cli
+from coolmuscle.chain.machine import load_machine
 from coolmuscle.tools.twin.compare import compare_session
 from coolmuscle.tools.twin.fit import fit_session
-
 from twin_support import HIDDEN, write_capture
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,9 +13,8 @@ from hypothesis import strategies as st
 from coolmuscle.chain.machine import parse_machine
 from coolmuscle.tools.script import run_script
 from coolmuscle.tools.twin.session import CaptureError, parse_session, read_session
-
-from twin_support import HIDDEN_TOML, capture_text, session_plan
 from fixtures import ChainFactory
+from twin_support import HIDDEN_TOML, capture_text, session_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 

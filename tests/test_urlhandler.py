@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 import serial
 from serial.serialutil import PortNotOpenError, SerialException
 
 import coolmuscle
-from coolmuscle.sim.kernel import NS_PER_S, seconds
 from coolmuscle.frontends.urlhandler import protocol_coolmuscle as handler
+from coolmuscle.sim.kernel import NS_PER_S, seconds
 from fakes import ROUNDTRIP, FakeChain, fake_factory, play_over_serial
 
 coolmuscle.register_url_handler()      # pyserial's protocol_handler_packages (once)

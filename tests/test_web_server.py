@@ -20,9 +20,8 @@ import time
 import aiohttp
 import pytest
 
-from coolmuscle.tools.web.access import Access, expand_web_flag, parse_web_address
 from coolmuscle.errors import TransportError
-
+from coolmuscle.tools.web.access import Access, expand_web_flag, parse_web_address
 from web_support import ROOT, HostLine, ask, count_snapshots, serve, ws_frames
 
 
@@ -252,8 +251,8 @@ def test_token_required_off_loopback_and_checked():
 
 
 def test_non_loopback_bind_refuses_websocket_without_token():
-    from coolmuscle.frontends.transports.service import ServiceThread
     from coolmuscle.chain import Chain
+    from coolmuscle.frontends.transports.service import ServiceThread
     from coolmuscle.tools.web.server import WebTransport
     with ServiceThread(lambda: Chain(), lambda: [WebTransport("0.0.0.0", 0)]) as st:
         web = st.transports[0]
@@ -391,7 +390,7 @@ def test_no_polling_storm_while_nothing_moves(served):
             try:
                 frames.append(await ws_frames(ws, lambda f: True,
                                               timeout=max(0.05, end - time.monotonic())))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
         return frames
     frames = _run(_with_ws(_url(served), body))    # 3.5 s since the hello in all
@@ -419,7 +418,7 @@ def _raw(port: int, data: bytes, wait: float = 2.0) -> bytes:
                 if not chunk:
                     break
                 out += chunk
-        except socket.timeout:
+        except TimeoutError:
             pass
         return out
 

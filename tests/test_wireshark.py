@@ -26,6 +26,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from coolmuscle.chain import Chain
+from coolmuscle.frontends.enip.cm1 import objects as enip_objects
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.lab import veth_pair
+from coolmuscle.frontends.ethercat.transport import EthercatTransport
+from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
+from coolmuscle.frontends.transports.service import ServiceThread
 from ethercat_support import run_master
 from fixtures import wait_until
 from web_support import ask, serve, ws_frames
@@ -41,14 +49,6 @@ from wireshark_support import (
     sim_process,
     values,
 )
-
-from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip.cm1 import objects as enip_objects
-from coolmuscle.frontends.ethercat.bridge import identity as ident
-from coolmuscle.frontends.ethercat.lab import veth_pair
-from coolmuscle.frontends.ethercat.transport import EthercatTransport
-from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
-from coolmuscle.frontends.transports.service import ServiceThread
 
 WHY = capture_unavailable()
 if WHY is not None and "tshark" in WHY and os.environ.get("CI"):

@@ -12,8 +12,9 @@ import os
 import re
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.transports import create

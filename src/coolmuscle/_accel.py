@@ -228,8 +228,13 @@ def sources_first(package_dir: str, files: list[str]) -> None:
     the finder the import system would give them, without extension modules: the
     sources beside them are imported instead.  Only these folders of the package are
     touched (their entries of ``sys.path_importer_cache``)."""
-    from importlib.machinery import (BYTECODE_SUFFIXES, SOURCE_SUFFIXES, FileFinder,
-                                     SourceFileLoader, SourcelessFileLoader)
+    from importlib.machinery import (
+        BYTECODE_SUFFIXES,
+        SOURCE_SUFFIXES,
+        FileFinder,
+        SourceFileLoader,
+        SourcelessFileLoader,
+    )
 
     for folder in sorted({os.path.dirname(f) for f in files} - {""}):
         # the key the import system uses: the parent package's __path__ entry joined

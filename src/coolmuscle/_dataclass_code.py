@@ -27,8 +27,8 @@ equality, pickling.
 """
 
 from __future__ import annotations
-
 import __future__
+
 import builtins
 import dataclasses
 import importlib.util

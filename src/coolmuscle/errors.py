@@ -156,7 +156,7 @@ class MotionInterruptedError(CoolMuscleError):
         super().__init__(message or f"motion interrupted: Ux={status}")
 
 
-def alarm_flags(status: int) -> "object":
+def alarm_flags(status: int) -> object:
     """The Ux value decoded as :class:`coolmuscle.motor.status.Ux` flags (6.6 ?99)."""
     from .motor.status import Ux
     return Ux(status)

@@ -15,7 +15,8 @@ with the hot modules (coolmuscle/_accel.py, docs/performance.md "Compiled hot mo
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Callable, Final, Iterable, Protocol
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Final, Protocol
 
 from ..cml import ast
 from ..device.api import Event, EventListener

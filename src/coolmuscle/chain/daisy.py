@@ -17,17 +17,24 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from ..cml import ast
 from ..cml.ast import inner_motor
 from ..cml.parser import parse
 from ..device.api import CyclicState, EventListener, MotorSnapshot, TargetStream
-from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      OutOfRangeError, StoreError)
+from ..errors import (
+    CmlSyntaxError,
+    MotorError,
+    NoLadderBankError,
+    NoProgramBankError,
+    OutOfRangeError,
+    StoreError,
+)
 from ..motor.context import Context
 from ..motor.motor import Motor
 from ..motor.programs.banks import BankUploads
@@ -42,11 +49,11 @@ from ..sim.kernel import PRIO_IO, Kernel
 from .bus import ChainBus, ChainCommands
 
 if TYPE_CHECKING:
-    from .banklines import BankLineObservers
-    from ..device.banklines import BankLineListener
     from ..device.api import Device
+    from ..device.banklines import BankLineListener
     from ..device.trace import TraceFeed
     from ..motor.core import MotorBus, MotorCore
+    from .banklines import BankLineObservers
     from .machine import Machine
 
 log = logging.getLogger(__name__)
@@ -93,7 +100,7 @@ class Chain:
     def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
                  firmware: str = "cm2", state_dir: Path | str | None = None,
                  pacing: bool = False,
-                 machine: "str | os.PathLike[str] | Machine | None" = None) -> None:
+                 machine: str | os.PathLike[str] | Machine | None = None) -> None:
         if not 1 <= motors <= 15:
             raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
         self.kernel = kernel or Kernel()
@@ -115,7 +122,7 @@ class Chain:
             raise
 
     def _build(self, motors: int, per_motor: list[str],
-               machine: "str | os.PathLike[str] | Machine | None") -> None:
+               machine: str | os.PathLike[str] | Machine | None) -> None:
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
                 get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
@@ -146,7 +153,7 @@ class Chain:
         """Wire-time pacing is on: bytes take their time on the host line and the links."""
         return self.host_line.pacing
 
-    def load_machine(self, machine: "str | os.PathLike[str] | Machine") -> None:
+    def load_machine(self, machine: str | os.PathLike[str] | Machine) -> None:
         """Install a machine file (docs/machine-file.md) on the motors it names: its
         path, or one :func:`.machine.load_machine` or :func:`.machine.parse_machine` read."""
         from .machine import Machine, apply_machine, load_machine
@@ -170,7 +177,7 @@ class Chain:
         self._observers.append(observer)
         return lambda: self._observers.remove(observer) if observer in self._observers else None
 
-    def observe_bank_lines(self, listener: "BankLineListener") -> Callable[[], None]:
+    def observe_bank_lines(self, listener: BankLineListener) -> Callable[[], None]:
         """Tell ``listener`` of every bank line run from now on (device/banklines.py);
         returns its remover.  Unobserved, the banks run as if this did not exist."""
         if self._bank_lines is None:
@@ -516,7 +523,7 @@ class Chain:
 
     def trace_feed(self) -> TraceFeed:
         """Record every motor from now on (:class:`coolmuscle.device.trace.TraceFeed`)."""
-        from ..device.trace import TraceFeed      # traces are optional: loaded when used
+        from ..device.trace import TraceFeed  # traces are optional: loaded when used
         return TraceFeed(self.kernel, self.motors, self.observe)
 
     # -- device API: Modbus (5.6) -------------------------------------------------

@@ -19,8 +19,8 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..cml import ast
 from ..cml.parser import parse

@@ -21,11 +21,17 @@ every command learns whether it failed.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generator, TypeVar
+from typing import Any, TypeVar
 
-from ..errors import (AlarmError, CoolMuscleTimeout, InvalidArgumentError, MotionInterruptedError,
-                      ProtocolError)
+from ..errors import (
+    AlarmError,
+    CoolMuscleTimeout,
+    InvalidArgumentError,
+    MotionInterruptedError,
+    ProtocolError,
+)
 from ..motor.status import ALARM_BITS, Report, Ux
 from . import args
 from .protocol import Exchange, MotorEvent, Protocol

@@ -22,8 +22,9 @@ its timeout.  Errors: :class:`~coolmuscle.errors.CoolMuscleTimeout`,
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 from urllib.parse import urlsplit
 
 import serial

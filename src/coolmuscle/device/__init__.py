@@ -5,8 +5,18 @@ motor model).
 ``from coolmuscle.device import Device, Event, MotorSnapshot`` is the stable import.
 """
 
-from .api import (ChainFactory, Com1Line, CyclicState, Device, Event, EventKind,
-                  EventListener, MotorSnapshot, Origin, TargetStream)
+from .api import (
+                  ChainFactory,
+                  Com1Line,
+                  CyclicState,
+                  Device,
+                  Event,
+                  EventKind,
+                  EventListener,
+                  MotorSnapshot,
+                  Origin,
+                  TargetStream,
+)
 
 __all__ = ["ChainFactory", "Com1Line", "CyclicState", "Device", "Event", "EventKind",
            "EventListener", "MotorSnapshot", "Origin", "TargetStream"]

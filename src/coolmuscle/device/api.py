@@ -14,8 +14,9 @@ See docs/device-api.md.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 from ..sim.kernel import Kernel
 from .hostline import ByteListener, HostLine

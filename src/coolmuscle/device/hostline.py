@@ -38,8 +38,9 @@ and text replies are not sent while it is active.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 from ..sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
 from .uart import as_read_at
@@ -229,7 +230,7 @@ class HostLine:
             return
         self.receive_text(data, source)
 
-    def _assembly_of(self, source: object) -> "_Assembly":
+    def _assembly_of(self, source: object) -> _Assembly:
         found = self._assembly.get(source)
         if found is None:
             found = self._assembly[source] = _Assembly()
@@ -284,7 +285,7 @@ class HostLine:
         hosts = self._hosts
         return not hosts or (len(hosts) == 1 and source in hosts)
 
-    def _echo_line_end(self, asm: "_Assembly", source: object, echo: bytearray,
+    def _echo_line_end(self, asm: _Assembly, source: object, echo: bytearray,
                        delimiter: bytes, typed: bool) -> None:
         """The echo at the end of a line: the rest of the line and the delimiter; the
         whole line when what was shown of it was cut off by another host's line (or,
@@ -326,7 +327,7 @@ class HostLine:
         if self.on_source_end is not None:
             self.on_source_end(source)
 
-    def _end_line(self, asm: "_Assembly", source: object) -> None:
+    def _end_line(self, asm: _Assembly, source: object) -> None:
         raw = bytes(asm.buf)
         asm.buf.clear()
         if asm.overflow:

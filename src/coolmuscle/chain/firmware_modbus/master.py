@@ -28,8 +28,9 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from ...sim.kernel import NS_PER_MS, NS_PER_S, PRIO_IO, Timer
 from .rtu import byte_baud, crc16, rtu_frame, silent_interval_ns
@@ -74,7 +75,7 @@ class Request:
 class Com1Port:
     """COM1 of the final motor as a Modbus host (see module docstring)."""
 
-    def __init__(self, device: "Device", emit: Emit) -> None:
+    def __init__(self, device: Device, emit: Emit) -> None:
         self.device = device
         self.kernel = device.kernel
         self._emit = emit

@@ -18,8 +18,9 @@ reports and side effects are the motor's.  Nothing here knows frames or CRCs.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ...device.api import Device, MotorSnapshot
@@ -59,7 +60,7 @@ class Cell:
     writable: bool = False
 
 
-def _analog_output(snap: "MotorSnapshot") -> int:
+def _analog_output(snap: MotorSnapshot) -> int:
     # K78+54 "Analog Output" has no CML query; the motor model publishes it in
     # ``extra`` when it models the analog output (docs/fidelity.md "Modbus").
     return int(snap.extra.get("analog_output", 0))
@@ -118,14 +119,14 @@ class MotorMap:
     by the caller once per request.  A snapshot is taken at most once per request.
     """
 
-    def __init__(self, device: "Device", motor: int, base: int, little: bool) -> None:
+    def __init__(self, device: Device, motor: int, base: int, little: bool) -> None:
         self.device = device
         self.motor = motor
         self.base = base
         self.little = little
-        self._snap: "MotorSnapshot | None" = None
+        self._snap: MotorSnapshot | None = None
 
-    def _snapshot(self) -> "MotorSnapshot":
+    def _snapshot(self) -> MotorSnapshot:
         if self._snap is None:
             self._snap = self.device.snapshot(self.motor)
         return self._snap
@@ -172,7 +173,7 @@ class MotorMap:
             raise RegisterError(f"count {count} (1..{MAX_READ})")
         rel = address - self.base
         present = set(self.device.motor_ids)
-        snaps: dict[int, "MotorSnapshot"] = {}
+        snaps: dict[int, MotorSnapshot] = {}
         words: list[int] = []
         for offset in range(rel, rel + count):
             block, slot = divmod(offset, 16) if offset >= 0 else (-1, 0)

@@ -97,7 +97,7 @@ class RtuSlaveLine:
     Installed as :attr:`coolmuscle.device.hostline.HostLine.mode` by the chain.
     """
 
-    def __init__(self, device: "Device", slave: ModbusSlave) -> None:
+    def __init__(self, device: Device, slave: ModbusSlave) -> None:
         self.device = device
         self.slave = slave
         self.kernel = device.kernel

@@ -57,13 +57,13 @@ def exception_pdu(function: int, code: int) -> bytes:
     return bytes((function | 0x80, code))
 
 
-def firmware_name(device: "Device") -> str:
+def firmware_name(device: Device) -> str:
     """The firmware profile name of ``device`` (``cm2`` when it does not say)."""
     firmware = getattr(device, "firmware", None)
     return str(getattr(firmware, "name", "cm2"))
 
 
-def supports_modbus(device: "Device") -> bool:
+def supports_modbus(device: Device) -> bool:
     """Whether the profile has the Modbus parameters K78–K85 of 5.6."""
     return firmware_name(device) in MODBUS_FIRMWARES
 
@@ -96,7 +96,7 @@ def _text_until_cr(data: bytes) -> str:
 class ModbusSlave:
     """The register map of 5.6.7 for every Modbus address of a chain (see module doc)."""
 
-    def __init__(self, device: "Device") -> None:
+    def __init__(self, device: Device) -> None:
         self.device = device
         self.enabled = supports_modbus(device)
         self._endian_k85 = firmware_name(device) in ENDIAN_FIRMWARES

@@ -25,13 +25,21 @@ import logging
 import socket
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ...errors import TransportError
 from ..transports.base import Port
 from ..transports.stream_server import StreamServer
-from .cip.encapsulation import (INVALID_LENGTH, Connection, Frame, FrameReader, FramingError,
-                                Sessions, answer_datagram)
+from .cip.encapsulation import (
+    INVALID_LENGTH,
+    Connection,
+    Frame,
+    FrameReader,
+    FramingError,
+    Sessions,
+    answer_datagram,
+)
 from .cip.io import DEFAULT_IO_PORT, ConnectionTable
 from .cip.producer import Producer
 from .cip.router import Router

@@ -130,7 +130,7 @@ class FrameThread:
         while not self._stop.is_set():
             try:
                 n, ancdata, _flags, addr = sock.recvmsg_into([buf], anc)
-            except socket.timeout:
+            except TimeoutError:
                 esc.tick(clock())
                 continue
             except OSError:

@@ -28,7 +28,8 @@ import re
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, Callable, Iterable, TypeVar
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
 
 from ...device.api import Device
 from ...device.hostline import HostLine
@@ -85,7 +86,7 @@ class Port:
             return fn(*args)
         return self.driver.call(fn, *args)
 
-    def open_lane(self, name: str = "host") -> "Lane":
+    def open_lane(self, name: str = "host") -> Lane:
         """A new host's input, assembled into lines apart from every other host's."""
         return Lane(self, name)
 
@@ -95,7 +96,7 @@ class Port:
             self._default = Lane(self, "default", source=None)
         self._default.feed(data)
 
-    def _enqueue(self, lane: "Lane") -> None:
+    def _enqueue(self, lane: Lane) -> None:
         if lane not in self._ready:
             self._ready.append(lane)
         self._drain()
@@ -173,7 +174,7 @@ class Port:
         not alone (``HostLine.open_source``)."""
         self.host_line.open_source(source)
 
-    def _close_lane(self, lane: "Lane") -> None:
+    def _close_lane(self, lane: Lane) -> None:
         if lane in self._ready:
             self._ready.remove(lane)
         try:
@@ -183,7 +184,7 @@ class Port:
             log.exception("host line failed to end a host's lane")
 
     def add_listener(self, listener: ByteListener,
-                     lane: "Lane | None" = None) -> Callable[[], None]:
+                     lane: Lane | None = None) -> Callable[[], None]:
         """Receive every byte the motor sends; returns an unsubscribe function.
 
         ``lane``: the host this listener reads for (its port's rate, :meth:`set_host_baud`)."""
@@ -191,7 +192,7 @@ class Port:
             return self.host_line.add_listener(listener)
         return self.host_line.add_listener(listener, lane.source)
 
-    def set_host_baud(self, lane: "Lane", baud: Callable[[], int | None]) -> None:
+    def set_host_baud(self, lane: Lane, baud: Callable[[], int | None]) -> None:
         """How to read the baud rate ``lane``'s host set on its port (the pty: the
         client's termios speed); with wire pacing the host line garbles the bytes both
         ways while it differs from K20 (``HostLine.set_host_baud``)."""

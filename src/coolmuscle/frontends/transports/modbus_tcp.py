@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+
 from ...device.api import Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port

@@ -32,8 +32,9 @@ import struct
 import sys
 import termios
 import tty
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport

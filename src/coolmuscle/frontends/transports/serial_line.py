@@ -28,7 +28,8 @@ import logging
 import os
 import termios
 import tty
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ...device.api import Com1Line, Device
 from ...errors import TransportError

@@ -15,7 +15,8 @@ import asyncio
 import concurrent.futures
 import logging
 import threading
-from typing import Any, Callable, Sequence, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 from ...device.api import Device
 from ...sim.realtime import BehindCallback, RealtimeDriver

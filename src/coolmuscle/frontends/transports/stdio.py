@@ -21,7 +21,8 @@ import termios
 import threading
 import time
 import tty
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Callable
+from collections.abc import Callable
 
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Lane, Port

@@ -37,11 +37,16 @@ import math
 import threading
 import time
 import urllib.parse
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException
-from serial.serialutil import to_bytes  # type: ignore[attr-defined]  # not in its stubs
+from serial.serialutil import (  # type: ignore[attr-defined]  # to_bytes: not in its stubs
+    PortNotOpenError,
+    SerialBase,
+    SerialException,
+    to_bytes,
+)
 
 from ...device.api import Device
 from ...errors import CoolMuscleError

@@ -20,8 +20,9 @@ target, on the command's final approach: possibly before the command has ended
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Callable, Protocol, Sequence
+from typing import Protocol
 
 from ...sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
@@ -35,10 +36,10 @@ log = logging.getLogger(__name__)
 class Watcher(Protocol):
     """Something that wants a kernel event when the motion reaches a condition."""
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never)."""
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         """The instant has come (it may change the command or the drive)."""
 
 

@@ -35,9 +35,10 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Any, Callable, Final, Sequence
+from typing import Any, Final
 
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
@@ -176,7 +177,7 @@ class Piece:
     def duration(self) -> float:
         return self.end - self.start
 
-    def placed(self, p0: float, cmd: F) -> "Piece":
+    def placed(self, p0: float, cmd: F) -> Piece:
         """This piece (solved relative to where its command started) where it is: the
         shaft from ``p0``, under the absolute command ``cmd``.  The error is computed
         afresh against the command, so Pe = command - position holds in absolute terms
@@ -188,7 +189,7 @@ class Piece:
         out.set_vel(self.vel())
         return out
 
-    def moved(self, shift: float, end: float) -> "Piece":
+    def moved(self, shift: float, end: float) -> Piece:
         """This piece seen from an origin ``shift`` seconds later, ending at ``end`` at
         the latest (the same functions of its own τ)."""
         last = self.end - shift
@@ -283,7 +284,7 @@ class Motion:
     """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
-                 drive: Drive, pieces_of: "Motion | None" = None) -> None:
+                 drive: Drive, pieces_of: Motion | None = None) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
@@ -303,7 +304,7 @@ class Motion:
         self._tail: Motion | None = None
 
     @staticmethod
-    def continued(old: "Motion", origin_ns: int, profile: Profile) -> "Motion":
+    def continued(old: Motion, origin_ns: int, profile: Profile) -> Motion:
         """``old`` from ``origin_ns`` until ``profile`` begins (its command unchanged until
         then), then the motion under ``profile`` from ``old``'s state at that instant.
 

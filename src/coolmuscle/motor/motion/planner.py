@@ -18,9 +18,9 @@ written down in docs/fidelity.md "Motion".
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from functools import lru_cache
 
 from ..state import units
 from .profile import _CHECKED, Profile, Segment, State, _check_chain

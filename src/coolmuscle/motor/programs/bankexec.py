@@ -13,19 +13,20 @@ queries, execution commands, branch conditions) are dispatched here to
 
 from __future__ import annotations
 
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Generator, Union
+from typing import TYPE_CHECKING
 
 from ...cml import ast
+from ...cml.ast import inner_motor
 from ...errors import MotorError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .banks import Bank, condition_only
-from ...cml.ast import inner_motor
 from .direct import MotorEval, route
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 #: RT3 3.4 "Typically steps take 250 µs to execute".
 STEP_NS = 250_000
@@ -46,9 +47,9 @@ class Sleep:
 class MotionWait:
     """Resume when every motor in ``motors`` has finished its motion (in position)."""
 
-    motors: tuple["MotorCore", ...]
+    motors: tuple[MotorCore, ...]
 
-    def __init__(self, motors: tuple["MotorCore", ...]) -> None:
+    def __init__(self, motors: tuple[MotorCore, ...]) -> None:
         # written out: a generated __init__ runs interpreted (profile.Segment)
         self.motors = motors
 
@@ -75,14 +76,14 @@ class Watch:
         self.timeout_ns = timeout_ns
 
 
-Request = Union[Sleep, MotionWait, Watch, Hold]
+Request = Sleep | MotionWait | Watch | Hold
 LineGen = Generator[Request, object, object]
 
 
 class Runner:
     """Drives one generator of wait requests with kernel events; can halt and re-arm."""
 
-    def __init__(self, motor: "MotorCore", on_done: Callable[[object], None]) -> None:
+    def __init__(self, motor: MotorCore, on_done: Callable[[object], None]) -> None:
         self.motor = motor
         self.kernel = motor.kernel
         self._on_done = on_done
@@ -232,7 +233,7 @@ class Runner:
 
 # ---------------------------------------------------------------- statements
 
-def target_motor(motor: "MotorCore", stmt: ast.Statement) -> "MotorCore | None":
+def target_motor(motor: MotorCore, stmt: ast.Statement) -> MotorCore | None:
     """The motor a statement addresses (its ``.n``), ``None`` when not on the chain."""
     motor_id = inner_motor(stmt)
     if motor_id is None or motor_id == motor.id:
@@ -240,13 +241,13 @@ def target_motor(motor: "MotorCore", stmt: ast.Statement) -> "MotorCore | None":
     return motor.bus.motor(motor_id)
 
 
-def run_plain(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+def run_plain(motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
     """A statement that means the same in direct mode and in banks (6.5), on its motor
     (an ID past the chain goes to the chain: the COM1 device, or nobody)."""
     route(motor, stmt, ctx)
 
 
-def holds(motor: "MotorCore", condition: ast.Expr) -> bool:
+def holds(motor: MotorCore, condition: ast.Expr) -> bool:
     """Truth of a branch condition on ``motor`` (V alone means V > 0, 6.3 "V")."""
     from .evaluate import condition as truth
     try:
@@ -255,7 +256,7 @@ def holds(motor: "MotorCore", condition: ast.Expr) -> bool:
         return False
 
 
-def timer_ns(motor: "MotorCore", reg: ast.Reg) -> int:
+def timer_ns(motor: MotorCore, reg: ast.Reg) -> int:
     """T# of the motor the register names, in ns (2.2.1 "T": msec, 0 = no action)."""
     target = (motor if reg.motor is None or reg.motor == motor.id
               else motor.bus.motor(reg.motor))
@@ -268,7 +269,7 @@ def timer_ns(motor: "MotorCore", reg: ast.Reg) -> int:
         return 0
 
 
-def wait_branch(motor: "MotorCore", branch: ast.Branch, wait: ast.Wait) -> Watch:
+def wait_branch(motor: MotorCore, branch: ast.Branch, wait: ast.Wait) -> Watch:
     """``cond, W#, else``: wait while ``cond`` holds, up to T# (W0 forever) (4.2.4)."""
     ns = timer_ns(motor, ast.Reg("T", wait.index, wait.motor))
     return Watch(lambda: holds(motor, branch.condition), ns or None)

@@ -21,23 +21,38 @@ bound to "Dx" (target position) or "St" (target speed).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Generator
+from collections.abc import Generator
+from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
-from .bankcheck import expr_steps, statement_steps
-from .compiled import Compiled, compile_statement
-from .bankexec import (HOLD, STEP_NS, LineGen, LineObserver, Request, Runner, Sleep, Unit,
-                       Watch, holds, ladder_units, run_plain, target_motor, timer_ns,
-                       wait_branch)
-from .direct import assign_value
 from ..state.memory import VState
+from .bankcheck import expr_steps, statement_steps
+from .bankexec import (
+    HOLD,
+    STEP_NS,
+    LineGen,
+    LineObserver,
+    Request,
+    Runner,
+    Sleep,
+    Unit,
+    Watch,
+    holds,
+    ladder_units,
+    run_plain,
+    target_motor,
+    timer_ns,
+    wait_branch,
+)
+from .compiled import Compiled, compile_statement
+from .direct import assign_value
 from .queries import display_reply, format_value, register_name
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 IDLE, RUNNING, PAUSED = "idle", "running", "paused"
 MAX_CALL_DEPTH = 10   # 2.2.3 "CL": "The maximum layer (nesting) should be under 10"
@@ -52,7 +67,7 @@ _Code = tuple[ast.Statement, "Compiled | None", bool]
 class LadderRunner:
     """Scans one ladder bank: the ladder (``motion=False``) or the logic motion bank."""
 
-    def __init__(self, motor: "MotorCore", *, motion: bool = False) -> None:
+    def __init__(self, motor: MotorCore, *, motion: bool = False) -> None:
         from ..context import Context
         self.motor = motor
         self.kernel = motor.kernel
@@ -86,7 +101,7 @@ class LadderRunner:
     def _refresh_period(self) -> None:
         self._period = self.period_ns()
 
-    def start(self, number: int, ctx: "Context | None" = None) -> None:
+    def start(self, number: int, ctx: Context | None = None) -> None:
         """``[L#`` / ``[LM#``: scan bank ``number`` from now (error06 if it does not exist)."""
         if self.motor.banks.get(True, number) is None:
             self.motor.report_error(ctx, NoLadderBankError())
@@ -410,7 +425,7 @@ def _reporting(observer: LineObserver, bank: int, unit: Unit) -> _Code:
     return unit.statements[0], report, unit.quiet
 
 
-def _assigned(target: "MotorCore", reg: ast.Reg, value: int | str | None) -> str:
+def _assigned(target: MotorCore, reg: ast.Reg, value: int | str | None) -> str:
     """The display of an assignment: the register as written, ``=`` and what it holds."""
     name = register_name(reg.kind, reg.index, target.id)
     if reg.kind == "K":

@@ -19,8 +19,9 @@ instant.  Choices: docs/fidelity.md "External encoder".
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ...sim.kernel import NS_PER_S, PRIO_MOTION, Timer
 from ..motion.planner import Limits
@@ -134,7 +135,7 @@ class _Clock:
 class ExternalEncoder:
     """K71/K72 external encoder of one motor."""
 
-    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
+    def __init__(self, motor: MotorCore, timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.gearing = Gearing()

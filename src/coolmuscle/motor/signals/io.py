@@ -16,10 +16,16 @@ ones are evaluated by the motor, which passes a ``function_signal`` callback.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
-from ..state.output_functions import (CML_OUTPUT_FUNCTIONS, OUT_ANALOG, OUT_FOLLOWS_O1,
-                                      OUT_FOLLOWS_O2, OUT_GENERAL, OUT_NONE)
+from ..state.output_functions import (
+    CML_OUTPUT_FUNCTIONS,
+    OUT_ANALOG,
+    OUT_FOLLOWS_O1,
+    OUT_FOLLOWS_O2,
+    OUT_GENERAL,
+    OUT_NONE,
+)
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
 _POWERS: tuple[int, ...] = tuple(10 ** n for n in range(12))

@@ -41,7 +41,7 @@ def _phase_b(quarter: int) -> bool:
 class RotationPulses:
     """The K34=7 outputs of one motor."""
 
-    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
+    def __init__(self, motor: MotorCore, timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.track: Track | None = None

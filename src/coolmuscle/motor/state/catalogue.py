@@ -18,9 +18,9 @@ tool asks of a K (``coolmuscle params diff``, a backup's check, a parameter edit
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
-from typing import Mapping
 
 from .firmware import FIRMWARES, Firmware, get_firmware
 from .params import FIRST_K, LAST_K, ParamSpec

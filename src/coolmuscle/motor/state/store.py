@@ -31,14 +31,15 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ...errors import StoreError
 
 if TYPE_CHECKING:
-    import sqlite3        # imported where a store is opened: a run without one never needs it
+    import sqlite3  # imported where a store is opened: a run without one never needs it
 
 try:
     import fcntl

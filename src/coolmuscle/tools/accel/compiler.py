@@ -35,11 +35,12 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.machinery import EXTENSION_SUFFIXES
 from importlib.util import cache_from_source, find_spec
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Protocol
 
 ENV = "COOLMUSCLE_COMPILE"
 

@@ -24,7 +24,8 @@ import signal
 import socket
 import threading
 import time
-from typing import Any, Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 from ...errors import CoolMuscleError
 from .job import Job, Outcome, execute, execute_many

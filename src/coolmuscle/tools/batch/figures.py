@@ -21,7 +21,8 @@ import logging
 from ...device.api import Device
 from ...motor.status import ALARM_BITS, Ux
 from ...sim.kernel import NS_PER_S
-from ..trace.recorder import FIELDS as TRACE_FIELDS, record
+from ..trace.recorder import FIELDS as TRACE_FIELDS
+from ..trace.recorder import record
 
 log = logging.getLogger(__name__)
 

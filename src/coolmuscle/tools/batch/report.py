@@ -20,13 +20,13 @@ from __future__ import annotations
 import csv
 import logging
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from ...errors import CoolMuscleError
 from ..trace.recorder import parquet_available
-from .job import Job, Outcome
 from .figures import ns_to_seconds
+from .job import Job, Outcome
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +133,8 @@ def _write_parquet(path: Path, header: list[str], rows: list[list[object]]) -> P
 def write_junit(path: Path, jobs: Sequence[Job], outcomes: Sequence[Outcome | None],
                 suite: str = "coolmuscle.batch") -> Path:
     """JUnit XML: one testcase per script, failure text = the first difference."""
-    from ..ci.junit import Case, Suite, write_junit as write
+    from ..ci.junit import Case, Suite
+    from ..ci.junit import write_junit as write
 
     cases = []
     for job, outcome in zip(jobs, outcomes):

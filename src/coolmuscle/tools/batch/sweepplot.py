@@ -9,11 +9,11 @@ PNG, SVG or PDF by the file's extension (matplotlib, as ``coolmuscle run --plot`
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
-from .job import Job, Outcome
 from .figures import ns_to_seconds
+from .job import Job, Outcome
 
 log = logging.getLogger(__name__)
 

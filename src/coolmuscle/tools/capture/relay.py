@@ -22,7 +22,7 @@ import selectors
 import socket
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from ..script.transcript import Direction
 from .ends import READ_SIZE, LinkBroken, MotorPort, PtyHostSide, TcpHostSide

@@ -24,22 +24,31 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 import typer
 from rich.console import Console
 
-from .version import version_text
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
-from .usage import UsageError
-from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
-                          clear_stop, install_startup_handlers, run_served, stop_line)
+from ...frontends.transports.base import Transport
+from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
-from ..script.runner import Script, load_script
-from ...frontends.transports.base import Transport
+from .stopsignals import (
+    STOP_SIGNALS,
+    SignalStop,
+    check_stop,
+    clear_stop,
+    ignore_stop_signals,
+    install_startup_handlers,
+    run_served,
+    stop_line,
+)
+from .usage import UsageError
+from .version import version_text
 
 log = logging.getLogger("coolmuscle")
 
@@ -260,26 +269,26 @@ def _reset_state(state: Path | None) -> None:
 
 @app.command()
 def sim(
-    tcp: Optional[str] = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
+    tcp: str | None = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
                                       help="Serve TCP (default when no transport is chosen: "
                                            "127.0.0.1:5150; port 0 picks a free one)."),
     pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
-    pty_link: Optional[Path] = typer.Option(None, "--pty-link", metavar="PATH",
+    pty_link: Path | None = typer.Option(None, "--pty-link", metavar="PATH",
                                             help="Stable symlink to the pty (implies --pty)."),
     stdio: bool = typer.Option(False, "--stdio",
                                help="Serve stdin/stdout (ends at end of input)."),
-    modbus_rtu: Optional[str] = typer.Option(
+    modbus_rtu: str | None = typer.Option(
         None, "--modbus-rtu", metavar="pty|DEVICE",
         help="COM0 as a Modbus RTU slave on a new pty or a serial device (sets K81.1=1 "
              "when it is 0)."),
-    modbus_tcp: Optional[str] = typer.Option(
+    modbus_tcp: str | None = typer.Option(
         None, "--modbus-tcp", metavar="[HOST:]PORT",
         help="Serve the Modbus map over Modbus TCP (e.g. 1502; host 127.0.0.1)."),
-    com1: Optional[str] = typer.Option(
+    com1: str | None = typer.Option(
         None, "--com1", metavar="pty|DEVICE",
         help="COM1 of the final motor (Modbus host when its K84=1) on a new pty or a "
              "serial device."),
-    state: Optional[Path] = typer.Option(
+    state: Path | None = typer.Option(
         None, "--state", metavar="DIR",
         help="State directory (default: ~/.local/share/coolmuscle/state)."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
@@ -293,23 +302,23 @@ def sim(
     time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
                                      help="Virtual seconds per wall second."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
-    web: Optional[str] = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
+    web: str | None = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
                                       help=_WEB_HELP),
-    ethercat: Optional[str] = typer.Option(
+    ethercat: str | None = typer.Option(
         None, "--ethercat", metavar="IFACE",
         help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
              "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
     bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
                                help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
-    enip: Optional[str] = typer.Option(
+    enip: str | None = typer.Option(
         None, "--enip", metavar="[HOST[:PORT]]",
         help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
              "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
     enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
                                      max=65535, help="UDP port of Class 1 I/O."),
-    enip_priority: Optional[int] = typer.Option(
+    enip_priority: int | None = typer.Option(
         None, "--enip-rt-priority", metavar="N", min=1, max=99,
         help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
@@ -359,43 +368,43 @@ def sim(
 @app.command()
 def run(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
-    until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
+    until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help="After the script, run on to this virtual time."),
-    trace: Optional[Path] = typer.Option(
+    trace: Path | None = typer.Option(
         None, "--trace", metavar="OUT.csv",
         help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow); streamed "
              "as the run goes."),
     trace_step: float = typer.Option(
         0.001, "--trace-step", metavar="SECONDS",
         help="Trace grid step (default 0.001); changes are recorded at their instant."),
-    plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
-    xy: Optional[str] = typer.Option(
+    plot: Path | None = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
+    xy: str | None = typer.Option(
         None, "--xy", metavar="X,Y",
         help="With --plot: draw the XY path of motors X and Y (default: pairs that "
              "interpolated; 'none' for no XY panel)."),
-    motors: Optional[int] = typer.Option(
+    motors: int | None = typer.Option(
         None, "--motors", min=1, max=15,
         help="Motors on the chain (default: the script's '# coolmuscle: motors=N', else 1)."),
-    firmware: Optional[Firmware] = typer.Option(
+    firmware: Firmware | None = typer.Option(
         None, "--firmware",
         help="Firmware profile (default: the script's 'firmware=', else cm2)."),
-    state: Optional[Path] = typer.Option(
+    state: Path | None = typer.Option(
         None, "--state", metavar="DIR",
         help="Start from (and save to) this state (default: a fresh chain)."),
     check: bool = typer.Option(False, "--check",
                                help="Print only the verdict; fail without expectations."),
     pace: bool = typer.Option(False, "--pace",
                               help="Bytes take their wire time at the K20 baud rate."),
-    record: Optional[Path] = typer.Option(
+    record: Path | None = typer.Option(
         None, "--record", metavar="OUT.cml",
         help="Write the script with the received bytes as expectations."),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
-    web: Optional[str] = typer.Option(
+    web: str | None = typer.Option(
         None, "--web", metavar="[[HOST:]PORT]",
         help="Play the script in real time and show it on the web dashboard "
              "(docs/web.md); starts when a page connects."),
-    junit: Optional[Path] = typer.Option(
+    junit: Path | None = typer.Option(
         None, "--junit", metavar="FILE.xml",
         help="Also write the verdict as JUnit XML (the failing line of the script)."),
 ) -> None:
@@ -429,8 +438,8 @@ def _web_transport(address: str) -> Transport:
 def _run_web(script: Script, address: str, until: float | None, others: tuple[object, ...],
              make_chain: Callable[[], Device]) -> None:
     """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
-    from .run import check_run_times
     from ..web.run import run_script_web
+    from .run import check_run_times
     check_run_times(until)
     if any(o not in (None, False) for o in others):
         raise UsageError("--web shows the run live: --check, --record, --trace, --plot "
@@ -545,8 +554,8 @@ def _main(argv: list[str] | None) -> None:
         if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
+    from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
     from .enip import optional_value_argv
-    from ..web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
 
     def call() -> None:
         args = expand_web_flag(sys.argv[1:] if argv is None else argv)

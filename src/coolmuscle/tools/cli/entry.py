@@ -28,7 +28,8 @@ Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad s
 from __future__ import annotations
 
 import sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .exits import guarded
 from .stopsignals import check_stop, install_startup_handlers

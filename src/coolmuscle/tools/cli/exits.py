@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 from .stopsignals import Guard, SignalStop, ignore_stop_signals, stop_line, stop_requested
 

@@ -11,7 +11,7 @@ import json
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any
 
 import typer
 
@@ -34,17 +34,17 @@ class FirmwareChoice(str, Enum):
 
 
 def check(
-    files: List[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
+    files: list[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
     output: Format = typer.Option(Format.human, "--format", help="human, json (schema: "
                                   "docs/check-schema.json), sarif (SARIF 2.1.0) or github "
                                   "(GitHub Actions annotations)."),
-    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml",
+    junit: Path | None = typer.Option(None, "--junit", metavar="FILE.xml",
                                          help="Also write JUnit XML (a case per finding, "
                                               "with its file and line)."),
-    firmware: Optional[FirmwareChoice] = typer.Option(
+    firmware: FirmwareChoice | None = typer.Option(
         None, "--firmware", help="Firmware the file is for (default: its '# coolmuscle: "
         "firmware=' comment, else cm2)."),
-    motors: Optional[int] = typer.Option(None, "--motors", min=1, max=15,
+    motors: int | None = typer.Option(None, "--motors", min=1, max=15,
                                          help="Motors on the chain (warn beyond)."),
     strict: bool = typer.Option(False, "--strict", help="Warnings fail too."),
 ) -> None:
@@ -85,8 +85,8 @@ def check(
         for report in reports:
             sys.stdout.write("\n".join(format_human(report)) + "\n")
     if junit is not None:
-        from ..ci.junit import write_junit
         from ..check.ci import junit_suites
+        from ..ci.junit import write_junit
         write_junit(junit, junit_suites(reports, strict=strict))
     if not ok:
         raise typer.Exit(1)
@@ -131,7 +131,7 @@ def upload(
                                 help="Read the banks back and compare."),
     baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for each reply."),
-    firmware: Optional[FirmwareChoice] = typer.Option(None, "--firmware",
+    firmware: FirmwareChoice | None = typer.Option(None, "--firmware",
                                                       help="Skip reading ?85."),
 ) -> None:
     """Send a .cml file to a real or virtual motor and verify it by readback."""
@@ -153,9 +153,9 @@ def term(
     baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
     motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
-    history: Optional[Path] = typer.Option(None, "--history", metavar="FILE",
+    history: Path | None = typer.Option(None, "--history", metavar="FILE",
                                            help="History file."),
-    log: Optional[Path] = typer.Option(None, "--log", metavar="FILE.cml",
+    log: Path | None = typer.Option(None, "--log", metavar="FILE.cml",
                                        help="Record the session as a golden transcript."),
 ) -> None:
     """Interactive terminal: line editing, history, colour, :send, :save, :log."""

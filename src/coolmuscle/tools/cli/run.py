@@ -237,7 +237,8 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                        pace, machine)
     try:
         if plot is not None:
-            from ..trace.recorder import NoTraceRecorderError, record as record_trace
+            from ..trace.recorder import NoTraceRecorderError
+            from ..trace.recorder import record as record_trace
             try:
                 record_trace(chain)
             except NoTraceRecorderError as exc:

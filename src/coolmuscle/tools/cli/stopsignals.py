@@ -29,8 +29,9 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from collections.abc import Callable, Coroutine
 from types import FrameType, TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Coroutine, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
     import asyncio
@@ -159,7 +160,7 @@ def serve_until_signal(loop: Any, stop: Any) -> None:
         signal.signal(sig, handler)
 
 
-def run_served(main: Callable[["asyncio.Event"], Coroutine[Any, Any, T]]) -> T:
+def run_served(main: Callable[[asyncio.Event], Coroutine[Any, Any, T]]) -> T:
     """Run ``main(stop)`` in a new event loop whose stop signals set ``stop``.
 
     The handlers of :func:`serve_until_signal` are in place before the loop runs its

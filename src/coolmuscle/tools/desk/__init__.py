@@ -21,8 +21,8 @@ from .connection import DeskLine, backup, factory_image, restore
 from .diff import Difference, diff_images, format_diff
 from .errors import BackupFileError, DeskError, FirmwareMismatchError, NoMotorError
 from .image import ChainImage, MotorImage
-from .restorer import Outcome, Part, RestoreReport, plan_restore, run_restore
 from .linescan import FoundMotor, ScanResult, scan, scan_bound
+from .restorer import Outcome, Part, RestoreReport, plan_restore, run_restore
 
 __all__ = ["scan", "scan_bound", "ScanResult", "FoundMotor", "DeskLine", "backup", "restore",
            "factory_image", "ChainImage", "MotorImage", "render_backup", "parse_backup",

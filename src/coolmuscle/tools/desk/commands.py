@@ -10,8 +10,8 @@ an unreadable file.
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, List, Optional
 
 import typer
 
@@ -61,8 +61,8 @@ def _exit(code: int) -> None:
 
 def scan(
     port: str = typer.Argument(..., metavar="PORT", help=_PORT),
-    baud: Optional[List[int]] = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
-    ids: Optional[str] = typer.Option(None, "--ids", metavar="IDS", help=_IDS),
+    baud: list[int] | None = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
+    ids: str | None = typer.Option(None, "--ids", metavar="IDS", help=_IDS),
     timeout: float = typer.Option(0.3, "--timeout", metavar="SECONDS", min=0.01, max=10.0,
                                   help="Seconds each motor has to answer a query."),
 ) -> None:
@@ -80,8 +80,8 @@ def backup(
     port: str = typer.Argument(..., metavar="PORT", help=_PORT),
     output: Path = typer.Option(..., "--output", "-o", metavar="FILE.cml",
                                 help="The backup file (a coolmuscle run script)."),
-    baud: Optional[List[int]] = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
-    ids: Optional[str] = typer.Option(None, "--ids", metavar="IDS", help=_IDS),
+    baud: list[int] | None = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
+    ids: str | None = typer.Option(None, "--ids", metavar="IDS", help=_IDS),
     force: bool = typer.Option(False, "--force", help="Replace FILE.cml if it exists."),
 ) -> None:
     """Read every K parameter, data register and bank of the motors on PORT into a file.
@@ -99,7 +99,7 @@ def restore(
     port: str = typer.Option(..., "--port", metavar="PORT", help=_PORT),
     save: bool = typer.Option(False, "--save",
                               help="Send $ to each motor at the end (2.1.2)."),
-    baud: Optional[List[int]] = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
+    baud: list[int] | None = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
 ) -> None:
     """Write a backup to the motors on PORT, part by part, each read back."""
     from .actions import do_restore, parse_bauds
@@ -114,7 +114,7 @@ def diff(
     b: str = typer.Argument(..., metavar="B", help="The same, the other side."),
     everything: bool = typer.Option(False, "--all",
                                     help="Also the data registers and the banks."),
-    baud: Optional[List[int]] = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
+    baud: list[int] | None = typer.Option(None, "--baud", metavar="BPS", help=_BAUD),
 ) -> None:
     """The K parameters that differ between A and B, each with its meaning (table 6.1).
 

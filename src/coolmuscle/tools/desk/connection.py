@@ -11,7 +11,8 @@ queries only) and keeps the port at that rate with a client session
 from __future__ import annotations
 
 import datetime
-from typing import Any, Callable, Sequence, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 from ...client.driver import SyncDriver
 from ...client.ops import Op, Session, status
@@ -19,10 +20,10 @@ from ...device.hostline import BAUD_RATES
 from ...motor.status import ALARM_BITS, Ux
 from .errors import DeskError
 from .image import ChainImage, MotorImage
+from .linescan import REPLY_TIMEOUT, SCAN_ORDER, ScanResult, scan_port
 from .ports import open_port, port_url
 from .reading import read_motor
 from .restorer import LineControl, RestoreReport, check_restorable, plan_restore, run_restore
-from .linescan import REPLY_TIMEOUT, SCAN_ORDER, ScanResult, scan_port
 
 __all__ = ["DeskLine", "backup", "restore", "factory_image", "listing_timeout"]
 
@@ -83,7 +84,7 @@ class DeskLine:
                 if progress is not None:
                     progress(f"reading ID{motor}")
                 motors.append(self.run(read_motor(self.session, motor)))
-        taken = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        taken = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         return ChainImage(tuple(motors), self.url, self.scan.baud, taken)
 
     def _at_rest(self, ids: Sequence[int]) -> None:

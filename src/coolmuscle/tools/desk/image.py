@@ -18,8 +18,8 @@ exactly what was read and a comparison is a comparison of the motor's own answer
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Mapping
 
 from ...client.replies import Version, parse_version
 from ...errors import ProtocolError

@@ -25,8 +25,9 @@ which failed with what, and which were not written.  Nothing is saved then.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 from ...client.banks import save as save_op
 from ...client.banks import upload

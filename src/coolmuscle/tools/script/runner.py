@@ -27,15 +27,18 @@ import os
 import re
 import string
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Literal
+from typing import TYPE_CHECKING, Literal
 
 from ...device.api import Device
 from ...errors import CoolMuscleError
 from ...sim.kernel import seconds, to_seconds
-from .record import Direction as Direction, Recorder
-from .record import TranscriptEntry as TranscriptEntry, escape as escape
+from .record import Direction as Direction
+from .record import Recorder
+from .record import TranscriptEntry as TranscriptEntry
+from .record import escape as escape
 
 if TYPE_CHECKING:
     from ..trace.recorder import TraceFile
@@ -344,7 +347,8 @@ class _Checker:
 def _start_trace(chain: Device, trace: str | os.PathLike[str], step: float,
                  warn_bytes: int | None, on_warning: Callable[[str], None] | None
                  ) -> TraceFile:
-    from ..trace.recorder import TraceFormatError, trace as start_trace
+    from ..trace.recorder import TraceFormatError
+    from ..trace.recorder import trace as start_trace
     try:
         return start_trace(chain, Path(trace), step, warn_bytes=warn_bytes,
                            on_warning=on_warning)

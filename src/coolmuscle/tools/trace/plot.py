@@ -17,8 +17,9 @@ matplotlib runs headless (Agg).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -96,7 +97,7 @@ OUTPUT_FUNCTIONS = {out.OUT_NONE: "no function", out.OUT_IN_POSITION: "in-positi
                     out.OUT_ANALOG: "analog", out.OUT_PUSH_AT_LEVEL: "push torque reached"}
 
 
-def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
+def _bit_rows(samples: list[Sample], motor: int, count: int, multi: bool,
               functions: Sequence[int] = ()) -> list[tuple[str, list[bool]]]:
     """Inputs and outputs that are ever on (or change), as (label, bits); an output is
     labelled with its K34 function, ``functions[n - 1]`` (``OUT1 in-position``)."""
@@ -113,7 +114,7 @@ def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
     return rows
 
 
-def _status_spans(t: list[float], samples: list["Sample"], end: float
+def _status_spans(t: list[float], samples: list[Sample], end: float
                   ) -> dict[str, list[tuple[float, float]]]:
     spans: dict[str, list[tuple[float, float]]] = {}
     start, current = t[0], status_class(samples[0].status)
@@ -138,7 +139,7 @@ def _palette(n: int) -> list[ColorType]:
     return [colours[i % len(colours)] for i in range(n)]
 
 
-def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
+def _speed_axis(ax: Axes, ppr: set[int]) -> None:
     """min⁻¹ on the right when every motor has the same resolution (K37)."""
     if len(ppr) != 1:
         return
@@ -152,12 +153,12 @@ def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
     right.set_ylabel("min⁻¹")
 
 
-def interpolated_pairs(recorder: "TraceRecorder") -> list[tuple[int, int]]:
+def interpolated_pairs(recorder: TraceRecorder) -> list[tuple[int, int]]:
     """(X, Y) IDs of every pair of motors that followed an interpolation path (4.4)."""
     return recorder.feed.interpolated_pairs()
 
 
-def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | None = None,
+def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None = None,
                title: str = "", xy: Sequence[tuple[int, int]] | None = None) -> Path:
     """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension).
 
@@ -232,7 +233,7 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     return path
 
 
-def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], motor: int,
+def _draw_motor(ax: dict[str, Axes], t: list[float], samples: list[Sample], motor: int,
                 color: object) -> None:
     label = f"ID{motor}"
     ax["position"].plot(t, [s.position for s in samples], color=color, linewidth=1.3,
@@ -250,7 +251,7 @@ def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], 
                            linewidth=1.0)
 
 
-def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple[int, int]],
+def _xy_panel(ax: Axes, data: dict[int, list[Sample]], pairs: Sequence[tuple[int, int]],
               colors: dict[int, ColorType]) -> None:
     """Each pair's path: the X motor's position across, the Y motor's up (4.4 figures);
     the command dashed, the start a circle, the end a square."""
@@ -272,7 +273,7 @@ def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple
     ax.legend(loc="best", fontsize="small")
 
 
-def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
+def _draw_timeline(ax: Axes, t: list[float], data: dict[int, list[Sample]],
                    bit_rows: dict[int, list[tuple[str, list[bool]]]],
                    colors: dict[int, ColorType], end: float) -> None:
     """Per motor: a status bar, then one logic-analyser row per active input/output."""
@@ -298,7 +299,7 @@ def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: "Axes", motor: int, stoppers: Sequence[float], color: object,
+def _draw_stoppers(ax: Axes, motor: int, stoppers: Sequence[float], color: object,
                    multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
     motor's user coordinates."""
@@ -310,7 +311,7 @@ def _draw_stoppers(ax: "Axes", motor: int, stoppers: Sequence[float], color: obj
                     va="bottom", color=color)
 
 
-def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
+def _legends(fig: Figure, ax: dict[str, Axes], motors: Sequence[int],
              colors: dict[int, ColorType], outside: bool, analog: bool,
              occurring: set[str] | None = None) -> None:
     status = [Patch(color=c, label=name) for name, c in STATUS_COLORS.items()

@@ -25,8 +25,9 @@ import csv
 import importlib.util
 import math
 import weakref
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 from ...device.api import Device
 from ...device.trace import MotorTrace, TraceFeed, TraceSample
@@ -155,7 +156,7 @@ class TraceRecorder:
         return path
 
 
-_RECORDERS: "weakref.WeakKeyDictionary[Device, TraceRecorder]" = weakref.WeakKeyDictionary()
+_RECORDERS: weakref.WeakKeyDictionary[Device, TraceRecorder] = weakref.WeakKeyDictionary()
 
 
 class NoTraceRecorderError(TraceFormatError):
@@ -179,7 +180,7 @@ class TraceFile:
 
     def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
                  prune: bool = True, warn_bytes: int | None = None,
-                 on_warning: "Callable[[str], None] | None" = None) -> None:
+                 on_warning: Callable[[str], None] | None = None) -> None:
         self.recorder = recorder
         self.path = path
         self.step = step
@@ -197,7 +198,7 @@ class TraceFile:
 
 def trace(chain: Device, path: str | Path, step: float = 0.001, *,
           warn_bytes: int | None = None,
-          on_warning: "Callable[[str], None] | None" = None) -> TraceFile:
+          on_warning: Callable[[str], None] | None = None) -> TraceFile:
     """Record ``chain`` from now on into ``path`` (CSV, or Parquet for ``.parquet``:
     ``TraceFormatError`` at once when pyarrow is missing), streamed as the run goes;
     ``close()`` on the handle finishes it.  ``warn_bytes``: call ``on_warning`` once
@@ -237,7 +238,7 @@ class TraceStream:
 
     def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
                  prune: bool = True, warn_bytes: int | None = None,
-                 on_warning: "Callable[[str], None] | None" = None) -> None:
+                 on_warning: Callable[[str], None] | None = None) -> None:
         self.recorder = recorder
         self.path = Path(path)
         self.step_ns = max(int(round(step * NS_PER_S)), 1)

@@ -38,9 +38,10 @@ import base64
 import html
 import math
 from bisect import bisect_left, bisect_right
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Literal
+from typing import TYPE_CHECKING, Literal
 
 from ...chain.machine import Machine
 from .plot import Panel, Series, figure_png

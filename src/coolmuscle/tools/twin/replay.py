@@ -62,7 +62,7 @@ class Replay:
     exact: dict[int, float]             # line index -> exact polled value
     origin_ns: int                      # kernel time of the capture's t=0
     failure: str | None = None          # the model raised (the replay stopped there)
-    recorder: "TraceRecorder | None" = None
+    recorder: TraceRecorder | None = None
     speed_units: dict[int, int] = field(default_factory=dict)   # motor -> pps per Sx unit
 
     def kernel_ns(self, seconds: float) -> int:

@@ -24,7 +24,8 @@ import asyncio
 import collections
 import json
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ...device import Device, Event
 

@@ -16,7 +16,8 @@ import asyncio
 import logging
 import re
 import sys
-from typing import Callable, TextIO
+from collections.abc import Callable
+from typing import TextIO
 
 from ...device import Device
 from ...frontends.transports.base import Port
@@ -152,5 +153,5 @@ async def _serve_run(script: Script, chain: Device, web: WebTransport, until: fl
 async def _sleep_or_stop(delay: float, stop: asyncio.Event) -> None:
     try:
         await asyncio.wait_for(stop.wait(), delay)
-    except asyncio.TimeoutError:
+    except TimeoutError:
         pass

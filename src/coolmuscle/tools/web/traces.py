@@ -14,8 +14,8 @@ import csv
 import importlib
 import math
 import threading
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from ...chain import Chain
 from ...device import Device

@@ -27,15 +27,25 @@ from __future__ import annotations
 import ipaddress
 import logging
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Literal, Protocol, TypeVar
+from typing import Any, Literal, Protocol, TypeVar
 
 from . import connmgr
 from . import messages as cip
 from .description import AdapterDescription
-from .encapsulation import (ITEM_CONNECTED_DATA, ITEM_SEQUENCED_ADDRESS, ITEM_SOCKADDR_OT,
-                            ITEM_SOCKADDR_TO, CpfError, Item, encode_cpf, parse_cpf,
-                            parse_sockaddr, sockaddr)
+from .encapsulation import (
+    ITEM_CONNECTED_DATA,
+    ITEM_SEQUENCED_ADDRESS,
+    ITEM_SOCKADDR_OT,
+    ITEM_SOCKADDR_TO,
+    CpfError,
+    Item,
+    encode_cpf,
+    parse_cpf,
+    parse_sockaddr,
+    sockaddr,
+)
 from .messages import CipError
 
 log = logging.getLogger(__name__)

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import ipaddress
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from . import messages as cip
 from .description import IdentityInfo

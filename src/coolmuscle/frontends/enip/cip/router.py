@@ -16,7 +16,7 @@ import ipaddress
 import logging
 import struct
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from . import messages as cip
 from .encapsulation import Item, Peer, sockaddr

@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import logging
 import struct
-from typing import Any, Callable, Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
 from ....device import Device
 from ....errors import CoolMuscleError

@@ -22,16 +22,31 @@ is not reset.
 from __future__ import annotations
 
 import struct
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 from ..cip import messages as cip
 from ..cip.description import AdapterDescription, AssemblyInfo, ConnectionInfo, IdentityInfo
 from ..cip.messages import CipError
-from ..cip.objects import (ASSEMBLY_CLASS, CONNECTION_MANAGER_CLASS, ETHERNET_LINK_CLASS,
-                           IDENTITY_CLASS, ROUTER_CLASS, TCPIP_CLASS, Attribute, Instance,
-                           ObjectService, ObjectTable, class_attributes,
-                           ethernet_link_instance, exact_data, identity_instance,
-                           router_instance, tcpip_instance, u16)
+from ..cip.objects import (
+    ASSEMBLY_CLASS,
+    CONNECTION_MANAGER_CLASS,
+    ETHERNET_LINK_CLASS,
+    IDENTITY_CLASS,
+    ROUTER_CLASS,
+    TCPIP_CLASS,
+    Attribute,
+    Instance,
+    ObjectService,
+    ObjectTable,
+    class_attributes,
+    ethernet_link_instance,
+    exact_data,
+    identity_instance,
+    router_instance,
+    tcpip_instance,
+    u16,
+)
 
 # -- static facts (also the EDS) -----------------------------------------------------
 

@@ -17,7 +17,8 @@ not call the model; :meth:`cycle` runs in the model's thread.
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ....device import Device
 from ....sim.kernel import PRIO_IO, Timer

@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from typing import Callable
+from collections.abc import Callable
 
 from ....device import CyclicState, Device
 from ....motor.status import ALARM_BITS, Ux
 from ..engine.dictionary import Dictionary
-from . import cia402
+from . import cia402, cpio, csp, homing, modes
 from .cia402 import State
-from . import cpio, csp, homing, modes
 
 log = logging.getLogger(__name__)
 

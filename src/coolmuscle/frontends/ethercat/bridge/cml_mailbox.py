@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from functools import partial
+
 from ....device import Device, Event
 from ....sim.kernel import PRIO_IO
 from .link import CmLink

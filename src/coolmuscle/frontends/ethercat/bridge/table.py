@@ -21,8 +21,21 @@ from __future__ import annotations
 from dataclasses import replace
 
 from ..engine import od
-from ..engine.od import (ARRAY, BOOL, INT8, INT16, INT32, STRING, UINT8, UINT16, UINT32,
-                         DataType, Entry, Obj, Table)
+from ..engine.od import (
+    ARRAY,
+    BOOL,
+    INT8,
+    INT16,
+    INT32,
+    STRING,
+    UINT8,
+    UINT16,
+    UINT32,
+    DataType,
+    Entry,
+    Obj,
+    Table,
+)
 from . import identity as ident
 
 #: Where an object's section is not given, it is the manual's object list.

@@ -15,8 +15,17 @@ import logging
 import struct
 from dataclasses import dataclass
 
-from .dictionary import (BAD_COMMAND, GENERAL, LENGTH_MISMATCH, NO_OBJECT, NO_SUBINDEX,
-                         OUT_OF_MEMORY, TOGGLE, Dictionary, SdoAbort)
+from .dictionary import (
+    BAD_COMMAND,
+    GENERAL,
+    LENGTH_MISMATCH,
+    NO_OBJECT,
+    NO_SUBINDEX,
+    OUT_OF_MEMORY,
+    TOGGLE,
+    Dictionary,
+    SdoAbort,
+)
 from .od import ARRAY, RECORD, STRING, VAR, Entry
 
 log = logging.getLogger(__name__)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import struct
-from typing import Callable
+from collections.abc import Callable
 
 from .od import ARRAY, RECORD, STRING, Entry, Obj, Table
 

@@ -11,7 +11,7 @@ element order follows the ETG.2000 EtherCATInfo schema.
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from typing import Sequence
+from collections.abc import Sequence
 
 from .description import SlaveDescription
 from .od import STRING, VAR, Entry, Obj, Table
@@ -170,7 +170,7 @@ def _device(devices: ET.Element, slave: SlaveDescription) -> None:
     _sub(eeprom, "ConfigData", build_sii(slave)[:14].hex().upper())
 
 
-def build_esi(slaves: Sequence[SlaveDescription]) -> "ET.ElementTree[ET.Element]":
+def build_esi(slaves: Sequence[SlaveDescription]) -> ET.ElementTree[ET.Element]:
     """The EtherCATInfo tree with one Device per description (one vendor for all)."""
     if not slaves:
         raise ValueError("an ESI file describes at least one device")

@@ -15,8 +15,8 @@ AL status and AL status code.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 INIT, PREOP, BOOT, SAFEOP, OP = 1, 2, 3, 4, 8
 NAMES = {INIT: "INIT", PREOP: "PRE-OP", BOOT: "BOOT", SAFEOP: "SAFE-OP", OP: "OP"}
