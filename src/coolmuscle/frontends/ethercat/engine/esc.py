@@ -2,9 +2,13 @@
 
 Owns what a real ESC does in hardware (ETG.1000.4, the ESC datasheet section II):
 the register space, the 14 datagram commands with their working-counter rules and
-auto-increment addressing, the FMMUs, the SyncManagers (mailbox full/empty and
-repeat, buffered process data), the SII EEPROM interface, the DC receive-time
-registers a master reads, and the SM watchdog.  No socket, no clock inside:
+auto-increment addressing, the FMMUs (:mod:`.fmmu`), the SyncManagers (mailbox
+full/empty and repeat, buffered process data), the SII EEPROM interface, the DC
+receive-time registers a master reads, and the SM watchdog.  A SyncManager guards
+process RAM only: the settings of an activated one are not written (datasheet
+0x0800: "r/(w)", written only while deactivated), and one whose buffer is not inside
+the process RAM (0x1000 up) is not activated, so no mailbox is ever written over the
+registers (docs/fidelity.md "EtherCAT bridge").  No socket, no clock inside:
 :meth:`Esc.process` takes a frame and the time ``now`` (ns) and returns the frame to
 send on; :meth:`Esc.tick` runs the watchdog.  It knows nothing of the device behind
 it: what a real chip loads from its EEPROM at power-up (PDI control, station alias)
@@ -101,6 +105,9 @@ class Pdi(Protocol):
     def watchdog_expired(self) -> None:
         """The SM watchdog expired (no output buffer within its time)."""
 
+    def sm_changed(self, sm: int) -> None:
+        """The master activated or deactivated SyncManager ``sm`` (AL event "SM change")."""
+
 
 @dataclass
 class SyncManager:
@@ -116,7 +123,14 @@ class SyncManager:
 
     @property
     def enabled(self) -> bool:
-        return bool(self.activate & 0x01) and self.length > 0 and not self.pdi_control & 0x01
+        return bool(self.activate & 0x01) and self.length > 0 \
+            and not self.pdi_control & 0x01 and self.in_ram
+
+    @property
+    def in_ram(self) -> bool:
+        """Its buffer lies inside the process RAM (a SyncManager guards RAM, never the
+        registers below 0x1000)."""
+        return RAM_START <= self.start and self.start + self.length <= MEM_SIZE
 
     @property
     def mailbox(self) -> bool:
@@ -489,14 +503,24 @@ class Esc:
             self.pdi.al_control(self.al_control_value)
 
     def _sm_written(self, lo: int, hi: int) -> None:
+        """The master wrote SyncManager registers.  As an ESC does (datasheet section II
+        0x0800: start, length and control are "r/(w)"): those of an activated SyncManager
+        are not written (they keep their values); an activation whose buffer is not
+        inside the process RAM does not take (the activate bit reads 0).  A change of
+        the activate bit is an SM change event for the firmware."""
         for s in self.sm:
             base = REG_SM + 8 * s.number
             if not (lo < base + 8 and base < hi):
                 continue
             was_enabled = s.enabled
             old_activate = s.activate
-            s.start, s.length, s.control, _status, s.activate = struct.unpack_from(
-                "<HHBBB", self.mem, base)
+            if old_activate & 0x01:
+                struct.pack_into("<HHB", self.mem, base, s.start, s.length, s.control)
+            else:
+                s.start, s.length, s.control = struct.unpack_from("<HHB", self.mem, base)
+            s.activate = self.mem[base + 6]
+            if s.activate & 0x01 and not s.in_ram:
+                s.activate &= 0xFE
             if not s.enabled:
                 s.status &= ~0x08 & 0xFF
             elif not was_enabled:
@@ -505,9 +529,12 @@ class Esc:
                     self._wd_last = self._now
                     self._wd_expired = False
                     self.mem[REG_WD_STATUS] |= 0x01
-            if s.mailbox and not s.master_writes and (s.activate ^ old_activate) & 0x02:
+            if s.enabled and s.mailbox and not s.master_writes \
+                    and (s.activate ^ old_activate) & 0x02:
                 self._repeat(s)
             self._sync_sm_regs(s)
+            if (s.activate ^ old_activate) & 0x01:
+                self.pdi.sm_changed(s.number)
 
     def _repeat(self, s: SyncManager) -> None:
         """Repeat request (activate bit 1 toggled): send the last message again."""
