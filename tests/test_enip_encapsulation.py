@@ -212,6 +212,43 @@ def test_vol1_duplicate_owner_and_close(rig):
     assert open_via(rig, conn, handle, close)[1] == (0x0107,)
 
 
+def class3_open(serial: int) -> bytes:
+    """A class 3 Forward_Open to the Message Router (20 02 24 01), as pycomm3 sends one."""
+    return forward_open(serial=serial, ot_size=504, to_size=504, transport=0xA3,
+                        path=bytes.fromhex("20 02 24 01"))
+
+
+def test_eds_capacity_per_kind_class3_never_starves_class1(rig):
+    """EDS [Capacity]: MaxMsgConnections 3, MaxIOConnections 1.  Four class 3 requests
+    from one idle client: three open, the fourth is out of connections (0x0113); the
+    PLC's Class 1 exclusive owner still opens; a second one is an ownership conflict
+    (0x0106).  Closing a class 3 connection frees its place for another."""
+    client = rig.connection()
+    handle = register(client)
+    class3 = [open_via(rig, client, handle, class3_open(serial)) for serial in (11, 12, 13, 14)]
+    plc = rig.connection()
+    plc_handle = register(plc)
+    assert open_via(rig, plc, plc_handle, forward_open(serial=1))[0] == 0      # Class 1
+    assert [status for status, _e, _b in class3] == [0, 0, 0, 0x01]
+    assert class3[3][1] == (0x0113,)
+    assert open_via(rig, plc, plc_handle, forward_open(serial=2))[1] == (0x0106,)
+    assert (rig.table.count(io=False), rig.table.count(io=True)) == (3, 1)
+    close = bytes((0x4E, 2, 0x20, 0x06, 0x24, 0x01)) + struct.pack(
+        "<BBHHIBB", 0x0A, 0xF0, 11, 0x00FE, 0xDEAD0000, 0, 0)
+    assert open_via(rig, client, handle, close)[0] == 0
+    assert open_via(rig, client, handle, class3_open(15))[0] == 0
+
+
+def test_message_router_and_eds_say_the_same_capacity(rig):
+    from coolmuscle.frontends.enip.cm1.eds import generate
+    conn = rig.connection()
+    reply = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(get_request(2, 1, 2)),
+                                        register(conn))))
+    assert reply[2] == 0 and struct.unpack_from("<H", reply, 4)[0] == 3
+    eds = generate()
+    assert "MaxIOConnections = 1;" in eds and "MaxMsgConnections = 3;" in eds
+
+
 def test_vol1_modeless_output_accepted_and_key_wildcards(rig):
     conn = rig.connection()
     key = bytes.fromhex("34 04 00 00 00 00 00 00 00 00")

@@ -488,3 +488,55 @@ def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypa
         finally:
             for sock in held:
                 sock.close()
+
+
+def _raw_open(tcp_port: int, request: bytes) -> tuple[int, tuple[int, ...]]:
+    """A Forward_Open by hand (CIP Vol 1 3-5.5.2 bytes) on a session of its own: the
+    general status and the extended status words of the reply."""
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from test_enip_encapsulation import decode, frame, rr_data
+    with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp:
+        tcp.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+        handle = decode(tcp.recv(1024)).session
+        tcp.sendall(frame(enc.SEND_RR_DATA, rr_data(request), handle).encode())
+        reply = enc.parse_cpf(decode(tcp.recv(1024)).data[6:])[1].data
+    return reply[2], struct.unpack_from(f"<{reply[3]}H", reply, 4)
+
+
+def test_idle_class3_connections_never_keep_the_plcs_class1_out(monkeypatch):
+    """EDS [Capacity]: MaxMsgConnections 3, MaxIOConnections 1, counted apart.  An idle
+    client tries four class 3 connections with pycomm3 (one CIPDriver each, its
+    Large_Forward_Open): three open, the fourth is refused.  The PLC (the ``ethernetip``
+    package's Class 1 originator) still opens its exclusive owner and T->O flows.  By
+    hand, one more class 3 request gets 0x01/0x0113 (out of connections, CIP Vol 1
+    table 3-5.33) and a second Class 1 owner 0x01/0x0106 (ownership conflict)."""
+    from pycomm3.exceptions import ResponseError
+
+    from test_enip_encapsulation import class3_open, forward_open
+    with enip_service() as st:
+        tcp_port, io_port = ports(st)
+        idle: list[CIPDriver] = []
+        opened = []
+        try:
+            for _ in range(4):
+                d = CIPDriver(f"127.0.0.1:{tcp_port}")
+                d.open()
+                idle.append(d)
+                try:
+                    opened.append(get(d, 1, 1, 7, connected=True).error is None)
+                except ResponseError:             # pycomm3: "Target did not connected"
+                    opened.append(False)
+            scanner = _Scanner(monkeypatch, tcp_port, io_port)
+            try:
+                assert scanner.forward_open() == 0
+                assert _wait(lambda: len(scanner.times) > 5, 2)        # T->O flows
+                assert opened == [True, True, True, False]
+                assert _raw_open(tcp_port, class3_open(21)) == (0x01, (0x0113,))
+                assert _raw_open(tcp_port, forward_open(serial=22)) == (0x01, (0x0106,))
+                assert (st.transports[0].table.count(io=False),
+                        st.transports[0].table.count(io=True)) == (3, 1)
+            finally:
+                scanner.close()
+        finally:
+            for d in idle:
+                d.close()

@@ -74,7 +74,8 @@ def identity_instance(ident: IdentityInfo, status: Callable[[], int]) -> Instanc
 
 
 def router_instance(classes: tuple[int, ...], max_connections: int) -> Instance:
-    """Message Router instance 1: the object list and the connections it takes."""
+    """Message Router instance 1: the object list and the connections it takes (5A-3.3
+    attribute 2, "number available": its own, the class 3 connections)."""
     listed = struct.pack("<H", len(classes)) + b"".join(struct.pack("<H", c) for c in classes)
     return {1: Attribute(lambda: listed), 2: Attribute(u16(max_connections))}
 

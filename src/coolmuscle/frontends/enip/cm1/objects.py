@@ -75,10 +75,14 @@ VENDOR_CLASS = 0x64
 VENDOR_ATTRIBUTE = 0x64
 CLASSES = (IDENTITY_CLASS, ROUTER_CLASS, ASSEMBLY_CLASS, CONNECTION_MANAGER_CLASS,
            VENDOR_CLASS, TCPIP_CLASS, ETHERNET_LINK_CLASS)
-MAX_CONNECTIONS = 4
+#: Connections the module takes, per kind (its EDS [Capacity]; docs/fidelity.md): the
+#: one Class 1 exclusive owner, and three class 3 connections to the Message Router.
+MAX_IO_CONNECTIONS = 1
+MAX_MSG_CONNECTIONS = 3
 
 #: What the CIP machinery (connection manager, connection table) serves.
-DESCRIPTION = AdapterDescription(IDENTITY, EXCLUSIVE_OWNER, MAX_CONNECTIONS)
+DESCRIPTION = AdapterDescription(IDENTITY, EXCLUSIVE_OWNER, MAX_IO_CONNECTIONS,
+                                 MAX_MSG_CONNECTIONS)
 
 #: Ethernet Link instance 1: 100 Mbit/s, link active, full duplex, negotiated; a locally
 #: administered MAC address.
@@ -118,7 +122,7 @@ class ObjectModel(ObjectService):
             IDENTITY_CLASS: {0: class_attributes(1, 1),
                              1: identity_instance(IDENTITY, self.module.identity_status)},
             ROUTER_CLASS: {0: class_attributes(1, 1),
-                           1: router_instance(CLASSES, MAX_CONNECTIONS)},
+                           1: router_instance(CLASSES, MAX_MSG_CONNECTIONS)},
             ASSEMBLY_CLASS: {0: class_attributes(2, max(ASSEMBLIES)),
                              **{i: self._assembly(a) for i, a in ASSEMBLIES.items()}},
             CONNECTION_MANAGER_CLASS: {0: class_attributes(1, 1), 1: {}},
