@@ -453,3 +453,35 @@ def test_identity_reset_closes_connections_and_clears_outputs(rig):
     assert rig.table.owner is None and rig.module.output_image() == bytes(14)
     bad = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(reset + b"\x05"), handle)))
     assert bad[2] == cip.INVALID_PARAMETER
+
+
+# -- TCP/IP Interface attribute 13, the encapsulation inactivity timeout (CIP Vol 2 5-3) --
+def _cip(conn: enc.Connection, handle: int, request: bytes) -> tuple[int, bytes]:
+    reply = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(request), handle)))
+    return reply[2], reply[4 + 2 * reply[3]:]
+
+
+def set_request(cls: int, inst: int, attr: int, data: bytes) -> bytes:
+    path = cip.encode_path(cls, inst, attr)
+    return bytes((0x10, len(path) // 2)) + path + data
+
+
+def test_vol2_inactivity_timeout_get_set_range_and_out_of_box_reset(rig):
+    conn = rig.connection()
+    handle = register(conn)
+    assert _cip(conn, handle, get_request(0xF5, 1, 13)) == (0, struct.pack("<H", 120))
+    all_before = _cip(conn, handle, bytes((0x01, 2)) + cip.encode_path(0xF5, 1))
+    for value, status in ((3601, 0x09), (0xFFFF, 0x09), (3600, 0), (0, 0), (1, 0)):
+        assert _cip(conn, handle, set_request(0xF5, 1, 13, struct.pack("<H", value)))[0] \
+            == status, value
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x05"))[0] == 0x13
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x05\x00\x01"))[0] == 0x15
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x07\x00\x00\x00"))[0] == 0  # + route
+    assert _cip(conn, handle, get_request(0xF5, 1, 13)) == (0, struct.pack("<H", 7))
+    assert rig.router.objects.inactivity.seconds == 7
+    assert _cip(conn, handle, bytes((0x01, 2)) + cip.encode_path(0xF5, 1)) == all_before
+    path = cip.encode_path(1, 1)
+    assert _cip(conn, handle, bytes((0x05, len(path) // 2)) + path + b"\x00")[0] == 0
+    assert rig.router.objects.inactivity.seconds == 7         # type 0: a power cycle
+    assert _cip(conn, handle, bytes((0x05, len(path) // 2)) + path + b"\x01")[0] == 0
+    assert rig.router.objects.inactivity.seconds == 120       # type 1: out of box

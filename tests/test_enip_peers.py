@@ -540,3 +540,67 @@ def test_idle_class3_connections_never_keep_the_plcs_class1_out(monkeypatch):
         finally:
             for d in idle:
                 d.close()
+
+
+def _closed_within(sock: socket.socket, limit: float) -> float | None:
+    """Seconds until the adapter closes ``sock``; ``None`` if still open after ``limit``."""
+    start = time.monotonic()
+    sock.settimeout(limit)
+    try:
+        data = sock.recv(1024)
+    except TimeoutError:
+        return None
+    except ConnectionResetError:
+        data = b""
+    assert data == b"", data
+    return time.monotonic() - start
+
+
+def test_encapsulation_inactivity_timeout_closes_silent_connections_cip_vol2_5_3():
+    """TCP/IP attribute 13 set to 1 s with pycomm3: a connection that never sends and an
+    idle pycomm3 client holding a class 3 connection are closed after about 1 s (the
+    class 3 place is freed); a client sending NOP every 0.25 s stays.  Set to 0, an idle
+    connection stays open."""
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from test_enip_encapsulation import decode, frame
+    with enip_service() as st:
+        tcp_port, _ = ports(st)
+        table = st.transports[0].table
+        with driver(st) as d:
+            assert get(d, 0xF5, 1, 13).value == struct.pack("<H", 120)
+            assert generic_status(d, service=0x10, class_code=0xF5, instance=1, attribute=13,
+                                  request_data=struct.pack("<H", 3601)) == 0x09
+            assert set_(d, 0xF5, 1, 13, struct.pack("<H", 1)).error is None
+            assert get(d, 0xF5, 1, 13).value == struct.pack("<H", 1)
+        holder = CIPDriver(f"127.0.0.1:{tcp_port}")
+        holder.open()
+        assert get(holder, 1, 1, 7, connected=True).error is None
+        assert table.count(io=False) == 1
+        talker = socket.create_connection(("127.0.0.1", tcp_port), timeout=3)
+        silent = socket.create_connection(("127.0.0.1", tcp_port), timeout=3)
+        try:
+            started, closed = time.monotonic(), None
+            while time.monotonic() - started < 2.5:
+                talker.sendall(frame(enc.NOP, b"").encode())
+                if closed is None:
+                    waited = _closed_within(silent, 0.25)
+                    if waited is not None:
+                        closed = time.monotonic() - started
+                else:
+                    time.sleep(0.25)
+            assert closed is not None and 0.7 <= closed <= 2.0, closed
+            assert _wait(lambda: table.count(io=False) == 0, 1)        # holder's place
+            talker.sendall(frame(enc.LIST_IDENTITY, b"").encode())
+            assert decode(talker.recv(1024)).status == 0                 # talker stays
+            assert st.transports[0].idle_closed == 2
+        finally:
+            talker.close()
+            silent.close()
+            try:
+                holder.close()
+            except Exception:       # pycomm3 cannot say goodbye on a closed socket
+                pass
+        with driver(st) as d:
+            assert set_(d, 0xF5, 1, 13, struct.pack("<H", 0)).error is None
+        with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as quiet:
+            assert _closed_within(quiet, 1.5) is None                    # 0: never
