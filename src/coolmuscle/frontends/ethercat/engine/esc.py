@@ -8,7 +8,7 @@ receive-time registers a master reads, and the SM watchdog.  A SyncManager guard
 process RAM only: the settings of an activated one are not written (datasheet
 0x0800: "r/(w)", written only while deactivated), and one whose buffer is not inside
 the process RAM (0x1000 up) is not activated, so no mailbox is ever written over the
-registers (docs/fidelity.md "EtherCAT bridge").  No socket, no clock inside:
+registers (docs/fidelity.md, the ESC).  No socket, no clock inside:
 :meth:`Esc.process` takes a frame and the time ``now`` (ns) and returns the frame to
 send on; :meth:`Esc.tick` runs the watchdog.  It knows nothing of the device behind
 it: what a real chip loads from its EEPROM at power-up (PDI control, station alias)
