@@ -12,11 +12,13 @@ the AL status changed only if the frame carries a write-type datagram that reach
 this slave over AL control (0x0120) or a SyncManager's activate register (0x0806 +
 8n: the firmware checks its configuration again), or a logical write (an FMMU may
 map those).  Every 100 frames a fresh master (reset, configure, INIT to OP) must
-reach OP.  Seeds are fixed: the run is the same every time.
+reach OP, and nothing was logged as an error (no exception caught inside either).
+Seeds are fixed: the run is the same every time.
 """
 
 from __future__ import annotations
 
+import logging
 import random
 import struct
 import time
@@ -188,7 +190,7 @@ def assert_sane(esc: E.Esc) -> None:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_fuzzed_frames_never_crash_hang_or_change_state_unasked(seed):
+def test_fuzzed_frames_never_crash_hang_or_change_state_unasked(seed, caplog):
     rng = random.Random(seed)
     app = BridgeApp(None)
     to_op(app)
@@ -212,6 +214,7 @@ def test_fuzzed_frames_never_crash_hang_or_change_state_unasked(seed):
         if n % 100 == 99 or esc.al_status != before:
             to_op(app)                # a fresh master still reaches OP
     assert time.perf_counter() - started < 30
+    assert not [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
 
 
 def _one(cmd: int, **fields: object) -> bytes:
@@ -228,7 +231,8 @@ def _sdo_upload(rng: random.Random) -> list[int]:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3, 4])
-def test_fuzzed_syncmanager_and_fmmu_settings_with_mailbox_traffic_keep_the_esm_sane(seed):
+def test_fuzzed_syncmanager_and_fmmu_settings_with_mailbox_traffic_keep_the_esm_sane(seed,
+                                                                                    caplog):
     """A master at the slave's station reconfigures SyncManagers and FMMUs at random
     (on the registers, past the RAM, deactivating first or not) between SDO requests,
     mailbox reads, logical datagrams and state requests."""
@@ -266,6 +270,7 @@ def test_fuzzed_syncmanager_and_fmmu_settings_with_mailbox_traffic_keep_the_esm_
         assert_sane(esc)
         if step % 100 == 99:
             to_op(app)
+    assert not [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
 
 
 def test_fuzz_reaches_the_syncmanager_and_fmmu_registers():
