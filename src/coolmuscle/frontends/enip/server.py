@@ -8,7 +8,10 @@ API, its objects and description) to the CIP machinery (:mod:`.cip`) and owns on
 sockets and timers:
 
 * TCP: one :class:`~.cip.encapsulation.Connection` per client; a frame longer than the
-  encapsulation limit is answered 0x0065 and the connection closed;
+  encapsulation limit is answered 0x0065 and the connection closed; a connection that
+  brings no whole encapsulation packet for the TCP/IP object's encapsulation
+  inactivity timeout (attribute 13, 120 s unless set; 0: never) is closed, and its
+  session and class 3 connections end with it (CIP Vol 2 5-3);
 * UDP on the TCP port number: ListIdentity / ListServices / ListInterfaces;
 * UDP I/O port (2222): O->T packets in; T->O packets out, sent on time by the
   :class:`~.cip.producer.Producer` thread; a loop timer runs the watchdogs.  The
@@ -97,6 +100,10 @@ class EnipTransport(StreamServer):
         self.lock = threading.Lock()
         self.producer: Producer | None = None
         self._io_sock: socket.socket | None = None
+        self.objects: ObjectModel | None = None
+        #: When each TCP connection last brought a whole encapsulation packet (monotonic s).
+        self._last_packet: dict[asyncio.StreamWriter, float] = {}
+        self.idle_closed = 0
 
     # -- life cycle -------------------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -109,6 +116,7 @@ class EnipTransport(StreamServer):
         objects = ObjectModel(self.module, host=self.host,
                               output_owned=lambda: self.table is not None
                               and self.table.owner is not None, reset=self._reset)
+        self.objects = objects
         try:
             await self._listen()
         except OSError as exc:
@@ -214,6 +222,7 @@ class EnipTransport(StreamServer):
         conn = Connection(self.router, self.sessions, (remote[0], remote[1]),
                           (local[0], local[1]))
         frames = FrameReader()
+        self._last_packet[writer] = time.monotonic()
         try:
             while not conn.closing:
                 data = await reader.read(READ_SIZE)
@@ -224,6 +233,7 @@ class EnipTransport(StreamServer):
                     break
                 await writer.drain()
         finally:
+            self._last_packet.pop(writer, None)
             with self.lock:
                 conn.close()
 
@@ -239,6 +249,7 @@ class EnipTransport(StreamServer):
                 return False
             if frame is None:
                 return True
+            self._last_packet[writer] = time.monotonic()
             assert self.table is not None
             with self.lock:
                 before = len(self.table.by_triad)
@@ -274,9 +285,27 @@ class EnipTransport(StreamServer):
                 gone = self.table.expire(time.monotonic_ns())
             if gone and self.producer is not None:
                 self.producer.wake()
+            self._close_idle(time.monotonic())
         except Exception:  # the watchdogs must go on whatever one connection did
             log.exception("enip: I/O watchdog failed")
         self._schedule()
+
+    def _close_idle(self, now: float) -> None:
+        """Close the TCP connections silent for the encapsulation inactivity timeout
+        (checked every tick, at most :data:`IDLE_TICK` late)."""
+        timeout = self.objects.inactivity.seconds if self.objects is not None else 0
+        if not timeout:
+            return
+        idle = [w for w, last in self._last_packet.items() if now - last >= timeout]
+        for writer in idle:
+            del self._last_packet[writer]
+            self.idle_closed += 1
+            log.debug("enip: closed a TCP connection with no encapsulation packet for %d s",
+                      timeout)
+            if writer.transport.get_write_buffer_size():
+                writer.transport.abort()          # a client that does not read either
+            else:
+                writer.transport.close()
 
     def _schedule(self) -> None:
         assert self.table is not None

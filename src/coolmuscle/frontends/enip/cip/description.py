@@ -4,8 +4,8 @@ The encapsulation, the Message Router, the Connection Manager and the connection
 table name no product: the identity a Forward_Open's electronic key is checked
 against (CIP Vol 1 5A-2, C-1.4.2), the assemblies, the one Class 1 connection the
 adapter offers (its connection points, sizes and RPI range, CIP Vol 1 3-5.5) and how
-many connections it takes come from one :class:`AdapterDescription` the product
-module builds.  The same facts write the product's EDS file.
+many connections of each kind it takes come from one :class:`AdapterDescription` the
+product module builds.  The same facts write the product's EDS file.
 """
 
 from __future__ import annotations
@@ -55,8 +55,12 @@ class ConnectionInfo:
 
 @dataclass(frozen=True, slots=True)
 class AdapterDescription:
-    """One adapter (target) as the CIP machinery serves it."""
+    """One adapter (target) as the CIP machinery serves it.  The connections it takes
+    are counted per kind, as its EDS declares them ([Capacity] MaxIOConnections and
+    MaxMsgConnections, CIP Vol 1 7-3.6.12): class 1 I/O connections and class 3
+    explicit connections to the Message Router never take each other's places."""
 
     identity: IdentityInfo
     connection: ConnectionInfo
-    max_connections: int
+    max_io_connections: int
+    max_msg_connections: int

@@ -20,6 +20,11 @@ is its :class:`~.description.AdapterDescription`; what it drives is a :class:`Mo
   production stops and the module's outputs go back to their power-up image.
 * Class 3 (explicit, to the Message Router) connections belong to the TCP session
   that opened them; a repeated sequence count gets the previous reply again.
+* Each kind has its own limit (the description's ``max_io_connections`` and
+  ``max_msg_connections``, the EDS's [Capacity]): idle class 3 connections never
+  keep a PLC's Class 1 connection out.  One kind full: 0x01/0x0113 "out of
+  connections" (CIP Vol 1 table 3-5.33); a second exclusive owner of the one I/O
+  connection point: 0x01/0x0106 "ownership conflict", as before.
 """
 
 from __future__ import annotations
@@ -156,6 +161,10 @@ class ConnectionTable:
         self._next_id = (self._next_id + 1) & 0xFFFFFFFF or 1
         return self._next_id
 
+    def count(self, io: bool) -> int:
+        """Open connections of one kind: class 1 (``io``) or class 3."""
+        return sum(1 for c in self.by_triad.values() if c.io == io)
+
     @property
     def owner(self) -> Connection | None:
         return next((c for c in self.by_triad.values() if c.io), None)
@@ -165,15 +174,17 @@ class ConnectionTable:
         """Forward_Open: the reply body and the CPF items to send with it."""
         if req.triad in self.by_triad:
             raise req.failure(connmgr.DUPLICATE)
-        if len(self.by_triad) >= self.adapter.max_connections:
-            raise req.failure(connmgr.OUT_OF_CONNECTIONS)
         if req.transport_class == 3:
             connmgr.check_class3(req, self.adapter.identity)
+            if self.count(io=False) >= self.adapter.max_msg_connections:
+                raise req.failure(connmgr.OUT_OF_CONNECTIONS)
             conn = Connection(req, self._new_id(), req.to_id, peer_ip, session)
             return self._register(conn, now), []
         header = connmgr.check_class1(req, self.adapter.identity, self.adapter.connection)
         if self.owner is not None:
             raise req.failure(connmgr.OWNERSHIP_CONFLICT)
+        if self.count(io=True) >= self.adapter.max_io_connections:
+            raise req.failure(connmgr.OUT_OF_CONNECTIONS)
         conn = Connection(req, self._new_id(), req.to_id, peer_ip, 0, header)
         extra = self._route_to(conn, items)
         conn.next_due = now

@@ -3,7 +3,8 @@
 A product module builds its objects as a table (class -> instance -> attribute ->
 :class:`Attribute`, instance 0 holding the class attributes) with the builders of the
 standard objects here: Identity (0x01, CIP Vol 1 5A-2), Message Router (0x02, 5A-3),
-TCP/IP Interface (0xF5, Vol 2 5-3) and Ethernet Link (0xF6, Vol 2 5-4); the Assembly
+TCP/IP Interface (0xF5, Vol 2 5-3, with its settable encapsulation inactivity
+timeout) and Ethernet Link (0xF6, Vol 2 5-4); the Assembly
 (0x04) data and any vendor class are the product's.  :class:`ObjectService` serves
 Get_Attribute_Single, Set_Attribute_Single, Get_Attributes_All and the Identity's
 Reset over such a table, raising :class:`~.messages.CipError` for every refusal.
@@ -74,14 +75,44 @@ def identity_instance(ident: IdentityInfo, status: Callable[[], int]) -> Instanc
 
 
 def router_instance(classes: tuple[int, ...], max_connections: int) -> Instance:
-    """Message Router instance 1: the object list and the connections it takes."""
+    """Message Router instance 1: the object list and the connections it takes (5A-3.3
+    attribute 2, "number available": its own, the class 3 connections)."""
     listed = struct.pack("<H", len(classes)) + b"".join(struct.pack("<H", c) for c in classes)
     return {1: Attribute(lambda: listed), 2: Attribute(u16(max_connections))}
 
 
-def tcpip_instance(host: str, hostname: str) -> Instance:
+#: TCP/IP Interface attribute 13 (CIP Vol 2 5-3): its default and largest value (s).
+INACTIVITY_DEFAULT_S = 120
+INACTIVITY_MAX_S = 3600
+
+
+@dataclass(slots=True)
+class EncapsulationTimeout:
+    """TCP/IP Interface attribute 13, Encapsulation Inactivity Timeout (CIP Vol 2 5-3,
+    UINT seconds): a TCP connection that carries no encapsulation packet
+    for that long is closed by the adapter; 0 disables it.  Get and Set; a value above
+    3600 is 0x09 (invalid attribute value), as OpENer answers; the out-of-box value is
+    120 (Identity Reset type 1 restores it)."""
+
+    seconds: int = INACTIVITY_DEFAULT_S
+
+    def get(self) -> bytes:
+        return struct.pack("<H", self.seconds)
+
+    def set(self, data: bytes) -> None:
+        value = struct.unpack("<H", exact_data(data, 2))[0]
+        if value > INACTIVITY_MAX_S:
+            raise CipError(cip.INVALID_ATTRIBUTE_VALUE)
+        self.seconds = value
+
+    def out_of_box(self) -> None:
+        self.seconds = INACTIVITY_DEFAULT_S
+
+
+def tcpip_instance(host: str, hostname: str, inactivity: EncapsulationTimeout) -> Instance:
     """TCP/IP Interface instance 1: status, capability, control, the physical link
-    (Ethernet Link instance 1), the configuration of ``host``, the host name."""
+    (Ethernet Link instance 1), the configuration of ``host``, the host name, and the
+    encapsulation inactivity timeout (13; Get_Attributes_All keeps to 1-6, as before)."""
     try:
         ip = int(ipaddress.IPv4Address(host))
     except ValueError:
@@ -91,7 +122,8 @@ def tcpip_instance(host: str, hostname: str) -> Instance:
                          0, 0, 0) + cip.cip_string("")
     return {1: Attribute(u32(1)), 2: Attribute(u32(0x04)), 3: Attribute(u32(0x00)),
             4: Attribute(lambda: path), 5: Attribute(lambda: config),
-            6: Attribute(lambda: cip.cip_string(hostname))}
+            6: Attribute(lambda: cip.cip_string(hostname)),
+            13: Attribute(inactivity.get, inactivity.set, in_all=False)}
 
 
 def ethernet_link_instance(speed_mbps: int, flags: int, mac: bytes) -> Instance:
@@ -121,9 +153,11 @@ class ObjectService:
     """The attribute services and the Identity's Reset over one object table."""
 
     def __init__(self, table: ObjectTable, *, reset: Callable[[], None] = lambda: None,
+                 out_of_box: Callable[[], None] = lambda: None,
                  get_all: frozenset[int] = GET_ALL_CLASSES) -> None:
         self.table = table
         self.reset = reset
+        self.out_of_box = out_of_box
         self.get_all = get_all
 
     def instance(self, request: cip.Request) -> Instance:
@@ -161,12 +195,15 @@ class ObjectService:
 
     def _reset(self, data: bytes) -> bytes:
         """Identity Reset (CIP Vol 1 5A-2.3): type 0 or 1 restarts the adapter (what that
-        means is the product's ``reset``)."""
+        means is the product's ``reset``); type 1 first restores the out-of-box settings
+        (``out_of_box``)."""
         kind = data[0] if data else 0
         if len(data) > 1:
             raise CipError(cip.TOO_MUCH_DATA)
         if kind not in (0, 1):
             raise CipError(cip.INVALID_PARAMETER)
+        if kind == 1:
+            self.out_of_box()
         self.reset()
         return b""
 

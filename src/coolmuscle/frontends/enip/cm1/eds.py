@@ -10,7 +10,7 @@ device.  ``coolmuscle enip eds > CoolMuscle1.eds`` writes it; tests check it wit
 from __future__ import annotations
 
 from ..cip.description import AssemblyInfo, ConnectionInfo
-from .objects import ASSEMBLIES, EXCLUSIVE_OWNER, IDENTITY, MAX_CONNECTIONS
+from .objects import ASSEMBLIES, DESCRIPTION, EXCLUSIVE_OWNER, IDENTITY
 
 #: Trigger and transport (CIP Vol 1 7-3.6.11.1): class 1, cyclic, exclusive owner.
 TRIGGER_EXCLUSIVE_OWNER = 0x04010002
@@ -109,8 +109,8 @@ def _port_capacity_sections() -> list[str]:
     return ["[Port]",
             '        Port1 = TCP, "EtherNet/IP Port", "20 F5 24 01", 1;', "",
             "[Capacity]",
-            "        MaxIOConnections = 1;",
-            f"        MaxMsgConnections = {MAX_CONNECTIONS - 1};",
+            f"        MaxIOConnections = {DESCRIPTION.max_io_connections};",
+            f"        MaxMsgConnections = {DESCRIPTION.max_msg_connections};",
             "        TSpec1 = TxRx, 8, 500;", "        TSpec2 = TxRx, 14, 500;", ""]
 
 

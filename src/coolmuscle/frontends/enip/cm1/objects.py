@@ -5,6 +5,8 @@
   3.1, 3.2, 3.3), Connection Manager (0x06, its services are in
   :mod:`..cip.connmgr`), TCP/IP Interface (0xF5), Ethernet Link (0xF6) and the vendor
   class 0x64 whose instance 1 attribute 0x64 is the communication error code (3.1.1).
+  TCP/IP attribute 13, the encapsulation inactivity timeout, is settable
+  (:attr:`ObjectModel.inactivity`; the server closes idle TCP connections by it).
 * :data:`IDENTITY`, :data:`ASSEMBLIES`, :data:`EXCLUSIVE_OWNER` and
   :data:`DESCRIPTION` are the static facts (the CIP machinery is configured by
   :data:`DESCRIPTION`, the EDS is written from them); :class:`ObjectModel` builds the
@@ -36,6 +38,7 @@ from ..cip.objects import (
     ROUTER_CLASS,
     TCPIP_CLASS,
     Attribute,
+    EncapsulationTimeout,
     Instance,
     ObjectService,
     ObjectTable,
@@ -75,10 +78,14 @@ VENDOR_CLASS = 0x64
 VENDOR_ATTRIBUTE = 0x64
 CLASSES = (IDENTITY_CLASS, ROUTER_CLASS, ASSEMBLY_CLASS, CONNECTION_MANAGER_CLASS,
            VENDOR_CLASS, TCPIP_CLASS, ETHERNET_LINK_CLASS)
-MAX_CONNECTIONS = 4
+#: Connections the module takes, per kind (its EDS [Capacity]; docs/fidelity.md): the
+#: one Class 1 exclusive owner, and three class 3 connections to the Message Router.
+MAX_IO_CONNECTIONS = 1
+MAX_MSG_CONNECTIONS = 3
 
 #: What the CIP machinery (connection manager, connection table) serves.
-DESCRIPTION = AdapterDescription(IDENTITY, EXCLUSIVE_OWNER, MAX_CONNECTIONS)
+DESCRIPTION = AdapterDescription(IDENTITY, EXCLUSIVE_OWNER, MAX_IO_CONNECTIONS,
+                                 MAX_MSG_CONNECTIONS)
 
 #: Ethernet Link instance 1: 100 Mbit/s, link active, full duplex, negotiated; a locally
 #: administered MAC address.
@@ -110,7 +117,9 @@ class ObjectModel(ObjectService):
         self.module = module
         self.host = host
         self.output_owned = output_owned
-        super().__init__(self._build(), reset=reset)
+        #: TCP/IP attribute 13, read by the server that closes idle TCP connections.
+        self.inactivity = EncapsulationTimeout()
+        super().__init__(self._build(), reset=reset, out_of_box=self.inactivity.out_of_box)
 
     def _build(self) -> ObjectTable:
         comm_error = Attribute(lambda: struct.pack("<H", self.module.comm_error()))
@@ -118,12 +127,13 @@ class ObjectModel(ObjectService):
             IDENTITY_CLASS: {0: class_attributes(1, 1),
                              1: identity_instance(IDENTITY, self.module.identity_status)},
             ROUTER_CLASS: {0: class_attributes(1, 1),
-                           1: router_instance(CLASSES, MAX_CONNECTIONS)},
+                           1: router_instance(CLASSES, MAX_MSG_CONNECTIONS)},
             ASSEMBLY_CLASS: {0: class_attributes(2, max(ASSEMBLIES)),
                              **{i: self._assembly(a) for i, a in ASSEMBLIES.items()}},
             CONNECTION_MANAGER_CLASS: {0: class_attributes(1, 1), 1: {}},
             VENDOR_CLASS: {0: class_attributes(1, 1), 1: {VENDOR_ATTRIBUTE: comm_error}},
-            TCPIP_CLASS: {0: class_attributes(4, 1), 1: tcpip_instance(self.host, HOSTNAME)},
+            TCPIP_CLASS: {0: class_attributes(4, 1),
+                          1: tcpip_instance(self.host, HOSTNAME, self.inactivity)},
             ETHERNET_LINK_CLASS: {0: class_attributes(4, 1),
                                   1: ethernet_link_instance(LINK_SPEED, LINK_FLAGS, MAC)},
         }

@@ -2,9 +2,13 @@
 
 Owns what a real ESC does in hardware (ETG.1000.4, the ESC datasheet section II):
 the register space, the 14 datagram commands with their working-counter rules and
-auto-increment addressing, the FMMUs, the SyncManagers (mailbox full/empty and
-repeat, buffered process data), the SII EEPROM interface, the DC receive-time
-registers a master reads, and the SM watchdog.  No socket, no clock inside:
+auto-increment addressing, the FMMUs (:mod:`.fmmu`), the SyncManagers (mailbox
+full/empty and repeat, buffered process data), the SII EEPROM interface, the DC
+receive-time registers a master reads, and the SM watchdog.  A SyncManager guards
+process RAM only: the settings of an activated one are not written (datasheet
+0x0800: "r/(w)", written only while deactivated), and one whose buffer is not inside
+the process RAM (0x1000 up) is not activated, so no mailbox is ever written over the
+registers (docs/fidelity.md, the ESC).  No socket, no clock inside:
 :meth:`Esc.process` takes a frame and the time ``now`` (ns) and returns the frame to
 send on; :meth:`Esc.tick` runs the watchdog.  It knows nothing of the device behind
 it: what a real chip loads from its EEPROM at power-up (PDI control, station alias)
@@ -21,6 +25,8 @@ import logging
 import struct
 from dataclasses import dataclass
 from typing import Protocol
+
+from . import fmmu
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +105,9 @@ class Pdi(Protocol):
     def watchdog_expired(self) -> None:
         """The SM watchdog expired (no output buffer within its time)."""
 
+    def sm_changed(self, sm: int) -> None:
+        """The master activated or deactivated SyncManager ``sm`` (AL event "SM change")."""
+
 
 @dataclass
 class SyncManager:
@@ -114,7 +123,14 @@ class SyncManager:
 
     @property
     def enabled(self) -> bool:
-        return bool(self.activate & 0x01) and self.length > 0 and not self.pdi_control & 0x01
+        return bool(self.activate & 0x01) and self.length > 0 \
+            and not self.pdi_control & 0x01 and self.in_ram
+
+    @property
+    def in_ram(self) -> bool:
+        """Its buffer lies inside the process RAM (a SyncManager guards RAM, never the
+        registers below 0x1000)."""
+        return RAM_START <= self.start and self.start + self.length <= MEM_SIZE
 
     @property
     def mailbox(self) -> bool:
@@ -149,6 +165,7 @@ class Esc:
             self._wmask[base:base + 5] = b"\x01" * 5
             self._wmask[base + 6] = 1
         self.sm = [SyncManager(i) for i in range(N_SM)]
+        self._fmmu: tuple[fmmu.Fmmu, ...] = ()
         self._inputs: dict[int, bytes] = {}
         self._mbx_out: dict[int, bytes] = {}
         self._wd_last: int | None = None
@@ -358,85 +375,49 @@ class Esc:
         return 0
 
     # -- FMMU ------------------------------------------------------------------
-    def _fmmus(self) -> list[tuple[int, int, int, int, int, int, int]]:
-        out = []
-        for i in range(N_FMMU):
-            base = REG_FMMU + 16 * i
-            if not self.mem[base + 12] & 0x01:
-                continue
-            lstart, llen, lsb, leb, pstart, psb, kind = struct.unpack_from(
-                "<IHBBHBB", self.mem, base)
-            if llen:
-                out.append((lstart, llen, lsb & 7, leb & 7, pstart, psb & 7, kind & 3))
-        return out
-
     def _logical(self, cmd: int, buf: bytearray, addr: int, data: int, length: int) -> int:
-        incoming = bytes(buf[data:data + length])
+        """LRD/LWR/LRW through the FMMUs decoded when they were configured: each one
+        costs the bits it shares with the datagram."""
+        incoming = bytes(buf[data:data + length]) if cmd != LRD else b""
         read_done = write_done = False
-        for lstart, llen, lsb, leb, pstart, psb, kind in self._fmmus():
-            lo = max(addr, lstart)
-            hi = min(addr + length, lstart + llen)
+        for f in self._fmmu:
+            lo, hi = f.overlap(addr, length)
             if lo >= hi:
                 continue
-            aligned = lsb == 0 and psb == 0 and leb == 7
-            if kind & 1 and cmd in (LRD, LRW):
-                if aligned:
-                    got = self.read(pstart + lo - lstart, hi - lo)
-                    if got is not None:
-                        buf[data + lo - addr:data + hi - addr] = got
-                        read_done = True
-                elif self._bits_read(buf, data, length, addr, lstart, llen, lsb, leb, pstart,
-                                     psb):
-                    read_done = True
-            if kind & 2 and cmd in (LWR, LRW):
-                if aligned:
-                    if self.write(pstart + lo - lstart, incoming[lo - addr:hi - addr]):
-                        write_done = True
-                elif self._bits_write(incoming, addr, lstart, llen, lsb, leb, pstart, psb):
-                    write_done = True
+            if f.reads and cmd != LWR and self._map_read(f, buf, data, addr, lo, hi):
+                read_done = True
+            if f.writes and cmd != LRD and self._map_write(f, incoming, addr, lo, hi):
+                write_done = True
         if cmd == LRW:
             return (1 if read_done else 0) + (2 if write_done else 0)
         return 1 if (read_done or write_done) else 0
 
-    @staticmethod
-    def _bit_pairs(addr: int, length: int, lstart: int, llen: int, lsb: int, leb: int,
-                   pstart: int, psb: int) -> list[tuple[int, int]]:
-        """(datagram bit, physical bit) pairs of a bit-wise FMMU inside the datagram."""
-        nbits = (llen - 1) * 8 + leb - lsb + 1
-        pairs = []
-        for k in range(max(0, nbits)):
-            lbit = (lstart - addr) * 8 + lsb + k
-            if 0 <= lbit < length * 8:
-                pairs.append((lbit, pstart * 8 + psb + k))
-        return pairs
-
-    def _bits_read(self, buf: bytearray, data: int, length: int, addr: int, lstart: int,
-                   llen: int, lsb: int, leb: int, pstart: int, psb: int) -> bool:
-        pairs = self._bit_pairs(addr, length, lstart, llen, lsb, leb, pstart, psb)
-        if not pairs:
-            return False
-        first = pairs[0][1] // 8
-        got = self.read(first, pairs[-1][1] // 8 - first + 1)
+    def _map_read(self, f: fmmu.Fmmu, buf: bytearray, data: int, addr: int, lo: int,
+                  hi: int) -> bool:
+        """Logical bits ``[lo, hi)`` of the datagram at ``data`` from physical memory."""
+        count, phys = hi - lo, f.pbit + lo - f.lbit
+        if f.aligned:
+            got = self.read(phys // 8, count // 8)
+            if got is None:
+                return False
+            buf[data + lo // 8 - addr:data + hi // 8 - addr] = got
+            return True
+        first = phys // 8
+        got = self.read(first, (phys + count - 1) // 8 - first + 1)
         if got is None:
             return False
-        for lbit, pbit in pairs:
-            value = got[pbit // 8 - first] >> (pbit % 8) & 1
-            mask = 1 << (lbit % 8)
-            buf[data + lbit // 8] = (buf[data + lbit // 8] & ~mask) | (mask if value else 0)
+        fmmu.copy_bits(got, phys - first * 8, buf, (data - addr) * 8 + lo, count)
         return True
 
-    def _bits_write(self, incoming: bytes, addr: int, lstart: int, llen: int, lsb: int,
-                    leb: int, pstart: int, psb: int) -> bool:
-        pairs = self._bit_pairs(addr, len(incoming), lstart, llen, lsb, leb, pstart, psb)
-        if not pairs:
-            return False
-        first = pairs[0][1] // 8
-        cur = bytearray(self.mem[first:pairs[-1][1] // 8 + 1])
-        for lbit, pbit in pairs:
-            value = incoming[lbit // 8] >> (lbit % 8) & 1
-            mask = 1 << (pbit % 8)
-            i = pbit // 8 - first
-            cur[i] = (cur[i] & ~mask) | (mask if value else 0)
+    def _map_write(self, f: fmmu.Fmmu, incoming: bytes, addr: int, lo: int, hi: int) -> bool:
+        """Logical bits ``[lo, hi)`` of the datagram's data ``incoming`` to physical memory
+        (the physical bits around them keep their values)."""
+        count, phys = hi - lo, f.pbit + lo - f.lbit
+        if f.aligned:
+            return self.write(phys // 8, incoming[lo // 8 - addr:hi // 8 - addr])
+        first, last = phys // 8, (phys + count - 1) // 8
+        cur = bytearray(bytes(self.mem[first:last + 1]).ljust(last + 1 - first, b"\x00"))
+        fmmu.copy_bits(incoming, lo - addr * 8, cur, phys - first * 8, count)
         return self.write(first, bytes(cur))
 
     # -- physical memory ---------------------------------------------------------
@@ -507,6 +488,8 @@ class Esc:
             return lo < b and a < hi
         if hit(REG_SM, REG_SM + 8 * N_SM):
             self._sm_written(lo, hi)
+        if hit(REG_FMMU, REG_FMMU + fmmu.FMMU_SIZE * N_FMMU):
+            self._fmmu = fmmu.decode(self.mem, REG_FMMU, N_FMMU)
         if hit(REG_SII_CONTROL, REG_SII_CONTROL + 2):
             self._sii_command()
         if hit(REG_ERR_COUNTERS, REG_ERR_COUNTERS + 0x14):
@@ -520,14 +503,24 @@ class Esc:
             self.pdi.al_control(self.al_control_value)
 
     def _sm_written(self, lo: int, hi: int) -> None:
+        """The master wrote SyncManager registers.  As an ESC does (datasheet section II
+        0x0800: start, length and control are "r/(w)"): those of an activated SyncManager
+        are not written (they keep their values); an activation whose buffer is not
+        inside the process RAM does not take (the activate bit reads 0).  A change of
+        the activate bit is an SM change event for the firmware."""
         for s in self.sm:
             base = REG_SM + 8 * s.number
             if not (lo < base + 8 and base < hi):
                 continue
             was_enabled = s.enabled
             old_activate = s.activate
-            s.start, s.length, s.control, _status, s.activate = struct.unpack_from(
-                "<HHBBB", self.mem, base)
+            if old_activate & 0x01:
+                struct.pack_into("<HHB", self.mem, base, s.start, s.length, s.control)
+            else:
+                s.start, s.length, s.control = struct.unpack_from("<HHB", self.mem, base)
+            s.activate = self.mem[base + 6]
+            if s.activate & 0x01 and not s.in_ram:
+                s.activate &= 0xFE
             if not s.enabled:
                 s.status &= ~0x08 & 0xFF
             elif not was_enabled:
@@ -536,9 +529,12 @@ class Esc:
                     self._wd_last = self._now
                     self._wd_expired = False
                     self.mem[REG_WD_STATUS] |= 0x01
-            if s.mailbox and not s.master_writes and (s.activate ^ old_activate) & 0x02:
+            if s.enabled and s.mailbox and not s.master_writes \
+                    and (s.activate ^ old_activate) & 0x02:
                 self._repeat(s)
             self._sync_sm_regs(s)
+            if (s.activate ^ old_activate) & 0x01:
+                self.pdi.sm_changed(s.number)
 
     def _repeat(self, s: SyncManager) -> None:
         """Repeat request (activate bit 1 toggled): send the last message again."""

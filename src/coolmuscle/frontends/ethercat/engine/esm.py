@@ -11,12 +11,19 @@ AL status and AL status code.
   device stays where it is and sets the error indication (AL status bit 4).
 * While the error indication is set, a request without the acknowledge bit (AL
   control bit 4) may only go down; a request with it clears the indication first.
+* Total: any AL status and any AL control value give an outcome, never an exception.
+  A current state that names no state (an AL status the firmware never writes) counts
+  as INIT, the state in which nothing runs.
+* :func:`fault` is a local error taking the device down (the SM watchdog in OP to
+  SAFE-OP with 001Bh; a SyncManager the master changed in PRE-OP or above, ETG.1000.6
+  as the slave stack checks it on the SM change event: to INIT with 0016h for a
+  mailbox SyncManager, to PRE-OP with 001Dh / 001Eh for the process data ones).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 INIT, PREOP, BOOT, SAFEOP, OP = 1, 2, 3, 4, 8
 NAMES = {INIT: "INIT", PREOP: "PRE-OP", BOOT: "BOOT", SAFEOP: "SAFE-OP", OP: "OP"}
@@ -60,7 +67,14 @@ class Outcome:
 
 def request(al_status: int, al_code: int, control: int, check: Check) -> Outcome:
     """Apply the master's AL control value to the current AL status."""
-    state = al_status & 0x0F
+    out = _request(al_status, al_code, control, check)
+    if _known(al_status & 0x0F) != al_status & 0x0F:     # an unknown state left for INIT
+        out = replace(out, changed=True, code=out.code if out.error else NO_ERROR)
+    return out
+
+
+def _request(al_status: int, al_code: int, control: int, check: Check) -> Outcome:
+    state = _known(al_status & 0x0F)
     error = bool(al_status & ERROR_FLAG)
     wanted = control & 0x0F
     if error and control & ACK:
@@ -69,7 +83,7 @@ def request(al_status: int, al_code: int, control: int, check: Check) -> Outcome
         return Outcome(state, True, UNKNOWN_STATE, False)
     if wanted == BOOT:
         return Outcome(state, True, BOOT_NOT_SUPPORTED, False)
-    if error and _ORDER[wanted] >= _ORDER.get(state, 0):
+    if error and _ORDER[wanted] >= _ORDER[state]:
         return Outcome(state, error, al_code, False)       # not acknowledged: stay
     if wanted == state:
         return Outcome(state, error, al_code, False)
@@ -82,7 +96,14 @@ def request(al_status: int, al_code: int, control: int, check: Check) -> Outcome
 
 
 def fault(al_status: int, to_state: int, code: int) -> Outcome:
-    """A local error (the SM watchdog in OP: 001Bh) takes the device down to ``to_state``."""
-    state = al_status & 0x0F
-    target = to_state if _ORDER.get(state, 0) > _ORDER[to_state] else state
-    return Outcome(target, True, code, target != state)
+    """A local error takes the device down to ``to_state`` (never up: below it, the
+    device stays where it is) with the error indication and ``code``."""
+    raw = al_status & 0x0F
+    state = _known(raw)
+    target = to_state if _ORDER[state] > _ORDER[_known(to_state)] else state
+    return Outcome(target, True, code, target != raw)
+
+
+def _known(state: int) -> int:
+    """``state`` if it names a state the device can be in, else INIT."""
+    return state if state in _ORDER else INIT

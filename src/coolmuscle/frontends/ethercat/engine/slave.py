@@ -4,7 +4,8 @@
 :class:`~.description.SlaveDescription`: it writes the SII image from it, runs the
 state machine (:mod:`.esm`) with the configuration checks of ETG.1000.6 (the
 SyncManagers a master sets up must be the description's: mailbox addresses and
-sizes, process-data sizes, an SM watchdog not shorter than its cycle), serves the
+sizes, process-data sizes, an SM watchdog not shorter than its cycle; checked again
+when the master (de)activates a SyncManager in PRE-OP and above), serves the
 mailbox (CoE through :class:`~.coe.CoeServer`, a mailbox error for the rest), moves
 the process images, and trips to SAFE-OP with 001Bh when the SM watchdog expires.
 It runs in the frame thread and never waits for the application.
@@ -119,13 +120,20 @@ class SlaveStack:
                     and sm[0].mailbox and sm[1].mailbox):
                 return esm.INVALID_MAILBOX_CONFIG
         if (current, requested) == (esm.PREOP, esm.SAFEOP):
-            if not (_matches(sm[2], d.outputs, d.output_size, True) and not sm[2].mailbox):
-                return esm.INVALID_OUTPUT_CONFIG
-            if not (_matches(sm[3], d.inputs, d.input_size, False) and not sm[3].mailbox):
-                return esm.INVALID_INPUT_CONFIG
+            code = self._process_data_check()
+            if code:
+                return code
             wd = self.esc.watchdog_ns()
             if sm[2].control & 0x40 and 0 < wd < d.cycle_ns:
                 return esm.INVALID_WATCHDOG_CONFIG
+        return 0
+
+    def _process_data_check(self) -> int:
+        sm, d = self.esc.sm, self.description
+        if not (_matches(sm[2], d.outputs, d.output_size, True) and not sm[2].mailbox):
+            return esm.INVALID_OUTPUT_CONFIG
+        if not (_matches(sm[3], d.inputs, d.input_size, False) and not sm[3].mailbox):
+            return esm.INVALID_INPUT_CONFIG
         return 0
 
     def watchdog_expired(self) -> None:
@@ -133,6 +141,23 @@ class SlaveStack:
             return
         before = self.esc.al_status
         self._apply(before, esm.fault(before, esm.SAFEOP, esm.SM_WATCHDOG))
+
+    def sm_changed(self, sm: int) -> None:
+        """The master (de)activated a SyncManager: in PRE-OP and above the configuration
+        the state rests on is checked again (ETG.1000.6; what SOES does on the AL event
+        "SM change").  A mailbox SyncManager that no longer matches takes the device to
+        INIT with 0016h, a process data one (SAFE-OP, OP) to PRE-OP with 001Dh / 001Eh."""
+        state = self.state
+        if state not in (esm.PREOP, esm.SAFEOP, esm.OP):
+            return
+        code = self._config_check(esm.INIT, esm.PREOP)
+        to_state = esm.INIT
+        if not code and state != esm.PREOP:
+            code = self._process_data_check()
+            to_state = esm.PREOP
+        if code:
+            before = self.esc.al_status
+            self._apply(before, esm.fault(before, to_state, code))
 
     # -- process data -------------------------------------------------------
     def outputs_written(self, sm: int, data: bytes) -> None:
@@ -164,6 +189,9 @@ class SlaveStack:
         self._pump()
 
     def _serve(self, data: bytes) -> None:
+        if len(data) < 6:
+            self._send(MBX_ERR, struct.pack("<HH", 0x0001, MBXERR_SIZE_TOO_SHORT))
+            return
         length, _address, _channel, kind = struct.unpack_from("<HHBB", data)
         payload = data[6:6 + length]
         if length > len(data) - 6:
