@@ -160,8 +160,12 @@ class Plan:
             return max(1, os.cpu_count() or 1)
 
 
-#: The plan of the package build.
-PLAN = Plan()
+#: The plan of the package build: a C file a module, compiled side by side on every CPU,
+#: at -O3.  One C file for all 37 modules took 129 s of CPU, one compiler process after
+#: another; a file a module 70 s, at the same speed of the compiled code (callgrind's
+#: instructions within 1 %).  -O2 took as long; -O1 52 s, for up to 4 % more
+#: instructions (bench/bench_compile.py; docs/performance.md "Compiled hot modules").
+PLAN = Plan(multi_file=True)
 
 
 class Sources(Protocol):
