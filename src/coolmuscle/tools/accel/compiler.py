@@ -126,6 +126,7 @@ class BuildExt(build_ext):
             list(pool.map(self.build_extension, biggest))
 
 setup(name="coolmuscle-accel", packages=[], ext_modules=extensions,
+      cmdclass={"build_ext": BuildExt},
       script_args=["build_ext", "--build-lib", out, "--build-temp", tmp])
 say("built %d extension modules" % len(extensions))
 """
