@@ -71,7 +71,24 @@ merge_extras() {  # merge_extras A B   the union of two comma-separated lists, s
     printf '%s\n' "${1//,/$'\n'}" "${2//,/$'\n'}" | sed '/^$/d' | sort -u | paste -sd, -
 }
 
-venv_install() {  # venv_install EXTRAS   (e.g. "all" or "all,test,docs,accel")
+ACCEL_PID=""
+
+compiled_current() {  # the compiled hot modules of the checkout are current
+    "$VENV/bin/python" -m coolmuscle.tools.accel status >/dev/null 2>&1
+}
+
+wait_compile() {  # wait_compile   the background compile of venv_install ... background, shown
+    [ -n "$ACCEL_PID" ] || return 0
+    say "waiting for the compile of the hot modules (started in the background):"
+    tail -n +1 -f --pid="$ACCEL_PID" "$VENV/accel-build.log" | sed -u 's/^/    /'
+    wait "$ACCEL_PID" || true
+    ACCEL_PID=""
+}
+
+venv_install() {  # venv_install EXTRAS [background]   (EXTRAS e.g. "all" or "all,test,docs,accel")
+    # "background": when the hot modules must be compiled, install without compiling and
+    # compile them in the background (`python -m coolmuscle.tools.accel build`, log in
+    # $VENV/accel-build.log); the sources run until it ends; wait_compile waits for it.
     # An editable install with the build requirements in the venv itself (the accel
     # extra: no separate build environment to set up each time): the build compiles the
     # model's hot modules with mypyc beside their sources in src/coolmuscle/ (setup.py,
@@ -93,6 +110,11 @@ venv_install() {  # venv_install EXTRAS   (e.g. "all" or "all,test,docs,accel")
     [ "$have_digest" = "$digest" ] || have=""
     local all
     all="$(merge_extras "$wanted" "$have")"
+    local later=""
+    if [ "${2:-}" = "background" ] && [ "${COOLMUSCLE_COMPILE:-}" != "0" ] \
+            && ! compiled_current; then
+        later=1                     # nothing current to keep: install without compiling
+    fi
     if [ "$have_digest" != "$digest" ] || [ "$all" != "$have" ]; then
         : > "$VENV/pip.log"
         say "installing the build requirements (mypy, setuptools) into $VENV (log: $VENV/pip.log)"
@@ -102,12 +124,24 @@ print("\n".join(tomllib.load(open(sys.argv[1], "rb"))["build-system"]["requires"
             "$ROOT/pyproject.toml")"
         # shellcheck disable=SC2086  # one requirement a line, none with a space
         pip_quiet -c "$ROOT/constraints.txt" $build
-        say "installing coolmuscle [$all] and its dependencies; the build compiles the hot modules"
-        pip_showing_build -c "$ROOT/constraints.txt" --no-build-isolation -e "$ROOT[$all]"
+        if [ -n "$later" ]; then
+            say "installing coolmuscle [$all] and its dependencies (compiled afterwards)"
+            COOLMUSCLE_COMPILE=0 pip_showing_build -c "$ROOT/constraints.txt" \
+                --no-build-isolation -e "$ROOT[$all]" >/dev/null
+        else
+            say "installing coolmuscle [$all] and its dependencies; the build compiles the hot modules"
+            pip_showing_build -c "$ROOT/constraints.txt" --no-build-isolation -e "$ROOT[$all]"
+        fi
         echo "$digest $all" > "$STAMP"
     fi
-    if [ "${COOLMUSCLE_COMPILE:-}" != "0" ] \
-            && ! "$VENV/bin/python" -m coolmuscle.tools.accel status >/dev/null 2>&1; then
+    if [ -n "$later" ]; then
+        say "compiling the hot modules in the background (log: $VENV/accel-build.log); the sources run until then"
+        env -u COOLMUSCLE_COMPILE "$VENV/bin/python" -m coolmuscle.tools.accel build --quiet \
+            > "$VENV/accel-build.log" 2>&1 &
+        ACCEL_PID=$!
+        return 0
+    fi
+    if [ "${COOLMUSCLE_COMPILE:-}" != "0" ] && ! compiled_current; then
         say "compiling the hot modules: $("$VENV/bin/python" -m coolmuscle.tools.accel status 2>&1)"
         "$VENV/bin/python" -m coolmuscle.tools.accel build --quiet 2>&1 | sed -u 's/^/    /' || true
     fi

@@ -73,7 +73,9 @@ def say(text, doing=None):
     with lock:
         state["said"] = time.monotonic()
         state["doing"] = doing or text
-        print("%s[%3.0f s] %s" % (plan["prefix"], state["said"] - START, text), flush=True)
+        # one write: the compiler threads' own lines must not land inside it
+        sys.stdout.write("%s[%3.0f s] %s\n" % (plan["prefix"], state["said"] - START, text))
+        sys.stdout.flush()
 
 def heartbeat():
     while True:
@@ -127,7 +129,7 @@ class BuildExt(build_ext):
 
 setup(name="coolmuscle-accel", packages=[], ext_modules=extensions,
       cmdclass={"build_ext": BuildExt},
-      script_args=["build_ext", "--build-lib", out, "--build-temp", tmp])
+      script_args=["-q", "build_ext", "--build-lib", out, "--build-temp", tmp])
 say("built %d extension modules" % len(extensions))
 """
 
@@ -378,8 +380,8 @@ def _run_child(command: list[str], cwd: Path, log: Callable[[str], None]) -> lis
     with proc:
         for line in proc.stdout:
             line = line.rstrip("\n")
-            if line.startswith(PROGRESS):
-                log(line[len(PROGRESS):])
+            if PROGRESS in line:          # (another thread's output may come before it)
+                log(line.split(PROGRESS, 1)[1])
             elif line.strip():
                 lines.append(line)
     if proc.returncode != 0:
