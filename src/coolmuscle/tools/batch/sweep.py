@@ -167,6 +167,9 @@ def sweep(
     check_outputs(junit=junit, results=results, plot=plot)
     if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
         raise usage_error(f"--plot {plot}: PNG, SVG or PDF by extension")
+    if plot is not None:
+        from ...needs import require_extra
+        require_extra("plot", "sweep --plot")       # before the runs, not after them
     engine = start_engine(jobs, scheduler, len(built))
     run = run_all(engine, built, "sweep")
     write_outputs(run, junit, results, "coolmuscle.sweep")

@@ -148,6 +148,8 @@ def capture(
     _check_out(out)
     machine_word = _machine_word(machine, out) if machine is not None else None
     if pty is not None:
+        from ...needs import needs_posix
+        needs_posix("--pty", "--listen [HOST:]PORT and a virtual COM port tool")
         from ...frontends.transports.pty import SymLink
         try:
             SymLink(pty.expanduser()).check()

@@ -34,6 +34,7 @@ from rich.console import Console
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from ...frontends.transports.base import Transport
+from ...needs import needs_posix
 from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
@@ -92,13 +93,16 @@ chain_factory: ChainFactory = _default_chain_factory
 
 
 def default_state_dir() -> Path:
-    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``).
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``; on
+    Windows ``%LOCALAPPDATA%\\coolmuscle\\state``).
 
     A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says
     ("If an implementation encounters a relative path ... it should consider the
     path invalid and ignore it")."""
     xdg = os.environ.get("XDG_DATA_HOME", "")
-    base = xdg if xdg and os.path.isabs(xdg) else os.path.expanduser("~/.local/share")
+    local = os.environ.get("LOCALAPPDATA", "") if os.name == "nt" else ""
+    base = (xdg if xdg and os.path.isabs(xdg) else local if local
+            else os.path.expanduser("~/.local/share"))
     return Path(base) / "coolmuscle" / "state"
 
 
@@ -148,8 +152,10 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
             raise UsageError(f"--tcp: {exc}") from None
         chosen.append(transports.create("tcp", host=host, port=port))
     if pty or pty_link is not None:
+        needs_posix("--pty-link" if pty_link is not None and not pty else "--pty")
         chosen.append(transports.create("pty", link=pty_link))
     if stdio:
+        needs_posix("--stdio", "--tcp")
         chosen.append(transports.create("stdio"))
     chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
     return chosen
@@ -180,6 +186,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
 
     chosen: list[Transport] = []
     if rtu is not None:
+        needs_posix("--modbus-rtu", "--modbus-tcp")
         chosen.append(transports.create("modbus-rtu", where=rtu))
     if tcp is not None:
         try:
@@ -188,6 +195,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
             raise UsageError(f"--modbus-tcp: {exc}") from None
         chosen.append(transports.create("modbus-tcp", host=host, port=port))
     if com1 is not None:
+        needs_posix("--com1", "--modbus-tcp for the Modbus side")
         chosen.append(transports.create("com1", where=com1))
     return chosen
 

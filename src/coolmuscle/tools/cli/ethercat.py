@@ -43,6 +43,8 @@ def chain_firmware(bridge: str) -> str:
 def sim_transport(iface: str, bridge: str) -> EthercatTransport:
     """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
     from ...frontends.ethercat.transport import EthercatTransport
+    from ...needs import needs_af_packet
+    needs_af_packet("--ethercat")
     chain_firmware(bridge)
     return EthercatTransport(iface, ident.variant(bridge).code)
 
@@ -71,6 +73,8 @@ def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list
     """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
     root's tools); a ``LabError`` is one line and exit status 1."""
     from ...frontends.ethercat import lab
+    from ...needs import needs_af_packet
+    needs_af_packet("coolmuscle ethercat lab")
     run = lab.up if step == "up" else lab.down
     try:
         return run(namespace, master_if, slave_if)

@@ -21,17 +21,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import matplotlib
+from ...device.api import Device
+from ...motor.state import output_functions as out
+from ...motor.status import ALARM_BITS, Ux
+from ...needs import needs_extra
+from ...sim.kernel import NS_PER_S
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+with needs_extra("plot", "plotting (--plot)"):
+    import matplotlib
 
-from ...device.api import Device  # noqa: E402
-from ...motor.state import output_functions as out  # noqa: E402
-from ...motor.status import ALARM_BITS, Ux  # noqa: E402
-from ...sim.kernel import NS_PER_S  # noqa: E402
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -15,11 +15,13 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from aiohttp import web
-
 from ...frontends.transports.base import Port
+from ...needs import has_extra, needs_extra
 from ..trace.recorder import TraceRecorder, parquet_available
 from .traces import plot, trace_rows, write_rows
+
+with needs_extra("web", "the web page"):
+    from aiohttp import web
 
 #: Most samples (rows x motors) of one downloaded trace: the step grows for long
 #: recordings (at least 1 ms, the step of ``coolmuscle run --trace``).
@@ -86,6 +88,9 @@ class Downloads:
         refused = self._refusal()
         if refused is not None:
             return refused
+        if not has_extra("plot"):
+            return _error(409, 'the plot needs the \'plot\' extra: pip install '
+                               '"coolmuscle[plot]"; the trace (CSV) works')
         recorder = self._recorder()
         assert recorder is not None
         async with self._busy:

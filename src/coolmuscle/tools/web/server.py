@@ -24,11 +24,10 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSMsgType, web
-
 from ...device import Device
 from ...errors import TransportError
 from ...frontends.transports.base import Port, Transport
+from ...needs import needs_extra
 from ..trace.recorder import TraceRecorder
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
@@ -36,6 +35,9 @@ from .banks import firmware_of
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .traces import start_recording
+
+with needs_extra("web", "the web page"):
+    from aiohttp import WSMsgType, web
 
 log = logging.getLogger(__name__)
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ...chain import Chain
 from ...device import Device
+from ...needs import has_extra
 from ..trace.recorder import INTEGER_FIELDS, TraceRecorder, record
 
 
@@ -32,8 +33,9 @@ def start_recording(device: Device) -> TraceRecorder | None:
     # daemon thread stopped at exit inside matplotlib's C++ extensions (Ctrl-C
     # right after the start) aborts the process ("terminate called without an
     # active exception", SIGABRT); the exit waits for the import instead.
-    threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.trace.plot",),
-                     name="coolmuscle-web-plot-import", daemon=False).start()
+    if has_extra("plot"):         # without it the page answers that the plot needs it
+        threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.trace.plot",),
+                         name="coolmuscle-web-plot-import", daemon=False).start()
     return recorder
 
 
