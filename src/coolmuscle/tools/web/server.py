@@ -192,12 +192,16 @@ class WebTransport(Transport):
         app.router.add_get("/", self._index)
         app.router.add_get("/api/info", self._info)
         app.router.add_get("/ws", self._websocket)
-        assert self.port is not None
-        downloads = Downloads(self.port, lambda: self._recorder, self.title)
-        app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
-        app.router.add_get("/api/plot.png", downloads.plot)
+        if self.port is not None:              # a served chain: its trace
+            downloads = Downloads(self.port, lambda: self._recorder, self.title)
+            app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
+            app.router.add_get("/api/plot.png", downloads.plot)
+        self._add_routes(app)
         app.router.add_static("/static", STATIC, follow_symlinks=False)
         return app
+
+    def _add_routes(self, app: web.Application) -> None:
+        """More routes of a page of another kind (:mod:`.linepage`)."""
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
@@ -256,7 +260,7 @@ class WebTransport(Transport):
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
                                    compress=False, timeout=CLOSE_TIMEOUT)
         await ws.prepare(request)
-        assert self.hub is not None and self.actions is not None
+        assert self.hub is not None
         self._sockets.add(ws)
         client = Client(ws.send_str)
         try:
@@ -272,7 +276,6 @@ class WebTransport(Transport):
         return ws
 
     async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
-        assert self.actions is not None and self.hub is not None
         async for msg in ws:
             if msg.type == WSMsgType.TEXT:
                 self._request(client, _loads(msg.data))
@@ -282,7 +285,6 @@ class WebTransport(Transport):
             elif msg.type == WSMsgType.ERROR:
                 log.info("dashboard WebSocket closed: %s", ws.exception())
                 break
-
 
     def _request(self, client: Client, request: Any) -> None:
         """Answer one request of a page: the desk's (:mod:`.deskpage`) as a task of its
