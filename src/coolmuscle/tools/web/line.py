@@ -29,6 +29,7 @@ no motor behaviour: every value it shows is a reply the motor gave.
 from __future__ import annotations
 
 import asyncio
+import collections
 import concurrent.futures
 import contextlib
 import logging
@@ -126,6 +127,44 @@ class PollPlan:
                 f"{busy / self.period:.0%} of the line)")
 
 
+class StampedPort:
+    """A pyserial port whose reads are stamped where they happen, in the driver's
+    reader thread: the page's loop hands the bytes on later (by as long as it was busy),
+    and the twin compares instants to the millisecond (:meth:`LineDevice.received_at`).
+    Everything else is the port's own."""
+
+    def __init__(self, port: Any) -> None:
+        object.__setattr__(self, "_port", port)
+        object.__setattr__(self, "_reads", collections.deque(maxlen=4096))
+
+    @classmethod
+    def wrap(cls, port: Any) -> Any:
+        """``port`` stamped; its class keeps the port's module, by which the asyncio
+        driver tells a ``socket://`` port (whose ``in_waiting`` says only 0 or 1)."""
+        kind = type(cls.__name__, (cls,), {"__module__": type(port).__module__})
+        return kind(port)
+
+    def read(self, size: int = 1) -> bytes:
+        data: bytes = self._port.read(size)
+        if data:
+            self._reads.append((time.monotonic(), len(data)))
+        return data
+
+    def taken(self, size: int) -> float | None:
+        """When the last of the next ``size`` bytes handed on was read."""
+        at = None
+        while size > 0 and self._reads:
+            at, got = self._reads.popleft()
+            size -= got
+        return at
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._port, name)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        setattr(self._port, name, value)
+
+
 class WallClock:
     """The page's clock on a real motor: nanoseconds since the line was opened."""
 
@@ -177,7 +216,7 @@ class LineDevice:
         self.url = found.url
         self.kernel = WallClock()
         self.polling = poll
-        self._port = port
+        self._port = StampedPort.wrap(port)
         self._found = found
         self._listeners: list[Callable[[Event], None]] = []
         self._values: dict[int, Values] = {}
@@ -192,6 +231,9 @@ class LineDevice:
         self.on_round: list[Callable[[], None]] = []
         #: ``tap(direction, data)``: every byte written (``">"``) and read (``"<"``)
         self.taps: list[Callable[[str, bytes], None]] = []
+        #: when (``time.monotonic()``, in the reader thread) the bytes of the latest
+        #: ``"<"`` tap call were read from the port (``None``: not known)
+        self.read_at: float | None = None
         #: adds ``[time_ns, ">", line, motor, "web"]`` to the page's log (the hub's)
         self.log: Callable[[list[Any]], None] = lambda entry: None
         self.session, self.driver = self._new_driver()
@@ -280,6 +322,9 @@ class LineDevice:
         return session, driver
 
     def _tap(self, direction: str, data: bytes) -> None:
+        if direction == "<":
+            taken: float | None = self._port.taken(len(data))
+            self.read_at = taken
         for tap in list(self.taps):
             try:
                 tap(direction, data)
@@ -396,11 +441,12 @@ class LineDevice:
                 with contextlib.suppress(Exception):
                     self._port.close()
                 try:
-                    self._port, found = await asyncio.to_thread(open_line, self.url, bauds)
-                except DeskError:
-                    self._port = await asyncio.to_thread(open_port, self.url,
-                                                         self.line_baud)
+                    opened, found = await asyncio.to_thread(open_line, self.url, bauds)
+                except DeskError:                # the line as it was, opened again
+                    self._port = StampedPort.wrap(
+                        await asyncio.to_thread(open_port, self.url, self.line_baud))
                     raise
+                self._port = StampedPort.wrap(opened)
                 self._found = found
                 self._values.clear()
                 self.silent = None

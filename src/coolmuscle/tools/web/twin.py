@@ -79,8 +79,9 @@ CHECK_PERIOD = 0.5
 #: A line is judged once it is this old (s): its partner has come by then (a reply
 #: within compare's timing tolerance, 20 ms and the wire time, with room to spare).
 SETTLE = 0.5
-#: Seconds before the stretch judged whose lines take part in the pairing again.
-LOOKBACK = 2.0
+#: Seconds before the stretch judged whose lines take part in the pairing again (the
+#: last command before them comes too, for its lag: compare's ``_command_lags``).
+LOOKBACK = 1.0
 #: Differences kept for the page (the newest).
 KEEP = 20
 #: Virtual seconds the twin may take to reach the real motor's position.
@@ -122,6 +123,10 @@ class LiveTwin:
         self.twin_after: list[int] = []
         self.twin_exact: dict[int, float] = {}
         self._stamps: list[float] = []
+        self._rx_times: list[float] = []
+        self._rx_numbers: list[int] = []
+        self._twin_times: list[float] = []
+        self._wire_free = 0.0
         self._echoes: collections.deque[int] = collections.deque(maxlen=64)
         self._owner = -1
         self._owner_count = 0
@@ -255,10 +260,16 @@ class LiveTwin:
         if direction == ">":
             self._sent_bytes(now, data)
         else:
+            read = self._line.read_at if self._line is not None else None
+            if read is not None:             # when the reader thread read them
+                now = min(now, read - self._start)
             self._writer.feed(now, "<", data)
             self._rx_buffer += data
             for piece in _lines(self._rx_buffer):
-                self.received.append(Line(now, "<", piece, self._line_no(now, piece)))
+                number = self._line_no(now, piece)
+                self.received.append(Line(now, "<", piece, number))
+                self._rx_times.append(now)
+                self._rx_numbers.append(number)
 
     def _line_no(self, at: float, data: bytes) -> int:
         """Where a line received at ``at`` stands among the lines sent (compare pairs a
@@ -287,9 +298,11 @@ class LiveTwin:
         it then (as the replay of a capture feeds it, docs/twin.md)."""
         loop = asyncio.get_running_loop()
         start = 0
+        begins = max(now, self._wire_free)      # after what was written before it
+        self._wire_free = begins + len(data) * self._byte_s
         for match in re.finditer(rb"\r", data):
             piece = data[start:match.end()]
-            stamp = now + (match.end() - 1) * self._byte_s
+            stamp = begins + (match.end() - 1) * self._byte_s
             self._writer.feed(stamp, ">", piece)
             index = len(self.sent)
             self.sent.append(Line(stamp, ">", piece, (index + 1) * LINE_GAP))
@@ -321,6 +334,7 @@ class LiveTwin:
         for piece in _lines(self._twin_buffer):
             index = len(self.twin_lines)
             self.twin_lines.append(Line(at, "<", piece, 0))
+            self._twin_times.append(at)
             self.twin_after.append(self._fed)
             found = parse_poll(self.twin_lines[index].text)
             if found is not None and found[1] in chain.motor_ids:
@@ -369,6 +383,18 @@ class LiveTwin:
                     self._hub.add_log([self._line.kernel.now if self._line else 0, "note",
                                        f"twin: {describe(verdict)}", 0, "web"])
 
+    def _last_command(self, before: int) -> int | None:
+        """The last line sent before index ``before`` that is not a ``?`` query."""
+        for index in range(before - 1, max(before - 2000, 0) - 1, -1):
+            if not _is_query(self.sent[index]):
+                return index
+        return None
+
+    def _first_back(self, command: int) -> Line | None:
+        """The first line received after the line sent at ``command``."""
+        at = bisect.bisect_right(self._rx_numbers, self.sent[command].line_no)
+        return self.received[at] if at < len(self.received) else None
+
     def check(self, until: float | None = None) -> list[Verdict] | None:
         """Judge the lines of the stretch not judged yet (up to ``until`` s of the
         session, default :data:`SETTLE` s ago); the new differences, or ``None`` when
@@ -378,14 +404,24 @@ class LiveTwin:
         if end <= start or self.port is None:
             return None
         lo = start - LOOKBACK
-        first_sent = bisect.bisect_left([line.time for line in self.sent], lo)
+        first_sent = bisect.bisect_left(self._stamps, lo)
         sent = self.sent[first_sent:]
-        real = [line for line in self.received if line.time >= lo]
-        twin_from = bisect.bisect_left([line.time for line in self.twin_lines], lo)
+        real = self.received[bisect.bisect_left(self._rx_times, lo):]
+        command = self._last_command(first_sent)
+        shift = first_sent
+        if command is not None:              # the command the polls since may lag on
+            sent = [self.sent[command]] + sent
+            shift -= 1
+            back = self._first_back(command)
+            if back is not None and (not real or back.line_no < real[0].line_no):
+                real = [back] + real
+        twin_from = bisect.bisect_left(self._twin_times, lo)
         twin = self.twin_lines[twin_from:]
-        after = [a - first_sent if a >= first_sent else -1
+        after = [a - shift if a >= first_sent else (0 if command is not None
+                                                    and a >= command else -1)
                  for a in self.twin_after[twin_from:]]
-        exact = {i - twin_from: v for i, v in self.twin_exact.items() if i >= twin_from}
+        exact = {i - twin_from: self.twin_exact[i]
+                 for i in range(twin_from, len(self.twin_lines)) if i in self.twin_exact}
         session = Session("live", {"baud": str(self._line.line_baud if self._line else 0),
                                    "parity": "none"}, Script(()), sent, real)
         chain = self.chain
@@ -414,6 +450,10 @@ def describe(verdict: Verdict) -> str:
     """compare's line for a verdict, the session's second in front (a live session has
     no capture file whose lines it could name)."""
     return _CAPTURE_LINE.sub(r"\1", verdict.describe())
+
+
+def _is_query(line: Line) -> bool:
+    return line.text.lstrip().startswith("?")
 
 
 def _lines(buffer: bytearray) -> list[bytes]:
