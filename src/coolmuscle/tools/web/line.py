@@ -39,13 +39,15 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from ...client.aio_driver import AsyncDriver
+from ...cml.ast import inner_motor
+from ...cml.parser import parse
 from ...client.banks import send_line
 from ...client.ops import Op, Session, query
 from ...client.protocol import MotorEvent
 from ...client.replies import parse_int_reply
 from ...device import Event, MotorSnapshot
 from ...device.hostline import BAUD_RATES
-from ...errors import CoolMuscleError, CoolMuscleTimeout, MotorError
+from ...errors import CmlSyntaxError, CoolMuscleError, CoolMuscleTimeout, MotorError
 from ...motor.status import ALARM_BITS, Report, Ux
 from ..desk.errors import DeskError
 from ..desk.linescan import REPLY_TIMEOUT, SCAN_ORDER, FoundMotor, ScanResult, scan_port
@@ -53,7 +55,7 @@ from ..desk.ports import open_port, port_url
 from ..desk.restorer import LineControl
 
 __all__ = ["LineDevice", "PollPlan", "POLL_SHARE", "round_bytes", "poll_period",
-           "open_line"]
+           "open_line", "addressed"]
 
 log = logging.getLogger(__name__)
 
@@ -190,6 +192,18 @@ class Values:
     k23: int | None = None
     status_at: float = 0.0
     status_due: bool = True
+
+
+def addressed(line: str, default: int) -> int:
+    """The motor whose fence ends a console line (``?96.n`` after it, the host library's
+    ``send_line``): the farthest one the line names (its replies come after those of the
+    motors before it on the chain), else ``default``, the motor chosen on the page."""
+    try:
+        statements = [s for parsed in parse(line) for s in parsed.statements]
+    except CmlSyntaxError:
+        return default
+    named = [m for m in (inner_motor(s) for s in statements) if m is not None]
+    return max(named, default=default)
 
 
 def open_line(port: str, bauds: Sequence[int] | None = None,
@@ -387,6 +401,7 @@ class LineDevice:
     async def console(self, line: str, motor: int) -> list[str]:
         """A line typed in the page's console, its replies (6.6) or the motor's error."""
         self.log([self.kernel.now, ">", line, motor, "web"])
+        motor = addressed(line, motor)
         try:
             replies = await self.run(send_line(self.session, motor, line, CONSOLE_TIMEOUT))
         except MotorError as exc:            # as the motor printed it (K23 16)
