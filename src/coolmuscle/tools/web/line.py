@@ -39,12 +39,12 @@ from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
 from ...client.aio_driver import AsyncDriver
-from ...cml.ast import inner_motor
-from ...cml.parser import parse
 from ...client.banks import send_line
 from ...client.ops import Op, Session, query
 from ...client.protocol import MotorEvent
 from ...client.replies import parse_int_reply
+from ...cml.ast import inner_motor
+from ...cml.parser import parse
 from ...device import Event, MotorSnapshot
 from ...device.hostline import BAUD_RATES
 from ...errors import CmlSyntaxError, CoolMuscleError, CoolMuscleTimeout, MotorError
