@@ -379,9 +379,10 @@ class LiveTwin:
             if new is not None and self._hub is not None:
                 self._hub.broadcast(json.dumps({"t": "twin", **self.info()},
                                                separators=(",", ":")))
-                for verdict in new:
+                if new:                      # one line a stretch in the log
+                    more = f" (and {len(new) - 1} more)" if len(new) > 1 else ""
                     self._hub.add_log([self._line.kernel.now if self._line else 0, "note",
-                                       f"twin: {describe(verdict)}", 0, "web"])
+                                       f"twin: {describe(new[0])}{more}", 0, "web"])
 
     def _last_command(self, before: int) -> int | None:
         """The last line sent before index ``before`` that is not a ``?`` query."""
