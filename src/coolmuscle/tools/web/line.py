@@ -259,6 +259,11 @@ class LineDevice:
         return self._found.ids
 
     @property
+    def rounds(self) -> int:
+        """Poll rounds done so far."""
+        return self._rounds
+
+    @property
     def found(self) -> ScanResult:
         return self._found
 
