@@ -137,6 +137,7 @@ def test_pty_page_says_real_and_a_k_edit_survives_a_restart_after_save(
     assert _query(sim.port, "K24.1", r"K24\.1=-?\d+") == "K24.1=2000"
     page.by("k-save").click()
     expect(page.by("k-note")).to_have_text("saved.1", timeout=10_000)
+    page.page.evaluate("window.scrollTo(0, 0)")
     page.page.screenshot(path=str(output_dir() / "web-real-k-editor.png"), full_page=True)
     assert sim.stop() == 0                          # Ctrl-C: a clean stop
     expect(page.by("line-state")).to_contain_text("the line failed", timeout=10_000)
@@ -187,6 +188,7 @@ def test_jog_moves_it_and_alarm_reset_clears_an_injected_alarm(
     expect(page.by("motion-note-1")).to_have_text("(.1 → Ux=8 in position", timeout=10_000)
     expect(page.by("status-1")).to_contain_text("in position", timeout=10_000)
     assert _query(sim.port, "?99.1", r"Ux\.1=\d+") == "Ux.1=8"
+    page.page.evaluate("window.scrollTo(0, 0)")
     page.page.screenshot(path=str(output_dir() / "web-real-alarm-reset.png"))
     assert page.errors == []
 

@@ -97,6 +97,7 @@ def _session(browser: Any, served_sim: SimFactory, folder: Path, twin: list[str]
         time.sleep(1.5)                           # the last stretch judged (SETTLE 0.5 s)
         state = by("twin-state").inner_text()
         differences = by("twin-diffs").locator("li").all_inner_texts()
+        page.evaluate("window.scrollTo(0, 0)")
         page.screenshot(path=str(output_dir() / shot))
         with urllib.request.urlopen(url + "api/capture.cml", timeout=10) as response:
             capture = response.read().decode()
