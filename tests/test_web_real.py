@@ -23,6 +23,7 @@ import asyncio
 import concurrent.futures
 import os
 import re
+import signal
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -197,7 +198,7 @@ def test_over_tcp_the_page_says_real_and_the_console_is_answered_while_polling(
         served_sim: SimFactory, web_page: Callable[..., tuple[Program, str]],
         pages: Callable[[str], Page]) -> None:
     sim = served_sim("--pace", "--motors", "2")
-    _, url = web_page(f"127.0.0.1:{sim.port}")
+    program, url = web_page(f"127.0.0.1:{sim.port}")
     page = pages(url)
     expect(page.by("line-badge")).to_have_text(
         f"2 real motors on socket://127.0.0.1:{sim.port} (K20 38.4 kbps)")
@@ -210,6 +211,8 @@ def test_over_tcp_the_page_says_real_and_the_console_is_answered_while_polling(
     expect(page.by("log")).to_contain_text("< P5.2=500, P6.2=0, P7.2=0, P8.2=0")
     assert _query(sim.port, "P5.2", r"P5\.2=-?\d+") == "P5.2=500"
     assert page.errors == []
+    assert program.signal(signal.SIGINT) == 0                 # Ctrl-C: a clean stop
+    assert "Traceback" not in program.text
 
 
 def test_bad_input_gets_one_clear_message_on_the_page_and_one_line_from_the_command(
@@ -222,6 +225,9 @@ def test_bad_input_gets_one_clear_message_on_the_page_and_one_line_from_the_comm
     assert wrong.stderr == (f"coolmuscle: error: no motor answers on {link} at 9600 bit/s "
                             "(?85.1 within 0.3 s); a wrong --baud? (without it every K20 "
                             "rate is tried)\n")
+    missing = run_coolmuscle("web", str(link), "--twin", str(tmp_path / "missing.toml"))
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1
+    assert missing.stderr.startswith("coolmuscle: error: cannot read machine file ")
     absent = run_coolmuscle("web", f"127.0.0.1:{closed_port}", "--listen", "0")
     assert absent.returncode == 2 and absent.stderr.count("\n") == 1
     assert absent.stderr.startswith(f"coolmuscle: error: cannot open socket://127.0.0.1:"

@@ -70,19 +70,18 @@ def web(
 ) -> None:
     """Serve the web dashboard in front of a real motor (or any line that speaks CML).
 
-    The page polls the motors at a rate the line can carry (docs/real-motor.md "The page
-    on a real motor"); the console, banks, the K-parameter editor, jog, enable, free,
-    stop, alarm reset, scan, backup and restore work on it as on a virtual one.
+    A poll the line can carry; console, banks, K editor, buttons, desk (docs/real-motor.md).
     """
-    from ...chain.machine import MachineFileError
-    from ...errors import TransportError
+    from ...chain.machine import load_machine
+    from ...errors import CoolMuscleError
     from ..desk.actions import parse_bauds, parse_ids
-    from ..desk.errors import DeskError
     machine = None if twin in (None, NO_MACHINE) else Path(str(twin))
     try:
         bauds, chosen = parse_bauds(baud), parse_ids(ids)
+        if machine is not None:
+            load_machine(machine)                # a bad file: said before the line opens
         serve(port, listen, bauds, chosen, twin is not None, machine, poll, _say)
-    except (DeskError, TransportError, MachineFileError) as exc:
+    except CoolMuscleError as exc:               # no motor, a wrong rate, a bad file ...
         raise UsageError(str(exc)) from None
 
 
