@@ -250,6 +250,18 @@ def test_bad_input_gets_one_clear_message_on_the_page_and_one_line_from_the_comm
     expect(page.by("desk-result")).to_have_text(
         f"rt3.cml holds ID1 of rt3 (ID1 : CM1v3.00R.1 #0000A00000), {link}'s ID1 is cm2 "
         f"({TITLE}): K85, K87 do not apply there; nothing written", timeout=30_000)
+    with page.page.expect_download(timeout=60_000) as download:  # the backup, downloaded
+        page.by("desk-backup").click()
+    saved = tmp_path / "motor.cml"
+    download.value.save_as(saved)
+    text = saved.read_text()
+    assert text.startswith(f"# coolmuscle backup of {link} at 38400 bit/s, ")
+    assert f"# == {TITLE}\n" in text and "\nK24.1=1000\n" in text
+    page.by("desk-file").set_input_files(str(saved))          # and restored, as it is
+    page.by("desk-restore").click()
+    expect(page.by("desk-result")).to_contain_text("restored (not saved", timeout=60_000)
+    expect(page.by("desk-result")).to_contain_text("ID1 K parameters: as in the backup, "
+                                                   "nothing to write")
     page.by("k-read").click()
     page.by("k-value-57").fill("99999")                      # ch. 3 K57: 100..10000
     page.by("k-write-57").click()

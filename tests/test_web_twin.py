@@ -88,6 +88,7 @@ def _session(browser: Any, served_sim: SimFactory, folder: Path, twin: list[str]
         expect(by("connection")).to_have_text("connected", timeout=10_000)
         expect(page.locator("#twin-panel")).to_be_visible()
         expect(by("twin-state")).to_contain_text("lines compared", timeout=10_000)
+        expect(by("chart-1").locator(".u-legend").first).to_contain_text("twin position")
         for move, target in zip(MOVES, ("6000", "0"), strict=True):
             by("cml-input").fill(move)
             by("cml-input").press("Enter")

@@ -385,6 +385,14 @@ class LineDevice:
             if self._user == 0:
                 self._no_user.set()
 
+    @contextlib.asynccontextmanager
+    async def quiet(self, settle: float = 0.05) -> AsyncIterator[None]:
+        """The line with nothing in flight: every exchange answered, the poll paused,
+        ``settle`` seconds for what the motors send last (the end of a capture)."""
+        async with self._users_turn(), self.driver.lock:
+            await asyncio.sleep(settle)
+            yield
+
     def _check_free(self) -> None:
         if self._held is not None:
             raise DeskError(f"the line is busy with a {self._held}: try again when it "

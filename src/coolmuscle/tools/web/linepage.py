@@ -232,6 +232,7 @@ class LinePage(WebTransport):
         if self.twin is None:
             return web.json_response({"error": "no twin: start coolmuscle web with --twin"},
                                      status=409)
-        body = self.twin.capture_text().encode("utf-8")
+        async with self.line.quiet():            # no query left without its answer
+            body = self.twin.capture_text().encode("utf-8")
         return web.Response(body=body, content_type="text/plain", charset="utf-8", headers={
             "Content-Disposition": 'attachment; filename="coolmuscle-capture.cml"'})
