@@ -158,9 +158,8 @@ class LiveTwin:
             placed[motor] = (position, status, temperature)
         machine = load_machine(self.machine_path) if self.machine_path else None
         machine = _with_idle(machine, {m: t for m, (_p, _s, t) in placed.items()})
-        firmware = ",".join(line.firmware_of(m) for m in range(1, max(ids) + 1)
-                            if m in ids) if len(set(map(line.firmware_of, ids))) > 1 \
-            else line.firmware_of(ids[0])
+        kinds = [line.firmware_of(m) for m in range(1, max(ids) + 1)]
+        firmware = ",".join(kinds) if len(set(kinds)) > 1 else kinds[0]
         chain = Chain(None, max(ids), firmware=firmware, machine=machine)
         try:
             self._copy(chain, image)
