@@ -7,10 +7,10 @@ the same page in front of a real motor (:mod:`.command`, :mod:`.line`, :mod:`.li
 with a live virtual twin, :mod:`.twin`; docs/real-motor.md).  The desk of the page (the
 K editor, the motor buttons, scan, backup, restore) is :mod:`.deskpage` over the client
 operations of :mod:`.pageops`, for virtual and real motors alike.  The page is one
-more client of the device API (origin ``web``); its banks and traces use the host tools (the checker, the client's bank
-upload with read-back, the trace recorder and its plot), which is why it is a tool
-and not a front end (docs/architecture.md, docs/web.md).  The server (aiohttp) is
-imported only when it is used.
+more client of the device API (origin ``web``); its banks and traces use the host
+tools (the checker, the client's bank upload with read-back, the trace recorder and its
+plot), which is why it is a tool and not a front end (docs/architecture.md,
+docs/web.md).  The server (aiohttp) is imported only when it is used.
 """
 
 from __future__ import annotations
