@@ -504,6 +504,14 @@ def _register_desk() -> None:
 _register_desk()  # scan, backup, restore, params diff (coolmuscle.tools.desk, docs/real-motor.md)
 
 
+def _register_web() -> None:
+    from ..web.command import register
+    register(app)
+
+
+_register_web()  # web: the page of a real motor (coolmuscle.tools.web, docs/real-motor.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version, and whether the hot modules run compiled or as sources."""
@@ -563,9 +571,10 @@ def _main(argv: list[str] | None) -> None:
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
     from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
+    from ..web.command import expand_twin_flag  # a bare --twin: the default load
     from .enip import optional_value_argv
 
     def call() -> None:
-        args = expand_web_flag(sys.argv[1:] if argv is None else argv)
+        args = expand_twin_flag(expand_web_flag(sys.argv[1:] if argv is None else argv))
         app(args=optional_value_argv(args), prog_name="coolmuscle")
     guarded(call)

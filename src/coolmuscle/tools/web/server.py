@@ -21,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from ..trace.recorder import TraceRecorder
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
 from .banks import firmware_of
+from .deskpage import ChainRunner, Desk
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .traces import start_recording
@@ -98,6 +100,8 @@ class WebTransport(Transport):
         self.bound: tuple[str, int] | None = None
         self.hub: Hub | None = None
         self.actions: Actions | None = None
+        self.desk: Desk | None = None
+        self._tasks: set[asyncio.Task[None]] = set()
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
         self._recorder: TraceRecorder | None = None
@@ -112,8 +116,15 @@ class WebTransport(Transport):
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
                                {"record": self._record_request})
+        self.desk = Desk(ChainRunner(port, device, self.hub.add_log), self.hub.add_log,
+                         lambda: device.kernel.now)
         if self.record:
             self.start_recording()
+        await self._listen()
+
+    async def _listen(self) -> None:
+        """Serve the page (the hub and the actions are ready)."""
+        assert self.hub is not None
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
                                      shutdown_timeout=1.0, logger=_HTTP_LOG,
                                      keepalive_timeout=IDLE_TIMEOUT)
@@ -166,6 +177,9 @@ class WebTransport(Transport):
         return {"host": host, "port": port, "url": self.url, "token": self.access.token}
 
     async def close(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
         await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
                                for ws in list(self._sockets)), return_exceptions=True)
         if self.hub is not None:
@@ -180,12 +194,16 @@ class WebTransport(Transport):
         app.router.add_get("/", self._index)
         app.router.add_get("/api/info", self._info)
         app.router.add_get("/ws", self._websocket)
-        assert self.port is not None
-        downloads = Downloads(self.port, lambda: self._recorder, self.title)
-        app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
-        app.router.add_get("/api/plot.png", downloads.plot)
+        if self.port is not None:              # a served chain: its trace
+            downloads = Downloads(self.port, lambda: self._recorder, self.title)
+            app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
+            app.router.add_get("/api/plot.png", downloads.plot)
+        self._add_routes(app)
         app.router.add_static("/static", STATIC, follow_symlinks=False)
         return app
+
+    def _add_routes(self, app: web.Application) -> None:
+        """More routes of a page of another kind (:mod:`.linepage`)."""
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
@@ -230,7 +248,11 @@ class WebTransport(Transport):
                 "title": self.title, "time": device.kernel.now, "fields": SNAP_FIELDS,
                 "io": counts, "faults": FAULTS, "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()),
-                "recording": self._recorder is not None}
+                "recording": self._recorder is not None, "line": self.line_info()}
+
+    def line_info(self) -> dict[str, Any]:
+        """What the page says of the line: virtual or a real motor (its badge)."""
+        return {"kind": "virtual", "text": "virtual"}
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self.access.origin_ok(request.headers.get("Origin"), request.headers.get("Host")):
@@ -240,7 +262,7 @@ class WebTransport(Transport):
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
                                    compress=False, timeout=CLOSE_TIMEOUT)
         await ws.prepare(request)
-        assert self.hub is not None and self.actions is not None
+        assert self.hub is not None
         self._sockets.add(ws)
         client = Client(ws.send_str)
         try:
@@ -256,18 +278,38 @@ class WebTransport(Transport):
         return ws
 
     async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
-        assert self.actions is not None and self.hub is not None
         async for msg in ws:
             if msg.type == WSMsgType.TEXT:
-                answer = self.actions.handle(_loads(msg.data))
-                client.queue_direct(json.dumps(answer, separators=(",", ":")))
-                self.hub.changed()
+                self._request(client, _loads(msg.data))
             elif msg.type == WSMsgType.BINARY:
                 client.queue_direct(json.dumps({"t": "result", "ok": False,
                                                 "error": "send JSON text frames"}))
             elif msg.type == WSMsgType.ERROR:
                 log.info("dashboard WebSocket closed: %s", ws.exception())
                 break
+
+    def _request(self, client: Client, request: Any) -> None:
+        """Answer one request of a page: the desk's (:mod:`.deskpage`) as a task of its
+        own, the others at once."""
+        assert self.actions is not None and self.hub is not None
+        if self.desk is not None and isinstance(request, dict) \
+                and self.desk.handles(request.get("t")):
+            self._answer_later(client, self.desk.handle(request))
+            return
+        answer = self.actions.handle(request)
+        client.queue_direct(json.dumps(answer, separators=(",", ":")))
+        self.hub.changed()
+
+    def _answer_later(self, client: Client,
+                      answer: Coroutine[Any, Any, dict[str, Any]]) -> None:
+        async def reply() -> None:
+            result = await answer
+            client.queue_direct(json.dumps(result, separators=(",", ":")))
+            if self.hub is not None:
+                self.hub.changed()
+        task = asyncio.get_running_loop().create_task(reply(), name="coolmuscle-web-request")
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
 
 
 def _io_counts(device: Device) -> dict[str, int]:
