@@ -78,13 +78,14 @@ def _parse(text: str) -> list[ast.Line]:
 class _Stream:
     """Cyclic position mode for one motor (device API ``target_stream``)."""
 
-    def __init__(self, motor: Motor) -> None:
+    def __init__(self, motor: Motor, period_ns: int = 0) -> None:
         self._motor = motor
+        self._period = period_ns
         self.closed = False
 
     def push(self, target: int) -> None:
         if not self.closed:
-            self._motor.follow(float(target))
+            self._motor.follow(float(target), self._period)
 
     def close(self) -> None:
         self.closed = True
@@ -510,8 +511,8 @@ class Chain:
             raise OutOfRangeError("analog input is 0..1023 (6.6 ?74)")
         self.bus.require(motor).analog = counts
 
-    def target_stream(self, motor: int) -> TargetStream:
-        return _Stream(self.bus.require(motor))
+    def target_stream(self, motor: int, period_ns: int = 0) -> TargetStream:
+        return _Stream(self.bus.require(motor), period_ns)
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         self.bus.require(motor).inject_fault(fault, **params)

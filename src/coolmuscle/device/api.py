@@ -188,8 +188,9 @@ class Device(Protocol):
     def subscribe(self, listener: EventListener) -> Callable[[], None]:
         """Receive every :class:`Event`; returns an unsubscribe function."""
 
-    def target_stream(self, motor: int) -> TargetStream:
-        """Enter cyclic position mode for ``motor``."""
+    def target_stream(self, motor: int, period_ns: int = 0) -> TargetStream:
+        """Enter cyclic position mode for ``motor``; ``period_ns``: the targets come one
+        each period (csp's cycle), which a stepper ramps over (0: not known)."""
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         """Inject a fault now (see docs/machine-file.md for names)."""
