@@ -13,7 +13,9 @@ Routes (aiohttp):
 The page is one more client of the device API (origin ``web``).  Access rules are in
 :mod:`.access`; a WebSocket message larger than ``MAX_MESSAGE`` closes that socket
 with status 1009 (message too big) and nothing else; malformed JSON is answered with
-an error frame.
+an error frame.  The pages' requests take turns with a bound per wake-up and per page
+(:mod:`.turns`): a request beyond a page's queue is refused with a message, and what a
+page queued is dropped when it leaves.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from .banks import firmware_of
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .traces import start_recording
+from .turns import Turns
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +103,8 @@ class WebTransport(Transport):
         self._sockets: set[web.WebSocketResponse] = set()
         self._recorder: TraceRecorder | None = None
         self._device: Device | None = None
+        self.turns: Turns | None = None
+        self.cross_site_refused = 0
 
     # -- life cycle ---------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -110,6 +115,7 @@ class WebTransport(Transport):
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
                                {"record": self._record_request})
+        self.turns = Turns(self._handle)
         if self.record:
             self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
@@ -166,6 +172,8 @@ class WebTransport(Transport):
     async def close(self) -> None:
         await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
                                for ws in list(self._sockets)), return_exceptions=True)
+        if self.turns is not None:
+            await self.turns.close_all()
         if self.hub is not None:
             await self.hub.close()
         if self._runner is not None:
@@ -195,6 +203,11 @@ class WebTransport(Transport):
         if not public and not self.access.token_ok(_token(request)):
             return _error(401, "the dashboard needs the token printed when the simulator "
                                "started")
+        if request.path.startswith("/api/") and not public and not self.access.fetch_ok(
+                request.headers.get("Origin"), request.headers.get("Sec-Fetch-Site"),
+                request.headers.get("Host")):
+            self.cross_site_refused += 1
+            return _error(403, "a download asked by another site's page is refused")
         try:
             response: web.StreamResponse = await handler(request)
         except web.HTTPException as exc:
@@ -245,7 +258,7 @@ class WebTransport(Transport):
             hello, seen = self._hello(), self.hub.pending()     # one instant: no await
             await ws.send_str(json.dumps(hello, separators=(",", ":")))
             self.hub.add(client, seen)
-            await self._receive(ws, client)
+            await self._receive(ws, client, request)
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
@@ -253,19 +266,49 @@ class WebTransport(Transport):
             self._sockets.discard(ws)
         return ws
 
-    async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
-        assert self.actions is not None and self.hub is not None
-        async for msg in ws:
-            if msg.type == WSMsgType.TEXT:
-                answer = self.actions.handle(_loads(msg.data))
-                client.queue_direct(json.dumps(answer, separators=(",", ":")))
-                self.hub.changed()
-            elif msg.type == WSMsgType.BINARY:
-                client.queue_direct(json.dumps({"t": "result", "ok": False,
-                                                "error": "send JSON text frames"}))
-            elif msg.type == WSMsgType.ERROR:
-                log.info("dashboard WebSocket closed: %s", ws.exception())
-                break
+    async def _receive(self, ws: web.WebSocketResponse, client: Client,
+                       request: web.Request) -> None:
+        """Queue the page's requests for their turn (:mod:`.turns`); one beyond its
+        queue's bound is refused with a message; what it queued is dropped when it leaves.
+        Reading pauses for the others once the pages have read their share of a wake-up."""
+        assert self.turns is not None
+        page = self.turns.open(lambda answer: self._answer(client, answer),
+                               lambda: ws.closed or request.transport is None)
+        try:
+            async for msg in ws:
+                if page.gone():
+                    break                       # the connection was lost: read no further
+                if msg.type == WSMsgType.TEXT:
+                    asked = _loads(msg.data)
+                    if not self.turns.submit(page, asked):
+                        self._answer(client, _busy(asked, self.turns.max_queued))
+                elif msg.type == WSMsgType.BINARY:
+                    client.queue_direct(json.dumps({"t": "result", "ok": False,
+                                                    "error": "send JSON text frames"}))
+                elif msg.type == WSMsgType.ERROR:
+                    log.info("dashboard WebSocket closed: %s", ws.exception())
+                    break
+                await self.turns.read_turn()    # the other clients' turn, now and then
+        finally:
+            self.turns.close(page)
+
+    def _handle(self, request: Any) -> Any:
+        assert self.actions is not None
+        return self.actions.handle(request)
+
+    def _answer(self, client: Client, answer: dict[str, Any]) -> None:
+        assert self.hub is not None
+        client.queue_direct(json.dumps(answer, separators=(",", ":")))
+        self.hub.changed()
+
+
+def _busy(request: Any, bound: int) -> dict[str, Any]:
+    """The answer to a request beyond its page's queue (not run)."""
+    rid = request.get("id") if isinstance(request, dict) else None
+    rid = rid if isinstance(rid, (int, str)) and not isinstance(rid, bool) else None
+    return {"t": "result", "id": rid, "ok": False,
+            "error": f"busy: {bound} requests of this page are waiting to run; this one "
+                     "was not run (wait for their answers)"}
 
 
 def _io_counts(device: Device) -> dict[str, int]:

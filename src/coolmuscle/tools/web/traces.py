@@ -5,7 +5,8 @@ Recording is off until asked (the page's Record button, ``run --web``): the reco
 A download samples it in the model's thread (:mod:`.downloads`) and the file is written
 here from those rows in a worker thread: CSV as ``coolmuscle run --trace`` writes it, or
 Parquet with typed columns.  The plot is the one of ``coolmuscle run --plot``
-(:func:`coolmuscle.tools.trace.plot.plot_trace`).
+(:mod:`coolmuscle.tools.trace.plot`), sampled in the model's thread and drawn by
+:func:`draw` in a worker thread.
 """
 
 from __future__ import annotations
@@ -13,9 +14,11 @@ from __future__ import annotations
 import csv
 import importlib
 import math
+import tempfile
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ...chain import Chain
 from ...device import Device
@@ -57,10 +60,32 @@ def write_rows(path: Path, header: list[str], rows: list[list[float]]) -> None:
             writer.writerow([f"{row[0]:.9f}"] + [_cell(v) for v in row[1:]])
 
 
-def plot(recorder: TraceRecorder, path: Path, title: str) -> None:
-    """Plot what ``recorder`` holds into ``path`` (PNG); reads the model (its thread)."""
-    from ..trace.plot import plot_trace
-    plot_trace(recorder, path, title=title)
+def plot_times(recorder: TraceRecorder) -> list[int]:
+    """The instants the plot samples (the model's thread)."""
+    from ..trace.plot import plot_times as times
+    return times(recorder)
+
+
+def sample_motors(recorder: TraceRecorder, times: list[int]) -> dict[int, list[Any]]:
+    """Every motor's samples at ``times`` (the model's thread)."""
+    from ..trace.plot import sample_motors as sample
+    return sample(recorder, times)
+
+
+def plot_facts(recorder: TraceRecorder, times: list[int],
+               samples: dict[int, list[Any]]) -> Any:
+    """What the plot draws, read from the recorder (the model's thread)."""
+    from ..trace.plot import plot_facts as facts
+    return facts(recorder, times, samples)
+
+
+def draw(facts: Any, title: str) -> bytes:
+    """The plot as PNG bytes, drawn from ``facts`` alone (any thread: a worker's)."""
+    from ..trace.plot import draw_plot
+    with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
+        path = Path(tmp) / "plot.png"
+        draw_plot(facts, path, title)
+        return path.read_bytes()
 
 
 def _cell(value: float) -> str:
