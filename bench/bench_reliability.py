@@ -10,6 +10,10 @@ Printed, side by side:
   client over TCP alone, then beside PAGES dashboard pages (WebSocket clients in
   another process, as browsers are) each pipelining ``?96.1`` console requests
   without pause, and the ratio (goal: p99 <= 50 ms beside 20 pages);
+* **web heavy**: the same host-line client alone, then beside a page uploading
+  banks back to back (a 48 KiB bank text, then a valid 450-line bank: checked in a
+  worker thread, sent in slices) and a client downloading the plot of the recording
+  back to back while two motors move (drawn in a worker thread);
 * **kill -9**: ROUNDS kills of ``coolmuscle sim`` during ``$`` (cml-users-guide.txt
   2.1.2): store damaged / state other than the last acknowledged save or the one in
   flight (0 expected);
@@ -20,7 +24,7 @@ Printed, side by side:
 ::
 
     PYTHONPATH=src python bench/bench_reliability.py [--rounds 100] [--hours 10]
-        [--pages 20] [--only clients,fairness,webflood,kill,trace]
+        [--pages 20] [--only clients,fairness,webflood,webheavy,kill,trace]
 """
 
 from __future__ import annotations
@@ -192,6 +196,74 @@ def _peak_rss(pid: int) -> float:
     return float("nan")
 
 
+def _heavy_pages(url: str, seconds: float, out: object) -> None:
+    """Child process: one page uploading banks back to back (each waits for its answer),
+    one client downloading the plot back to back; puts (uploads, plots) done."""
+    import aiohttp
+
+    big = "\n".join(f"B{b}.1\n" + "\n".join(f"S{n % 8 + 1}.1=100, A{n % 8 + 1}.1=100, "
+                                               f"P{n % 8 + 1}.1=1000" for n in range(300))
+                    + "\nEND" for b in range(1, 4))[:48000]
+    valid = "\n".join(["B2.1", *(f"T{n % 8 + 1}.1" for n in range(450)), "END"])
+
+    async def uploads(session: aiohttp.ClientSession, end: float) -> int:
+        done = 0
+        async with session.ws_connect(url + "ws", max_msg_size=0) as ws:
+            while time.monotonic() < end:
+                await ws.send_str(json.dumps({"t": "bank_upload", "id": done, "motor": 1,
+                                              "text": (big, valid)[done % 2]}))
+                async for msg in ws:
+                    if f'"t":"result","id":{done},' in msg.data:
+                        break
+                done += 1
+        return done
+
+    async def plots(session: aiohttp.ClientSession, end: float) -> int:
+        done = 0
+        while time.monotonic() < end:
+            async with session.get(url + "api/plot.png") as r:
+                await r.read()
+                done += r.status == 200
+        return done
+
+    async def main() -> tuple[int, int]:
+        end = time.monotonic() + seconds
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(url + "ws") as ws:     # record, two motors move
+                await ws.send_str(json.dumps({"t": "record", "id": 1}))
+                for line in ("S.1=50, A.1=50, P.1=2000000, ^.1",
+                             "S.2=50, A.2=50, P.2=-2000000, ^.2"):
+                    await ws.send_str(json.dumps({"t": "cml", "id": 2, "line": line}))
+                await asyncio.sleep(2.0)
+            done = await asyncio.gather(uploads(session, end), plots(session, end))
+            return done[0], done[1]
+    out.put(asyncio.run(main()))  # type: ignore[attr-defined]
+
+
+def web_heavy(seconds: float = 5.0) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        sim = ServedSim(Path(tmp) / "sim.log", "--motors", "2", web=True, env=ENV)
+        try:
+            alone = _timed_trips(sim.port, seconds)
+            context = multiprocessing.get_context("spawn")
+            queue = context.Queue()
+            child = context.Process(target=_heavy_pages,
+                                    args=(sim.web_url, seconds + 5.0, queue))
+            child.start()
+            time.sleep(4.0)                    # recording for 2 s, the heavy work begun
+            loaded = _timed_trips(sim.port, seconds)
+            uploads, plots = queue.get(timeout=seconds + 120)
+            child.join(10)
+        finally:
+            sim.close()
+    a50, a99 = _p(alone, .5), _p(alone, .99)
+    l50, l99 = _p(loaded, .5), _p(loaded, .99)
+    print(f"web heavy ?96.1 host line alone p50 {a50:.2f} ms p99 {a99:.2f} ms | beside bank "
+          f"uploads (48 KiB text / 450-line bank, {uploads} done) and plot downloads "
+          f"({plots} done) p50 {l50:.2f} ms p99 {l99:.2f} ms ({len(loaded)} trips) | "
+          f"ratio p99 {l99 / a99:.1f}x")
+
+
 def _timed_trips(port: int, seconds: float) -> list[float]:
     """One-at-a-time ``?96.1`` round trips for ``seconds`` (s each)."""
     trips: list[float] = []
@@ -288,7 +360,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=100)
     parser.add_argument("--hours", type=float, default=10.0)
     parser.add_argument("--pages", type=int, default=20)
-    parser.add_argument("--only", default="clients,fairness,webflood,kill,trace")
+    parser.add_argument("--only", default="clients,fairness,webflood,webheavy,kill,trace")
     args = parser.parse_args()
     chosen = set(args.only.split(","))
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
@@ -298,6 +370,8 @@ def main() -> None:
         fairness()
     if "webflood" in chosen:
         web_flood(args.pages)
+    if "webheavy" in chosen:
+        web_heavy()
     if "kill" in chosen:
         kill9(args.rounds)
     if "trace" in chosen:

@@ -28,6 +28,7 @@ from ...device import Device
 from ...errors import CmlSyntaxError, CoolMuscleError
 from .banks import check_program_text, firmware_of, list_banks, refusal, send_slice, start_upload
 from .hub import Note
+from .turns import in_worker
 
 log = logging.getLogger(__name__)
 
@@ -179,7 +180,7 @@ class Actions:
             raise RequestError(f"bank text too long ({len(text)} characters, at most "
                                f"{MAX_BANK_TEXT})")
         firmware = firmware_of(self.device)
-        program, diagnostics = await asyncio.to_thread(
+        program, diagnostics = await in_worker(
             check_program_text, text, firmware.name if firmware else "cm2",
             len(self.device.motor_ids))
         refused = refusal(program, diagnostics)

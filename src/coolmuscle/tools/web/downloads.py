@@ -23,6 +23,7 @@ from aiohttp import web
 from ...frontends.transports.base import Port
 from ..trace.recorder import TraceRecorder, parquet_available
 from .traces import draw, plot_facts, plot_times, sample_motors, trace_rows, write_rows
+from .turns import in_worker
 
 #: Most samples (rows x motors) of one downloaded trace: the step grows for long
 #: recordings (at least 1 ms, the step of ``coolmuscle run --trace``).
@@ -61,7 +62,7 @@ class Downloads:
             return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
         async with self._busy:
             header, rows = await self._sample()
-            body = await asyncio.to_thread(self._write, f"trace.{fmt}", header, rows)
+            body = await in_worker(self._write, f"trace.{fmt}", header, rows)
         return _file(f"trace.{fmt}", body)
 
     async def _sample(self) -> tuple[list[str], list[list[float]]]:
@@ -103,7 +104,7 @@ class Downloads:
                     samples.setdefault(motor, []).extend(values)
                 await asyncio.sleep(0)         # the others' turn between two slices
             facts = self.port.call(plot_facts, recorder, times, samples)
-            body = await asyncio.to_thread(draw, facts, self.title)
+            body = await in_worker(draw, facts, self.title)
         return _file("plot.png", body)
 
 

@@ -19,16 +19,23 @@ for it (a page's answers keep the order of its requests), the other pages go on.
 
 When a page leaves, what it queued is dropped (counted), not run; a request already
 running ends normally.
+
+Pure work (checking a bank text, drawing a plot) runs in a worker thread
+(:func:`in_worker`); while one runs the interpreter hands the processor between threads
+every ``WORKER_SWITCH_INTERVAL`` seconds instead of Python's 5 ms, so the loop's thread,
+which gives the interpreter up at each socket call, gets it back within a millisecond.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, TypeVar
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +45,10 @@ MAX_QUEUED = 64
 MAX_PER_WAKE = 32
 MAX_SECONDS_PER_WAKE = 0.01
 
+#: The interpreter's switch interval (s) while a worker thread does a page's pure work.
+WORKER_SWITCH_INTERVAL = 0.001
+
+T = TypeVar("T")
 Answer = dict[str, Any]
 #: Runs one request now: its answer, or an awaitable of it (a request in steps).
 Handler = Callable[[Any], "Answer | Awaitable[Answer]"]
@@ -177,3 +188,39 @@ class Turns:
             if page.queue and not page.closed and page not in self._ready:
                 self._ready.append(page)
                 self._schedule()
+
+
+class _SwitchInterval:
+    """The switch interval lowered while any worker runs, restored after the last one
+    (process-wide: a lock, as several servers may run in one process)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._workers = 0
+        self._saved = 0.0
+
+    def enter(self) -> None:
+        with self._lock:
+            if not self._workers:
+                self._saved = sys.getswitchinterval()
+                sys.setswitchinterval(min(self._saved, WORKER_SWITCH_INTERVAL))
+            self._workers += 1
+
+    def leave(self) -> None:
+        with self._lock:
+            self._workers -= 1
+            if not self._workers:
+                sys.setswitchinterval(self._saved)
+
+
+_SWITCH = _SwitchInterval()
+
+
+async def in_worker(fn: Callable[..., T], *args: Any) -> T:
+    """``fn(*args)`` in a worker thread (pure work: no model state), the switch interval
+    lowered meanwhile (module docstring)."""
+    _SWITCH.enter()
+    try:
+        return await asyncio.to_thread(fn, *args)
+    finally:
+        _SWITCH.leave()
