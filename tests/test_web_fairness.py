@@ -213,3 +213,30 @@ def test_an_upload_sent_in_slices_is_its_own_sender(
         return list(await asyncio.gather(page(url, uploader), page(url, chatter)))
     upload, _ = run(both())
     assert upload["ok"] and upload["uploaded"] and upload["differences"] == []
+
+
+def test_the_pages_recording_keeps_its_last_hour_only() -> None:
+    """Recording from the page grew for as long as it ran (0.75 MiB a minute with two
+    motors moving); it now keeps the last hour of virtual time: after five hours of
+    moves it holds what it held after two, and a download starts an hour back."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.tools.trace.recorder import record
+    from coolmuscle.tools.web.traces import RECORD_WINDOW_S, forget_old, trace_rows
+
+    chain = Chain(motors=2)
+    recorder = record(chain)
+    for line in ("S.1=100", "A.1=100", "S.2=100", "A.2=100"):
+        chain.execute(line)
+    held = []
+    for minute in range(5 * 60):
+        for n in range(4):                     # two moves a minute each way, both motors
+            chain.execute(f"P.1={20000 * (n % 2)}, ^.1, P.2={-30000 * (n % 2)}, ^.2")
+            chain.kernel.run(until=chain.kernel.now + 15 * 10**9)
+        forget_old(recorder)
+        if minute in (2 * 60 - 1, 5 * 60 - 1):
+            held.append(sum(len(t.state_times()) + len(t.piece_starts())
+                            for t in recorder.traces.values()))
+    assert held[0] > 0 and abs(held[1] - held[0]) <= held[0] * 0.02, held
+    assert recorder.start == chain.kernel.now - int(RECORD_WINDOW_S * 1e9)
+    _, rows = trace_rows(recorder, 60.0, chain.kernel.now)
+    assert next(iter(rows))[0] == recorder.start / 1e9

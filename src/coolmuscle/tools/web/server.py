@@ -37,7 +37,7 @@ from .actions import FAULTS, Actions
 from .banks import firmware_of
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
-from .traces import start_recording
+from .traces import FORGET_EVERY_S, forget_old, start_recording
 from .turns import Turns
 
 log = logging.getLogger(__name__)
@@ -105,6 +105,7 @@ class WebTransport(Transport):
         self._device: Device | None = None
         self.turns: Turns | None = None
         self.cross_site_refused = 0
+        self._trimmer: asyncio.Task[None] | None = None
 
     # -- life cycle ---------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -142,11 +143,24 @@ class WebTransport(Transport):
         the recorder looks at every motor after every kernel event."""
         if self._recorder is None and self.port is not None and self._device is not None:
             self._recorder = self.port.call(start_recording, self._device)
+            if self._recorder is not None:
+                self._trimmer = asyncio.get_running_loop().create_task(
+                    self._trim_recording(), name="coolmuscle-web-recording-window")
             if self._recorder is not None and self.hub is not None:
                 self.hub.add_log([self._device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
                 self.hub.broadcast(json.dumps({"t": "recording", "on": True}))
         return self._recorder is not None
+
+    async def _trim_recording(self) -> None:
+        """Keep the recording to its window (:func:`.traces.forget_old`), now and then."""
+        while True:
+            await asyncio.sleep(FORGET_EVERY_S)
+            if self._recorder is not None and self.port is not None:
+                try:
+                    self.port.call(forget_old, self._recorder)
+                except Exception:              # a model failure must not end the server
+                    log.exception("dashboard: trimming the recording failed")
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
@@ -172,6 +186,10 @@ class WebTransport(Transport):
     async def close(self) -> None:
         await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
                                for ws in list(self._sockets)), return_exceptions=True)
+        if self._trimmer is not None:
+            self._trimmer.cancel()
+            await asyncio.gather(self._trimmer, return_exceptions=True)
+            self._trimmer = None
         if self.turns is not None:
             await self.turns.close_all()
         if self.hub is not None:

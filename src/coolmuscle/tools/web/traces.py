@@ -2,6 +2,9 @@
 
 Recording is off until asked (the page's Record button, ``run --web``): the recorder
 (:mod:`coolmuscle.tools.trace.recorder`) looks at every motor after every kernel event.
+It keeps the last ``RECORD_WINDOW_S`` seconds of virtual time (:func:`forget_old`, run
+every ``FORGET_EVERY_S`` wall seconds by the server): what came before is forgotten, so
+memory stays bounded however long the page records (docs/web.md "Record and download").
 A download samples it in the model's thread (:mod:`.downloads`) and the file is written
 here from those rows in a worker thread: CSV as ``coolmuscle run --trace`` writes it, or
 Parquet with typed columns.  The plot is the one of ``coolmuscle run --plot``
@@ -22,6 +25,7 @@ from typing import Any
 
 from ...chain import Chain
 from ...device import Device
+from ...sim.kernel import NS_PER_S
 from ..trace.recorder import INTEGER_FIELDS, TraceRecorder, record
 
 
@@ -38,6 +42,23 @@ def start_recording(device: Device) -> TraceRecorder | None:
     threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.trace.plot",),
                      name="coolmuscle-web-plot-import", daemon=False).start()
     return recorder
+
+
+#: Virtual seconds of history the page's recording keeps.
+RECORD_WINDOW_S = 3600.0
+#: Wall seconds between two trims of the page's recording.
+FORGET_EVERY_S = 60.0
+
+
+def forget_old(recorder: TraceRecorder, window_s: float = RECORD_WINDOW_S) -> None:
+    """Forget the recording before the last ``window_s`` virtual seconds: its start
+    moves up to there (downloads begin at it).  The model's thread."""
+    upto = recorder.feed.now - int(window_s * NS_PER_S)
+    if upto <= recorder.start:
+        return
+    for trace in recorder.traces.values():
+        trace.forget_before(upto)
+    recorder.start = upto
 
 
 def trace_rows(recorder: TraceRecorder, step: float,
