@@ -240,3 +240,20 @@ def test_the_pages_recording_keeps_its_last_hour_only() -> None:
     assert recorder.start == chain.kernel.now - int(RECORD_WINDOW_S * 1e9)
     _, rows = trace_rows(recorder, 60.0, chain.kernel.now)
     assert next(iter(rows))[0] == recorder.start / 1e9
+
+
+def test_a_text_of_thousands_of_errors_gets_an_answer_of_200_findings(
+        served: ServiceThread) -> None:
+    """A 48 KiB text with an error on every line: the answer lists the first 200 (errors
+    first) and says how many more, not half a megabyte of findings."""
+    text = "\n".join(["B1.1", *("P.1=(((" for _ in range(6000)), "END"])[:48000]
+
+    async def body(ws: Any) -> dict[str, Any]:
+        return await ask(ws, {"t": "bank_upload", "motor": 1, "text": text}, timeout=60)
+    answer = run(page(served.transports[1].url, body))
+    assert answer["ok"] and answer["uploaded"] is False
+    found = answer["diagnostics"]
+    assert len(found) == 201 and all(d["severity"] == "error" for d in found[:200])
+    assert found[-1]["rule"] == "more" and found[-1]["message"].endswith(
+        "more findings (coolmuscle check lists them all)")
+    assert len(json.dumps(answer)) < 64 * 1024

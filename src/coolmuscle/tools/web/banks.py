@@ -57,9 +57,15 @@ def check_text(device: Device, text: str) -> tuple[ProgramFile, list[dict[str, A
                               len(device.motor_ids))
 
 
+#: Findings of the checker an answer lists at most (then one line says how many more):
+#: a 48 KiB text of errors made a half-megabyte answer.
+MAX_DIAGNOSTICS = 200
+
+
 def check_program_text(text: str, firmware: str, motors: int
                        ) -> tuple[ProgramFile, list[dict[str, Any]]]:
-    """Parse and check ``text``; diagnostics as ``{line, column, severity, message}``.
+    """Parse and check ``text``; diagnostics as ``{line, column, severity, message}``
+    (the first ``MAX_DIAGNOSTICS``, errors first, then a line saying how many more).
     Pure work (no model state): the web server runs it in a worker thread."""
     program = parse_program(text, "<page>")
     report = check_program(program, firmware=firmware, motors=motors)
@@ -67,6 +73,13 @@ def check_program_text(text: str, firmware: str, motors: int
               "message": d.message + (f" (error{d.motor_error:02d})"
                                       if d.motor_error is not None else "")}
              for d in report.diagnostics]
+    if len(found) > MAX_DIAGNOSTICS:
+        found.sort(key=lambda d: (d["severity"] != "error", d["line"]))
+        more = len(found) - MAX_DIAGNOSTICS
+        found = found[:MAX_DIAGNOSTICS] + [{
+            "line": found[MAX_DIAGNOSTICS]["line"], "column": 1, "severity": "note",
+            "rule": "more", "message": f"{more} more findings (coolmuscle check lists "
+                                       "them all)"}]
     return program, found
 
 
