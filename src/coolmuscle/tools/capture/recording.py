@@ -117,6 +117,8 @@ class CaptureFile:
             self._queued += len(data)
             self._lines += lines
             self.peak_queued = max(self.peak_queued, self._queued)
+            if self._half_full():
+                self._room.notify_all()          # the writer starts at once
 
     def stop_waiting(self) -> None:
         """The capture ends: :meth:`put` takes what comes without waiting from now on."""
@@ -134,9 +136,15 @@ class CaptureFile:
             self._room.notify_all()
             return at, direction, data
 
+    def _half_full(self) -> bool:
+        return self._queued >= MAX_QUEUED // 2 or self._lines >= MAX_QUEUED_LINES // 2
+
     def _run(self) -> None:
         while True:
-            closing = self._closing.wait(ROUND)
+            with self._room:       # a round, or at once when half full or closing
+                self._room.wait_for(lambda: self._closing.is_set() or self._half_full(),
+                                    timeout=ROUND)
+            closing = self._closing.is_set()
             if not self._items:
                 if closing:
                     return
@@ -156,6 +164,8 @@ class CaptureFile:
         """Write what is queued and pending; the end line when ``stopped`` says why."""
         self.stop_waiting()
         self._closing.set()
+        with self._room:
+            self._room.notify_all()
         self._thread.join()
         if self._failed:
             self.file.close()
