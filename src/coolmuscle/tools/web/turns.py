@@ -29,15 +29,12 @@ which gives the interpreter up at each socket call, gets it back within a millis
 from __future__ import annotations
 
 import asyncio
-import logging
 import sys
 import threading
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
-
-log = logging.getLogger(__name__)
 
 #: Requests one page may have waiting; one more is refused with a message.
 MAX_QUEUED = 64
@@ -71,7 +68,8 @@ class PageRequests:
 class Turns:
     """Round robin over the pages' queues with a bound per wake-up (module docstring).
 
-    ``handle`` runs one request; ``slow(request)`` says whether it runs in steps."""
+    ``handle`` runs one request: it returns the answer, or an awaitable of it for a
+    request that runs in steps (run as a task; the page waits for it)."""
 
     def __init__(self, handle: Handler, *, max_queued: int = MAX_QUEUED,
                  max_per_wake: int = MAX_PER_WAKE,
