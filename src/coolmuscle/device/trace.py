@@ -30,6 +30,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from ..motor.motion.axis import wrap_user
 from ..motor.motion.trajectory import Piece
 from ..motor.signals.analog_output import output_volts
 from ..motor.state.output_functions import OUT_ROTATION_PULSE
@@ -189,8 +190,9 @@ class MotorTrace:
         torque = sign * motion.torque_percent_at(t)
         if not status & _NO_TORQUE:
             torque += motor.analog_control.load_percent(t)   # a sensed load (5.5)
-        command = sign * (command_raw - zero)
-        position = sign * (actual_raw - zero)
+        half = motor.axis.half_range                 # as the position counter shows them
+        command = wrap_user(sign * (command_raw - zero), half)
+        position = wrap_user(sign * (actual_raw - zero), half)
         error = command_raw - actual_raw
         k33, k34, k35 = self.k_at(t)          # the K values of that instant, not of now
         analog_out = output_volts(k35, target=target if math.isfinite(target)

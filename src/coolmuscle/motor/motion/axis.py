@@ -20,6 +20,7 @@ target, on the command's final approach: possibly before the command has ended
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Protocol
@@ -61,6 +62,9 @@ class Axis:
         self._on_passing_point = on_passing_point
         self.zero = 0.0
         self.sign = 1
+        #: Half the span of the position counter (user pulses): user positions wrap
+        #: round past it (:func:`wrap_user`; inf: never).
+        self.half_range = math.inf
         self._enabled = True
         self.profile: Profile = hold(0.0, kernel.now)
         #: (profile, rest): after a reversal restarted at rest (:meth:`move`), the plan
@@ -92,12 +96,16 @@ class Axis:
 
     # -- coordinates ------------------------------------------------------
     def to_raw(self, user: float) -> float:
-        """User pulses -> raw pulses."""
+        """User pulses -> raw pulses.  The user value counts in the counter's current
+        turn, the one the shaft is in (after a wrap, P0 is the counter's 0 there)."""
+        if self.half_range != math.inf:
+            here = self.sign * (self.raw_actual() - self.zero)
+            user += here - wrap_user(here, self.half_range)
         return self.zero + self.sign * user
 
     def to_user(self, raw: float) -> float:
-        """Raw pulses -> user pulses."""
-        return self.sign * (raw - self.zero)
+        """Raw pulses -> user pulses, as the position counter shows them (wrapped)."""
+        return wrap_user(self.sign * (raw - self.zero), self.half_range)
 
     # -- live values (closed form at kernel.now) --------------------------
     def raw_command(self) -> float:
@@ -430,6 +438,14 @@ class Axis:
     def _arrived(self) -> None:
         self.moving = False
         self._on_in_position()
+
+
+def wrap_user(user: float, half: float) -> float:
+    """``user`` as a counter of span 2·``half`` shows it: within [-half, half)."""
+    if -half <= user < half or not math.isfinite(user):
+        return user
+    span = 2.0 * half
+    return user - math.floor((user + half) / span) * span
 
 
 def _to_raw(profile: Profile, zero: float, sign: int) -> Profile:
