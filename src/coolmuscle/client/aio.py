@@ -17,7 +17,6 @@ they arrive, also between calls.  Timeouts are wall-clock seconds (on
 from __future__ import annotations
 
 import asyncio
-import math
 import weakref
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -271,11 +270,9 @@ class EventStream:
     async def __anext__(self) -> MotorEvent:
         if self._ended and self._queue.empty():
             raise StopAsyncIteration
-        if self._queue.empty():
-            with self._driver.waiting(math.inf):    # a fast port's time moves meanwhile
-                item = await self._queue.get()
-        else:
-            item = self._queue.get_nowait()
+        if self._queue.empty():      # a fast port's time moves while the stream waits
+            await self._driver.advance_until(lambda: not self._queue.empty())
+        item = await self._queue.get()
         if item is None or isinstance(item, BaseException):
             self._ended = True
             if isinstance(item, BaseException):
