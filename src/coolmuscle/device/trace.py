@@ -240,11 +240,19 @@ class MotorTrace:
         """Pulses per revolution now (K37)."""
         return self._motor.resolution.pulses_per_rev
 
-    def stoppers(self) -> list[float]:
-        """The machine file's stoppers (a pushed object, 4.1.4), user pulses."""
+    def stoppers(self, t: int | None = None) -> list[float]:
+        """The machine file's stoppers (a pushed object, 4.1.4) in user pulses, in the
+        user coordinates in force at ``t`` (default: now): an origin set (``|2``, an
+        origin search) or K45 moves where they are counted from, not where they are."""
         motor = self._motor
         walls = motor.geometry.walls(motor.resolution.pulses_per_rev)
-        return [motor.axis.to_user(raw) for raw in walls if math.isfinite(raw)]
+        zero, sign = motor.axis.zero, motor.axis.sign
+        history = motor.axis.history
+        if t is not None and history:
+            entry = history[max(bisect_right(self._piece_starts(history), t) - 1, 0)]
+            zero, sign = entry[3], entry[4]
+        half = motor.axis.half_range
+        return [wrap_user(sign * (raw - zero), half) for raw in walls if math.isfinite(raw)]
 
 
 class TraceFeed:

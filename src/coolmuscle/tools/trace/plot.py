@@ -208,7 +208,8 @@ def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None 
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
-        _draw_stoppers(ax["position"], mid, traces[mid].stoppers(), colors[mid], multi)
+        walls = [traces[mid].stoppers(x) for x in times]
+        _draw_stoppers(ax["position"], mid, t, walls, colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
@@ -299,14 +300,20 @@ def _draw_timeline(ax: Axes, t: list[float], data: dict[int, list[Sample]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: Axes, motor: int, stoppers: Sequence[float], color: object,
-                   multi: bool) -> None:
+def _draw_stoppers(ax: Axes, motor: int, t: list[float], walls: list[list[float]],
+                   color: object, multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
-    motor's user coordinates."""
-    for where in stoppers:
-        ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
-        name = f"ID{motor} stopper" if multi else "stopper"
-        ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+    motor's user coordinates of each instant: a line steps where an origin set moved
+    them, so the trace never crosses a stopper it did not touch."""
+    if not walls or not walls[0]:
+        return
+    name = f"ID{motor} stopper" if multi else "stopper"
+    for k in range(len(walls[0])):
+        values = [w[k] for w in walls]
+        ax.step(t, values, where="post", color=color, linestyle=":", linewidth=1.2)
+        shown = f"{values[0]:g}" if values[-1] == values[0] else \
+            f"{values[0]:g} -> {values[-1]:g}"
+        ax.annotate(f"{name} {shown} (machine file)", (0.01, values[0]),
                     xycoords=("axes fraction", "data"), fontsize="x-small",
                     va="bottom", color=color)
 
