@@ -350,6 +350,18 @@ class AsyncCoolMuscle(AsyncMotor):
                 self._driver.listeners.remove(entry)
         return remove
 
+    def add_failure_listener(self, listener: Callable[[BaseException], None]
+                             ) -> Callable[[], None]:
+        """Call ``listener(error)`` in the loop once the port fails (the peer closed the
+        connection, the cable was pulled): the :class:`~coolmuscle.errors.TransportError`
+        every later call raises.  Returns a function that removes it."""
+        self._driver.on_failure.append(listener)
+
+        def remove() -> None:
+            if listener in self._driver.on_failure:
+                self._driver.on_failure.remove(listener)
+        return remove
+
     def add_tap(self, tap: Callable[[str, bytes], None]) -> Callable[[], None]:
         """Call ``tap(">", data)`` for every byte written and ``tap("<", data)`` for every
         byte read (a session recorder); returns a function that removes it."""

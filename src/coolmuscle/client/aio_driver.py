@@ -279,6 +279,8 @@ class AsyncDriver:
     def write(self, data: bytes) -> None:
         if not data:
             return
+        if self._failure is not None:      # the port is gone: nothing written is lost silently
+            raise self._failure
         self._tap(">", data)
         try:
             self.port.write(data)

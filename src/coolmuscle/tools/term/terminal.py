@@ -15,8 +15,11 @@ Line editing and history come from prompt_toolkit (history kept in
 ``:save [ID]``       ``$`` and wait for ``saved.n`` (default: the terminal's motor)
 ``:log FILE``        record the session as a golden transcript (docs/scripts.md);
                      ``:log off`` stops
-``:motor ID``        the motor ID ``:save`` and ``:send`` use
+``:motor ID``        the motor ID ``:save`` and ``:send`` use (one that answers)
 ``:help``, ``:quit`` (or Ctrl-D)
+
+A lost connection (the peer closed it, the cable was pulled) is said at once, in red,
+and ends the terminal with exit status 1: no line typed after it is lost silently.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from prompt_toolkit.shortcuts import ProgressBar
 from ...client import AsyncCoolMuscle, connect_async
 from ...client.program import load_program
 from ...client.protocol import MotorEvent
-from ...errors import CoolMuscleError
+from ...errors import CoolMuscleError, CoolMuscleTimeout, TransportError
 from ...motor.status import Ux
 from ..script.transcript import TranscriptRecorder
 
@@ -90,6 +93,8 @@ class Terminal:
         self.motor = client.id
         self.recorder: TranscriptRecorder | None = None
         self._untap: Callable[[], None] | None = None
+        #: why the connection was lost (``None``: it works)
+        self.lost: BaseException | None = None
 
     def on_event(self, event: MotorEvent) -> None:
         text, style = describe(event)
@@ -99,8 +104,18 @@ class Terminal:
         """One input line; ``False`` ends the session."""
         if line.startswith(":"):
             return await self.command(line[1:].strip())
-        self.client.write_line(line)
+        try:
+            self.client.write_line(line)
+        except TransportError as exc:
+            self.connection_lost(exc)
+            return False
         return True
+
+    def connection_lost(self, error: BaseException) -> None:
+        """The port failed: said once, in red; the session ends (exit status 1)."""
+        if self.lost is None:
+            self.lost = error
+            show(f"connection lost: {error}; the terminal ends", "error")
 
     async def command(self, text: str) -> bool:
         words = shlex.split(text) if text else [""]
@@ -117,13 +132,23 @@ class Terminal:
             elif name == "log" and len(args) == 1:
                 self.log(args[0])
             elif name == "motor" and len(args) == 1 and args[0].isdigit():
-                self.motor = self.client.motor(int(args[0])).id    # 1..15 (1.1)
-                show(f"motor ID{self.motor}", "info")
+                await self.select_motor(int(args[0]))
             else:
                 show(HELP, "info")
         except (CoolMuscleError, OSError, ValueError) as exc:
             show(f"{name}: {exc}", "error")
         return True
+
+    async def select_motor(self, motor_id: int) -> None:
+        """``:motor ID``: a motor ID of the chain (1..15, 1.1) that answers ``?99``."""
+        motor = self.client.motor(motor_id)
+        try:
+            await motor.get_status()
+        except CoolMuscleTimeout:
+            raise CoolMuscleError(f"ID{motor.id} does not answer (no reply to "
+                                  f"?99.{motor.id}): still ID{self.motor}") from None
+        self.motor = motor.id
+        show(f"motor ID{self.motor}", "info")
 
     def log(self, target: str) -> None:
         if self.recorder is not None and self._untap is not None:
@@ -162,14 +187,20 @@ class Terminal:
             self.log("off")
 
 
-async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
+async def _session(client: AsyncCoolMuscle, url: str, history: History) -> Terminal:
     term = Terminal(client, url)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
+
+    def lost(error: BaseException) -> None:
+        term.connection_lost(error)
+        if prompt.app.is_running:
+            prompt.app.exit(exception=EOFError())       # the prompt ends at once
+    client.add_failure_listener(lost)
     show(f"coolmuscle term: {url} (motor ID{client.id}); :help for commands", "info")
     try:
         with patch_stdout(raw=True):
-            while True:
+            while term.lost is None:
                 try:
                     line = await prompt.prompt_async(f"ID{term.motor}> ")
                 except EOFError:
@@ -180,6 +211,7 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
                     break
     finally:
         term.close()
+    return term
 
 
 async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
@@ -201,12 +233,14 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
         if recorder is not None:
             client.add_tap(recorder.tap)
         try:
-            await _session(client, url, store)
+            term = await _session(client, url, store)
         finally:
             if recorder is not None:
                 recorder.close()
     finally:
         await client.close()
+    if term.lost is not None:
+        raise SystemExit(1)
 
 
 def main(url: str, **options: Any) -> None:
