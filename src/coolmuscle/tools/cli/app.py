@@ -253,16 +253,25 @@ def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str
 
 
 def _reset_state(state: Path | None) -> None:
-    """``sim --reset``: forget what the state directory holds (factory state)."""
+    """``sim --reset``: forget what the state directory holds (factory state).  A store
+    file that cannot be read at all (damaged, not a store) is kept aside, not lost."""
     if state is None:
         return
-    from ...motor.state.store import DEFAULT_FILENAME, Store
+    from ...errors import DamagedStoreError
+    from ...motor.state.store import DEFAULT_FILENAME, Store, set_aside
     path = state / DEFAULT_FILENAME
     if not path.exists():
         return
-    with Store(path, writer=True) as store:     # not under a running sim
-        for motor_id in store.motors():
-            store.delete(motor_id)
+    try:
+        with Store(path, writer=True) as store:     # not under a running sim
+            for motor_id in store.motors():
+                store.delete(motor_id)
+    except DamagedStoreError as exc:
+        kept = set_aside(path)
+        err.print(f"coolmuscle: state reset: {_show_path(path)} {exc.problem}: kept it as "
+                  f"{_show_path(Path(kept))}; {_show_path(state)} holds factory settings",
+                  markup=False)
+        return
     err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
               markup=False)
 
