@@ -103,11 +103,13 @@ def _junit_path(path: Path | None) -> None:
 def _check_script_lines(path: Path, report: Any) -> None:
     """The script lines (``@wait`` ...) as ``coolmuscle run`` reads them: a directive
     ``run`` refuses (``@wiat``) is a ``script`` error here too (docs/scripts.md)."""
+    from ...motor.state.firmware import get_firmware
     from ..script.runner import ScriptError, parse_line
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return
+    inputs = get_firmware(report.firmware).inputs
     for number, raw in enumerate(text.splitlines(), start=1):
         source = raw.rstrip("\r")
         stripped = source.lstrip()
@@ -115,7 +117,10 @@ def _check_script_lines(path: Path, report: Any) -> None:
                 not stripped.startswith("<<"):
             continue
         try:
-            parse_line(stripped, number)
+            step = parse_line(stripped, number)
+            if step.kind == "input" and step.args[1] > inputs:
+                raise ScriptError(f"@input {step.args[1]}: the motor has inputs 1..{inputs} "
+                                  f"({report.firmware})", number)
         except ScriptError as exc:
             message = str(exc).split(": ", 1)[1] if str(exc).startswith("line ") else str(exc)
             report.add(number, "script", message)
