@@ -15,9 +15,13 @@ from typing import Any
 
 import typer
 
+from .ports import port_url
 from .usage import UsageError
 
 __all__ = ["register"]
+
+_PORT_HELP = ("The motor: a serial device (/dev/ttyUSB0), HOST:PORT (127.0.0.1:5150, what "
+              "'coolmuscle sim' serves) or a pyserial URL (socket://, coolmuscle://).")
 
 
 class Format(str, Enum):
@@ -129,8 +133,7 @@ def _check_script_lines(path: Path, report: Any) -> None:
 
 def upload(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="File to send."),
-    port: str = typer.Option(..., "--port", metavar="URL",
-                             help="Serial device or pyserial URL (socket://, coolmuscle://)."),
+    port: str = typer.Option(..., "--port", metavar="PORT", help=_PORT_HELP),
     save: bool = typer.Option(False, "--save", help="Send $ afterwards (2.1.2)."),
     verify: bool = typer.Option(True, "--verify/--no-verify",
                                 help="Read the banks back and compare."),
@@ -146,7 +149,7 @@ def upload(
         raise UsageError(f"{file} is a directory, not a .cml file")
     if not file.is_file():
         raise UsageError(f"no such file: {file}")
-    result = upload_file(file, port, save=save, verify=verify, baudrate=baudrate,
+    result = upload_file(file, port_url(port), save=save, verify=verify, baudrate=baudrate,
                          timeout=timeout, firmware=firmware.value if firmware else None,
                          out=sys.stdout, progress=sys.stderr.isatty())
     if not result.ok:
@@ -154,7 +157,7 @@ def upload(
 
 
 def term(
-    url: str = typer.Argument(..., metavar="URL", help="Serial device or pyserial URL."),
+    url: str = typer.Argument(..., metavar="PORT", help=_PORT_HELP),
     baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
     motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
@@ -166,7 +169,8 @@ def term(
     """Interactive terminal: line editing, history, colour, :send, :save, :log."""
     from ..term.terminal import main
 
-    main(url, baudrate=baudrate, motor=motor, timeout=timeout, history=history, log=log)
+    main(port_url(url), baudrate=baudrate, motor=motor, timeout=timeout, history=history,
+         log=log)
 
 
 def register(app: typer.Typer) -> None:
