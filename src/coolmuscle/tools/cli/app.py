@@ -556,12 +556,17 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(sig, handler)
 
 
+#: The commands that handle Ctrl-C as KeyboardInterrupt themselves: the terminal (at
+#: its prompt a key), batch and sweep (they report what finished).  Every other command
+#: stops with one line and 130 (typer turns a KeyboardInterrupt into a silent 130).
+_OWN_CTRL_C = ("term", "batch", "sweep")
+
+
 def _main(argv: list[str] | None) -> None:
     if threading.current_thread() is threading.main_thread():
         install_startup_handlers()    # also when started as coolmuscle.tools.cli.app:main
         args = sys.argv[1:] if argv is None else argv
-        if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
-            # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
+        if next((a for a in args if not a.startswith("-")), "") in _OWN_CTRL_C:
             signal.signal(signal.SIGINT, signal.default_int_handler)
     from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
     from .enip import optional_value_argv
