@@ -243,3 +243,18 @@ def test_upload_of_an_rt3_file_to_a_cm2_hints_at_the_firmware() -> None:
                           "coolmuscle://?mode=fast")
     assert done.returncode == 1
     assert "hint: the file is written for rt3" in done.stdout and "motor is cm2" in done.stdout
+
+
+def test_the_baud_rate_option_has_one_name_everywhere(capsys: Any) -> None:
+    """``--baud BPS`` as in capture and the desk commands; ``--baudrate`` still works
+    (an alias the help does not show)."""
+    for command in (["upload", "--help"], ["term", "--help"], ["capture", "--help"],
+                    ["scan", "--help"]):
+        with pytest.raises(SystemExit):
+            cli.main(command)
+        out = capsys.readouterr().out
+        assert "--baud " in out and "--baudrate" not in out, command
+    for option in ("--baud", "--baudrate"):
+        code, out, _ = upload_cli(capsys, str(EXAMPLES / "2.1-operation.cml"), "--port", URL,
+                                  option, "38400")
+        assert code == 0, out

@@ -20,6 +20,8 @@ from .usage import UsageError
 
 __all__ = ["register"]
 
+#: ``--baud`` as in capture and the desk commands (``--baudrate``: a hidden alias).
+_BAUD_HELP = "Baud rate of the motor's port (K20)."
 _PORT_HELP = ("The motor: a serial device (/dev/ttyUSB0), HOST:PORT (127.0.0.1:5150, what "
               "'coolmuscle sim' serves) or a pyserial URL (socket://, coolmuscle://).")
 
@@ -137,7 +139,8 @@ def upload(
     save: bool = typer.Option(False, "--save", help="Send $ afterwards (2.1.2)."),
     verify: bool = typer.Option(True, "--verify/--no-verify",
                                 help="Read the banks back and compare."),
-    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    baud: int = typer.Option(38400, "--baud", metavar="BPS", help=_BAUD_HELP),
+    baudrate: int | None = typer.Option(None, "--baudrate", hidden=True),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for each reply."),
     firmware: FirmwareChoice | None = typer.Option(None, "--firmware",
                                                       help="Skip reading ?85."),
@@ -149,7 +152,8 @@ def upload(
         raise UsageError(f"{file} is a directory, not a .cml file")
     if not file.is_file():
         raise UsageError(f"no such file: {file}")
-    result = upload_file(file, port_url(port), save=save, verify=verify, baudrate=baudrate,
+    result = upload_file(file, port_url(port), save=save, verify=verify,
+                         baudrate=baudrate if baudrate is not None else baud,
                          timeout=timeout, firmware=firmware.value if firmware else None,
                          out=sys.stdout, progress=sys.stderr.isatty())
     if not result.ok:
@@ -158,7 +162,8 @@ def upload(
 
 def term(
     url: str = typer.Argument(..., metavar="PORT", help=_PORT_HELP),
-    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    baud: int = typer.Option(38400, "--baud", metavar="BPS", help=_BAUD_HELP),
+    baudrate: int | None = typer.Option(None, "--baudrate", hidden=True),
     motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
     history: Path | None = typer.Option(None, "--history", metavar="FILE",
@@ -169,8 +174,8 @@ def term(
     """Interactive terminal: line editing, history, colour, :send, :save, :log."""
     from ..term.terminal import main
 
-    main(port_url(url), baudrate=baudrate, motor=motor, timeout=timeout, history=history,
-         log=log)
+    main(port_url(url), baudrate=baudrate if baudrate is not None else baud, motor=motor,
+         timeout=timeout, history=history, log=log)
 
 
 def register(app: typer.Typer) -> None:
