@@ -47,14 +47,16 @@ class Lab:
     def outer(self) -> str:
         return self.master_if if self.inside == "slave" else self.slave_if
 
-    def instructions(self) -> str:
+    def instructions(self, program: str = "coolmuscle") -> str:
+        """What to run next; ``program`` is the command as it runs under sudo (sudo
+        does not keep an activated virtual environment: ``.venv/bin/coolmuscle``)."""
         return (f"EtherCAT lab up: veth {self.master_if} <-> {self.slave_if} "
                 f"(in network namespace {self.namespace})\n"
-                f"  slave:  sudo ip netns exec {self.namespace} coolmuscle sim --ethercat "
+                f"  slave:  sudo ip netns exec {self.namespace} {program} sim --ethercat "
                 f"{self.slave_if} [--bridge EB02]\n"
                 f"  master: give your EtherCAT master the interface {self.master_if} "
                 f"(e.g. pysoem: master.open('{self.master_if}'))\n"
-                f"  down:   sudo coolmuscle ethercat lab down")
+                f"  down:   sudo {program} ethercat lab down")
 
 
 def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
