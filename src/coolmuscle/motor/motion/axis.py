@@ -98,10 +98,15 @@ class Axis:
     def to_raw(self, user: float) -> float:
         """User pulses -> raw pulses.  The user value counts in the counter's current
         turn, the one the shaft is in (after a wrap, P0 is the counter's 0 there)."""
-        if self.half_range != math.inf:
-            here = self.sign * (self.raw_actual() - self.zero)
-            user += here - wrap_user(here, self.half_range)
-        return self.zero + self.sign * user
+        return self.zero + self.sign * (user + self._turn())
+
+    def _turn(self) -> float:
+        """Where the counter's current turn starts, in unwrapped user pulses (0 until
+        the position first wraps round)."""
+        if self.half_range == math.inf:
+            return 0.0
+        here = self.sign * (self.raw_actual() - self.zero)
+        return here - wrap_user(here, self.half_range)
 
     def to_user(self, raw: float) -> float:
         """Raw pulses -> user pulses, as the position counter shows them (wrapped)."""
@@ -230,7 +235,7 @@ class Axis:
         interpolation, 4.4) with the same tracking, in-position and passing points as
         :meth:`move`.  Its origin may lie ahead (a command still on its way down the
         chain): the axis holds its position until then."""
-        raw = _to_raw(profile, self.zero, self.sign)
+        raw = _to_raw(profile, self.zero + self.sign * self._turn(), self.sign)
         self.target_raw = raw.final_position
         self._start(raw)
 
