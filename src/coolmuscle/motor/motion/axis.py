@@ -384,7 +384,10 @@ class Axis:
                             self._current_drive())
         self.motion = motion
         if len(self.motion.pieces) >= 2000:
-            log.warning("axis: motion solver hit its piece limit at %d ns", now)
+            # the solver's safety net (dynamics.MAX_PIECES): a model bug, said so
+            log.warning("the motion model gave up (piece limit) at virtual time %.6f s: "
+                        "the shaft holds still from there; please report the script or "
+                        "commands that led here", now / 1e9)
         self._remember()
         if self.moving:
             self._schedule_milestones()
