@@ -77,6 +77,23 @@ def test_fast_mode_time_stands_still_between_requests() -> None:
     assert after == before
 
 
+def test_fast_mode_delivers_what_a_line_produced_at_once_without_a_wait() -> None:
+    """A line written with no request waiting (a terminal's): its reply, said at this
+    very instant, reaches the subscribers; virtual time stands still."""
+    async def session() -> tuple[list[str], int]:
+        async with await connect_async("coolmuscle://?mode=fast") as m:
+            seen: list[str] = []
+            m.subscribe(lambda e: seen.append(e.text))
+            m.write_line("?96.1")
+            for _ in range(100):
+                if seen:
+                    break
+                await asyncio.sleep(0.01)
+            return seen, m.port.kernel.now
+    seen, now = run(session())
+    assert seen == ["Px.1=0"] and now == 0
+
+
 def test_fast_mode_wait_event_times_out_in_virtual_time() -> None:
     async def session() -> float:
         async with await connect_async("coolmuscle://?mode=fast") as m:

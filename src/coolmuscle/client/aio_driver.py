@@ -70,12 +70,21 @@ class _ThreadedReader:
             return 0.0
         return max(0.0, min(READ_SLICE, horizon - self.clock()))
 
-    async def step(self) -> None:
+    async def step(self, timeout: float | None = None) -> None:
         """One read of a fast port (in a worker thread: the loop stays free while the
-        chain runs), its bytes (or its failure) handed over before it returns."""
-        data = await self._loop.run_in_executor(None, self._read_fast, self.fast_timeout())
+        chain runs), its bytes (or its failure) handed over before it returns.
+        ``timeout``: how far it may move virtual time (default :meth:`fast_timeout`)."""
+        wait = self.fast_timeout() if timeout is None else timeout
+        data = await self._loop.run_in_executor(None, self._read_fast, wait)
         if not self._stop.is_set():
             self._on_data(data)
+
+    async def drain(self) -> None:
+        """What a fast port holds now, with virtual time standing still (the replies
+        a write produced at once): delivered to subscribers without a wait."""
+        async with self.steps:
+            if not self._stop.is_set():
+                await self.step(0.0)
 
     def _read_fast(self, timeout: float) -> bytes | BaseException:
         try:
@@ -134,6 +143,8 @@ class AsyncDriver:
         self._failure: BaseException | None = None
         self._loop = asyncio.get_running_loop()
         self._reader = _ThreadedReader(port, self._loop, self._received)
+        #: fast port: the reads of what a write produced at once (kept till done)
+        self._drains: set[asyncio.Task[None]] = set()
         #: called once when the port fails (the event streams end with the error)
         self.on_failure: list[Callable[[BaseException], None]] = []
 
@@ -286,6 +297,10 @@ class AsyncDriver:
             self.port.write(data)
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"cannot write to the port: {exc}") from exc
+        if self._reader.fast:              # its replies at this instant, waited for or not
+            task = self._loop.create_task(self._reader.drain())
+            self._drains.add(task)
+            task.add_done_callback(self._drains.discard)
 
 
 class _Waiting:
