@@ -174,7 +174,8 @@ def test_bank_uploaded_from_the_page_reads_back_with_query_1(page, host):
     page.page.select_option("#bank-motor", "3")
     page.by("bank-text").fill("S1.3=50\nA1.3=100\nP1.3=2000\nB1.3\nS1.3, A1.3, P1.3\nEND")
     page.by("bank-upload").click()
-    expect(page.by("bank-result")).to_contain_text("read back identical", timeout=5000)
+    expect(page.by("bank-verdict")).to_contain_text("read back identical", timeout=5000)
+    expect(page.by("bank-findings").locator("li")).to_have_count(0)
     assert host.query("?1.3", r"S1\.3.*") == "S1.3, A1.3, P1.3"
     assert host.query("?P1.3", r"P1\.3=.*").startswith("P1.3=2000,")  # the data line ran too
     page.by("bank-start").click()                                      # [1.3 (6.5)
@@ -188,7 +189,10 @@ def test_checker_errors_are_shown_on_their_line_and_nothing_is_sent(page, host):
     page.by("bank-text").fill("B4.3\nS1.3\nP1.3=(((\nEND")
     page.by("bank-upload").click()
     expect(page.by("bank-result")).to_contain_text("line 3", timeout=5000)
-    expect(page.by("bank-result")).to_contain_text("not uploaded")
+    expect(page.by("bank-verdict")).to_have_text("not uploaded")
+    # the findings are numbered; the outcome is not one of them
+    findings = page.by("bank-findings").locator("li").all_inner_texts()
+    assert findings and all(re.match(r"line \d+:\d+ (error|warning): ", f) for f in findings)
     page.by("bank-result").get_by_role("button", name=re.compile(r"line 3:.*error")).click()
     selected = page.page.evaluate(
         "() => { const t = document.getElementById('bank-text');"

@@ -41,7 +41,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ...errors import StoreError
+from ...errors import DamagedStoreError, StoreError
 
 if TYPE_CHECKING:
     import sqlite3  # imported where a store is opened: a run without one never needs it
@@ -384,8 +384,7 @@ def _open(path: str) -> sqlite3.Connection:
             raise StoreError(f"cannot open store {path}: {exc.strerror or exc}") from exc
         else:
             if size == 0:    # never written by us (a new store appears whole): truncated
-                raise StoreError(f"{path} is empty (0 bytes), not a coolmuscle store; move "
-                                 f"it aside (mv {path} {path}.bad) to start with defaults")
+                raise _damaged(path, "is empty (0 bytes), not a coolmuscle store")
     try:
         conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
                                check_same_thread=False)
@@ -402,7 +401,7 @@ def _open(path: str) -> sqlite3.Connection:
         conn.close()
         if disk_full(path, exc):
             raise StoreError(full_disk_message(path, "open")) from exc
-        raise StoreError(f"{path} is not a usable coolmuscle store: {exc}") from exc
+        raise _damaged(path, f"is not a usable coolmuscle store: {exc}") from exc
     return conn
 
 
@@ -440,6 +439,38 @@ def full_disk_message(path: str, doing: str) -> str:
             "again, or start with --no-state")
 
 
+def _damaged(path: str, problem: str) -> DamagedStoreError:
+    """The error for a store file nothing can be read from, saying what to do."""
+    return DamagedStoreError(f"{path} {problem}; move it aside (mv {path} {path}.bad) to "
+                             "start with defaults, or start coolmuscle sim with --reset "
+                             "(it keeps the file aside)", problem=problem)
+
+
+def set_aside(path: str | os.PathLike[str]) -> str:
+    """Move a damaged store (with its ``-wal`` and ``-shm``) aside, as ``PATH.bad`` (or
+    ``PATH.bad.1``, ... when that is taken), under the writer lock: never a store a
+    running chain holds.  Returns where it went; the next open starts a new store."""
+    path = str(path)
+    lock = _writer_lock(path)
+    try:
+        kept = path + ".bad"
+        n = 0
+        while any(os.path.exists(kept + tail) for tail in ("", "-wal", "-shm")):
+            n += 1
+            kept = f"{path}.bad.{n}"
+        try:
+            os.replace(path, kept)
+            for tail in ("-wal", "-shm"):
+                if os.path.exists(path + tail):
+                    os.replace(path + tail, kept + tail)
+        except OSError as exc:
+            raise StoreError(f"cannot move {path} aside: {exc.strerror or exc}") from exc
+        return kept
+    finally:
+        if lock is not None:
+            lock()                          # released with its file or connection
+
+
 def _create(path: str) -> None:
     """A new store appears whole: built under a temporary name, then renamed, so a
     crash while creating it never leaves a 0-byte or half-made file at ``path``."""
@@ -469,7 +500,7 @@ def _prepare(conn: sqlite3.Connection, path: str) -> None:
     objects = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
     fresh = app_id == 0 and version == 0 and objects == 0
     if not fresh and app_id != APPLICATION_ID:
-        raise StoreError(f"{path} is an SQLite file but not a coolmuscle store")
+        raise _damaged(path, "is an SQLite file but not a coolmuscle store")
     if not fresh and not 1 <= version <= SCHEMA_VERSION:
         raise StoreError(f"{path}: store schema {version} is not supported "
                          f"(this version reads 1..{SCHEMA_VERSION})")
@@ -486,7 +517,7 @@ def _prepare(conn: sqlite3.Connection, path: str) -> None:
         conn.execute("COMMIT")
     check = conn.execute("PRAGMA quick_check").fetchone()[0]
     if check != "ok":
-        raise StoreError(f"{path} is damaged: {check}")
+        raise _damaged(path, f"is damaged: {check}")
 
 
 # -- encoding ----------------------------------------------------------------------

@@ -23,6 +23,7 @@ import typer
 from ...device.hostline import BAUD_RATES
 from ...errors import TransportError
 from ..cli.host_commands import FirmwareChoice
+from ..cli.ports import port_url
 from ..cli.run import stderr_line
 from ..cli.stopsignals import SignalStop, ignore_stop_signals
 from ..cli.usage import UsageError
@@ -107,8 +108,8 @@ def _settings(motor: MotorPort, url: str, given: LineSettings, *, probing: bool,
 
 def capture(
     url: Annotated[str, typer.Argument(
-        metavar="PORT_OR_URL", help="The motor: a serial device or pyserial URL (socket://, "
-                                    "rfc2217://, coolmuscle://).")],
+        metavar="PORT", help="The motor: a serial device, HOST:PORT (127.0.0.1:5150) or a "
+                             "pyserial URL (socket://, rfc2217://, coolmuscle://).")],
     out: Annotated[Path, typer.Option(
         "--out", metavar="SESSION.cml", help="The capture file (written as it goes).")],
     listen: Annotated[str | None, typer.Option(
@@ -166,6 +167,7 @@ def capture(
             parse_address(listen)
         except TransportError as exc:
             raise UsageError(f"--listen: {exc}") from None
+    url = port_url(url)
     given = LineSettings(baud=baud or 38400, parity=(parity or Parity.none).value)
     try:
         motor = MotorPort(url, given.baud, given.parity)

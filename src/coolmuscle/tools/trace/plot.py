@@ -173,7 +173,7 @@ class PlotData:
     input_counts: dict[int, int]
     output_functions: dict[int, list[int]]
     analog_out: dict[int, bool]            # K35 is not 0: the analog output is in use
-    stoppers: dict[int, list[float]]
+    stoppers: dict[int, list[list[float]]]   # each motor's stoppers at each instant
     pulses_per_rev: set[int]
     pairs: list[tuple[int, int]]
 
@@ -203,7 +203,7 @@ def plot_facts(recorder: TraceRecorder, times: list[int], samples: dict[int, lis
                     input_counts={m: traces[m].input_count for m in motors},
                     output_functions={m: list(traces[m].output_functions()) for m in motors},
                     analog_out={m: recorder.chain.get_param(m, 35) != 0 for m in motors},
-                    stoppers={m: list(traces[m].stoppers()) for m in motors},
+                    stoppers={m: [traces[m].stoppers(x) for x in times] for m in motors},
                     pulses_per_rev={traces[m].pulses_per_rev for m in motors}, pairs=pairs)
 
 
@@ -262,7 +262,7 @@ def draw_plot(plot: PlotData, path: str | Path, title: str = "") -> Path:
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
-        _draw_stoppers(ax["position"], mid, plot.stoppers[mid], colors[mid], multi)
+        _draw_stoppers(ax["position"], mid, t, plot.stoppers[mid], colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
@@ -352,14 +352,20 @@ def _draw_timeline(ax: Axes, t: list[float], data: dict[int, list[Sample]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: Axes, motor: int, stoppers: Sequence[float], color: object,
-                   multi: bool) -> None:
+def _draw_stoppers(ax: Axes, motor: int, t: list[float], walls: list[list[float]],
+                   color: object, multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
-    motor's user coordinates."""
-    for where in stoppers:
-        ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
-        name = f"ID{motor} stopper" if multi else "stopper"
-        ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+    motor's user coordinates of each instant: a line steps where an origin set moved
+    them, so the trace never crosses a stopper it did not touch."""
+    if not walls or not walls[0]:
+        return
+    name = f"ID{motor} stopper" if multi else "stopper"
+    for k in range(len(walls[0])):
+        values = [w[k] for w in walls]
+        ax.step(t, values, where="post", color=color, linestyle=":", linewidth=1.2)
+        shown = f"{values[0]:g}" if values[-1] == values[0] else \
+            f"{values[0]:g} -> {values[-1]:g}"
+        ax.annotate(f"{name} {shown} (machine file)", (0.01, values[0]),
                     xycoords=("axes fraction", "data"), fontsize="x-small",
                     va="bottom", color=color)
 
