@@ -488,11 +488,10 @@ class Chain:
 
     def cyclic_state(self, motor: int) -> CyclicState:
         m = self.bus.require(motor)
-        return CyclicState(
-            motor=m.id, time=self.kernel.now, position=m.position(),
-            speed_pps=m.axis.velocity(), status=m.status, inputs=m.io.input_word(),
-            outputs=m.io.output_word(), enabled=m.axis.enabled,
-            origin_search=bool(m.origin.active), origin_done=bool(m.origin_done))
+        axis, io = m.axis, m.io
+        return CyclicState(       # by position: called every cycle for every axis
+            m.id, self.kernel.now, m.position(), axis.velocity(), m.status, io.input_word(),
+            io.output_word(), axis.enabled, bool(m.origin.active), bool(m.origin_done))
 
     def machine_data(self, motor: int) -> dict[str, float]:
         """The load and drive data ``motor`` runs with, by machine-file key."""
