@@ -197,7 +197,9 @@ class Recorder:
         for byte in data:
             if byte == 0x0A and self._held is not None and not self._line:
                 held, self._held = self._held, None
-                self.emit(TranscriptEntry(held.time, "<", held.data + b"\n"))
+                # joined, never ``+``: compiled, mypyc 1.19 leaks the left operand of
+                # bytes + bytes (docs/performance.md "Compiled hot modules")
+                self.emit(TranscriptEntry(held.time, "<", b"".join((held.data, b"\n"))))
                 continue
             self.flush_held()
             self._line.append(byte)
