@@ -250,9 +250,12 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
             stderr_line(f"coolmuscle: warning: {text}")
 
         from ..trace.recorder import DEFAULT_WARN_BYTES
+        # the transcript goes to stdout as it comes and nothing of it is kept (a run of
+        # any length in bounded memory), unless --record writes it all at the end
         result = run_script(script, chain, until=until, trace=trace,
                             on_entry=None if check else show, trace_step=trace_step,
-                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn)
+                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn,
+                            keep=record is not None)
         sys.stdout.flush()
         if plot is not None:
             from ..trace.plot import plot as plot_chain
