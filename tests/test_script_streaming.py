@@ -28,7 +28,8 @@ LOOP = ("S1.1=100\nA1.1=100\nP1.1=10000\nP2.1=0\nB1.1\nX0\nS1.1, A1.1, P1.1\nP2.
         "END\n[1.1\n")
 
 
-def _run(text: str, path: Path, tmp_path: Path, keep: bool) -> tuple[RunResult, list[str]]:
+def _run(text: str, path: Path, tmp_path: Path, keep: bool,
+         record: list[str] | None = None) -> tuple[RunResult, list[str]]:
     options = chain_options(text)
     if options.pop("state", None):
         options["state_dir"] = tmp_path / ("kept" if keep else "streamed")
@@ -38,7 +39,7 @@ def _run(text: str, path: Path, tmp_path: Path, keep: bool) -> tuple[RunResult, 
     chain = Chain(**options)  # type: ignore[arg-type]
     try:
         result = run_script(parse_script(text), chain, on_entry=LineWriter(shown.append),
-                            keep=keep)
+                            keep=keep, record=None if record is None else record.append)
     finally:
         chain.close()
     return result, shown
@@ -64,8 +65,10 @@ def test_streaming_gives_the_verdict_and_lines_of_a_kept_run(path: Path,
     text = path.read_text(encoding="utf-8")
     for variant in _variants(text):
         kept, kept_shown = _run(variant, path, tmp_path, keep=True)
-        streamed, shown = _run(variant, path, tmp_path, keep=False)
+        golden: list[str] = []
+        streamed, shown = _run(variant, path, tmp_path, keep=False, record=golden)
         assert streamed.failure == kept.failure
+        assert "".join(golden) == kept.to_script()
         assert (streamed.matched, streamed.end_time, streamed.marks) == \
             (kept.matched, kept.end_time, kept.marks)
         assert shown == kept_shown
@@ -134,6 +137,29 @@ def test_a_long_run_prints_every_line_in_bounded_memory(tmp_path: Path,
         tracemalloc.stop()
     assert long_lines > short_lines + 5000
     assert long - short < 256 * 1024, (short, long)
+
+
+def test_a_long_recorded_run_writes_every_line_in_bounded_memory(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``coolmuscle run --record``: the golden transcript is written as the run goes,
+    nothing of it kept; before, ``--record`` kept the whole run to write it at the end."""
+    script = tmp_path / "loop.cml"
+    script.write_text(LOOP, encoding="utf-8")
+    record = tmp_path / "golden.cml"
+    sink = _Sink()
+    peaks = []
+    tracemalloc.start()
+    try:
+        with monkeypatch.context() as patch:
+            patch.setattr(sys, "stdout", sink)
+            for until in (100, 2000, 8000):
+                tracemalloc.reset_peak()
+                assert run_command(script, until=until, record=record) == 0
+                peaks.append(tracemalloc.get_traced_memory()[1])
+    finally:
+        tracemalloc.stop()
+    assert len(re.findall(r"^<< ", record.read_text(encoding="utf-8"), re.MULTILINE)) > 7000
+    assert peaks[2] - peaks[1] < 256 * 1024, peaks
 
 
 def test_record_still_writes_the_whole_golden_transcript(tmp_path: Path,

@@ -250,12 +250,17 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
             stderr_line(f"coolmuscle: warning: {text}")
 
         from ..trace.recorder import DEFAULT_WARN_BYTES
-        # the transcript goes to stdout as it comes and nothing of it is kept (a run of
-        # any length in bounded memory), unless --record writes it all at the end
-        result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show, trace_step=trace_step,
-                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn,
-                            keep=record is not None)
+        # the transcript goes to stdout and --record's file as it comes and nothing of
+        # it is kept: a run of any length in bounded memory
+        golden = _Recording(record) if record is not None else None
+        try:
+            result = run_script(script, chain, until=until, trace=trace,
+                                on_entry=None if check else show, trace_step=trace_step,
+                                trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn,
+                                keep=False, record=golden.write if golden else None)
+        finally:
+            if golden is not None:
+                golden.close()
         sys.stdout.flush()
         if plot is not None:
             from ..trace.plot import plot as plot_chain
@@ -266,11 +271,6 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                 plot_chain(chain, plot, title=title, xy=pairs)
     finally:
         chain.close()
-    if record is not None:
-        try:
-            record.write_text(result.to_script(), encoding="utf-8")
-        except OSError as exc:
-            raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
     if junit is not None:
         write_run_junit(junit, file, result, time.perf_counter() - started)
     if not result.ok:
@@ -281,6 +281,33 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
     elif script.expectations:
         stderr_line(f"coolmuscle: {result.summary()}")
     return 0
+
+
+class _Recording:
+    """``--record``'s file, written as the run goes; a file that cannot be opened or
+    written is a :class:`ScriptError` (exit 2)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            self.file = path.open("w", encoding="utf-8")
+        except OSError as exc:
+            raise self.failed(exc) from exc
+
+    def failed(self, exc: OSError) -> ScriptError:
+        return ScriptError(f"cannot write {self.path}: {exc.strerror or exc}")
+
+    def write(self, text: str) -> None:
+        try:
+            self.file.write(text)
+        except OSError as exc:
+            raise self.failed(exc) from exc
+
+    def close(self) -> None:
+        try:
+            self.file.close()
+        except OSError as exc:
+            raise self.failed(exc) from exc
 
 
 def write_run_junit(path: Path, file: Path, result: Any, wall_s: float) -> Path:

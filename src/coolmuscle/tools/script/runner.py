@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Literal
 from ...device.api import Device
 from ...errors import CoolMuscleError
 from ...sim.kernel import seconds, to_seconds
+from .golden import GoldenWriter
+from .golden import split_lines as split_lines
 from .record import Direction as Direction
 from .record import Recorder
 from .record import TranscriptEntry as TranscriptEntry
@@ -88,12 +90,6 @@ def unescape(text: str) -> bytes:
     if bad_char is not None:
         raise ValueError(f"character {bad_char.group()!r} is not a byte (use \\xNN)")
     return out.encode("latin-1")
-
-
-def split_lines(data: bytes) -> list[bytes]:
-    """Split at CR, LF or CRLF, keeping the terminators; the last piece may be partial."""
-    pieces = re.findall(rb"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+$", data)
-    return [p for p in pieces if p]
 
 
 # -- parsing ------------------------------------------------------------
@@ -285,28 +281,21 @@ class RunResult:
         return f"ok: {checked}, ended at {to_seconds(self.end_time):.6f} s"
 
     def to_script(self) -> str:
-        """The script with ``<<`` lines of what was actually received (a golden transcript)."""
+        """The script with ``<<`` lines of what was actually received (a golden
+        transcript): what ``run_script(..., record=...)`` writes as the run goes."""
         out: list[str] = []
-        offsets = dict(self.marks)
+        writer = GoldenWriter(self.script, out.append)
         start = 0
-        for step in self.script.lines:
-            if step.kind == "expect":
-                continue
-            out.append(step.source)
-            end = offsets.get(step.line_no)
-            if end is None:
-                continue
-            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:end])]
+        for line_no, end in self.marks:
+            writer.step(line_no)
+            writer.received(self.received[start:end])
+            writer.mark()
             start = end
         if start < len(self.received) or self.tail_seconds > 0:
-            if self.tail_seconds > 0:
-                out.append(f"@wait {_fmt_seconds(self.tail_seconds)}")
-            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:])]
-        return "\n".join(out) + "\n"
-
-
-def _fmt_seconds(value: float) -> str:
-    return f"{value:.9f}".rstrip("0").rstrip(".") or "0"
+            writer.tail(self.tail_seconds)
+            writer.received(self.received[start:])
+        writer.finish()
+        return "".join(out) or "\n"
 
 
 # -- running ------------------------------------------------------------
@@ -390,7 +379,7 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                on_entry: Callable[[TranscriptEntry], None] | None = None,
                trace_step: float = 0.001, trace_warn_bytes: int | None = None,
                on_warning: Callable[[str], None] | None = None,
-               keep: bool = True) -> RunResult:
+               keep: bool = True, record: Callable[[str], object] | None = None) -> RunResult:
     """Run a script against ``chain`` in fast virtual time and check its expectations.
 
     ``source`` is a :class:`Script`, a path or script text (:func:`load_script`).
@@ -407,7 +396,10 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     ``received`` are empty; ``on_entry`` is where the transcript goes) and checks as
     the bytes come: ``@until`` looks at each line as it arrives and the received bytes
     are kept only up to the last expectation, so a run of any length stays in bounded
-    memory (``coolmuscle run``).
+    memory (``coolmuscle run``).  ``record`` is given the run written back as a golden
+    transcript (what :meth:`RunResult.to_script` gives) a line at a time, as it goes
+    (``coolmuscle run --record``); when it raises, the run goes on and the exception
+    is raised at the end.
     """
     script = source if isinstance(source, Script) else load_script(source)
     kernel = chain.kernel
@@ -425,6 +417,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
               if trace is not None else None)
     remove = host_line.add_listener(recorder.on_bytes)
+    golden = GoldenWriter(script, record) if record is not None else None
+    unrecord = host_line.add_listener(golden.received) if golden is not None else None
     failure: Failure | None = None
     exception: BaseException | None = None
     marks: list[tuple[int, int]] = []
@@ -433,6 +427,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
 
     try:
         for index, step in enumerate(steps):
+            if golden is not None and step.kind != "expect":
+                golden.step(step.line_no)
             try:
                 if step.kind in ("send", "raw"):
                     recorder.sent(TranscriptEntry(kernel.now, ">", step.data, step.line_no))
@@ -467,12 +463,16 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                                   f"{type(exc).__name__}: {exc}", step.line_no, kernel.now)
             if step.kind != "expect":
                 marks.append((step.line_no, recorder.received))
+                if golden is not None:
+                    golden.mark()
             if failure is not None:
                 break
         if failure is None and until is not None:
             target = seconds(until)
             if target > kernel.now:
                 tail = to_seconds(target - kernel.now)
+                if golden is not None:
+                    golden.tail(tail)
                 try:
                     kernel.run(until=target)
                 except Exception as exc:
@@ -484,6 +484,9 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     finally:
         remove()
         recorder.finish()
+        if golden is not None and unrecord is not None:
+            unrecord()
+            golden.finish()
         raised = sys.exc_info()[0]
         interrupted = raised is not None and not issubclass(
             raised, Exception)                # Ctrl-C, a stop signal: stop at once
@@ -492,6 +495,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
             close()
     if recorder.display_error is not None:
         raise recorder.display_error
+    if golden is not None and golden.error is not None:
+        raise golden.error
     return RunResult(script=script, transcript=recorder.entries,
                      received=bytes(recorder.stream) if keep else b"",
                      failure=failure, expectations=script.expectations, matched=checker.matched,
