@@ -20,7 +20,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.tools.cli.run import run_command
 from coolmuscle.tools.script.record import LineWriter
-from coolmuscle.tools.script.runner import RunResult, parse_script, run_script
+from coolmuscle.tools.script.runner import RunResult, ScriptError, parse_script, run_script
 from test_transcripts import chain_options, transcript_files
 
 #: One motor looping a PTP bank of 1.1 s moves, as bench_speed's first row.
@@ -174,3 +174,17 @@ def test_record_still_writes_the_whole_golden_transcript(tmp_path: Path,
     golden = record.read_text(encoding="utf-8")
     assert len(re.findall(r"^<< ", golden, re.MULTILINE)) == sink.lines - LOOP.count("\n")
     assert run_command(record, check=True) == 0
+
+
+def test_a_run_that_does_not_end_leaves_the_record_as_it_was(tmp_path: Path) -> None:
+    """``--record`` writes beside the file and replaces it when the run has ended: a run
+    stopped by an error (here a script error found as it starts) leaves the file whole
+    and no temporary file behind."""
+    script = tmp_path / "bad.cml"
+    script.write_text("?96.1\n@input 9 on\n", encoding="utf-8")
+    record = tmp_path / "golden.cml"
+    record.write_text("?96.1\n<< Ux.1=8\\r\\n\n", encoding="utf-8")
+    with pytest.raises(ScriptError):
+        run_command(script, record=record)
+    assert record.read_text(encoding="utf-8") == "?96.1\n<< Ux.1=8\\r\\n\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.cml", "golden.cml"]

@@ -11,6 +11,7 @@ usual help and error messages.
 from __future__ import annotations
 
 import logging
+import os
 import re
 import sys
 import time
@@ -258,9 +259,12 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                                 on_entry=None if check else show, trace_step=trace_step,
                                 trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn,
                                 keep=False, record=golden.write if golden else None)
-        finally:
+        except BaseException:
             if golden is not None:
-                golden.close()
+                golden.discard()              # a run that did not end leaves the file be
+            raise
+        if golden is not None:
+            golden.close()
         sys.stdout.flush()
         if plot is not None:
             from ..trace.plot import plot as plot_chain
@@ -284,13 +288,15 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
 
 
 class _Recording:
-    """``--record``'s file, written as the run goes; a file that cannot be opened or
-    written is a :class:`ScriptError` (exit 2)."""
+    """``--record``'s file, written as the run goes into a temporary file beside it that
+    replaces it when the run has ended (a run stopped by an error or Ctrl-C leaves the
+    file as it was); a file that cannot be written is a :class:`ScriptError` (exit 2)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.part = path.with_name(f".{path.name}.part")
         try:
-            self.file = path.open("w", encoding="utf-8")
+            self.file = self.part.open("w", encoding="utf-8")
         except OSError as exc:
             raise self.failed(exc) from exc
 
@@ -304,10 +310,21 @@ class _Recording:
             raise self.failed(exc) from exc
 
     def close(self) -> None:
+        """The run has ended: the file in place."""
         try:
             self.file.close()
+            os.replace(self.part, self.path)
         except OSError as exc:
+            self.discard()
             raise self.failed(exc) from exc
+
+    def discard(self) -> None:
+        """The run did not end: the temporary file removed, the file left as it was."""
+        try:
+            self.file.close()
+        except OSError:
+            pass
+        self.part.unlink(missing_ok=True)
 
 
 def write_run_junit(path: Path, file: Path, result: Any, wall_s: float) -> Path:
