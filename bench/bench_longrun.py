@@ -30,7 +30,7 @@ sys.path.insert(0, str(HERE))
 
 from bench_speed import B2_SCRIPT, ROOT, Tree, baseline_tree, chain_script  # noqa: E402
 
-#: main when the growth was found (issue figures: 107 MiB after 100 h with one motor,
+#: main when the growth was found (then: 107 MiB after 100 h with one motor,
 #: 159 MiB after 10 h with 15 motors), before ``coolmuscle run`` streamed its transcript.
 BASELINE = "5c722ef"
 HOURS = (1, 10, 100)
