@@ -86,7 +86,8 @@ def require_extra(extra: str, what: str) -> None:
 
 
 #: What to use instead of a POSIX-only option on Windows, by default.
-INSTEAD = "--tcp and a virtual COM port tool (README.md \"Windows\")"
+INSTEAD = ("--rfc2217 [HOST:]PORT (a COM port to rfc2217:// clients and virtual COM port "
+           "tools) or --tcp (README.md \"Windows\")")
 
 
 def posix_terminals() -> bool:
