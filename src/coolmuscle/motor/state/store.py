@@ -19,6 +19,9 @@ mixture; a committed ``$`` is durable before ``saved.`` is printed.
 
 Concurrency: one writer process (the simulator); callers serialise access from
 several threads themselves (the coolmuscle:// port holds a lock).  Other processes may read.
+The writer holds a ``flock`` on ``PATH.lock``, a regular file opened without following
+a symbolic link (:func:`open_lock_file`).  A store that cannot be opened because the
+disk is full says so (:func:`disk_full`), not that the store is unusable.
 
 Snapshot shape (the motor decides the content; the store only requires JSON
 data with string keys, except ``params`` whose keys may be ints)::
@@ -29,8 +32,10 @@ data with string keys, except ``params`` whose keys may be ints)::
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import stat
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -261,9 +266,9 @@ def _writer_lock(path: str) -> Callable[[], None] | None:
     lock_path = path + ".lock"
     try:
         Path(lock_path).parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise StoreError(f"cannot lock {path}: {exc.strerror or exc}") from exc
+    fd = open_lock_file(lock_path)
     release: Callable[[], None] | None
     if fcntl is not None:
         try:
@@ -318,6 +323,52 @@ def _sqlite_lock(path: str) -> Callable[[], None] | None:
     return conn.close
 
 
+#: Opening the lock file never follows a symbolic link at its name (``O_NOFOLLOW``,
+#: where the system has it) and never waits on a FIFO or a device (``O_NONBLOCK``).
+_LOCK_FLAGS = (os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+               | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+
+
+def open_lock_file(lock_path: str) -> int:
+    """``lock_path`` opened for reading and writing (created if missing), only when it
+    is a regular file: a symbolic link (whose target start-up would otherwise truncate
+    and write a PID into), a directory, a FIFO or a device is refused with one line
+    (:class:`StoreError`) and left untouched.  Where ``O_NOFOLLOW`` is missing the name
+    is looked at first (``lstat``) as well."""
+    if not getattr(os, "O_NOFOLLOW", 0) and os.path.islink(lock_path):
+        raise StoreError(_not_a_lock_file(lock_path, "a symbolic link"))
+    try:
+        fd = os.open(lock_path, _LOCK_FLAGS, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP or os.path.islink(lock_path):
+            raise StoreError(_not_a_lock_file(lock_path, "a symbolic link")) from None
+        if exc.errno == errno.EISDIR:
+            raise StoreError(_not_a_lock_file(lock_path, "a directory")) from None
+        raise StoreError(f"cannot lock {lock_path}: {exc.strerror or exc}") from exc
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        raise StoreError(_not_a_lock_file(lock_path, _kind(mode)))
+    return fd
+
+
+def _not_a_lock_file(lock_path: str, kind: str) -> str:
+    return (f"{lock_path} is {kind}, not the store's lock file: left as it is; remove it "
+            f"(rm {lock_path}) and start again, or give another --state DIR")
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
 def _open(path: str) -> sqlite3.Connection:
     import sqlite3
     if path != ":memory:":
@@ -339,6 +390,8 @@ def _open(path: str) -> sqlite3.Connection:
         conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
                                check_same_thread=False)
     except sqlite3.Error as exc:
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "open")) from exc
         raise StoreError(f"cannot open store {path}: {exc}") from exc
     try:
         _prepare(conn, path)
@@ -347,8 +400,44 @@ def _open(path: str) -> sqlite3.Connection:
         raise
     except sqlite3.Error as exc:
         conn.close()
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "open")) from exc
         raise StoreError(f"{path} is not a usable coolmuscle store: {exc}") from exc
     return conn
+
+
+#: Free bytes below which an I/O error of SQLite is read as a full disk: opening a
+#: store in WAL mode makes its 32 KiB shared-memory file and writes WAL pages.
+FULL_DISK_MARGIN = 1 << 20
+
+
+def disk_full(path: str, exc: Exception) -> bool:
+    """Whether ``exc`` (an SQLite or OS error on ``path``) comes from a full disk: SQLite
+    says so (``SQLITE_FULL``, ``ENOSPC``), or says only "disk I/O error" (it does when
+    it cannot size its shared-memory file) while the disk has almost no room left."""
+    if getattr(exc, "sqlite_errorname", "") == "SQLITE_FULL" or \
+            getattr(exc, "errno", None) == errno.ENOSPC:
+        return True
+    if not str(getattr(exc, "sqlite_errorname", "")).startswith("SQLITE_IOERR"):
+        return False
+    return free_bytes(os.path.dirname(os.path.abspath(path))) < FULL_DISK_MARGIN
+
+
+def free_bytes(directory: str) -> int:
+    """Bytes free for this user in ``directory``'s file system (huge when unknown)."""
+    import shutil
+    try:
+        return shutil.disk_usage(directory).free
+    except OSError:
+        return 1 << 62
+
+
+def full_disk_message(path: str, doing: str) -> str:
+    """One line for a store that cannot be opened or created because the disk is full."""
+    directory = os.path.dirname(os.path.abspath(path))
+    return (f"cannot {doing} store {path}: the disk is full ({free_bytes(directory)} bytes "
+            f"free in {directory}); the store was not changed: free some space and start "
+            "again, or start with --no-state")
 
 
 def _create(path: str) -> None:
@@ -366,10 +455,11 @@ def _create(path: str) -> None:
         finally:
             conn.close()
         os.replace(tmp, path)
-    except sqlite3.Error as exc:
-        raise StoreError(f"cannot create store {path}: {exc}") from exc
-    except OSError as exc:
-        raise StoreError(f"cannot create store {path}: {exc.strerror or exc}") from exc
+    except (sqlite3.Error, OSError) as exc:
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "create")) from exc
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise StoreError(f"cannot create store {path}: {reason}") from exc
 
 
 def _prepare(conn: sqlite3.Connection, path: str) -> None:

@@ -3,7 +3,8 @@
 Registered on the ``coolmuscle`` command by :func:`register`.  Exit status: 0 the
 capture ended with the host program (``--once``); 1 the link to the motor broke; 2 bad
 usage (no such port, a missing directory, bad options: nothing written); 130 Ctrl-C
-(128 + N for another stop signal), the file complete with its ``# end:`` line.
+(128 + N for another stop signal) within a second, the file complete with its
+``# end:`` line.
 Messages are one line (docs/user-guide.md "coolmuscle capture").
 """
 
@@ -35,6 +36,10 @@ __all__ = ["capture", "register"]
 #: Thread switch interval while relaying (s): a thread woken by a byte gets the
 #: interpreter within this, not Python's default 5 ms (docs/performance.md).
 SWITCH_INTERVAL = 0.0002
+#: Seconds the host program gets to take what it has not read yet when the capture
+#: ends by itself, and when it is stopped (Ctrl-C: the whole stop within a second).
+END_FLUSH = 1.0
+STOP_FLUSH = 0.2
 
 
 class Parity(str, Enum):
@@ -196,8 +201,10 @@ def capture(
     finally:
         ignore_stop_signals()                 # a second signal must not cut the file short
         sys.setswitchinterval(switch_interval)
-        if relay is not None:
-            relay.close()                     # both ends too
+        if record is not None:
+            record.stop_waiting()             # the relay's threads end without waiting
+        if relay is not None:                 # both ends too; Ctrl-C: at once
+            relay.close(flush=STOP_FLUSH if signum is not None else END_FLUSH)
         else:
             if host is not None:
                 host.close()
