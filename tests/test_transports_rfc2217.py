@@ -249,6 +249,22 @@ def test_several_clients_each_with_its_own_rate(paced: Served) -> None:
         assert b"Px.1" not in wrong.read(wrong.in_waiting or 1)
 
 
+def test_a_silent_client_makes_room_without_a_word_when_every_place_is_taken() -> None:
+    st = ServiceThread(Chain, lambda: [Rfc2217Transport(port=0, max_clients=1,
+                                                        idle_timeout=0.0)]).start()
+    try:
+        url = f"rfc2217://127.0.0.1:{st.transports[0].info()['port']}"
+        with _raw(url) as silent:
+            negotiation = _read_all(silent)
+            with serial.serial_for_url(url, baudrate=38400, timeout=0.05) as port:
+                assert ask(port, b"?96.1\r") == b"?96.1\r\nPx.1=0\r\n"
+                silent.settimeout(2)
+                assert silent.recv(4096) == b""      # closed (end of stream), no words
+            assert negotiation.startswith(bytes([IAC]))
+    finally:
+        st.stop()
+
+
 # -- the tools over rfc2217:// ------------------------------------------------------------
 
 def test_the_host_library_over_rfc2217(served: Served) -> None:

@@ -6,8 +6,10 @@ that speaks RFC 2217 (com0com's hub4com ``com2tcp-rfc2217``, a terminal program'
 Telnet and the COM-PORT-OPTION negotiation are pyserial's
 :class:`serial.rfc2217.PortManager`; this module owns the port it configures
 (:class:`ComPort`: what a real port server's UART would be set to) and the TCP side,
-shared with the ``tcp`` transport (bounded output, connection limit, one
-:class:`~coolmuscle.frontends.transports.base.Lane` per client).
+shared with the ``tcp`` transport (bounded output, connection limit and idle policy,
+one :class:`~coolmuscle.frontends.transports.base.Lane` per client; a connection
+refused or closed by the idle policy is closed without a word: every byte a COM port
+delivers is the motor's).
 
 What a client's settings do (docs/transports.md "RFC 2217", docs/fidelity.md "Baud rate
 of the host"):
@@ -58,7 +60,7 @@ from serial.rfc2217 import (
 from ...device.hostline import BAUD_RATES
 from ...device.uart import Frame
 from .base import DEFAULT_MAX_BUFFER, Lane, Port
-from .stream_server import DEFAULT_MAX_CLIENTS
+from .stream_server import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CLIENTS, StreamServer
 from .tcp import DEFAULT_HOST, READ_SIZE, TcpTransport, _Client
 
 log = logging.getLogger(__name__)
@@ -236,18 +238,24 @@ class Rfc2217Transport(TcpTransport):
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  max_buffer: int = DEFAULT_MAX_BUFFER,
-                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
-        super().__init__(host, port, max_buffer=max_buffer, max_clients=max_clients)
+                 max_clients: int = DEFAULT_MAX_CLIENTS,
+                 idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT) -> None:
+        super().__init__(host, port, max_buffer=max_buffer, max_clients=max_clients,
+                         idle_timeout=idle_timeout)
 
     async def start(self, port: Port) -> None:
         self.port = port
         self._loop = asyncio.get_running_loop()
         await self.listen()
 
-    def refuse(self, writer: Any) -> None:
-        writer.transport.close()        # a COM port refuses a second opener without words
+    def refuse(self, writer: asyncio.StreamWriter) -> None:
+        writer.transport.close()        # no words: a COM port's bytes are the motor's
 
-    async def serve_connection(self, reader: Any, writer: Any, peer: str) -> None:
+    def evict(self, writer: asyncio.StreamWriter, idle: float) -> None:
+        StreamServer.evict(self, writer, idle)
+
+    async def serve_connection(self, reader: asyncio.StreamReader,
+                               writer: asyncio.StreamWriter, peer: str) -> None:
         assert self.port is not None
         lane = self.port.open_lane("rfc2217")
         client = _Client(reader, writer, lane, peer)
@@ -258,13 +266,17 @@ class Rfc2217Transport(TcpTransport):
         self._clients.append(client)
         unsubscribe = self._attach(client, com)
         manager = _Manager(com, _Wire(self, client))
-        log.info("rfc2217: client %s connected", peer)
+        self._log_connection("rfc2217: client %s connected", peer)
         try:
             while not client.dropped:
                 data = await reader.read(READ_SIZE)
                 if not data:
                     break
-                lane.feed(_data_of(manager, data))
+                data = _data_of(manager, data)
+                if b"\r" in data or b"\n" in data:   # a whole line: in use (idle policy)
+                    client.spoke = True
+                    self.request_seen(writer)
+                lane.feed(data)
                 await room.wait()
                 if client.unread() and not client.dropped:
                     await writer.drain()
@@ -272,7 +284,7 @@ class Rfc2217Transport(TcpTransport):
             unsubscribe()
             self._clients.remove(client)
             lane.close()
-            log.info("rfc2217: client %s disconnected", peer)
+            self._log_connection("rfc2217: client %s disconnected", peer)
 
     def _attach(self, client: _Client, com: ComPort) -> Callable[[], None]:
         """Wire ``com`` to the host line for ``client``'s lane; the unsubscriber."""
