@@ -34,7 +34,7 @@ from rich.console import Console
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from ...frontends.transports.base import Transport
-from ...needs import needs_posix
+from ...needs import needs_posix, realtime_problem
 from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
@@ -177,6 +177,10 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
     except EthercatUsageError as exc:
         raise UsageError(f"--bridge: {exc}") from None
     chosen: list[Transport] = [sim_transport(iface, bridge)]
+    problem = realtime_problem()
+    if problem is not None:          # said once: the frame thread and the model's both
+        err.print(f"coolmuscle: note: the bridge runs at normal priority ({problem}); "
+                  "its answers and cycles may come late on a busy machine", markup=False)
     if tcp or pty or pty_link or stdio or any(modbus) or rfc2217 is not None:
         chosen += _transports(tcp, pty, pty_link, stdio, modbus, rfc2217=rfc2217)
     return chosen, 4, fw
