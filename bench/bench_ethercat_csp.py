@@ -27,11 +27,15 @@ Printed side by side, for the axes following (csp moving) and holding (same targ
 The loop runs as ``sim --ethercat`` runs the model's thread where the system allows it
 (root, CAP_SYS_NICE): under SCHED_FIFO at the transport's priority.  It waits for a
 cycle by sleeping until ``--spin-us`` before it and spinning the rest (a sleeping
-virtual CPU wakes 0.1-1 ms late); and the cyclic collector runs between cycles, when
-the next one is at least ``GC_SLACK`` away, instead of at whatever allocation crosses
-its threshold inside a cycle (a generation-1 collection is 1-2.7 ms here).
+virtual CPU wakes 0.1-1 ms late); and the cyclic collector is set as ``sim --ethercat``
+sets it (``transport.cycle_collector``: what ships is measured).  The collections that
+start during each run are counted by generation with the longest one
+(``gc.callbacks``).  ``--collector between`` runs the collector between cycles instead
+(automatic collection off, a collection when the next cycle is at least ``GC_SLACK``
+away), for comparison.
 
-    PYTHONPATH=src python bench/bench_ethercat_csp.py [--seconds 60] [--bridges 8]
+    PYTHONPATH=src python bench/bench_ethercat_csp.py [--seconds 60] [--bridges 8] \
+        [--collector between]
     PYTHONPATH=src python bench/bench_ethercat_csp.py --virtual 2000   # no pacing
 """
 
@@ -52,7 +56,11 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
 from coolmuscle.frontends.ethercat.bridge.segment import BridgeSegment  # noqa: E402
-from coolmuscle.frontends.ethercat.transport import MODEL_PRIORITY, CycleLateness  # noqa: E402
+from coolmuscle.frontends.ethercat.transport import (  # noqa: E402
+    MODEL_PRIORITY,
+    CycleLateness,
+    cycle_collector,
+)
 from coolmuscle.sim.kernel import Kernel  # noqa: E402
 from coolmuscle.sim.realtime import RealtimeClock  # noqa: E402
 
@@ -102,7 +110,25 @@ def ramp(i: int, axis: int) -> int:
     return round(half - half * math.cos(2.0 * math.pi * i / 4000.0))
 
 
-def run(seconds: float, moving: bool, spin: float, bridges: int) -> dict[str, Any]:
+class Collections:
+    """The collections that start while it is installed: how many by generation, and
+    the longest (gc.callbacks)."""
+
+    def __init__(self) -> None:
+        self.count = [0, 0, 0]
+        self.longest = 0.0
+        self._began = 0.0
+
+    def __call__(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._began = time.perf_counter()
+        else:
+            self.count[info["generation"]] += 1
+            self.longest = max(self.longest, time.perf_counter() - self._began)
+
+
+def run(seconds: float, moving: bool, spin: float, bridges: int,
+        between: bool) -> dict[str, Any]:
     kernel = Kernel()
     chains = [Chain(kernel, AXES, firmware="cm2") for _ in range(bridges)]
     segment = BridgeSegment(chains, ("EB02",) * bridges)
@@ -133,9 +159,12 @@ def run(seconds: float, moving: bool, spin: float, bridges: int) -> dict[str, An
         lateness.append(clock.lateness(kernel.now))
 
     segment.start_cycles(CYCLE_NS, note)
-    gc.freeze()                                # as the transport does once it has started
-    gc.disable()                               # collected between cycles (below)
+    undo = cycle_collector()                   # as the transport does once it has started
+    if between:
+        gc.disable()                           # collected between cycles (below)
     thresholds = gc.get_threshold()
+    collections = Collections()
+    gc.callbacks.append(collections)
     steal0 = steal_ticks()
     for i in range(cycles):
         due = clock.wall_at(base_virtual + (i + 1) * CYCLE_NS)
@@ -146,7 +175,7 @@ def run(seconds: float, moving: bool, spin: float, bridges: int) -> dict[str, An
                              base_virtual + cycles * CYCLE_NS))
         cpu += time.process_time() - c0
         counts = gc.get_count()
-        if (counts[0] > thresholds[0]
+        if (between and counts[0] > thresholds[0]
                 and clock.wall_at(kernel.now + CYCLE_NS) - time.perf_counter() > GC_SLACK):
             gc.collect(2 if counts[2] >= thresholds[2] else 1 if counts[1] >= thresholds[1]
                        else 0)
@@ -155,8 +184,9 @@ def run(seconds: float, moving: bool, spin: float, bridges: int) -> dict[str, An
     total_cpu = time.process_time() - t0_cpu
     steal = (steal_ticks() - steal0) / os.sysconf("SC_CLK_TCK")
     segment.stop_cycles()
+    gc.callbacks.remove(collections)
     gc.enable()
-    gc.unfreeze()
+    undo()
     lateness.sort()
     positions = [chain.snapshot(a).position for chain in chains for a in range(1, AXES + 1)]
     words = [od.get(0x6041 + 0x800 * a) for od in ods for a in range(AXES)]
@@ -165,14 +195,15 @@ def run(seconds: float, moving: bool, spin: float, bridges: int) -> dict[str, An
             "wall": wall, "steal": steal,
             "p99_ms": lateness[int(0.99 * (len(lateness) - 1))] * 1e3,
             "worst_ms": lateness[-1] * 1e3,
-            "positions": positions, "words": words}
+            "positions": positions, "words": words,
+            "collections": collections.count, "longest_gc_ms": collections.longest * 1e3}
 
 
 def run_virtual(cycles: int, bridges: int) -> tuple[float, float]:
     """The moving run's work in virtual time, without pacing or waiting: CPU seconds of
     ``cycles`` cycles after 200 to start (the steady measure: under callgrind, two
-    lengths subtracted cancel the start), and of the collector run between them as in
-    the paced run (here: once every 100 cycles)."""
+    lengths subtracted cancel the start), and of a full collection every 100 cycles
+    between them (what ``--collector between`` would cost)."""
     kernel = Kernel()
     chains = [Chain(kernel, AXES, firmware="cm2") for _ in range(bridges)]
     segment = BridgeSegment(chains, ("EB02",) * bridges)
@@ -243,7 +274,10 @@ def main() -> None:
                     help="spin this long before each cycle instead of sleeping (0: sleep)")
     ap.add_argument("--virtual", type=int, metavar="CYCLES", default=0,
                     help="only the moving work in virtual time, CYCLES cycles (profiling)")
+    ap.add_argument("--collector", choices=("shipped", "between"), default="shipped",
+                    help="the collector as sim --ethercat sets it, or run between cycles")
     args = ap.parse_args()
+    between = args.collector == "between"
     if args.virtual:
         cpu, collect = run_virtual(args.virtual, args.bridges)
         print(f"{args.bridges} bridge(s) in virtual time: {cpu / args.virtual * 1e6:.1f} us "
@@ -254,12 +288,13 @@ def main() -> None:
     fifo = realtime()
     load = os.getloadavg()
     axes = AXES * args.bridges
-    moving = run(args.seconds, True, args.spin_us / 1e6, args.bridges)
-    holding = run(args.seconds, False, args.spin_us / 1e6, args.bridges)
+    moving = run(args.seconds, True, args.spin_us / 1e6, args.bridges, between)
+    holding = run(args.seconds, False, args.spin_us / 1e6, args.bridges, between)
     empty = run_empty(args.seconds, args.spin_us / 1e6)
     print(f"{args.bridges} bridge(s), {axes} axes in csp at 1 ms, {args.seconds:g} s each "
           f"(manual 6.3); {'SCHED_FIFO' if fifo else 'normal priority (no CAP_SYS_NICE)'}, "
-          f"spin {args.spin_us:g} us; load average {load[0]:.2f} before, "
+          f"spin {args.spin_us:g} us; collector {args.collector}; "
+          f"load average {load[0]:.2f} before, "
           f"{os.getloadavg()[0]:.2f} after")
     print(f"{'':28s}{'csp moving':>14s}{'csp holding':>14s}{'empty cycle':>14s}{'goal':>10s}")
     rows = (moving, holding, empty)
@@ -272,6 +307,10 @@ def main() -> None:
     print(f"{'missed beyond the empty':28s}" + "".join(
         f"{r['missed'] / r['cycles'] - floor:>14.3%}" for r in rows[:2])
         + f"{'':14s}{GOAL_LATE_ABOVE:>10.1%}")
+    print(f"{'collections (gen 0/1/2)':28s}" + "".join(
+        f"{'/'.join(map(str, r['collections'])):>14s}" for r in rows[:2]))
+    print(f"{'longest collection (ms)':28s}" + "".join(
+        f"{r['longest_gc_ms']:>14.3f}" for r in rows[:2]))
     print(f"{'CPU share':28s}{moving['cpu_share']:>14.1%}{holding['cpu_share']:>14.1%}")
     print(f"{'model time per cycle (us)':28s}{moving['cycle_us']:>14.1f}"
           f"{holding['cycle_us']:>14.1f}{'':14s}{GOAL_CYCLE_US * axes / 32:>10.0f}")

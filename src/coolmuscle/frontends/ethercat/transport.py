@@ -56,6 +56,22 @@ SWITCH_INTERVAL = 0.0002
 BridgeChains = Callable[[Kernel, int, str], Device]
 
 
+def cycle_collector() -> Callable[[], None]:
+    """The cyclic garbage collector while the bridge cycles (``sim --ethercat``); returns
+    what undoes it.
+
+    The start-up objects leave it (``gc.freeze``: no collection walks them again, shorter
+    GIL pauses) and automatic collection stays on at the interpreter's thresholds.
+    Chosen by measurement (bench/bench_ethercat_csp.py, which runs this very setting;
+    docs/performance.md): a csp cycle leaves nothing behind for the collector (the
+    motion caches keep no per-cycle entry), so with the compiled modules not one
+    collection starts in 16,000 cycles, and a raised threshold or collecting between
+    cycles has nothing to change (a threshold raised far would only make each collection
+    that other traffic, the CML port or Modbus, still causes longer)."""
+    gc.freeze()
+    return gc.unfreeze
+
+
 def check_interface(iface: str) -> None:
     """Refuse a name that cannot carry the bridge (loopback, missing interface)."""
     if not iface:
@@ -241,6 +257,7 @@ class EthercatTransport(Transport):
         self.realtime_model = True
         self._made: list[Device] = []
         self._old_policy: tuple[int, os.sched_param] | None = None
+        self._collector: Callable[[], None] = lambda: None   # undoes cycle_collector
 
     async def start(self, port: Port) -> None:
         from .bridge.segment import BridgeSegment
@@ -257,7 +274,7 @@ class EthercatTransport(Transport):
         self.segment = BridgeSegment(devices, self.bridges)
         self.app = self.segment.apps[0]
         self.frames = FrameThread(self.segment.line, self.iface)
-        gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
+        self._collector = cycle_collector()
         self._model_realtime(True)
         self.frames.start()
         # The bridges' 1 ms cycle (6.3) runs in the model's thread as kernel events on
@@ -345,7 +362,7 @@ class EthercatTransport(Transport):
             self.frames.close()
             self.frames = None
             self._model_realtime(False)
-            gc.unfreeze()
+            self._collector()
         made, self._made = self._made, []
         for chain in made:                 # the chains this transport made (their state)
             try:

@@ -242,20 +242,26 @@ def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float,
     """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
 
     Remembered for a reused plan (the same segment tuple: planner.plan_moves) seen from
-    the same offset: a repeated move builds its command once."""
+    the same offset: a repeated move builds its command once.  A hold (no segments: csp's
+    command, a new position every cycle) is one constant piece, built faster than looked
+    up, and is not kept.  The table makes room by dropping its oldest entry, one at a
+    time: no cycle pays for emptying it all."""
     segments, base = profile.segments, profile.origin_ns
+    if not segments:
+        return _command_pieces(profile, origin_ns)
     key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
            None if profile.end_ns is None else profile.end_ns - base)
     found = _COMMANDS.get(key)
     if found is not None and found[0] is segments:
         return list(found[1])
     out = _command_pieces(profile, origin_ns)
-    if len(_COMMANDS) >= 1024:
-        _COMMANDS.clear()
+    if len(_COMMANDS) >= _COMMANDS_SIZE:
+        del _COMMANDS[next(iter(_COMMANDS))]
     _COMMANDS[key] = (segments, tuple(out))
     return out
 
 
+_COMMANDS_SIZE = 1024
 _COMMANDS: dict[tuple[object, ...], tuple[object, tuple[tuple[float, float, F], ...]]] = {}
 
 
@@ -350,8 +356,8 @@ class Motion:
         motion.pieces, motion._starts = pieces, [p.start for p in pieces]
         motion._peaks, motion._memo = _peaks(pieces), {}
         if source is not None:
-            if len(_SPLICED) >= 1024:
-                _SPLICED.clear()
+            if len(_SPLICED) >= 1024:                  # room: the oldest goes
+                del _SPLICED[next(iter(_SPLICED))]
             _SPLICED[key] = (source, tail.pieces,
                              (motion.pieces, motion._starts, motion._peaks, motion._memo))
         return motion

@@ -8,7 +8,7 @@ errors to one-line messages and exit codes.  No traceback reaches the user
   or a runtime error (port in use, store); 2 bad usage or a bad script;
   70 an internal error (a bug: please report it).
 
-``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
+``sim`` serves a virtual chain over TCP / a pty / RFC 2217 / stdio in real time until Ctrl-C or
 SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
 its expectations (docs/scripts.md); ``check``, ``upload``, ``term`` and ``capture`` are
 the host tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
@@ -34,7 +34,7 @@ from rich.console import Console
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from ...frontends.transports.base import Transport
-from ...needs import needs_posix
+from ...needs import needs_posix, realtime_problem
 from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
@@ -141,20 +141,23 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                enip: bool = False) -> list[Transport]:
+                enip: bool = False, rfc2217: str | None = None) -> list[Transport]:
     from ...frontends import transports
     from ...frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip
+                            or rfc2217 is not None):
         tcp = str(DEFAULT_PORT)
-    if tcp is not None:
+    for option, name, value in (("--tcp", "tcp", tcp), ("--rfc2217", "rfc2217", rfc2217)):
+        if value is None:
+            continue
         try:
-            host, port = parse_address(tcp)
+            host, port = parse_address(value)
         except TransportError as exc:
-            raise UsageError(f"--tcp: {exc}") from None
-        chosen.append(transports.create("tcp", host=host, port=port))
+            raise UsageError(f"{option}: {exc}") from None
+        chosen.append(transports.create(name, host=host, port=port))
     if pty or pty_link is not None:
         needs_posix("--pty-link" if pty_link is not None and not pty else "--pty")
         chosen.append(transports.create("pty", link=pty_link))
@@ -168,23 +171,28 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
 def _ethercat_transports(iface: str, codes: tuple[str, ...], motors: int, tcp: str | None,
                          pty: bool, pty_link: Path | None, stdio: bool,
                          modbus: tuple[str | None, str | None, str | None],
-                         chains: BridgeChains | None) -> tuple[list[Transport], int, str]:
+                         chains: BridgeChains | None, rfc2217: str | None = None
+                         ) -> tuple[list[Transport], int, str]:
     """``--ethercat IFACE``: the bridges in a line plus any line transport asked for
     (those serve the first bridge's chain)."""
     from .ethercat import chain_firmware, sim_transport
     if motors not in (1, 4):
         raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
-    fw = chain_firmware(codes[0])
+    fw = chain_firmware(codes[0])               # codes: checked by segment_codes
     chosen: list[Transport] = [sim_transport(iface, codes, chains)]
-    if tcp or pty or pty_link or stdio or any(modbus):
-        chosen += _transports(tcp, pty, pty_link, stdio, modbus)
+    problem = realtime_problem()
+    if problem is not None:          # said once: the frame thread and the model's both
+        err.print(f"coolmuscle: note: the bridge runs at normal priority ({problem}); "
+                  "its answers and cycles may come late on a busy machine", markup=False)
+    if tcp or pty or pty_link or stdio or any(modbus) or rfc2217 is not None:
+        chosen += _transports(tcp, pty, pty_link, stdio, modbus, rfc2217=rfc2217)
     return chosen, 4, fw
 
 
 def _segment(iface: str, bridge: str | None, bridges: str | None, motors: int,
              tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
              modbus: tuple[str | None, str | None, str | None], state: Path | None,
-             pace: bool, machine: Path | None
+             pace: bool, machine: Path | None, rfc2217: str | None = None
              ) -> tuple[list[Transport], int, str, tuple[str, ...], Machine | None]:
     """``--ethercat`` with ``--bridge``/``--bridges`` or a machine file's ``[ethercat]``:
     the transports, motors, the first chain's firmware, the bridges and the machine
@@ -200,7 +208,7 @@ def _segment(iface: str, bridge: str | None, bridges: str | None, motors: int,
         raise UsageError(str(exc)) from None
     chains = bridge_chains(chain_factory, state, pace, loaded) if len(codes) > 1 else None
     chosen, motors, fw = _ethercat_transports(iface, codes, motors, tcp, pty, pty_link, stdio,
-                                              modbus, chains)
+                                              modbus, chains, rfc2217)
     return chosen, motors, fw, codes, loaded
 
 
@@ -317,6 +325,10 @@ def sim(
     pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
     pty_link: Path | None = typer.Option(None, "--pty-link", metavar="PATH",
                                             help="Stable symlink to the pty (implies --pty)."),
+    rfc2217: str | None = typer.Option(
+        None, "--rfc2217", metavar="[HOST:]PORT",
+        help="Serve an RFC 2217 serial port (rfc2217:// clients, virtual COM port tools; "
+             "host 127.0.0.1)."),
     stdio: bool = typer.Option(False, "--stdio",
                                help="Serve stdin/stdout (ends at end of input)."),
     modbus_rtu: str | None = typer.Option(
@@ -387,7 +399,7 @@ def sim(
                              "motors are not the EtherNet/IP module's CM1)")
         chosen, motors, fw, codes, loaded = _segment(
             ethercat, bridge, bridges, motors, tcp, pty, pty_link, stdio,
-            (modbus_rtu, modbus_tcp, com1), state_dir, pace, machine)
+            (modbus_rtu, modbus_tcp, com1), state_dir, pace, machine, rfc2217)
         label = fw.upper().replace(",", "/") if len(codes) == 1 else \
             f"{len(codes)} bridges {'/'.join(codes)}, each"
         if reset:
@@ -399,7 +411,7 @@ def sim(
         if bridges is not None:
             raise UsageError("--bridges needs --ethercat IFACE")
         chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
-                             enip=enip is not None)
+                             enip=enip is not None, rfc2217=rfc2217)
         chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
         if reset:
             _reset_state(state_dir)
