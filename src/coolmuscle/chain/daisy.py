@@ -27,6 +27,7 @@ from ..cml import ast
 from ..cml.ast import inner_motor
 from ..cml.parser import parse
 from ..device.api import CyclicState, EventListener, MotorSnapshot, TargetStream
+from ..device.wire.chain import cut_from
 from ..device.wire.line import LineFaults
 from ..device.wire.schedule import ActiveFault, WireFault, WireFaults, WireRecord, wire_fault
 from ..errors import (
@@ -49,7 +50,7 @@ from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..motor.status import Report
 from ..sim.kernel import PRIO_IO, Kernel
 from .bus import ChainBus, ChainCommands
-from .power import cut_from, power_off, power_on_again
+from .power import power_off, power_on_again
 
 if TYPE_CHECKING:
     from ..device.api import Device

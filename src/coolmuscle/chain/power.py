@@ -16,7 +16,7 @@ docs/fidelity.md "Wire faults":
 * **broken link** (``link_break``, motor N): the link from N to N+1 carries nothing;
   IDs from N+1 on are cut off but keep running what they run.
 
-:func:`cut_from` is the first ID the host cannot reach, 0 when it reaches them all.
+:func:`coolmuscle.device.wire.chain.cut_from` is the first ID the host cannot reach.
 """
 
 from __future__ import annotations
@@ -24,26 +24,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..device.wire.schedule import WireFaults
 from ..motor.state.memory import Memory
 
 if TYPE_CHECKING:
     from ..motor.motor import Motor
 
-__all__ = ["cut_from", "power_off", "power_on_again"]
-
-DOOR = "chain"
-
-
-def cut_from(faults: WireFaults) -> int:
-    """The first ID the host cannot reach now (0: it reaches every motor)."""
-    first = 0
-    for fault in faults.live_faults(DOOR):
-        if fault.motor is None:
-            continue
-        cut = fault.motor if fault.kind == "power_off" else fault.motor + 1
-        first = cut if not first else min(first, cut)
-    return first
+__all__ = ["power_off", "power_on_again"]
 
 
 def power_off(motor: Motor) -> None:
