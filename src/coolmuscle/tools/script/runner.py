@@ -7,7 +7,8 @@ This module owns:
   ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES``
   (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
 * running a script against a chain in fast (unpaced, deterministic) virtual time,
-  producing a timestamped transcript of every line sent and received;
+  producing a timestamped transcript of every line sent and received, and of what each
+  wire fault did (``#`` entries, docs/wire-faults.md);
 * checking the received byte stream against the expectations, in order, byte for
   byte, and reporting the first mismatch with context;
 * recording a run back as a golden transcript (:meth:`RunResult.to_script`).
@@ -383,6 +384,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
               if trace is not None else None)
     remove = host_line.add_listener(recorder.on_bytes)
+    unsubscribe = chain.subscribe(lambda event: recorder.note(event.text)
+                                  if event.kind == "wire" else None)
     failure: Failure | None = None
     exception: BaseException | None = None
     marks: list[tuple[int, int]] = []
@@ -444,6 +447,7 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
             failure = checker.leftover(kernel.now)
     finally:
         remove()
+        unsubscribe()
         recorder.finish()
         raised = sys.exc_info()[0]
         interrupted = raised is not None and not issubclass(

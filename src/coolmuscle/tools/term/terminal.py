@@ -6,7 +6,10 @@ motor says appears as it arrives, also between lines you type, in colour:
 * replies (``Px.1=10000``) green, K23 reports (``Ux.1=8`` with its flags decoded,
   ``IN.1=``, ``OUT.1=``) cyan, messages (``saved.1``, ``End.1``) yellow, errors
   (``error01.1: syntax error!!``, no answer, a lost connection) red, unreadable bytes
-  magenta.  The echo is not shown twice: you see what you typed at the prompt.
+  magenta.  The echo is not shown twice: you see what you typed at the prompt.  A
+  query whose reply does not come within the timeout (``--timeout``, 1 s) is said so
+  (``no reply to '?96.1' within 1 s``), and a line whose echo does not come either
+  (the line is down).
 
 Line editing and history come from prompt_toolkit (history kept in
 ``$XDG_STATE_HOME/coolmuscle/term_history``).  Commands start with ``:``:
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import shlex
 from collections.abc import Callable
 from pathlib import Path
@@ -47,6 +51,9 @@ __all__ = ["run_term", "STYLES", "HELP"]
 STYLES = {"reply": "ansigreen", "status": "ansicyan", "input": "ansicyan",
           "output": "ansicyan", "message": "ansiyellow", "error": "ansired",
           "garbled": "ansimagenta", "info": "ansiblue"}
+
+#: A line the motor answers with a reply: a query (6.6) or a K parameter read alone.
+_ASKS = re.compile(r"\s*(\?|K\d+(\.\d+)?\s*$)", re.IGNORECASE)
 
 HELP = """commands: :send FILE.cml   :save [ID]   :log FILE | :log off   :motor ID
           :help   :quit (or Ctrl-D); anything else is sent to the motor as typed"""
@@ -84,12 +91,19 @@ def describe(event: MotorEvent) -> tuple[str, str]:
 class Terminal:
     """One terminal session on one connection."""
 
-    def __init__(self, client: AsyncCoolMuscle, url: str) -> None:
+    def __init__(self, client: AsyncCoolMuscle, url: str, timeout: float = 1.0) -> None:
         self.client = client
         self.url = url
         self.motor = client.id
+        self.timeout = timeout
         self.recorder: TranscriptRecorder | None = None
         self._untap: Callable[[], None] | None = None
+        self.lines_in = 0             # line ends received: what came since a line was typed
+        client.add_tap(self._count)
+
+    def _count(self, direction: str, data: bytes) -> None:
+        if direction == "<":
+            self.lines_in += data.count(b"\r")       # K70: CR or CR LF (ch. 3)
 
     def on_event(self, event: MotorEvent) -> None:
         text, style = describe(event)
@@ -100,7 +114,28 @@ class Terminal:
         if line.startswith(":"):
             return await self.command(line[1:].strip())
         self.client.write_line(line)
+        self._watch(line)
         return True
+
+    def _watch(self, line: str) -> None:
+        """Say so when what a line brings does not come within the timeout: its echo
+        (once the motor is known to echo, ch. 3 K23 8) and, for a query, its reply
+        (a dropped reply, a dead line: docs/wire-faults.md)."""
+        echo = self.client.echo is True
+        expected = int(echo) + int(bool(_ASKS.match(line)))
+        if expected:
+            asyncio.get_running_loop().call_later(self.timeout, self._check, line,
+                                                  self.lines_in, expected, echo)
+
+    def _check(self, line: str, start: int, expected: int, echo: bool) -> None:
+        got = self.lines_in - start
+        if got >= expected:
+            return
+        if got == 0 and echo:
+            show(f"no answer to {line!r} within {self.timeout:g} s, not even its echo: "
+                 "is the line down?", "error")
+        else:
+            show(f"no reply to {line!r} within {self.timeout:g} s", "error")
 
     async def command(self, text: str) -> bool:
         words = shlex.split(text) if text else [""]
@@ -162,8 +197,9 @@ class Terminal:
             self.log("off")
 
 
-async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
-    term = Terminal(client, url)
+async def _session(client: AsyncCoolMuscle, url: str, history: History,
+                   timeout: float = 1.0) -> None:
+    term = Terminal(client, url, timeout)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
     show(f"coolmuscle term: {url} (motor ID{client.id}); :help for commands", "info")
@@ -201,7 +237,7 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
         if recorder is not None:
             client.add_tap(recorder.tap)
         try:
-            await _session(client, url, store)
+            await _session(client, url, store, timeout)
         finally:
             if recorder is not None:
                 recorder.close()
