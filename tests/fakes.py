@@ -3,7 +3,8 @@
 ``FakeChain`` has the final ``Chain`` constructor and attributes (``kernel``,
 ``host_line``, ``motor_ids``, ``subscribe()`` (no events), ``close()``) and a tiny line
 callback, so transports, pacing and the script runner are exercised with the real
-echo / delimiter / pacing behaviour of :class:`coolmuscle.device.hostline.HostLine` until the motor model lands:
+echo / delimiter / pacing behaviour of :class:`coolmuscle.device.hostline.HostLine`
+until the motor model lands:
 
 * ``?96.n``   -> ``Px.n=<counter>`` (counter starts at 1, one per reply, all motors);
 * ``^.n``     -> ``Ux.n=8`` after ``move_time`` seconds of virtual time (kernel event);
