@@ -36,6 +36,7 @@ from .banks import firmware_of
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .traces import start_recording
+from .wirefaults import WirePanel, vocabulary
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +110,8 @@ class WebTransport(Transport):
         self.port, self._device = port, device
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
-                               {"record": self._record_request})
+                               {"record": self._record_request,
+                                **WirePanel(device, port.call).handlers()})
         if self.record:
             self.start_recording()
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
@@ -226,7 +228,8 @@ class WebTransport(Transport):
         return {"t": "hello", "motors": list(device.motor_ids),
                 "firmware": firmware.name if firmware else "",
                 "title": self.title, "time": device.kernel.now, "fields": SNAP_FIELDS,
-                "io": counts, "faults": FAULTS, "log": list(self.hub.history),
+                "io": counts, "faults": FAULTS, "wire": vocabulary(),
+                "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()),
                 "recording": self._recorder is not None}
 

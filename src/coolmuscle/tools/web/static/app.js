@@ -176,6 +176,7 @@
     state.io = msg.io;
     if (!same || !state.cards.size) buildMotors(msg.motors);
     if (!$("faults").childElementCount) buildFaults(msg.faults);
+    if (msg.wire && !$("wire-door").options.length) wire.build(msg.wire);
     if (msg.time < state.lastTime) resetSeries();   // a restarted simulator
     $("log").textContent = "";
     onLog(msg.log, 0);
@@ -410,6 +411,7 @@
 
   const { setupBanks, buildFaults } = window.Coolmuscle.panels(
     { state, $, request, note, localNote });
+  const wire = window.Coolmuscle.wirePanel({ $, request, note });    // wire.js
 
   // -- downloads ---------------------------------------------------------------------------
   function setDownloadLinks() {
