@@ -196,3 +196,13 @@ def test_without_faults_the_transcript_has_no_fault_notes(tmp_path):
     text, received = _run(SCRIPT, machine)
     assert "# wire" not in text
     assert received.count(b"Px.1=0\r\n") == 25
+
+
+def test_a_garbled_read_back_of_a_write_is_a_protocol_error_not_out_of_range():
+    with connect("coolmuscle://?mode=fast", timeout=0.5, firmware="cm2") as m:
+        m.write_register("P", 9, 1)                   # K37 read and kept
+        # the read-back "P9.1=-344" with its '-' (0x2d) xor 0x02 = '/'
+        faults_of(m).inject_wire_fault("host-line", "garble", byte=5, xor=0x02, count=1)
+        with pytest.raises(ProtocolError, match=r"garbled reply 'P9\.1=/344'"):
+            m.write_register("P", 9, -344)
+        assert m.read_register("P", 9) == -344          # it was applied

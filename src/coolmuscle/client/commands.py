@@ -120,6 +120,8 @@ def write_register(session: Session, motor: int, kind: str, index: int,
     else:
         same = got == expected
     if not same:
+        if kind != "V":
+            line.int_value()      # a read-back that is no number is garbled: ProtocolError
         raise OutOfRangeError(f"{name}={text} was not applied: the motor holds {got!r}")
 
 
