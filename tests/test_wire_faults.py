@@ -306,3 +306,31 @@ def test_each_fault_is_a_wire_event(wire):
     assert [(e.time, e.motor, e.text, e.origin) for e in events] == [
         (0, 3, "wire fault 1 chain power_off: begins", "api"),
         (ms(250), 3, "wire fault 1 chain power_off: ends", "api")]
+
+
+# -- the trace --------------------------------------------------------------------------
+def test_a_trace_counts_what_the_wire_faults_did_at_their_instants(make_chain, tmp_path):
+    from coolmuscle.tools.trace.recorder import trace
+    machine = parse_machine('[[wire.fault]]\ndoor = "host-line"\nkind = "drop"\nat = 0.25\n'
+                            'count = 2\n', "m.toml")
+    chain = make_chain(machine=machine)
+    w = Wire(chain)
+    stream = trace(chain, tmp_path / "t.csv", 0.5)
+    for at in (0.1, 0.3, 0.6, 0.9):
+        chain.kernel.run(until=seconds(at))
+        w.send("?96.1")
+    chain.kernel.run(until=seconds(1.0))
+    stream.close()
+    rows = (tmp_path / "t.csv").read_text().splitlines()
+    assert rows[0].endswith(",m1.encoder,wire")
+    counts = {row.split(",")[0]: row.split(",")[-1] for row in rows[1:]}
+    assert counts["0.300000000"] == "1" and counts["0.600000000"] == "2"
+    assert counts["1.000000000"] == "2"
+
+
+def test_a_trace_without_wire_faults_keeps_its_columns(chain, tmp_path):
+    from coolmuscle.tools.trace.recorder import trace
+    stream = trace(chain, tmp_path / "t.csv", 0.5)
+    chain.kernel.run(until=seconds(1.0))
+    stream.close()
+    assert (tmp_path / "t.csv").read_text().splitlines()[0].endswith(",m1.encoder")

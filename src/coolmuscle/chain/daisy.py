@@ -611,7 +611,7 @@ class Chain:
     def trace_feed(self) -> TraceFeed:
         """Record every motor from now on (:class:`coolmuscle.device.trace.TraceFeed`)."""
         from ..device.trace import TraceFeed  # traces are optional: loaded when used
-        return TraceFeed(self.kernel, self.motors, self.observe)
+        return TraceFeed(self.kernel, self.motors, self.observe, self.wire_faults)
 
     # -- device API: Modbus (5.6) -------------------------------------------------
     def modbus_request(self, unit: int, pdu: bytes, *, tcp: bool = False) -> bytes | None:
