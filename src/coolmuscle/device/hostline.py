@@ -33,6 +33,11 @@ line answers, so one host's echo never runs into another's (docs/fidelity.md
 COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
 :attr:`HostLine.mode` then takes the received bytes instead of the text line,
 and text replies are not sent while it is active.
+
+Wire faults (docs/wire-faults.md): once one of the host line or the chain is installed,
+a :class:`WireHook` as :attr:`HostLine.wire` decides what the host gets of each piece
+sent, and when (:mod:`.wire.line`), and whether what the host sends is lost; without
+one, bytes go straight to the listeners.
 """
 
 from __future__ import annotations
