@@ -334,3 +334,70 @@ def test_a_trace_without_wire_faults_keeps_its_columns(chain, tmp_path):
     chain.kernel.run(until=seconds(1.0))
     stream.close()
     assert (tmp_path / "t.csv").read_text().splitlines()[0].endswith(",m1.encoder")
+
+
+# -- fuzz: any fault of the vocabulary, any bytes ------------------------------------------
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from coolmuscle.device.wire import kinds  # noqa: E402
+
+
+def _param_value(param: dict) -> st.SearchStrategy:
+    if param["type"] == "bool":
+        return st.booleans()
+    if "choices" in param:
+        return st.sampled_from(param["choices"])
+    lo, hi = param.get("min", -1e6), param.get("max", 1e6)
+    if param["type"] == "int":
+        return st.integers(int(lo), int(hi))
+    return st.floats(lo, min(hi, 2000.0), allow_nan=False)
+
+
+@st.composite
+def any_fault(draw: st.DrawFn) -> tuple[str, str, dict]:
+    door = draw(st.sampled_from(["host-line", "chain", "modbus-rtu", "modbus-tcp", "enip"]))
+    kind = draw(st.sampled_from([k.describe() for k in kinds(door)]))
+    params = {p["name"]: draw(_param_value(p)) for p in kind["params"]
+              if draw(st.booleans())}
+    schedule = {"at": draw(st.floats(0, 1)), "until": draw(st.floats(1, 3))}
+    if kind["motor"] != "none":
+        schedule["motor"] = draw(st.integers(1, 2))
+    if not kind["lasting"]:
+        choice = draw(st.sampled_from(["every", "probability", "count", None]))
+        if choice == "every":
+            schedule["every"] = draw(st.integers(1, 5))
+        elif choice == "probability":
+            schedule["probability"] = draw(st.floats(0, 1))
+            schedule["seed"] = draw(st.integers(0, 2**64 - 1))
+        elif choice == "count":
+            schedule["count"] = draw(st.integers(1, 5))
+    return door, kind["kind"], {**schedule, **params}
+
+
+LINES = st.sampled_from([b"?96.1\r", b"?96.2\r", b"P1.2=5\r", b"$.2\r", b"S.2=50, P.2=800, ^.2\r",
+                         b"K81.1=1\r", bytes.fromhex("01 03 00 C8 00 02 45 F5"),
+                         b"FFFFFFFFF\r", b"K81.1=0\r", b"]\r", b"\x00\xff\r", b"?99.1\r"])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(faults=st.lists(any_fault(), max_size=6), lines=st.lists(LINES, max_size=25))
+def test_any_faults_and_any_bytes_never_raise_and_keep_saved_data(faults, lines):
+    chain = Chain(motors=2)
+    try:
+        chain.execute("P7.2=321")
+        chain.execute("$.2")
+        for door, kind, params in faults:
+            try:
+                chain.inject_wire_fault(door, kind, **params)
+            except ValueError:
+                pass                           # refused (a link after the last motor)
+        for i, line in enumerate(lines):
+            chain.host_line.feed(line)
+            chain.modbus_request(1, bytes.fromhex("03 00 C8 00 02"), tcp=True)
+            chain.kernel.run(until=seconds(0.2 * (i + 1)))
+        chain.kernel.run(until=seconds(10))
+        assert chain.wire_faults.lasting("chain", "power_off") is None
+        assert chain.get_register(2, "P", 7) == 321      # saved: back after any power cycle
+    finally:
+        chain.close()
