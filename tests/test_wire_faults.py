@@ -280,6 +280,15 @@ def test_power_off_id1_kills_the_host_line(wire):
     assert wire.take() == [b"?96.1\r\n", b"Px.1=0\r\n"]
 
 
+def test_a_motor_a_machine_file_keeps_off_at_power_up_powers_up_when_it_ends(make_chain):
+    machine = parse_machine('[[wire.fault]]\ndoor = "chain"\nkind = "power_off"\n'
+                            'motor = 2\nuntil = 0.5\n', "m.toml")
+    chain = make_chain(motors=2, machine=machine)
+    assert not chain.snapshot(2).enabled and chain.snapshot(1).enabled   # K68=1: servo on
+    chain.kernel.run(until=seconds(1.0))
+    assert chain.snapshot(2).enabled
+
+
 def test_link_break_cuts_the_motors_beyond_which_keep_running(wire):
     chain = wire.chain
     chain.execute("S.3=100, A.3=100, P.3=20000, ^.3")

@@ -152,7 +152,8 @@ class Chain:
         if machine is not None:           # wired before power-up (K46 odd searches then)
             self.load_machine(machine)
         for motor in self.motors.values():
-            motor.power_on()
+            if self.wire_faults.lasting("chain", "power_off", motor.id) is None:
+                motor.power_on()          # one a machine file keeps off powers up later
 
     # -- device API: identity -------------------------------------------------------
     @property
