@@ -131,6 +131,9 @@ class Chain:
         self.wire_faults = WireFaults(self.kernel)
         self.wire_faults.listen(self._wire_record)
         self.wire_faults.watch("chain", self._chain_fault)
+        #: The first ID cut off from ID1 (the bus's ``cut_from``, read here in plain
+        #: Python on every line: an attribute of the compiled bus costs more)
+        self._cut = 0
         try:
             self._build(motors, per_motor, machine)
         except BaseException:      # a damaged store, a bad machine file: let the state go
@@ -259,17 +262,22 @@ class Chain:
         return answer in ("Y", "N")
 
     def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
-        cut = self.bus.cut_from if ctx.origin in _THROUGH_ID1 else 0
+        if self._cut and ctx.origin in _THROUGH_ID1:
+            statements = self._reachable(statements, ctx)
         for stmt in statements:
             motor_id = inner_motor(stmt) or ctx.default_motor
-            if cut and motor_id >= cut:    # powered off, or beyond a broken link
-                continue
             motor = self.motors.get(motor_id)
             if motor is not None:
                 run_statement(motor, stmt, ctx)
             else:
                 self.beyond_chain(motor_id, stmt, ctx)
         end_of_line(ctx)          # an "@" of a branch left without its partner (4.4)
+
+    def _reachable(self, statements: list[ast.Statement], ctx: Context) -> list[ast.Statement]:
+        """The statements whose motor the line reaches: not one powered off or beyond a
+        broken link (chain/power.py)."""
+        cut = self._cut
+        return [stmt for stmt in statements if (inner_motor(stmt) or ctx.default_motor) < cut]
 
     # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
     def _arrivals(self, routed: list[list[tuple[ast.Statement, int]]],
@@ -343,7 +351,7 @@ class Chain:
     def _reached(self, ctx: Context) -> list[Motor]:
         """The motors a chain-wide command of ``ctx`` reaches: all of them, but those
         cut off from ID1 for a line that travels the chain (chain/power.py)."""
-        cut = self.bus.cut_from if ctx.origin in _THROUGH_ID1 else 0
+        cut = self._cut if ctx.origin in _THROUGH_ID1 else 0
         return [m for m in self.motors.values() if not cut or m.id < cut]
 
     def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
@@ -594,7 +602,7 @@ class Chain:
 
     def _chain_fault(self, fault: ActiveFault, on: bool) -> None:
         """A ``chain`` fault begins or ends: who is cut off; a motor powered off or on."""
-        self.bus.cut_from = cut_from(self.wire_faults)
+        self._cut = self.bus.cut_from = cut_from(self.wire_faults)
         motor = self.motors.get(fault.motor or 0)
         if fault.kind != "power_off" or motor is None:
             return
