@@ -42,6 +42,16 @@ accel = _load("_coolmuscle_build_accel", PACKAGE / "_accel.py")
 compiler = _load("_coolmuscle_build_compiler", PACKAGE / "tools" / "accel" / "compiler.py")
 
 
+#: What starts each line the compile says (pip shows them with ``-v``; scripts/_env.sh
+#: shows these lines and keeps the rest in its log).
+SAY = "coolmuscle build: "
+
+
+def say(text: str) -> None:
+    for line in text.splitlines():
+        print(SAY + line, file=sys.stderr, flush=True)
+
+
 class BuildAccel(Command):
     """Compile the hot modules with mypyc, or record why the sources run."""
 
@@ -65,9 +75,8 @@ class BuildAccel(Command):
         dest = self._dest()
         lock = dest / ".accel-build.lock" if self.editable_mode else None
         outcome = compiler.build(accel, dest, in_place=self.editable_mode, lock=lock,
-                                 log=lambda line: print(line, file=sys.stderr))
-        print(f"build_accel: {'compiled' if outcome.compiled else 'sources'}: "
-              f"{outcome.reason}")
+                                 log=say)
+        say(f"{'compiled' if outcome.compiled else 'sources'}: {outcome.reason}")
 
     def get_outputs(self) -> list[str]:
         """The compiled files and the stamp this step wrote."""

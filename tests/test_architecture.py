@@ -54,11 +54,13 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
         ("cli.entry",),                  # the command's first code
         ("cli.app",),                    # the typer application: every sub-command
         ("cli.exits",),                  # one-line errors and exit codes of both paths
-        ("batch", "capture", "desk", "twin", "web", "cli"),   # sub-commands; cli: the rest
+        ("web",),                        # the page: a motor's desk and its twin
+        ("batch", "capture", "desk", "twin", "cli"),   # sub-commands; cli: the rest
         ("cli.host_commands",),          # check, upload, term
         ("cli.run", "term"),             # what run does; the terminal and its upload
         ("script",),                     # scripts, transcripts
         ("check", "trace", "accel"),     # the linter, traces and plots, compiled modules
+        ("cli.ports",),                  # PORT as every command takes it
         ("cli.usage", "cli.stopsignals", "cli.version",    # what every command shares,
          "ci"),                                             # and the CI formats they write
     ),

@@ -13,7 +13,14 @@ which adds the path but not the editable install's own ``.pth``).  There:
   ``--sample``) gives the same bytes compiled, with ``COOLMUSCLE_PURE=1``, and as this
   checkout's sources;
 * without one (``CC`` names no program), the build still succeeds with a pure wheel,
-  ``coolmuscle --version`` says why the sources run, and the run gives the same bytes.
+  ``coolmuscle --version`` says why the sources run, and the run gives the same bytes;
+* asked for one (``COOLMUSCLE_COMPILE=0``), the wheel is pure, and installed with only
+  the dependencies its metadata names without an extra (linked from this environment:
+  pyserial, typer, rich and theirs; no compiler, no matplotlib, numpy or aiohttp) it
+  runs the demo's ``coolmuscle run examples/2.1-operation.cml``, while ``--plot``,
+  ``sim --web`` and ``compare`` each say in one line which extra they need; its
+  ``all`` extra asks for every extra, and this environment (constraints.txt, what the
+  scripts install) meets every range it names.
 
 Slow (the compile is 30-120 s on a busy 2-CPU machine); both tests share one worker.
 """
@@ -173,6 +180,108 @@ def test_without_a_c_compiler_the_build_succeeds_and_the_sources_run(
     head, lines = sample(python)
     assert head == {"compiled": False, "reason": why}
     assert lines == reference
+
+
+def requirement_closure(names: list[str]) -> set[str]:
+    """The distributions of this environment that ``names`` need (markers evaluated,
+    no extras): what ``pip install`` of a wheel requiring them brings."""
+    from importlib.metadata import distribution
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    found: set[str] = set()
+    todo = [Requirement(n) for n in names]
+    while todo:
+        req = todo.pop()
+        if req.marker is not None and not req.marker.evaluate({"extra": ""}):
+            continue
+        name = canonicalize_name(req.name)
+        if name in found:
+            continue
+        found.add(name)
+        todo += [Requirement(r) for r in distribution(req.name).requires or []]
+    return found
+
+
+def link_only(python: Path, dists: set[str], where: Path) -> None:
+    """Only the distributions ``dists`` of this environment on ``python``'s path: their
+    top-level modules and metadata linked into ``where``."""
+    from importlib.metadata import distribution
+
+    where.mkdir()
+    for name in dists:
+        dist = distribution(name)
+        base = Path(str(dist.locate_file("")))
+        for top in {Path(str(f)).parts[0] for f in dist.files or []}:
+            if not (where / top).exists() and (base / top).exists() and ".." not in top:
+                (where / top).symlink_to(base / top)
+    site = Path(run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                    clean_env()).strip())
+    (site / "coolmuscle-test-core.pth").write_text(f"{where}\n")
+
+
+def wheel_requirements(python: Path) -> list[str]:
+    code = "import importlib.metadata as m; print('\\n'.join(m.requires('coolmuscle')))"
+    return run([str(python), "-c", code], clean_env()).splitlines()
+
+
+def test_a_pure_wheel_installs_the_light_core_and_names_each_missing_extra(
+        sdist: Path, tmp_path: Path) -> None:
+    from packaging.requirements import Requirement
+
+    wheel = build_wheel(sdist, tmp_path / "dist", clean_env(COOLMUSCLE_COMPILE="0"))
+    assert wheel.name.endswith("-py3-none-any.whl"), wheel.name       # asked for: pure
+    run([sys.executable, "-m", "venv", "--without-pip", str(tmp_path / "venv")], clean_env())
+    python = tmp_path / "venv" / "bin" / "python"
+    run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
+         "--no-index", "--no-cache-dir", "--quiet", str(wheel)], clean_env())
+    requires = [Requirement(r) for r in wheel_requirements(python)]
+    core = [str(r) for r in requires if r.marker is None]
+    assert sorted(Requirement(r).name for r in core) == [
+        "mypy_extensions", "pyserial", "rich", "typer"]
+    dists = requirement_closure(core)       # typer brings pydantic and theirs: 14 today
+    assert len(dists) <= 16, sorted(dists)
+    assert not dists & {"numpy", "matplotlib", "aiohttp", "prompt-toolkit", "scipy",
+                        "pymodbus", "dask", "distributed"}, sorted(dists)
+    link_only(python, dists, tmp_path / "core")
+    absent = run([str(python), "-c", "import importlib.util as u; print([m for m in "
+                  "('matplotlib', 'numpy', 'aiohttp', 'prompt_toolkit', 'scipy', 'pymodbus') "
+                  "if u.find_spec(m) is None])"], clean_env()).strip()
+    assert absent == "['matplotlib', 'numpy', 'aiohttp', 'prompt_toolkit', 'scipy', 'pymodbus']"
+
+    command = str(python.parent / "coolmuscle")
+    assert version_lines(python)[1] == \
+        "hot modules: sources (not compiled at install time: COOLMUSCLE_COMPILE=0)"
+    demo = ROOT / "examples" / "2.1-operation.cml"
+    out = run([command, "run", str(demo), "--trace", str(tmp_path / "demo.csv")], clean_env())
+    assert out.splitlines()[-1].endswith("< Px.1=0") and (tmp_path / "demo.csv").is_file()
+    for args, extra, what, module in (
+            (["run", str(demo), "--plot", str(tmp_path / "demo.png")], "plot",
+             "plotting (--plot)", "matplotlib"),
+            (["sim", "--no-state", "--web", "0"], "web", "the web page", "aiohttp"),
+            (["compare", str(ROOT / "examples" / "twin" / "session.cml")], "twin",
+             "the twin's plots (compare, fit)", "matplotlib")):
+        done = subprocess.run([command, *args], env=clean_env(), capture_output=True,
+                              text=True, timeout=120, stdin=subprocess.DEVNULL)
+        assert (done.returncode, done.stderr) == (2, (
+            f"coolmuscle: error: {what} needs the '{extra}' extra ({module} is not "
+            f'installed): pip install "coolmuscle[{extra}]"\n')), (args, done)
+    assert not (tmp_path / "demo.png").exists()
+
+    extras = {str(m).split('"')[1] for r in requires if (m := r.marker) is not None}
+    assert extras == {"plot", "web", "term", "twin", "dask", "peers", "all", "test", "docs",
+                      "accel"}
+    everything = [r for r in requires if r.marker is not None
+                  and r.marker.evaluate({"extra": "all"})]
+    assert [(r.name, sorted(r.extras)) for r in everything] == [
+        ("coolmuscle", ["dask", "peers", "plot", "term", "twin", "web"])]
+    from importlib.metadata import version
+    for r in requires:            # what the scripts install meets every range of [all]
+        extra = str(r.marker).split('"')[1] if r.marker is not None else ""
+        if extra in ("", "plot", "web", "term", "twin", "dask", "peers") \
+                and r.name != "coolmuscle":
+            assert r.specifier.contains(version(r.name)), (str(r), version(r.name))
 
 
 def test_stale_compiled_files_in_the_tree_do_not_break_or_enter_an_editable_install(

@@ -53,6 +53,8 @@ def read_ledger(path: Path) -> list[dict[str, Any]]:
 
 
 def _process_left(entry: Entry) -> str | None:
+    if not hasattr(os, "killpg"):      # no process groups (Windows): Program.close killed it
+        return None
     try:
         os.killpg(int(entry["pgid"]), 0)
     except ProcessLookupError:
@@ -132,5 +134,6 @@ def leftovers(entries: Iterable[Entry], token: str | None = None) -> list[str]:
 
 def end_group(pgid: int) -> None:
     """SIGKILL what is left of a process group (a last resort after a failed check)."""
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(pgid, signal.SIGKILL)
+    if hasattr(os, "killpg"):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(pgid, signal.SIGKILL)

@@ -143,14 +143,19 @@ class Program:
         return self.proc.wait(timeout=timeout)
 
     def close(self) -> None:
-        """Kill its process group if anything of it still runs, and reap it."""
+        """Kill its process group if anything of it still runs, and reap it (where
+        there are no process groups, Windows: the process)."""
+        killpg = getattr(os, "killpg", None)
         if self.proc.poll() is None:
             with contextlib.suppress(ProcessLookupError):
-                os.killpg(self.proc.pid, signal.SIGKILL)
+                if killpg is not None:
+                    killpg(self.proc.pid, signal.SIGKILL)
+                else:
+                    self.proc.kill()
             self.proc.wait(timeout=10)
-        else:
+        elif killpg is not None:
             with contextlib.suppress(ProcessLookupError):      # a child it left behind
-                os.killpg(self.proc.pid, signal.SIGKILL)
+                killpg(self.proc.pid, signal.SIGKILL)
 
     kill = close
 

@@ -26,15 +26,12 @@ import asyncio
 import errno
 import logging
 import os
-import termios
-import tty
 from collections.abc import Callable
 from typing import Any
 
 from ...device.api import Com1Line, Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port, Transport
-from .pty import PtyTransport
 
 log = logging.getLogger(__name__)
 
@@ -154,6 +151,9 @@ class _Device:
 
 
 def _new_pty() -> tuple[int, int, str]:
+    import termios  # POSIX only, as pseudo-terminals are (coolmuscle.needs)
+    import tty
+
     master, slave = os.openpty()
     tty.setraw(slave, termios.TCSANOW)
     os.set_blocking(master, False)
@@ -242,8 +242,11 @@ class ModbusRtuTransport(Transport):
     def __init__(self, where: str = "pty", *, link: str | os.PathLike[str] | None = None) -> None:
         super().__init__()
         self.where = where
-        self.inner: Transport = (PtyTransport(link) if where == "pty"
-                                 else SerialTransport(where))
+        if where == "pty":
+            from .pty import PtyTransport  # POSIX only (coolmuscle.needs)
+            self.inner: Transport = PtyTransport(link)
+        else:
+            self.inner = SerialTransport(where)
         self.station = 0
 
     async def start(self, port: Port) -> None:

@@ -27,7 +27,7 @@ removes a current build.
 
 from __future__ import annotations
 
-import fcntl
+import json
 import os
 import shlex
 import shutil
@@ -49,17 +49,126 @@ ENV = "COOLMUSCLE_COMPILE"
 #: their types) but reports errors only in the compiled ones; a build environment has
 #: none of coolmuscle's dependencies (pyserial, numpy ...), so their importers would
 #: otherwise fail the type check that a full environment passes.
-_SETUP = """
-import sys
+#:
+#: It says what it is doing on lines that start with :data:`PROGRESS` (the parent
+#: passes them on): the mypyc step, then each C file as the compiler finishes it, and
+#: every :data:`HEARTBEAT` seconds of silence what it is still doing.  The C files are
+#: compiled ``jobs`` at a time (distutils compiles an extension's files one by one, and
+#: setuptools' ``--parallel`` only runs whole extensions side by side).
+_SETUP = r"""
+import json, os, sys, threading, time
+from concurrent.futures import ThreadPoolExecutor
 from setuptools import setup
+from setuptools.command.build_ext import build_ext
 from mypyc.build import mypycify
-paths, out, tmp, group = sys.argv[1].split(","), sys.argv[2], sys.argv[3], sys.argv[4]
-options = ["--follow-imports=silent", "--cache-dir=" + tmp + "/mypy-cache"]
-setup(name="coolmuscle-accel", packages=[],
-      ext_modules=mypycify(options + paths, opt_level="3", target_dir=tmp,
-                           group_name=group),
-      script_args=["build_ext", "--build-lib", out, "--build-temp", tmp])
+
+paths, out, tmp = sys.argv[1].split(","), sys.argv[2], sys.argv[3]
+plan = json.loads(sys.argv[4])
+jobs = max(1, int(plan["jobs"]))
+START = time.monotonic()
+lock = threading.Lock()
+state = {"doing": "starting", "said": START}
+
+def say(text, doing=None):
+    with lock:
+        state["said"] = time.monotonic()
+        state["doing"] = doing or text
+        # one write: the compiler threads' own lines must not land inside it
+        sys.stdout.write("%s[%3.0f s] %s\n" % (plan["prefix"], state["said"] - START, text))
+        sys.stdout.flush()
+
+def heartbeat():
+    while True:
+        time.sleep(1.0)
+        with lock:
+            quiet, doing = time.monotonic() - state["said"], state["doing"]
+        if quiet >= plan["heartbeat"]:
+            say("still " + doing, doing)
+
+threading.Thread(target=heartbeat, daemon=True).start()
+groups = plan["groups"]
+separate = [(g["paths"], g["name"]) for g in groups] if groups else bool(plan["separate"])
+say("mypyc: checking the types of %d modules and writing their C code" % len(paths),
+    "checking types and writing C code (mypyc)")
+extensions = mypycify(
+    ["--follow-imports=silent", "--cache-dir=" + tmp + "/mypy-cache"] + paths,
+    opt_level=plan["opt_level"], multi_file=plan["multi_file"], separate=separate,
+    target_dir=tmp, group_name=None if (groups or plan["separate"]) else plan["group"])
+# a group named in a package ("coolmuscle._hot") has its header in that package's folder,
+# where mypyc's files of one module each (multi_file) do not look
+for ext in extensions:
+    ext.include_dirs.append(os.path.join(tmp, *plan["group"].split(".")[:-1]))
+total = sum(len(ext.sources) for ext in extensions)
+done = [0]
+say("mypyc: done; compiling %d C files, %d at a time, at -O%s"
+    % (total, jobs, plan["opt_level"]), "compiling C files")
+slots = threading.BoundedSemaphore(jobs)
+
+class BuildExt(build_ext):
+    def build_extensions(self):
+        whole = self.compiler.compile
+
+        def one(source, kwargs):
+            with slots:
+                objects = whole([source], **kwargs)
+            with lock:
+                done[0] += 1
+                count = done[0]
+            say("C compiler: %d/%d %s" % (count, total, os.path.basename(source)),
+                "compiling C files (%d/%d done)" % (count, total))
+            return objects
+
+        def compile(sources, **kwargs):
+            with ThreadPoolExecutor(max(1, min(jobs, len(sources)))) as pool:
+                return [o for objs in pool.map(lambda s: one(s, kwargs), sources) for o in objs]
+
+        self.compiler.compile = compile
+        biggest = sorted(self.extensions, key=lambda e: -len(e.sources))
+        with ThreadPoolExecutor(jobs) as pool:
+            list(pool.map(self.build_extension, biggest))
+
+setup(name="coolmuscle-accel", packages=[], ext_modules=extensions,
+      cmdclass={"build_ext": BuildExt},
+      script_args=["-q", "build_ext", "--build-lib", out, "--build-temp", tmp])
+say("built %d extension modules" % len(extensions))
 """
+
+#: The lines of the child's output that say what it is doing (passed to ``log``).
+PROGRESS = "coolmuscle-accel: "
+#: Seconds of silence after which the child says what it is still doing.
+HEARTBEAT = 10.0
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How the modules are compiled (docs/performance.md "Compiled hot modules": each
+    lever measured).  ``groups``: ``None`` for one shared library (:data:`Sources.GROUP`),
+    else ``(library, module prefixes)`` pairs; a module goes to the first whose prefix
+    it starts with (the last group should take ``""``).  ``separate``: every module its
+    own library.  ``jobs``: C files compiled at a time (0: the CPUs this process may
+    use)."""
+
+    opt_level: str = "3"
+    multi_file: bool = False
+    groups: tuple[tuple[str, tuple[str, ...]], ...] | None = None
+    separate: bool = False
+    jobs: int = 0
+
+    def job_count(self) -> int:
+        if self.jobs > 0:
+            return self.jobs
+        try:
+            return max(1, len(os.sched_getaffinity(0)))
+        except AttributeError:                 # not Linux
+            return max(1, os.cpu_count() or 1)
+
+
+#: The plan of the package build: a C file a module, compiled side by side on every CPU,
+#: at -O3.  One C file for all 37 modules took 129 s of CPU, one compiler process after
+#: another; a file a module 70 s, at the same speed of the compiled code (callgrind's
+#: instructions within 1 %).  -O2 took as long; -O1 52 s, for up to 4 % more
+#: instructions (bench/bench_compile.py; docs/performance.md "Compiled hot modules").
+PLAN = Plan(multi_file=True)
 
 
 class Sources(Protocol):
@@ -134,7 +243,8 @@ def will_compile() -> bool:
 
 
 def build(accel: Sources, dest: Path, *, in_place: bool, force: bool = False,
-          lock: Path | None = None, log: Callable[[str], None] = print) -> Outcome:
+          lock: Path | None = None, log: Callable[[str], None] = print,
+          plan: Plan = PLAN) -> Outcome:
     """Compile the modules into the package folder ``dest`` unless it is current (or
     ``force``).
 
@@ -147,16 +257,35 @@ def build(accel: Sources, dest: Path, *, in_place: bool, force: bool = False,
     ``COOLMUSCLE_COMPILE=1`` a build that cannot compile raises :class:`CompileError`,
     and so does a forced rebuild of a current build (which stays); otherwise a build
     that cannot compile says why in the stamp and in its :class:`Outcome`, and the
-    sources run."""
+    sources run.  ``log`` gets what the compile is doing, a line at a time, as it goes
+    (``plan``: how it compiles)."""
     if lock is None:
-        return _build(accel, dest, in_place, force, log)
+        return _build(accel, dest, in_place, force, log, plan)
     lock.parent.mkdir(parents=True, exist_ok=True)
     with open(lock, "ab") as held:
-        fcntl.flock(held, fcntl.LOCK_EX)
-        try:
-            return _build(accel, dest, in_place, force, log)
-        finally:
-            fcntl.flock(held, fcntl.LOCK_UN)
+        _lock_file(held.fileno())
+        return _build(accel, dest, in_place, force, log, plan)   # closing the file unlocks
+
+
+def _lock_file(fd: int) -> None:
+    """Wait for the exclusive lock of the open file ``fd``: ``flock`` (POSIX), else
+    ``msvcrt.locking`` on its first byte (Windows), else none.  Imported here, not at
+    the top: ``setup.py`` loads this file on every system."""
+    if sys.platform == "win32":
+        import msvcrt
+
+        os.lseek(fd, 0, os.SEEK_SET)
+        while True:
+            try:
+                msvcrt.locking(fd, msvcrt.LK_LOCK, 1)     # retries for 10 s, then raises
+                return
+            except OSError:
+                continue
+    try:
+        import fcntl
+    except ImportError:
+        return
+    fcntl.flock(fd, fcntl.LOCK_EX)
 
 
 def current_stamp(accel: Sources, dest: Path) -> dict[str, object] | None:
@@ -190,7 +319,7 @@ def _touched_only(accel: Sources, dest: Path) -> dict[str, object] | None:
 
 
 def _build(accel: Sources, dest: Path, in_place: bool, force: bool,
-           log: Callable[[str], None]) -> Outcome:
+           log: Callable[[str], None], plan: Plan) -> Outcome:
     choice = setting()
     current = in_place and current_stamp(accel, dest) is not None
     if choice == "0":
@@ -205,7 +334,7 @@ def _build(accel: Sources, dest: Path, in_place: bool, force: bool,
         why = missing()
         if why is not None:
             raise CompileError(why)
-        _compile(accel, dest, in_place, log)
+        _compile(accel, dest, in_place, log, plan)
     except CompileError as exc:
         if choice == "1" or current:      # required, or a forced rebuild: keep what is there
             raise
@@ -222,29 +351,64 @@ def _keep_sources(accel: Sources, dest: Path, reason: str) -> Outcome:
     return Outcome(False, reason)
 
 
-def _compile(accel: Sources, dest: Path, in_place: bool, log: Callable[[str], None]) -> None:
+def _plan_json(accel: Sources, plan: Plan, paths: dict[str, str]) -> str:
+    """The child's settings: ``plan`` with its groups as lists of paths."""
+    groups: list[dict[str, object]] | None = None
+    if plan.groups is not None:
+        members: dict[str, list[str]] = {name: [] for name, _ in plan.groups}
+        for module, path in paths.items():
+            short = module.removeprefix("coolmuscle.")
+            name = next((n for n, prefixes in plan.groups
+                         if any(short.startswith(p) for p in prefixes)), None)
+            if name is None:
+                raise CompileError(f"no group of the plan takes {module}")
+            members[name].append(path)
+        groups = [{"name": name, "paths": found} for name, found in members.items() if found]
+    return json.dumps({"opt_level": plan.opt_level, "multi_file": plan.multi_file,
+                       "separate": plan.separate, "groups": groups, "group": accel.GROUP,
+                       "jobs": plan.job_count(), "prefix": PROGRESS, "heartbeat": HEARTBEAT})
+
+
+def _run_child(command: list[str], cwd: Path, log: Callable[[str], None]) -> list[str]:
+    """Run the child, passing its progress lines to ``log`` as they come; its whole
+    output, or :class:`CompileError` with the end of it."""
+    env = dict(os.environ, COOLMUSCLE_PURE="1", PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, errors="replace")
+    lines: list[str] = []
+    assert proc.stdout is not None
+    with proc:
+        for line in proc.stdout:
+            line = line.rstrip("\n")
+            if PROGRESS in line:          # (another thread's output may come before it)
+                log(line.split(PROGRESS, 1)[1])
+            elif line.strip():
+                lines.append(line)
+    if proc.returncode != 0:
+        log("\n".join(lines[-15:]))
+        last = lines[-1].strip()[:200] if lines else f"exit status {proc.returncode}"
+        raise CompileError(f"mypyc or the C compiler failed: {last}")
+    return lines
+
+
+def _compile(accel: Sources, dest: Path, in_place: bool, log: Callable[[str], None],
+             plan: Plan) -> None:
     """Run mypyc in a child interpreter, then put its output in ``dest``: the stamp says
     "cut short" (naming the old and the new files) while the files are replaced, then
     what was built.  A failure logs the end of mypyc's output and raises with its last
     line."""
     package = Path(accel.PACKAGE_DIR)
     src = package.parent
-    paths = [str((package / accel.source_relpath(m)).relative_to(src)) for m in accel.MODULES]
+    paths = {m: str((package / accel.source_relpath(m)).relative_to(src))
+             for m in accel.MODULES}
     digest = accel.source_digest()             # before compiling: an edit meanwhile is stale
     stats = accel.source_stats() if in_place else None
     with tempfile.TemporaryDirectory(prefix="coolmuscle-accel-") as work:
         out, tmp = Path(work) / "out", Path(work) / "tmp"
         setup_py = Path(work) / "setup_accel.py"
         setup_py.write_text(_SETUP, encoding="utf-8")
-        env = dict(os.environ, COOLMUSCLE_PURE="1")
-        proc = subprocess.run(
-            [sys.executable, str(setup_py), ",".join(paths), str(out), str(tmp), accel.GROUP],
-            cwd=src, env=env, capture_output=True, text=True)
-        if proc.returncode != 0:
-            lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
-            log("\n".join(lines[-15:]))
-            last = lines[-1].strip()[:200] if lines else f"exit status {proc.returncode}"
-            raise CompileError(f"mypyc or the C compiler failed: {last}")
+        _run_child([sys.executable, str(setup_py), ",".join(paths.values()), str(out),
+                    str(tmp), _plan_json(accel, plan, paths)], src, log)
         built = out / package.name
         files = sorted(p.relative_to(built).as_posix() for p in _extensions(built))
         modules = {_module_name(f) for f in files}

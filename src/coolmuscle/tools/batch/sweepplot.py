@@ -36,9 +36,11 @@ def figure_value(outcome: Outcome, column: str) -> float | None:
 def plot_sweep(path: Path, jobs: Sequence[Job], outcomes: Sequence[Outcome | None],
                column: str, title: str = "") -> Path:
     """Draw ``column`` against the first varied value, one line per other combination."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    from ...needs import needs_extra
+    with needs_extra("plot", "sweep --plot"):
+        import matplotlib  # noqa: PLC0415
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415
 
     names = [n for n, _ in jobs[0].values]
     first = names[0]

@@ -34,6 +34,7 @@ from rich.console import Console
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from ...frontends.transports.base import Transport
+from ...needs import needs_posix
 from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
@@ -92,13 +93,16 @@ chain_factory: ChainFactory = _default_chain_factory
 
 
 def default_state_dir() -> Path:
-    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``).
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``; on
+    Windows ``%LOCALAPPDATA%\\coolmuscle\\state``).
 
     A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says
     ("If an implementation encounters a relative path ... it should consider the
     path invalid and ignore it")."""
     xdg = os.environ.get("XDG_DATA_HOME", "")
-    base = xdg if xdg and os.path.isabs(xdg) else os.path.expanduser("~/.local/share")
+    local = os.environ.get("LOCALAPPDATA", "") if os.name == "nt" else ""
+    base = (xdg if xdg and os.path.isabs(xdg) else local if local
+            else os.path.expanduser("~/.local/share"))
     return Path(base) / "coolmuscle" / "state"
 
 
@@ -148,8 +152,10 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
             raise UsageError(f"--tcp: {exc}") from None
         chosen.append(transports.create("tcp", host=host, port=port))
     if pty or pty_link is not None:
+        needs_posix("--pty-link" if pty_link is not None and not pty else "--pty")
         chosen.append(transports.create("pty", link=pty_link))
     if stdio:
+        needs_posix("--stdio", "--tcp")
         chosen.append(transports.create("stdio"))
     chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
     return chosen
@@ -180,6 +186,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
 
     chosen: list[Transport] = []
     if rtu is not None:
+        needs_posix("--modbus-rtu", "--modbus-tcp")
         chosen.append(transports.create("modbus-rtu", where=rtu))
     if tcp is not None:
         try:
@@ -188,6 +195,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
             raise UsageError(f"--modbus-tcp: {exc}") from None
         chosen.append(transports.create("modbus-tcp", host=host, port=port))
     if com1 is not None:
+        needs_posix("--com1", "--modbus-tcp for the Modbus side")
         chosen.append(transports.create("com1", where=com1))
     return chosen
 
@@ -253,16 +261,25 @@ def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str
 
 
 def _reset_state(state: Path | None) -> None:
-    """``sim --reset``: forget what the state directory holds (factory state)."""
+    """``sim --reset``: forget what the state directory holds (factory state).  A store
+    file that cannot be read at all (damaged, not a store) is kept aside, not lost."""
     if state is None:
         return
-    from ...motor.state.store import DEFAULT_FILENAME, Store
+    from ...errors import DamagedStoreError
+    from ...motor.state.store import DEFAULT_FILENAME, Store, set_aside
     path = state / DEFAULT_FILENAME
     if not path.exists():
         return
-    with Store(path, writer=True) as store:     # not under a running sim
-        for motor_id in store.motors():
-            store.delete(motor_id)
+    try:
+        with Store(path, writer=True) as store:     # not under a running sim
+            for motor_id in store.motors():
+                store.delete(motor_id)
+    except DamagedStoreError as exc:
+        kept = set_aside(path)
+        err.print(f"coolmuscle: state reset: {_show_path(path)} {exc.problem}: kept it as "
+                  f"{_show_path(Path(kept))}; {_show_path(state)} holds factory settings",
+                  markup=False)
+        return
     err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
               markup=False)
 
@@ -496,6 +513,14 @@ def _register_desk() -> None:
 _register_desk()  # scan, backup, restore, params diff (coolmuscle.tools.desk, docs/real-motor.md)
 
 
+def _register_web() -> None:
+    from ..web.command import register
+    register(app)
+
+
+_register_web()  # web: the page of a real motor (coolmuscle.tools.web, docs/real-motor.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version, and whether the hot modules run compiled or as sources."""
@@ -547,17 +572,23 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(sig, handler)
 
 
+#: The commands that handle Ctrl-C as KeyboardInterrupt themselves: the terminal (at
+#: its prompt a key), batch and sweep (they report what finished).  Every other command
+#: stops with one line and 130 (typer turns a KeyboardInterrupt into a silent 130).
+_OWN_CTRL_C = ("term", "batch", "sweep")
+
+
 def _main(argv: list[str] | None) -> None:
     if threading.current_thread() is threading.main_thread():
         install_startup_handlers()    # also when started as coolmuscle.tools.cli.app:main
         args = sys.argv[1:] if argv is None else argv
-        if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
-            # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
+        if next((a for a in args if not a.startswith("-")), "") in _OWN_CTRL_C:
             signal.signal(signal.SIGINT, signal.default_int_handler)
     from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
+    from ..web.command import expand_twin_flag  # a bare --twin: the default load
     from .enip import optional_value_argv
 
     def call() -> None:
-        args = expand_web_flag(sys.argv[1:] if argv is None else argv)
+        args = expand_twin_flag(expand_web_flag(sys.argv[1:] if argv is None else argv))
         app(args=optional_value_argv(args), prog_name="coolmuscle")
     guarded(call)

@@ -43,6 +43,8 @@ def chain_firmware(bridge: str) -> str:
 def sim_transport(iface: str, bridge: str) -> EthercatTransport:
     """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
     from ...frontends.ethercat.transport import EthercatTransport
+    from ...needs import needs_af_packet
+    needs_af_packet("--ethercat")
     chain_firmware(bridge)
     return EthercatTransport(iface, ident.variant(bridge).code)
 
@@ -71,11 +73,25 @@ def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list
     """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
     root's tools); a ``LabError`` is one line and exit status 1."""
     from ...frontends.ethercat import lab
+    from ...needs import needs_af_packet
+    needs_af_packet("coolmuscle ethercat lab")
     run = lab.up if step == "up" else lab.down
     try:
         return run(namespace, master_if, slave_if)
     except lab.LabError as exc:
         _fail(str(exc), 1)
+
+
+def _program() -> str:
+    """This command as a path sudo finds: sudo does not keep an activated virtual
+    environment, so ``coolmuscle`` alone may be another one, or none."""
+    import os
+    import shlex
+    import sys
+    run = sys.argv[0] if sys.argv else ""
+    if os.path.basename(run) == "coolmuscle" and os.path.isabs(run):
+        return shlex.quote(run)
+    return f"{shlex.quote(sys.executable)} -m coolmuscle"
 
 
 @lab_app.command("up")
@@ -85,7 +101,7 @@ def lab_up(
     slave_if: str = _SLAVE_IF,
 ) -> None:
     """Make the veth pair and print which end to give the master."""
-    typer.echo(_lab("up", namespace, master_if, slave_if).instructions())
+    typer.echo(_lab("up", namespace, master_if, slave_if).instructions(_program()))
 
 
 @lab_app.command("down")

@@ -38,8 +38,11 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 
-#: The signals that stop the program.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: The signals that stop the program: those of them this system has (Windows has no
+#: SIGHUP; its Ctrl-Break is SIGBREAK).
+STOP_SIGNALS = tuple(getattr(signal, name)
+                     for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
+                     if hasattr(signal, name))
 
 
 class SignalStop(BaseException):

@@ -11,15 +11,22 @@ motor says appears as it arrives, also between lines you type, in colour:
   (``no reply to '?96.1' within 1 s``), and a line whose echo does not come either
   (the line is down).
 
-Line editing and history come from prompt_toolkit (history kept in
-``$XDG_STATE_HOME/coolmuscle/term_history``).  Commands start with ``:``:
+Line editing and history come from prompt_toolkit (the ``term`` extra; history kept in
+``$XDG_STATE_HOME/coolmuscle/term_history``).  When the input is not a terminal (a
+file or a pipe: ``coolmuscle term URL < lines.txt``, on any system) each line is sent
+as it is read, what the motor says is printed plainly, and at the end of the input the
+terminal waits until the motor has said nothing for ``--timeout`` seconds; this needs
+no prompt_toolkit.  Commands start with ``:``:
 
 ``:send FILE.cml``   upload a file with a progress bar and verify its banks (``upload``)
 ``:save [ID]``       ``$`` and wait for ``saved.n`` (default: the terminal's motor)
 ``:log FILE``        record the session as a golden transcript (docs/scripts.md);
                      ``:log off`` stops
-``:motor ID``        the motor ID ``:save`` and ``:send`` use
+``:motor ID``        the motor ID ``:save`` and ``:send`` use (one that answers)
 ``:help``, ``:quit`` (or Ctrl-D)
+
+A lost connection (the peer closed it, the cable was pulled) is said at once, in red,
+and ends the terminal with exit status 1: no line typed after it is lost silently.
 """
 
 from __future__ import annotations
@@ -28,22 +35,21 @@ import asyncio
 import os
 import re
 import shlex
+import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-from prompt_toolkit import PromptSession, print_formatted_text
-from prompt_toolkit.formatted_text import FormattedText
-from prompt_toolkit.history import FileHistory, History, InMemoryHistory
-from prompt_toolkit.patch_stdout import patch_stdout
-from prompt_toolkit.shortcuts import ProgressBar
+from typing import TYPE_CHECKING, Any
 
 from ...client import AsyncCoolMuscle, connect_async
 from ...client.program import load_program
 from ...client.protocol import MotorEvent
-from ...errors import CoolMuscleError
+from ...errors import CoolMuscleError, CoolMuscleTimeout, TransportError
 from ...motor.status import Ux
+from ...needs import needs_extra
 from ..script.transcript import TranscriptRecorder
+
+if TYPE_CHECKING:
+    from prompt_toolkit.history import History
 
 __all__ = ["run_term", "STYLES", "HELP"]
 
@@ -60,19 +66,28 @@ HELP = """commands: :send FILE.cml   :save [ID]   :log FILE | :log off   :motor 
 
 
 def default_history() -> Path:
-    """``$XDG_STATE_HOME/coolmuscle/term_history`` (``~/.local/state/...``)."""
-    base = os.environ.get("XDG_STATE_HOME") or os.path.expanduser("~/.local/state")
+    """``$XDG_STATE_HOME/coolmuscle/term_history`` (``~/.local/state/...``; on Windows
+    in ``%LOCALAPPDATA%``)."""
+    local = os.environ.get("LOCALAPPDATA") if os.name == "nt" else None
+    base = os.environ.get("XDG_STATE_HOME") or local or os.path.expanduser("~/.local/state")
     return Path(base) / "coolmuscle" / "term_history"
 
 
+#: How a line is shown: ``show(text, style)`` (a key of :data:`STYLES`).
+Show = Callable[[str, str], None]
+
+
 def show(text: str, style: str) -> None:
-    """Print one line in colour above the prompt."""
+    """Print one line in colour above the prompt (prompt_toolkit)."""
+    from prompt_toolkit import print_formatted_text
+    from prompt_toolkit.formatted_text import FormattedText
+
     print_formatted_text(FormattedText([(STYLES.get(style, ""), text)]))
 
 
-def _log_failed(text: str) -> None:
-    """The log's file failed (a full disk): said once; the session goes on."""
-    show(f"log: {text}; the session goes on", "error")
+def show_plain(text: str, _style: str) -> None:
+    """Print one line as it is (input from a file or a pipe)."""
+    print(text, flush=True)
 
 
 def describe(event: MotorEvent) -> tuple[str, str]:
@@ -91,29 +106,53 @@ def describe(event: MotorEvent) -> tuple[str, str]:
 class Terminal:
     """One terminal session on one connection."""
 
-    def __init__(self, client: AsyncCoolMuscle, url: str, timeout: float = 1.0) -> None:
+    def __init__(self, client: AsyncCoolMuscle, url: str, show: Show = show,
+                 timeout: float = 1.0) -> None:
         self.client = client
         self.url = url
         self.motor = client.id
+        self.show = show
         self.timeout = timeout
         self.recorder: TranscriptRecorder | None = None
         self._untap: Callable[[], None] | None = None
+        #: The loop time of the last line the motor said or the terminal sent.
+        self.last_activity = 0.0
+        #: why the connection was lost (``None``: it works)
+        self.lost: BaseException | None = None
         self.lines_in = 0             # line ends received: what came since a line was typed
+        #: lines whose echo or reply is still awaited (:meth:`_watch`)
+        self.watching = 0
         client.add_tap(self._count)
 
     def _count(self, direction: str, data: bytes) -> None:
         if direction == "<":
             self.lines_in += data.count(b"\r")       # K70: CR or CR LF (ch. 3)
 
+    def _touch(self) -> None:
+        try:
+            self.last_activity = asyncio.get_running_loop().time()
+        except RuntimeError:          # an event outside the loop (a test's direct call)
+            pass
+
     def on_event(self, event: MotorEvent) -> None:
+        self._touch()
         text, style = describe(event)
-        show(text, style)
+        self.show(text, style)
+
+    def log_failed(self, text: str) -> None:
+        """The log's file failed (a full disk): said once; the session goes on."""
+        self.show(f"log: {text}; the session goes on", "error")
 
     async def handle(self, line: str) -> bool:
         """One input line; ``False`` ends the session."""
         if line.startswith(":"):
             return await self.command(line[1:].strip())
-        self.client.write_line(line)
+        self._touch()
+        try:
+            self.client.write_line(line)
+        except TransportError as exc:
+            self.connection_lost(exc)
+            return False
         self._watch(line)
         return True
 
@@ -124,18 +163,26 @@ class Terminal:
         echo = self.client.echo is True
         expected = int(echo) + int(bool(_ASKS.match(line)))
         if expected:
+            self.watching += 1
             asyncio.get_running_loop().call_later(self.timeout, self._check, line,
                                                   self.lines_in, expected, echo)
 
     def _check(self, line: str, start: int, expected: int, echo: bool) -> None:
+        self.watching -= 1
         got = self.lines_in - start
-        if got >= expected:
+        if got >= expected or self.lost is not None:
             return
         if got == 0 and echo:
-            show(f"no answer to {line!r} within {self.timeout:g} s, not even its echo: "
-                 "is the line down?", "error")
+            self.show(f"no answer to {line!r} within {self.timeout:g} s, not even its "
+                      "echo: is the line down?", "error")
         else:
-            show(f"no reply to {line!r} within {self.timeout:g} s", "error")
+            self.show(f"no reply to {line!r} within {self.timeout:g} s", "error")
+
+    def connection_lost(self, error: BaseException) -> None:
+        """The port failed: said once, in red; the session ends (exit status 1)."""
+        if self.lost is None:
+            self.lost = error
+            self.show(f"connection lost: {error}; the terminal ends", "error")
 
     async def command(self, text: str) -> bool:
         words = shlex.split(text) if text else [""]
@@ -148,28 +195,38 @@ class Terminal:
             elif name == "save" and len(args) <= 1:
                 motor = int(args[0]) if args else self.motor
                 await self.client.motor(motor).save()
-                show(f"saved.{motor}", "message")
+                self.show(f"saved.{motor}", "message")
             elif name == "log" and len(args) == 1:
                 self.log(args[0])
             elif name == "motor" and len(args) == 1 and args[0].isdigit():
-                self.motor = self.client.motor(int(args[0])).id    # 1..15 (1.1)
-                show(f"motor ID{self.motor}", "info")
+                await self.select_motor(int(args[0]))
             else:
-                show(HELP, "info")
+                self.show(HELP, "info")
         except (CoolMuscleError, OSError, ValueError) as exc:
-            show(f"{name}: {exc}", "error")
+            self.show(f"{name}: {exc}", "error")
         return True
+
+    async def select_motor(self, motor_id: int) -> None:
+        """``:motor ID``: a motor ID of the chain (1..15, 1.1) that answers ``?99``."""
+        motor = self.client.motor(motor_id)
+        try:
+            await motor.get_status()
+        except CoolMuscleTimeout:
+            raise CoolMuscleError(f"ID{motor.id} does not answer (no reply to "
+                                  f"?99.{motor.id}): still ID{self.motor}") from None
+        self.motor = motor.id
+        self.show(f"motor ID{self.motor}", "info")
 
     def log(self, target: str) -> None:
         if self.recorder is not None and self._untap is not None:
             self._untap()
             self.recorder.close()
-            show(f"log written: {self.recorder.path}", "info")
+            self.show(f"log written: {self.recorder.path}", "info")
             self.recorder = None
         if target.lower() != "off":
-            self.recorder = TranscriptRecorder(target, self.url, on_error=_log_failed)
+            self.recorder = TranscriptRecorder(target, self.url, on_error=self.log_failed)
             self._untap = self.client.add_tap(self.recorder.tap)
-            show(f"logging to {target} (:log off to stop)", "info")
+            self.show(f"logging to {target} (:log off to stop)", "info")
 
     async def send_file(self, path: Path) -> None:
         program = load_program(path)
@@ -178,19 +235,27 @@ class Terminal:
             raise CoolMuscleError(f"{path}: {len(bad)} syntax error(s) (coolmuscle check "
                                   f"{path}); nothing sent")
         total = program.send_count()
-        with ProgressBar(title=f"sending {path.name}") as bar:
-            counter = bar(range(total), total=total, label="lines")
+        upload = self.client.motor(self.motor).upload
+        if self.show is show:          # on the screen: prompt_toolkit's progress bar
+            from prompt_toolkit.shortcuts import ProgressBar
 
-            def progress(done: int, _total: int) -> None:
-                while counter.items_completed < done:
-                    counter.item_completed()
-            result = await self.client.motor(self.motor).upload(program, check=False,
-                                                                progress=progress)
+            with ProgressBar(title=f"sending {path.name}") as bar:
+                counter = bar(range(total), total=total, label="lines")
+
+                def progress(done: int, _total: int) -> None:
+                    while counter.items_completed < done:
+                        counter.item_completed()
+                result = await upload(program, check=False, progress=progress)
+        else:
+            self.show(f"sending {path.name}: {total} line(s)", "info")
+            result = await upload(program, check=False)
+        self._touch()
         for line in result.report():
-            show(line, "error")
+            self.show(line, "error")
         verdict = "verified" if result.ok else "FAILED"
-        show(f"sent {result.sent} line(s) of {path.name}; banks {', '.join(result.banks) or '-'}"
-             f" {verdict}", "message" if result.ok else "error")
+        self.show(f"sent {result.sent} line(s) of {path.name}; banks "
+                  f"{', '.join(result.banks) or '-'} {verdict}",
+                  "message" if result.ok else "error")
 
     def close(self) -> None:
         if self.recorder is not None:
@@ -198,14 +263,24 @@ class Terminal:
 
 
 async def _session(client: AsyncCoolMuscle, url: str, history: History,
-                   timeout: float = 1.0) -> None:
-    term = Terminal(client, url, timeout)
+                   timeout: float = 1.0) -> Terminal:
+    """On a terminal: prompt_toolkit's prompt, history and colours."""
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.patch_stdout import patch_stdout
+
+    term = Terminal(client, url, timeout=timeout)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
+
+    def lost(error: BaseException) -> None:
+        term.connection_lost(error)
+        if prompt.app.is_running:
+            prompt.app.exit(exception=EOFError())       # the prompt ends at once
+    client.add_failure_listener(lost)
     show(f"coolmuscle term: {url} (motor ID{client.id}); :help for commands", "info")
     try:
         with patch_stdout(raw=True):
-            while True:
+            while term.lost is None:
                 try:
                     line = await prompt.prompt_async(f"ID{term.motor}> ")
                 except EOFError:
@@ -216,33 +291,75 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History,
                     break
     finally:
         term.close()
+    return term
+
+
+async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Terminal:
+    """Input from a file or a pipe: each line sent as it is read; at the end of the input
+    (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds and every
+    line's echo or reply came or was said missing."""
+    term = Terminal(client, url, show=show_plain, timeout=quiet)
+    client.subscribe(term.on_event)
+    client.add_failure_listener(term.connection_lost)
+    loop = asyncio.get_running_loop()
+    term.last_activity = loop.time()
+    try:
+        while term.lost is None:
+            line = await asyncio.to_thread(sys.stdin.readline)
+            if not line or not await term.handle(line.rstrip("\r\n")):
+                break
+        while term.lost is None and ((left := term.last_activity + quiet - loop.time()) > 0
+                                     or term.watching):
+            await asyncio.sleep(min(max(left, 0.0), 0.05) or 0.01)
+    finally:
+        term.close()
+    return term
+
+
+def _history(path: Path) -> History:
+    from prompt_toolkit.history import FileHistory, InMemoryHistory
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return FileHistory(str(path))
+    except OSError:
+        return InMemoryHistory()
 
 
 async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
                    timeout: float = 1.0, history: Path | None = None,
-                   log: Path | None = None, **serial_options: Any) -> None:
-    """Run the terminal on ``url`` until ``:quit`` or end of input."""
-    path = history or default_history()
-    store: History
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        store = FileHistory(str(path))
-    except OSError:
-        store = InMemoryHistory()
+                   log: Path | None = None, interactive: bool | None = None,
+                   **serial_options: Any) -> None:
+    """Run the terminal on ``url`` until ``:quit`` or end of input.  ``interactive``
+    (default: standard input is a terminal) chooses the prompt_toolkit session (the
+    ``term`` extra) or the plain one."""
+    if interactive is None:
+        interactive = sys.stdin is not None and sys.stdin.isatty()
+    store: History | None = None
+    if interactive:
+        with needs_extra("term", "the interactive terminal (line editing, history)"):
+            store = _history(history or default_history())
     client = await connect_async(url, baudrate=baudrate, motor=motor, timeout=timeout,
                                  **serial_options)
     try:
-        recorder = (TranscriptRecorder(log, url, on_error=_log_failed) if log is not None
-                    else None)
-        if recorder is not None:
+        recorder: TranscriptRecorder | None = None
+        if log is not None:
+            said = show if store is not None else show_plain
+            recorder = TranscriptRecorder(log, url, on_error=lambda text: said(
+                f"log: {text}; the session goes on", "error"))
             client.add_tap(recorder.tap)
         try:
-            await _session(client, url, store, timeout)
+            if store is not None:
+                term = await _session(client, url, store, timeout)
+            else:
+                term = await _plain_session(client, url, timeout)
         finally:
             if recorder is not None:
                 recorder.close()
     finally:
         await client.close()
+    if term.lost is not None:
+        raise SystemExit(1)
 
 
 def main(url: str, **options: Any) -> None:

@@ -25,9 +25,9 @@ import collections
 import json
 import logging
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
-from ...device import Device, Event
+from ...device import Event, MotorSnapshot
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +49,26 @@ Note = Callable[[list[Any]], None]
 SNAP_FIELDS = ("id", "position", "target", "speed", "torque", "status", "inputs",
                "outputs", "temperature", "analog", "analog_out", "voltage",
                "position_error", "enabled")
+
+
+class _Clock(Protocol):
+    @property
+    def now(self) -> int: ...
+
+
+class FeedSource(Protocol):
+    """What the feed reads: a :class:`~coolmuscle.device.Device`, or the line to a real
+    motor (:class:`.line.LineDevice`, its clock the wall clock)."""
+
+    @property
+    def kernel(self) -> _Clock: ...
+
+    @property
+    def motor_ids(self) -> tuple[int, ...]: ...
+
+    def snapshot(self, motor: int) -> MotorSnapshot: ...
+
+    def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]: ...
 
 
 class Client:
@@ -116,7 +136,7 @@ class Client:
 class Hub:
     """Fan-out of the chain's events and snapshots to every open page."""
 
-    def __init__(self, device: Device, call: Callable[..., Any]) -> None:
+    def __init__(self, device: FeedSource, call: Callable[..., Any]) -> None:
         self.device = device
         self._call = call                     # runs a model call at "now" (Port.call)
         self.clients: set[Client] = set()

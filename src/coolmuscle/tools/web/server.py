@@ -13,7 +13,9 @@ Routes (aiohttp):
 The page is one more client of the device API (origin ``web``).  Access rules are in
 :mod:`.access`; a WebSocket message larger than ``MAX_MESSAGE`` closes that socket
 with status 1009 (message too big) and nothing else; malformed JSON is answered with
-an error frame.
+an error frame.  The pages' requests take turns with a bound per wake-up and per page
+(:mod:`.turns`): a request beyond a page's queue is refused with a message, and what a
+page queued is dropped when it leaves.
 """
 
 from __future__ import annotations
@@ -24,19 +26,23 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSMsgType, web
-
 from ...device import Device
 from ...errors import TransportError
 from ...frontends.transports.base import Port, Transport
+from ...needs import needs_extra
 from ..trace.recorder import TraceRecorder
 from .access import DEFAULT_HOST, DEFAULT_PORT, Access
 from .actions import FAULTS, Actions
 from .banks import firmware_of
+from .deskpage import ChainRunner, Desk
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
-from .traces import start_recording
+from .traces import FORGET_EVERY_S, forget_old, start_recording
+from .turns import Turns
 from .wirefaults import WirePanel, vocabulary
+
+with needs_extra("web", "the web page"):
+    from aiohttp import WSMsgType, web
 
 log = logging.getLogger(__name__)
 
@@ -97,10 +103,14 @@ class WebTransport(Transport):
         self.bound: tuple[str, int] | None = None
         self.hub: Hub | None = None
         self.actions: Actions | None = None
+        self.desk: Desk | None = None
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
         self._recorder: TraceRecorder | None = None
         self._device: Device | None = None
+        self.turns: Turns | None = None
+        self.cross_site_refused = 0
+        self._trimmer: asyncio.Task[None] | None = None
 
     # -- life cycle ---------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -112,8 +122,16 @@ class WebTransport(Transport):
         self.actions = Actions(device, port.call, self.hub.add_log,
                                {"record": self._record_request,
                                 **WirePanel(device, port.call).handlers()})
+        self.desk = Desk(ChainRunner(port, device, self.hub.add_log), self.hub.add_log,
+                         lambda: device.kernel.now)
+        self.turns = Turns(self._handle)
         if self.record:
             self.start_recording()
+        await self._listen()
+
+    async def _listen(self) -> None:
+        """Serve the page (the hub and the actions are ready)."""
+        assert self.hub is not None
         self._runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
                                      shutdown_timeout=1.0, logger=_HTTP_LOG,
                                      keepalive_timeout=IDLE_TIMEOUT)
@@ -138,11 +156,24 @@ class WebTransport(Transport):
         the recorder looks at every motor after every kernel event."""
         if self._recorder is None and self.port is not None and self._device is not None:
             self._recorder = self.port.call(start_recording, self._device)
+            if self._recorder is not None:
+                self._trimmer = asyncio.get_running_loop().create_task(
+                    self._trim_recording(), name="coolmuscle-web-recording-window")
             if self._recorder is not None and self.hub is not None:
                 self.hub.add_log([self._device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
                 self.hub.broadcast(json.dumps({"t": "recording", "on": True}))
         return self._recorder is not None
+
+    async def _trim_recording(self) -> None:
+        """Keep the recording to its window (:func:`.traces.forget_old`), now and then."""
+        while True:
+            await asyncio.sleep(FORGET_EVERY_S)
+            if self._recorder is not None and self.port is not None:
+                try:
+                    self.port.call(forget_old, self._recorder)
+                except Exception:              # a model failure must not end the server
+                    log.exception("dashboard: trimming the recording failed")
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
@@ -168,6 +199,12 @@ class WebTransport(Transport):
     async def close(self) -> None:
         await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
                                for ws in list(self._sockets)), return_exceptions=True)
+        if self._trimmer is not None:
+            self._trimmer.cancel()
+            await asyncio.gather(self._trimmer, return_exceptions=True)
+            self._trimmer = None
+        if self.turns is not None:
+            await self.turns.close_all()
         if self.hub is not None:
             await self.hub.close()
         if self._runner is not None:
@@ -180,12 +217,16 @@ class WebTransport(Transport):
         app.router.add_get("/", self._index)
         app.router.add_get("/api/info", self._info)
         app.router.add_get("/ws", self._websocket)
-        assert self.port is not None
-        downloads = Downloads(self.port, lambda: self._recorder, self.title)
-        app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
-        app.router.add_get("/api/plot.png", downloads.plot)
+        if self.port is not None:              # a served chain: its trace
+            downloads = Downloads(self.port, lambda: self._recorder, self.title)
+            app.router.add_get("/api/trace.{fmt:csv|parquet}", downloads.trace)
+            app.router.add_get("/api/plot.png", downloads.plot)
+        self._add_routes(app)
         app.router.add_static("/static", STATIC, follow_symlinks=False)
         return app
+
+    def _add_routes(self, app: web.Application) -> None:
+        """More routes of a page of another kind (:mod:`.linepage`)."""
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Any) -> web.StreamResponse:
@@ -197,6 +238,11 @@ class WebTransport(Transport):
         if not public and not self.access.token_ok(_token(request)):
             return _error(401, "the dashboard needs the token printed when the simulator "
                                "started")
+        if request.path.startswith("/api/") and not public and not self.access.fetch_ok(
+                request.headers.get("Origin"), request.headers.get("Sec-Fetch-Site"),
+                request.headers.get("Host")):
+            self.cross_site_refused += 1
+            return _error(403, "a download asked by another site's page is refused")
         try:
             response: web.StreamResponse = await handler(request)
         except web.HTTPException as exc:
@@ -231,7 +277,11 @@ class WebTransport(Transport):
                 "io": counts, "faults": FAULTS, "wire": vocabulary(),
                 "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()),
-                "recording": self._recorder is not None}
+                "recording": self._recorder is not None, "line": self.line_info()}
+
+    def line_info(self) -> dict[str, Any]:
+        """What the page says of the line: virtual or a real motor (its badge)."""
+        return {"kind": "virtual", "text": "virtual"}
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self.access.origin_ok(request.headers.get("Origin"), request.headers.get("Host")):
@@ -241,14 +291,14 @@ class WebTransport(Transport):
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=20.0,
                                    compress=False, timeout=CLOSE_TIMEOUT)
         await ws.prepare(request)
-        assert self.hub is not None and self.actions is not None
+        assert self.hub is not None
         self._sockets.add(ws)
         client = Client(ws.send_str)
         try:
             hello, seen = self._hello(), self.hub.pending()     # one instant: no await
             await ws.send_str(json.dumps(hello, separators=(",", ":")))
             self.hub.add(client, seen)
-            await self._receive(ws, client)
+            await self._receive(ws, client, request)
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
@@ -256,19 +306,54 @@ class WebTransport(Transport):
             self._sockets.discard(ws)
         return ws
 
-    async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
-        assert self.actions is not None and self.hub is not None
-        async for msg in ws:
-            if msg.type == WSMsgType.TEXT:
-                answer = self.actions.handle(_loads(msg.data))
-                client.queue_direct(json.dumps(answer, separators=(",", ":")))
-                self.hub.changed()
-            elif msg.type == WSMsgType.BINARY:
-                client.queue_direct(json.dumps({"t": "result", "ok": False,
-                                                "error": "send JSON text frames"}))
-            elif msg.type == WSMsgType.ERROR:
-                log.info("dashboard WebSocket closed: %s", ws.exception())
-                break
+    async def _receive(self, ws: web.WebSocketResponse, client: Client,
+                       request: web.Request) -> None:
+        """Queue the page's requests for their turn (:mod:`.turns`); one beyond its
+        queue's bound is refused with a message; what it queued is dropped when it leaves.
+        Reading pauses for the others once the pages have read their share of a wake-up."""
+        assert self.turns is not None
+        page = self.turns.open(lambda answer: self._answer(client, answer),
+                               lambda: ws.closed or request.transport is None)
+        try:
+            async for msg in ws:
+                if page.gone():
+                    break                       # the connection was lost: read no further
+                if msg.type == WSMsgType.TEXT:
+                    asked = _loads(msg.data)
+                    if not self.turns.submit(page, asked):
+                        self._answer(client, _busy(asked, self.turns.max_queued))
+                elif msg.type == WSMsgType.BINARY:
+                    client.queue_direct(json.dumps({"t": "result", "ok": False,
+                                                    "error": "send JSON text frames"}))
+                elif msg.type == WSMsgType.ERROR:
+                    log.info("dashboard WebSocket closed: %s", ws.exception())
+                    break
+                await self.turns.read_turn()    # the other clients' turn, now and then
+        finally:
+            self.turns.close(page)
+
+    def _handle(self, request: Any) -> Any:
+        """Run one request of a page: the desk's (:mod:`.deskpage`) as steps the page
+        waits for (an awaitable, run as a task by :mod:`.turns`), the others at once."""
+        assert self.actions is not None
+        if self.desk is not None and isinstance(request, dict) \
+                and self.desk.handles(request.get("t")):
+            return self.desk.handle(request)
+        return self.actions.handle(request)
+
+    def _answer(self, client: Client, answer: dict[str, Any]) -> None:
+        assert self.hub is not None
+        client.queue_direct(json.dumps(answer, separators=(",", ":")))
+        self.hub.changed()
+
+
+def _busy(request: Any, bound: int) -> dict[str, Any]:
+    """The answer to a request beyond its page's queue (not run)."""
+    rid = request.get("id") if isinstance(request, dict) else None
+    rid = rid if isinstance(rid, (int, str)) and not isinstance(rid, bool) else None
+    return {"t": "result", "id": rid, "ok": False,
+            "error": f"busy: {bound} requests of this page are waiting to run; this one "
+                     "was not run (wait for their answers)"}
 
 
 def _io_counts(device: Device) -> dict[str, int]:

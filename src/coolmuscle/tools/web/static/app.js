@@ -135,7 +135,7 @@
     state.pending.clear();
   }
 
-  function request(kind, body) {
+  function request(kind, body, timeoutMs) {
     return new Promise((resolve) => {
       const ws = state.ws;
       if (!ws || ws.readyState !== WebSocket.OPEN) {
@@ -146,7 +146,7 @@
       const timer = setTimeout(() => {
         state.pending.delete(id);
         resolve({ ok: false, error: "no answer from the simulator" });
-      }, REQUEST_TIMEOUT_MS);
+      }, timeoutMs || REQUEST_TIMEOUT_MS);
       state.pending.set(id, { resolve, timer });
       ws.send(JSON.stringify(Object.assign({ t: kind, id }, body)));
     });
@@ -160,6 +160,7 @@
     else if (msg.t === "log") onLog(msg.lines, msg.dropped);
     else if (msg.t === "tick") { setTime(msg.time); state.dirty = true; }
     else if (msg.t === "recording") showRecording(msg.on);
+    else if (msg.t === "twin") desk.showTwin(msg);
     else if (msg.t === "result") {
       const p = state.pending.get(msg.id);
       if (p) { clearTimeout(p.timer); state.pending.delete(msg.id); p.resolve(msg); }
@@ -174,7 +175,11 @@
     const same = msg.motors.join(",") === state.motors.join(",");
     state.fields = msg.fields;
     state.io = msg.io;
-    if (!same || !state.cards.size) buildMotors(msg.motors);
+    const twin = msg.fields.includes("twin_position");
+    const redo = state.twin !== twin;
+    state.twin = twin;
+    if (!same || redo || !state.cards.size) buildMotors(msg.motors);
+    desk.hello(msg);
     if (!$("faults").childElementCount) buildFaults(msg.faults);
     if (msg.wire && !$("wire-door").options.length) wire.build(msg.wire);
     if (msg.time < state.lastTime) resetSeries();   // a restarted simulator
@@ -261,6 +266,7 @@
       const r = await request("analog", { motor: id, counts: Number(card.analog.value) });
       if (!r.ok) note("cml-note", r.error);
     });
+    desk.cardButtons(node, id);
     state.cards.set(id, card);
     return node;
   }
@@ -300,31 +306,34 @@
       torque: at("torque"), status: at("status"), inputs: at("inputs"), outputs: at("outputs"),
       temperature: at("temperature"), analog: at("analog"), aout: at("analog_out"),
       voltage: at("voltage"), pe: at("position_error"),
+      tpos: at("twin_position"), tspd: at("twin_speed"), ttrq: at("twin_torque"),
     };
+    const shown = (v) => (v === null || v === undefined ? "—" : v);
     for (const row of msg.m) {
       const id = row[idx.id];
       const card = state.cards.get(id);
       if (!card) continue;
-      card.position.textContent = row[idx.position];
-      card.target.textContent = row[idx.target];
-      card.speed.textContent = row[idx.speed];
-      card.torque.textContent = row[idx.torque];
-      card.temperature.textContent = row[idx.temperature];
-      card.pe.textContent = row[idx.pe];
-      card.voltage.textContent = (row[idx.voltage] / 10).toFixed(1);
-      card.aout.textContent = row[idx.aout];
+      card.position.textContent = shown(row[idx.position]);
+      card.target.textContent = shown(row[idx.target]);
+      card.speed.textContent = shown(row[idx.speed]);
+      card.torque.textContent = shown(row[idx.torque]);
+      card.temperature.textContent = shown(row[idx.temperature]);
+      card.pe.textContent = shown(row[idx.pe]);
+      card.voltage.textContent = row[idx.voltage] === null ? "—" : (row[idx.voltage] / 10).toFixed(1);
+      card.aout.textContent = shown(row[idx.aout]);
       const ux = row[idx.status];
-      card.status.textContent = statusText(ux);
+      card.status.textContent = ux === null ? "Ux not read yet" : statusText(ux);
       const alarm = UX_BITS.some(([bit, , isAlarm]) => isAlarm && (ux & bit));
       card.status.classList.toggle("alarm", alarm);
       card.node.classList.toggle("alarm", alarm);
-      showBits(card.inputs, row[idx.inputs], "Input", id);
-      showBits(card.outputs, row[idx.outputs], "Output", id);
-      if (document.activeElement !== card.analog) {
+      if (row[idx.inputs] !== null) showBits(card.inputs, row[idx.inputs], "Input", id);
+      if (row[idx.outputs] !== null) showBits(card.outputs, row[idx.outputs], "Output", id);
+      if (document.activeElement !== card.analog && row[idx.analog] !== null) {
         card.analog.value = row[idx.analog];
         card.analogValue.textContent = row[idx.analog];
       }
-      pushSample(id, t, row[idx.position], row[idx.target], row[idx.speed], row[idx.torque]);
+      const twin = idx.tpos >= 0 ? [row[idx.tpos], row[idx.tspd], row[idx.ttrq]] : null;
+      pushSample(id, t, row[idx.position], row[idx.target], row[idx.speed], row[idx.torque], twin);
     }
     state.dirty = true;
   }
@@ -346,6 +355,7 @@
     const frag = document.createDocumentFragment();
     if (dropped) frag.appendChild(logLine(state.lastTime, "!", "… " + dropped + " lines not shown (page too slow)", "k-note"));
     for (const [time, kind, text, motor, origin] of lines) {
+      desk.onMessage(kind, text);
       const sent = kind === ">";
       const line = kind === "note" ? logLine(time, "!", text, "k-note")
         : logLine(time, sent ? ">" : "<", text, sent ? "sent" : "k-" + kind);
@@ -412,6 +422,7 @@
   const { setupBanks, buildFaults } = window.Coolmuscle.panels(
     { state, $, request, note, localNote });
   const wire = window.Coolmuscle.wirePanel({ $, request, note });    // wire.js
+  const desk = window.Coolmuscle.desk({ state, $, request, note, localNote });
 
   // -- downloads ---------------------------------------------------------------------------
   function setDownloadLinks() {
@@ -455,6 +466,7 @@
   // -- start ------------------------------------------------------------------------------
   setupConsole();
   setupBanks();
+  desk.setup();
   $("window").addEventListener("change", () => { state.dirty = true; });
   $("xy-x").addEventListener("change", () => { state.dirty = true; });
   $("xy-y").addEventListener("change", () => { state.dirty = true; });

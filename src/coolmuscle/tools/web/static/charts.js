@@ -16,17 +16,28 @@ window.Coolmuscle.charts = function (state, $) {
       if (old) { old.top.destroy(); old.bottom.destroy(); }
       const card = state.cards.get(id);
       if (!card) continue;
-      const data = [[], [], [], [], []];
+      // with a twin (coolmuscle web --twin) its position, speed and torque are drawn
+      // over the real ones, dashed: data [t, pos, tgt, spd, trq, tpos, tspd, ttrq]
+      const data = [[], [], [], [], [], [], [], []];
       const width = Math.max(200, card.chartBox.clientWidth || 300);
-      const top = new uPlot(chartOpts(width, 130, [
+      const topSeries = [
         { label: "position", stroke: "#1f6feb", width: 2 },
         { label: "target", stroke: "#d29922", width: 1, dash: [6, 4],
           paths: uPlot.paths.stepped({ align: 1 }) },
-      ], "pulses"), [data[0], data[1], data[2]], card.chartBox);
-      const bottom = new uPlot(chartOpts(width, 110, [
+      ];
+      const bottomSeries = [
         { label: "speed", stroke: "#2da44e", width: 1.5 },
         { label: "torque %", stroke: "#cf222e", width: 1.5, scale: "%" },
-      ], "speed"), [data[0], data[3], data[4]], card.chartBox);
+      ];
+      if (state.twin) {
+        topSeries.push({ label: "twin position", stroke: "#8250df", width: 2, dash: [4, 3] });
+        bottomSeries.push({ label: "twin speed", stroke: "#1b7c83", width: 1.5, dash: [4, 3] },
+          { label: "twin torque %", stroke: "#bf3989", width: 1.5, dash: [4, 3], scale: "%" });
+      }
+      const top = new uPlot(chartOpts(width, 130, topSeries, "pulses"),
+        topCols(data), card.chartBox);
+      const bottom = new uPlot(chartOpts(width, 110, bottomSeries, "speed"),
+        bottomCols(data), card.chartBox);
       state.series.set(id, { data, top, bottom });
     }
   }
@@ -46,12 +57,17 @@ window.Coolmuscle.charts = function (state, $) {
       legend: { show: true, live: false }, cursor: { show: false } };
   }
 
-  function pushSample(id, t, pos, tgt, spd, trq) {
+  function topCols(d) { return state.twin ? [d[0], d[1], d[2], d[5]] : [d[0], d[1], d[2]]; }
+  function bottomCols(d) { return state.twin ? [d[0], d[3], d[4], d[6], d[7]] : [d[0], d[3], d[4]]; }
+
+  function pushSample(id, t, pos, tgt, spd, trq, twin) {
     const s = state.series.get(id);
     if (!s) return;
     const d = s.data;
     if (d[0].length && t < d[0][d[0].length - 1]) { d.forEach((a) => { a.length = 0; }); }
+    const tw = twin || [null, null, null];
     d[0].push(t); d[1].push(pos); d[2].push(tgt); d[3].push(spd); d[4].push(trq);
+    d[5].push(tw[0]); d[6].push(tw[1]); d[7].push(tw[2]);
     const window = Number($("window").value);
     let cut = 0;
     while (cut < d[0].length && d[0][cut] < t - window) cut++;
@@ -69,8 +85,9 @@ window.Coolmuscle.charts = function (state, $) {
         const x = d[0].slice(), y = (k) => d[k].slice();
         if (now > x[x.length - 1]) { x.push(now); }
         const pad = (arr) => { if (arr.length < x.length) arr.push(arr[arr.length - 1]); return arr; };
-        s.top.setData([x, pad(y(1)), pad(y(2))]);
-        s.bottom.setData([x, pad(y(3)), pad(y(4))]);
+        const cols = d.map((_, k) => (k ? pad(y(k)) : x));
+        s.top.setData(topCols(cols));
+        s.bottom.setData(bottomCols(cols));
       }
       drawXY();
     }
