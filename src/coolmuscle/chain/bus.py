@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Final, Protocol
 
 from ..cml import ast
 from ..device.api import Event, EventListener
-from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+from ..device.hostline import BAUD_RATES, PARITY_OF_K82, HostLine, LineSettings
+from ..device.uart import PLAIN, Frame
 from ..errors import NoSuchMotorError
 from ..motor.context import Context
 from ..motor.status import Report
@@ -34,6 +35,14 @@ if TYPE_CHECKING:
 log = logging.getLogger("coolmuscle.chain.daisy")
 
 _NO_ECHO: Final = int(Report.NO_ECHO)
+
+
+def _frame_of_k82(k82: int) -> Frame:
+    """The frame of the host line: 8 data bits, K82's parity, 1 stop bit (5.6.1; a
+    firmware without K82 reads it 0: no parity)."""
+    parity = PARITY_OF_K82.get(k82, "N")
+    return PLAIN if parity == "N" else Frame(parity=parity)
+
 
 #: Origins whose replies are printed on the host line (docs/device-api.md).
 HOST_LINE_ORIGINS: Final = frozenset({"host", "bank", "ladder", "motor"})
@@ -80,7 +89,7 @@ class ChainBus:
         #: motor looks only there while no watcher listens to every motor).
         self._watching: dict[int, list[Watcher]] = {}
         self._everywhere = 0            # watchers without ``motors``
-        self._settings_cache: dict[tuple[int, int, int, bool], LineSettings] = {}
+        self._settings_cache: dict[tuple[int, int, int, bool, int], LineSettings] = {}
         self._settings_now = LineSettings()
         self._settings_version = -1     # ID1's params.version of _settings_now
         self.host_line = HostLine(kernel, on_line, self._line_settings, pacing=pacing)
@@ -117,12 +126,14 @@ class ChainBus:
         version = first.params.version
         if version == self._settings_version:       # ID1's K values unchanged since
             return self._settings_now
-        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0)
+        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0,
+               first.k(82))
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
             found = self._settings_cache[key] = LineSettings(
                 echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3])
+                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3],
+                frame=_frame_of_k82(key[4]))
         self._settings_now, self._settings_version = found, version
         return found
 

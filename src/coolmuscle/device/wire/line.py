@@ -3,7 +3,7 @@
 :class:`LineFaults` sits where bytes leave the model (the host line hands it every
 piece it sends, :meth:`coolmuscle.device.hostline.HostLine.write`, after the K20 wire
 time when pacing is on), so every transport gets the same faults: TCP, the pty, stdio,
-a serial device, the ``coolmuscle://`` URL, and RFC 2217 when it comes.  A *message*
+a serial device, the ``coolmuscle://`` URL, and RFC 2217.  A *message*
 is one piece the motor sends: a reply or report line with its delimiter, an echo, a
 Modbus RTU frame.  The ``host-line`` kinds (:mod:`.vocabulary`):
 
@@ -26,6 +26,7 @@ from collections.abc import Callable
 from functools import partial
 
 from ...sim.kernel import PRIO_REPORT, Kernel, Timer, ms
+from ..uart import PLAIN, Frame
 from .schedule import ActiveFault, WireFaults
 
 __all__ = ["LineFaults", "shown"]
@@ -36,7 +37,8 @@ MESSAGE_KINDS = frozenset({"drop", "garble", "delay", "split", "duplicate"})
 #: Bytes of a message a record shows.
 SHOWN = 40
 
-Hand = Callable[[bytes, int], None]
+#: Gives bytes to the host's listeners with the motor's rate and frame on the wire.
+Hand = Callable[[bytes, int, Frame], None]
 
 
 def shown(data: bytes) -> str:
@@ -63,18 +65,20 @@ class LineFaults:
         self._free_at = 0            # the line to the host is busy until (held pieces)
         self._held = 0               # pieces scheduled, not yet delivered
         self._adapter = bytearray()  # what the USB-serial adapter holds (latency)
-        self._baud = 0
+        self._baud, self._frame = 0, PLAIN   # how what the adapter holds was sent
         self._tick: Timer | None = None
         faults.watch(DOOR, self._lasting)
 
     # -- out: motor -> host ------------------------------------------------------------------
-    def deliver(self, data: bytes, baud: int, echo: bool = False) -> None:
-        """A piece the motor sends, at ``kernel.now`` (``echo``: the echo of what the
-        host typed: a message only for faults with ``echo = true``)."""
+    def deliver(self, data: bytes, baud: int, frame: Frame = PLAIN,
+                echo: bool = False) -> None:
+        """A piece the motor sends, at ``kernel.now``, at ``baud`` in ``frame`` (0:
+        unpaced); ``echo``: the echo of what the host typed, a message only for faults
+        with ``echo = true``."""
         faults = self.faults
         if not (faults.live(DOOR) or faults.live("chain")) and not self._held \
                 and not self._adapter:
-            self._hand(data, baud)
+            self._hand(data, baud, frame)
             return
         if self._dead():
             dead = faults.lasting(DOOR, "dead") or faults.lasting("chain", "power_off", 1)
@@ -83,7 +87,7 @@ class LineFaults:
             return
         fault = faults.hit(DOOR, MESSAGE_KINDS, where=_echoes if echo else None)
         pieces = [(0, data)] if fault is None else self._apply(fault, data)
-        self._send(pieces, baud, ms(float(fault.params["ms"]))
+        self._send(pieces, baud, frame, ms(float(fault.params["ms"]))
                    if fault is not None and fault.kind == "delay" else 0)
 
     def _apply(self, fault: ActiveFault, data: bytes) -> list[tuple[int, bytes]]:
@@ -122,39 +126,40 @@ class LineFaults:
                                   f"0x{out[where]:02x}")
         return bytes(out)
 
-    def _send(self, pieces: list[tuple[int, bytes]], baud: int, late: int) -> None:
+    def _send(self, pieces: list[tuple[int, bytes]], baud: int, frame: Frame,
+              late: int) -> None:
         """Deliver ``pieces`` in order, after what is held back, ``late`` ns late."""
         now = self.kernel.now
         at = max(now + late, self._free_at)
         for gap, piece in pieces:
             at += gap
             if at <= now and not self._held:
-                self._out(piece, baud)
+                self._out(piece, baud, frame)
                 continue
             self._held += 1
-            self.kernel.schedule_at(at, partial(self._later, piece, baud),
+            self.kernel.schedule_at(at, partial(self._later, piece, baud, frame),
                                     priority=PRIO_REPORT, name="host-line fault")
         self._free_at = at
 
-    def _later(self, piece: bytes, baud: int) -> None:
+    def _later(self, piece: bytes, baud: int, frame: Frame) -> None:
         self._held -= 1
-        self._out(piece, baud)
+        self._out(piece, baud, frame)
 
-    def _out(self, piece: bytes, baud: int) -> None:
+    def _out(self, piece: bytes, baud: int, frame: Frame) -> None:
         """A piece reaches the host's end of the line: through the adapter while a
         latency fault is live."""
         latency = self.faults.lasting(DOOR, "latency")
         if latency is None:
             self._flush()
-            self._hand(piece, baud)
+            self._hand(piece, baud, frame)
             return
-        self._baud = baud
+        self._baud, self._frame = baud, frame
         self._adapter += piece
         packet = int(latency.params["packet"])
         while len(self._adapter) >= packet:          # a full USB packet goes at once
             block = bytes(self._adapter[:packet])
             del self._adapter[:packet]
-            self._hand(block, baud)
+            self._hand(block, baud, frame)
         if self._adapter and self._tick is None:
             period = max(1, ms(float(latency.params["ms"])))
             now = self.kernel.now
@@ -174,7 +179,7 @@ class LineFaults:
         if self._adapter:
             block = bytes(self._adapter)
             self._adapter.clear()
-            self._hand(block, self._baud)
+            self._hand(block, self._baud, self._frame)
 
     def _lasting(self, fault: ActiveFault, on: bool) -> None:
         if fault.kind == "latency" and not on:
