@@ -1,5 +1,5 @@
 """Host-line wire faults as a host program sees them (docs/wire-faults.md): the host
-library over ``coolmuscle://`` (virtual time), over TCP and over the pty (the same
+library over ``coolmuscle://`` (virtual time), over TCP, the pty and RFC 2217 (the same
 faults on every transport: they are applied where bytes leave the model), and
 ``coolmuscle term`` in a tmux pane.  Then determinism: a machine file's fault schedule
 gives the same transcript bit for bit on two runs, and a run without faults is the
@@ -18,6 +18,7 @@ from coolmuscle import connect
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.errors import CoolMuscleTimeout, ProtocolError
 from coolmuscle.frontends.transports.pty import PtyTransport
+from coolmuscle.frontends.transports.rfc2217 import Rfc2217Transport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from coolmuscle.tools.script.runner import run_script
@@ -112,10 +113,15 @@ def test_url_takes_a_machine_file_with_wire_faults(tmp_path: Path):
         assert m.get_position() == 0
 
 
+def _served(tmp_path: Path, pace: bool = False) -> ServiceThread:
+    return ServiceThread(lambda: Chain(pacing=pace), lambda: [
+        TcpTransport(port=0), PtyTransport(link=str(tmp_path / "cm-pty")),
+        Rfc2217Transport(port=0)]).start()
+
+
 @pytest.fixture
 def served_line(tmp_path: Path) -> Iterator[tuple[ServiceThread, str, str]]:
-    st = ServiceThread(lambda: Chain(), lambda: [
-        TcpTransport(port=0), PtyTransport(link=str(tmp_path / "cm-pty"))]).start()
+    st = _served(tmp_path)
     try:
         yield st, f"socket://127.0.0.1:{st.transports[0].info()['port']}", \
             str(tmp_path / "cm-pty")
@@ -124,10 +130,23 @@ def served_line(tmp_path: Path) -> Iterator[tuple[ServiceThread, str, str]]:
 
 
 @pytest.mark.peer
-@pytest.mark.parametrize("transport", ["tcp", "pty"])
-def test_the_same_faults_on_tcp_and_the_pty(served_line, transport):
-    st, url, pty = served_line
-    with connect(url if transport == "tcp" else pty, timeout=0.5, firmware="cm2") as m:
+@pytest.mark.parametrize("transport, pace", [("tcp", False), ("pty", False),
+                                             ("rfc2217", False), ("rfc2217", True)])
+def test_the_same_faults_on_tcp_the_pty_and_rfc2217(tmp_path, transport, pace):
+    """pyserial's ``socket://``, a pty and ``rfc2217://`` (also with wire pacing: the
+    faults act on bytes sent at K20 in the motor's frame, the port set to the same)."""
+    st = _served(tmp_path, pace)
+    where = {"tcp": f"socket://127.0.0.1:{st.transports[0].info()['port']}",
+             "pty": str(tmp_path / "cm-pty"),
+             "rfc2217": f"rfc2217://127.0.0.1:{st.transports[2].info()['port']}"}
+    try:
+        _the_same_faults(st, where[transport])
+    finally:
+        st.stop()
+
+
+def _the_same_faults(st: ServiceThread, url: str) -> None:
+    with connect(url, timeout=0.5, firmware="cm2") as m:
         assert m.get_position() == 0
         st.call(lambda: st.chain.inject_wire_fault("host-line", "drop", count=1))
         with pytest.raises(CoolMuscleTimeout):

@@ -1,7 +1,7 @@
 """The wire-fault vocabulary: each door, the fault kinds it knows and their parameters.
 
 A *door* is a way into the device that carries bytes (the host line, the daisy chain,
-Modbus RTU and TCP, EtherNet/IP; EtherCAT registers its own).  Each door registers its
+Modbus RTU and TCP, EtherNet/IP).  Each door registers its
 kinds here, with the schema of their parameters (:class:`Param`): the machine file's
 ``[[wire.fault]]`` tables, the device API's ``inject_wire_fault`` and the web page's
 fault panel all check against this one registry, and docs/wire-faults.md describes it.
@@ -12,8 +12,8 @@ or *lasting* (a state that holds from ``at`` to ``until``: the line dead, a moto
 powered off, the CM1's serial link down).
 
 The built-in doors are declared at the end of this module, as data: the model checks
-a machine file before any front end is imported.  A door added later (EtherCAT) adds
-its declaration with :func:`register` in the same way.
+a machine file before any front end is imported.  Another door adds its declaration
+with :func:`register` in the same way.
 """
 
 from __future__ import annotations
