@@ -11,6 +11,7 @@ import pytest
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
+from coolmuscle.device.uart import Frame, as_read_at
 from coolmuscle.device.wire import Generator, describe, wire_fault
 from coolmuscle.sim.kernel import ms, seconds
 from fixtures import collect_events
@@ -126,6 +127,29 @@ def test_dead_line_loses_both_ways_then_comes_back(wire):
     assert wire.take() == []
     wire.send("P1.1")
     assert wire.take() == [b"P1.1\r\n", b"P1.1=0\r\n"]       # P1.1=5 never arrived
+
+
+@pytest.mark.parametrize("kind, params", [("delay", {"ms": 5}), ("split", {}),
+                                          ("latency", {"ms": 16})])
+def test_a_host_set_to_another_frame_reads_garbage_through_the_faults_too(kind, params):
+    """Paced, the motor frames its bytes with K82's parity (ch. 3 K82); a host whose port
+    is 8N1 reads them as a UART would (.uart) whether a fault held them or not."""
+    chain = Chain(pacing=True)
+    chain.execute("K82.1=2")                                  # odd parity
+    host = object()
+    chain.host_line.set_host_baud(host, lambda: 38400)
+    chain.host_line.set_host_frame(host, lambda: Frame())
+    heard: list[bytes] = []
+    plain: list[bytes] = []
+    chain.host_line.add_listener(heard.append, host)
+    chain.host_line.add_listener(plain.append)
+    chain.inject_wire_fault("host-line", kind, **params)
+    chain.host_line.write(b"Px.1=0\r\n")
+    chain.kernel.run(until=chain.kernel.now + seconds(0.1))
+    assert b"".join(plain) == b"Px.1=0\r\n" and len(plain) >= 1
+    assert heard == [as_read_at(piece, 38400, 38400, Frame(parity="O"), Frame())
+                     for piece in plain] != plain
+    chain.close()
 
 
 def test_every_hits_every_nth_reply(wire):
