@@ -8,6 +8,7 @@ golden one.
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -183,6 +184,23 @@ def test_term_says_what_happened(served_line, tmp_path):
         pane.keys("C-d")
     finally:
         pane.close()
+
+
+@pytest.mark.peer
+def test_term_from_a_pipe_says_which_reply_did_not_come(served_line, tmp_path):
+    """Input from a pipe: the plain session prints what came and, before it ends, which
+    query's reply did not come (the dropped one), then the next one's reply."""
+    st, url, _ = served_line
+    st.call(lambda: st.chain.inject_wire_fault("host-line", "drop", count=1))
+    out = subprocess.run([sys.executable, "-m", "coolmuscle", "term", url, "--timeout",
+                          "0.5"], input="?96.1\n", capture_output=True, text=True,
+                         timeout=60, env=term_env(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert "no reply to '?96.1' within 0.5 s" in out.stdout, out.stdout
+    out = subprocess.run([sys.executable, "-m", "coolmuscle", "term", url, "--timeout",
+                          "0.5"], input="?96.1\n", capture_output=True, text=True,
+                         timeout=60, env=term_env(tmp_path))
+    assert "Px.1=0" in out.stdout and "no reply" not in out.stdout, out.stdout
 
 
 def _run(script: str, machine: Path) -> tuple[str, bytes]:

@@ -119,7 +119,8 @@ class Terminal:
         self.last_activity = 0.0
         #: why the connection was lost (``None``: it works)
         self.lost: BaseException | None = None
-        self.lines_in = 0             # line ends received: what came since a line was typed
+        self.lines_in = 0             # line ends received, echoes too
+        self.events_in = 0            # lines received that are not an echo
         #: lines whose echo or reply is still awaited (:meth:`_watch`)
         self.watching = 0
         client.add_tap(self._count)
@@ -136,6 +137,7 @@ class Terminal:
 
     def on_event(self, event: MotorEvent) -> None:
         self._touch()
+        self.events_in += 1
         text, style = describe(event)
         self.show(text, style)
 
@@ -161,21 +163,22 @@ class Terminal:
         (once the motor is known to echo, ch. 3 K23 8) and, for a query, its reply
         (a dropped reply, a dead line: docs/wire-faults.md)."""
         echo = self.client.echo is True
-        expected = int(echo) + int(bool(_ASKS.match(line)))
-        if expected:
+        query = bool(_ASKS.match(line))
+        if echo or query:
             self.watching += 1
             asyncio.get_running_loop().call_later(self.timeout, self._check, line,
-                                                  self.lines_in, expected, echo)
+                                                  self.lines_in, self.events_in, query, echo)
 
-    def _check(self, line: str, start: int, expected: int, echo: bool) -> None:
+    def _check(self, line: str, lines: int, events: int, query: bool, echo: bool) -> None:
+        """``lines``, ``events``: the counts when ``line`` was sent.  The echo is no
+        event (the client knows it), so a reply is an event; any line end is a line."""
         self.watching -= 1
-        got = self.lines_in - start
-        if got >= expected or self.lost is not None:
+        if self.lost is not None:
             return
-        if got == 0 and echo:
+        if echo and self.lines_in == lines:
             self.show(f"no answer to {line!r} within {self.timeout:g} s, not even its "
                       "echo: is the line down?", "error")
-        else:
+        elif query and self.events_in == events:
             self.show(f"no reply to {line!r} within {self.timeout:g} s", "error")
 
     def connection_lost(self, error: BaseException) -> None:
