@@ -17,7 +17,7 @@ import pytest
 
 from coolmuscle import connect
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.errors import CoolMuscleTimeout, ProtocolError
+from coolmuscle.errors import CoolMuscleTimeout, OutOfRangeError, ProtocolError
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.rfc2217 import Rfc2217Transport
 from coolmuscle.frontends.transports.service import ServiceThread
@@ -71,6 +71,29 @@ def test_garbled_value_raises_protocol_error_and_the_next_command_works():
         with pytest.raises(ProtocolError, match=r"garbled reply 'Px\.1=p'"):
             m.get_position()
         assert m.get_position() == 0
+
+
+@pytest.mark.parametrize("firmware", ["cm2", "rt3"])
+@pytest.mark.parametrize("write", [False, True])
+def test_a_dropped_read_back_is_a_timeout_not_a_missing_register(firmware, write):
+    """The fence (``?96.1``) is answered, the register's reply is not: on the R type
+    (CM2) an allocation could have removed P9 (2.1.2), so the library asks once more;
+    either way the lost reply is a ``CoolMuscleTimeout``, and the next command works."""
+    with connect("coolmuscle://?mode=fast", timeout=0.5, firmware=firmware) as m:
+        m.write_register("P", 9, 0)                      # K37 and the firmware known
+        faults_of(m).inject_wire_fault("host-line", "drop", count=1)
+        with pytest.raises(CoolMuscleTimeout, match=r"no reply to P9\.1, though the "
+                                                    r"\?96\.1 after it was answered"):
+            m.write_register("P", 9, 5) if write else m.read_register("P", 9)
+        assert m.read_register("P", 9) == (5 if write else 0)
+
+
+def test_a_register_an_allocation_removed_is_still_out_of_range():
+    with connect("coolmuscle://?mode=fast", timeout=0.5, firmware="cm2") as m:
+        m.send("\\P5")                                   # P0..P5 only (2.1.2)
+        with pytest.raises(OutOfRangeError, match=r"P9\.1: no such register"):
+            m.read_register("P", 9)
+        assert m.read_register("P", 5) == 0
 
 
 def test_unreadable_reply_times_out_naming_what_came():
