@@ -6,14 +6,16 @@ live from ``at`` to ``until`` by kernel events).  The frames come in the frame t
 (as an ESC does, in hardware): it cannot wait for the model.  So the two threads meet
 under one lock, in two directions:
 
-* the model's thread publishes the per-frame faults live now (:meth:`EthercatFaults.sync`,
-  at every bridge cycle, 1 ms) and installs the segment's tap only while one is live:
-  without a fault the frames pass no hook at all;
+* the model's thread publishes the per-frame faults live now, at the virtual instant a
+  fault enters or leaves its window (``WireFaults.watch(..., every_kind=True)``), and
+  installs the segment's tap only while one is live: without a fault the frames pass
+  no hook at all;
 * the frame thread decides for each frame with each fault's own generator
   (:meth:`~coolmuscle.device.wire.schedule.ActiveFault.decide`: only this door's
   faults, only in this thread), does it, and leaves what it did in a list that the next
-  :meth:`sync` records in the model's thread (an event of kind ``wire``, the trace, the
-  transcript; its time is that cycle's instant).
+  bridge cycle's :meth:`~EthercatFaults.sync` records in the model's thread (an event of
+  kind ``wire``, the trace, the transcript; its time is that cycle's instant) and where
+  it ends a fault whose ``count`` is spent.
 
 So two runs that present the same frames in the same order to the same live faults
 make the same choices, bit for bit; the sans-IO tests drive both threads' parts in
@@ -103,25 +105,38 @@ class EthercatFaults:
         self._late_until: int | None = None
         self.skipped = 0
         self._unwatch = wire.watch(DOOR, self._lasting)
+        self._unwatch_every = wire.watch(DOOR, self._window, every_kind=True)
         for fault in wire.live_faults(DOOR):       # a machine file's, live from power-up
             if fault.lasting:
                 self._lasting(fault, True)
+        self._publish()
 
     def close(self) -> None:
         self._unwatch()
+        self._unwatch_every()
         self.line.tap = None
 
     # -- the model's thread ---------------------------------------------------------------
-    def sync(self) -> None:
-        """Publish the per-frame faults live now and record what the frame thread did
-        since the last call (the model's thread, each bridge cycle)."""
-        if not self._live and not self._done and not self.wire.live(DOOR):
-            return                                     # the fast path: nothing to do
+    def _window(self, fault: ActiveFault, on: bool) -> None:
+        """A fault of this door enters or leaves its window: the frames see it now."""
+        if fault.kind in FRAME_KINDS:
+            self._publish()
+
+    def _publish(self) -> None:
+        """Hand the per-frame faults live now to the frame thread (the model's thread):
+        the tap is installed only while one is live."""
         live = tuple(f for f in self.wire.live_faults(DOOR) if f.kind in FRAME_KINDS)
         with self._lock:
             self._live = live
-            done, self._done = self._done, []
         self.line.tap = self.tap if live else None
+
+    def sync(self) -> None:
+        """Record what the frame thread did since the last call, and end the faults whose
+        ``count`` it spent (the model's thread, each bridge cycle)."""
+        if not self._done:
+            return                                     # the fast path: nothing to do
+        with self._lock:
+            done, self._done = self._done, []
         for fault, text in done:
             self.wire.record(fault, text)
             if fault.spent and not fault.over:
