@@ -12,6 +12,8 @@ from __future__ import annotations
 import struct
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
@@ -307,3 +309,28 @@ def test_a_scheduled_storm_gives_the_same_frames_and_records_on_two_runs():
     off = sum(c is not None and c[0] not in (9, 6, 3) for c in got)
     assert lost > 3 and off > 10 and any("ms late" in e for e in events)
     assert any(c is not None and c[0] == 6 for c in got)          # bridge 3 gone
+
+
+# -- robustness ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def fuzzed() -> Master:
+    """Three bridges in OP with every per-frame fault live, chosen by probability."""
+    m = Master()
+    m.to_op()
+    for kind, params in (("lost_frame", {"way": "back"}), ("wkc", {"datagram": "any"}),
+                         ("mailbox_lost", {}), ("lost_frame", {"bridge": 3})):
+        m.chains[0].inject_wire_fault("ethercat", kind, probability=0.3, seed=5, **params)
+    return m
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(min_size=0, max_size=300), st.integers(0, 0x7FF))
+def test_any_bytes_with_every_frame_fault_on_never_raise(fuzzed: Master, body: bytes,
+                                                        length: int):
+    """An EtherCAT header with any length and any datagrams behind it: the faults' tap
+    parses what it finds and never raises (a frame comes back whole or is lost)."""
+    m = fuzzed
+    raw = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4" + struct.pack("<H", 0x1000 | length) + body
+    out = m.line.process(raw, m.kernel.now)
+    assert out is None or len(out) == len(raw)
+    m.ms()
