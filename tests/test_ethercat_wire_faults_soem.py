@@ -13,7 +13,12 @@ The same faults sans IO: tests/test_ethercat_wire_faults.py.
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
+import sys
+import textwrap
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -119,3 +124,64 @@ def test_pysoem_sees_working_counter_errors_lost_frames_a_repeated_mailbox_and_0
     assert sum(t.endswith("is pulled") for t in records) == 1
     assert sum(t.endswith("is back") for t in records) == 1
     assert faults.lost == 11 and faults.changed == 20
+
+
+MACHINE = """
+[ethercat]
+bridges = ["EB02", "EB02"]
+
+[[wire.fault]]
+door = "ethercat"
+kind = "wkc"
+every = 2
+
+[[wire.fault]]
+door = "ethercat"
+kind = "lost_frame"
+way = "back"
+every = 7
+at = 3600
+"""
+
+SCAN = textwrap.dedent("""
+    import json, sys, time, pysoem
+    m = pysoem.Master(); m.open(sys.argv[1])
+    n = m.config_init()
+    m.config_map()
+    wkcs = []
+    for _ in range(40):
+        m.send_processdata(); wkcs.append(m.receive_processdata(10_000)); time.sleep(0.001)
+    print(json.dumps({"found": n, "expected": m.expected_wkc, "wkcs": wkcs}))
+    m.close()
+""")
+
+
+def test_sim_takes_the_ethercat_faults_of_a_machine_file(tmp_path: Path) -> None:
+    """``coolmuscle sim --ethercat IFACE --machine FILE``: the file's ``[[wire.fault]]``
+    reach the segment (one LRW in two one short; a fault not yet live does nothing)."""
+    machine = tmp_path / "flaky.toml"
+    machine.write_text(MACHINE)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    with link("wm") as lab:
+        sim = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--ethercat",
+                                lab.slave_if, "--machine", str(machine)],
+                               env=env, stderr=subprocess.PIPE, text=True)
+        try:
+            assert sim.stderr is not None
+            banner = sim.stderr.readline() + sim.stderr.readline()
+            scan = subprocess.run(["ip", "netns", "exec", lab.namespace, sys.executable, "-c",
+                                   SCAN, lab.master_if], capture_output=True, text=True,
+                                  timeout=60)
+        finally:
+            sim.send_signal(signal.SIGTERM)
+            try:
+                _out, err = sim.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                sim.kill()
+                _out, err = sim.communicate()
+    assert "2 EtherCAT slaves in a line" in banner, banner + err
+    assert "Traceback" not in err
+    r = json.loads(scan.stdout.strip().splitlines()[-1]) if scan.stdout.strip() else scan.stderr
+    assert r["found"] == 2 and r["expected"] == EXPECTED_WKC, r
+    # the fault counts LRW frames from the first: every second one comes back one short
+    assert r["wkcs"] == [EXPECTED_WKC, EXPECTED_WKC - 1] * 20, r
