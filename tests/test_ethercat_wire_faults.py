@@ -142,7 +142,6 @@ def test_lost_frames_out_and_back():
     m = Master()
     m.to_op()
     m.chains[0].inject_wire_fault("ethercat", "lost_frame", bridge=2, every=3, count=2)
-    m.ms()                                            # the cycle publishes it
     got = m.run(7)
     assert [g is None for g in got] == [False, False, True, False, False, True, False]
     assert m.seg.faults is not None and m.seg.faults.lost == 2

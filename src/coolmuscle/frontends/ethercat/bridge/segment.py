@@ -33,7 +33,7 @@ import logging
 from collections.abc import Callable, Sequence
 
 from ....device import Device
-from ....sim.kernel import PRIO_IO
+from ....sim.kernel import PRIO_IO, Timer
 from ..engine.segment import Segment
 from .app import CYCLE_NS, BridgeApp, CycleSchedule
 from .faults import EthercatFaults
@@ -55,6 +55,7 @@ class BridgeSegment:
         self.line = Segment([app.stack.esc for app in self.apps])
         self.device = next((d for d in devices if d is not None), None)
         self._cycles: CycleSchedule | None = None
+        self._late: Timer | None = None           # a late cycle waiting to run
         #: The ``ethercat`` wire faults (none without a device: no virtual time).
         self.faults = None if self.device is None \
             else EthercatFaults(self.line, self.device.wire_faults)
@@ -72,8 +73,8 @@ class BridgeSegment:
             later = faults.late_cycle()
             if later is not None:
                 if later and self.device is not None:
-                    self.device.kernel.schedule_at(later, self._run_apps, priority=PRIO_IO,
-                                                   name="late bridge cycle")
+                    self._late = self.device.kernel.schedule_at(
+                        later, self._run_apps, priority=PRIO_IO, name="late bridge cycle")
                 return
         self._run_apps()
 
@@ -95,6 +96,9 @@ class BridgeSegment:
         self._cycles = CycleSchedule(self.device.kernel, period_ns, self.cycle, on_start)
 
     def stop_cycles(self) -> None:
+        if self._late is not None:
+            self._late.cancel()
+            self._late = None
         if self._cycles is not None:
             self._cycles.cancel()
             self._cycles = None
