@@ -9,7 +9,9 @@ tests/test_ethercat_wire_faults_soem.py.
 
 from __future__ import annotations
 
+import gc
 import struct
+import tracemalloc
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -335,3 +337,36 @@ def test_any_bytes_with_every_frame_fault_on_never_raise(fuzzed: Master, body: b
     out = m.line.process(raw, m.kernel.now)
     assert out is None or len(out) == len(raw)
     m.ms()
+
+
+def test_a_long_rain_of_faults_leaves_nothing_behind():
+    """Faults of every kind installed and over, again and again, for 3 s of cycles: what
+    is over is forgotten, nothing piles up between the threads, the tap goes away."""
+    m = Master()
+    m.to_op()
+    device = m.chains[0]
+    faults = m.seg.faults
+    assert faults is not None
+    sizes = []
+    tracemalloc.start()
+    try:
+        for i in range(3000):
+            if i % 50 == 0:
+                m.events.clear()                      # (the test's own list)
+                device.inject_wire_fault("ethercat", "lost_frame", probability=0.1, seed=i,
+                                         until=0.03)
+                device.inject_wire_fault("ethercat", "wkc", every=3, count=5)
+                device.inject_wire_fault("ethercat", "late_cycle", ms=1.5, count=1)
+                device.inject_wire_fault("ethercat", "link_down", bridge=3, at=0.01,
+                                         until=0.02)
+            m.cycle()
+            if i % 1000 == 999:
+                gc.collect()
+                sizes.append(tracemalloc.get_traced_memory()[0])
+    finally:
+        tracemalloc.stop()
+    m.ms(50)
+    assert device.wire_faults.faults == [] and faults._done == [] and m.line.tap is None
+    assert faults.lost > 50 and faults.changed == 5 * 60 and faults.skipped > 0
+    assert m.line.plugged == (True, True, True)
+    assert sizes[-1] - sizes[0] < 20_000, sizes           # bytes: flat after the first second
