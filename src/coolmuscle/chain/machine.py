@@ -26,6 +26,7 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from ..device.wire.schedule import SCHEDULE_KEYS, WireFault, wire_fault
 from ..errors import CoolMuscleError
 from ..motor.signals.analog import source_from_config
 from ..motor.signals.encoder import gearing_from_config
@@ -46,6 +47,8 @@ class MachineHost(Protocol):
     def set_input(self, motor: int, number: int, on: bool) -> None: ...
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None: ...
+
+    def add_wire_fault(self, fault: WireFault) -> int: ...
 
 
 class MachineFileError(CoolMuscleError, ValueError):
@@ -134,12 +137,15 @@ class Machine:
     source: str = "<machine>"
     #: ``[ethercat] bridges``: the variants of the bridges in line order (empty: none).
     bridges: tuple[str, ...] = ()
+    #: ``[[wire.fault]]``: communication faults (docs/wire-faults.md)
+    wire: list[WireFault] = field(default_factory=list)
 
     def for_bridge(self, bridge: int) -> Machine:
-        """The tables of bridge ``bridge``'s chain, as a machine of one chain."""
+        """The tables of bridge ``bridge``'s chain, as a machine of one chain (the wire
+        faults go with the first bridge's: its chain is the one the text line serves)."""
         return Machine([replace(a, bridge=1) for a in self.axes if a.bridge == bridge],
                        self.source if bridge == 1 else f"{self.source} (bridge {bridge})",
-                       self.bridges)
+                       self.bridges, list(self.wire) if bridge == 1 else [])
 
 
 # -- reading ------------------------------------------------------------------------
@@ -165,7 +171,7 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         raise MachineFileError(f"{source}: not valid TOML: {exc}") from None
     except RecursionError:
         raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
-    unknown = set(data) - {"axis", "name", "description", "ethercat"}
+    unknown = set(data) - {"axis", "name", "description", "ethercat", "wire"}
     if unknown:
         raise MachineFileError(f"{source}: unknown top-level key {sorted(unknown)[0]!r}")
     bridges = _bridges(data.get("ethercat", {}), source)
@@ -185,7 +191,7 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         if a.bridge > max(1, len(bridges)):
             raise MachineFileError(f"{source}: axis motor={a.motor} bridge={a.bridge}: "
                                    f"[ethercat] bridges names {len(bridges)} bridge(s)")
-    return Machine(axes, source, bridges)
+    return Machine(axes, source, bridges, _wire(data.get("wire", {}), source))
 
 
 def _bridges(value: object, source: str) -> tuple[str, ...]:
@@ -202,6 +208,28 @@ def _bridges(value: object, source: str) -> tuple[str, ...]:
         raise MachineFileError(f"{where}.bridges: expected a list of at most {MAX_BRIDGES} "
                                'bridge names, e.g. ["EB02", "EB12"]')
     return tuple(b.upper() for b in bridges)
+
+
+def _wire(value: object, source: str) -> list[WireFault]:
+    """``[[wire.fault]]``: each checked against the wire-fault vocabulary."""
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{source}: 'wire' must be a table holding [[wire.fault]]")
+    unknown = set(value) - {"fault"}
+    if unknown:
+        raise MachineFileError(f"{source}: wire: unknown key {sorted(unknown)[0]!r} (fault)")
+    faults = []
+    for i, table in enumerate(_list(value.get("fault", []), f"{source}: wire.fault")):
+        where = f"{source}: wire.fault[{i + 1}]"
+        schedule = {k: v for k, v in table.items() if k in SCHEDULE_KEYS[2:]}
+        params = {k: v for k, v in table.items() if k not in SCHEDULE_KEYS}
+        try:
+            faults.append(wire_fault(table.get("door"), table.get("kind"), schedule,
+                                     params, where))
+        except ValueError as exc:
+            message = str(exc)
+            raise MachineFileError(message if message.startswith(where)
+                                   else f"{where}: {message}") from None
+    return faults
 
 
 def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
@@ -359,6 +387,12 @@ def apply_machine(machine: Machine, chain: MachineHost) -> None:
             if isinstance(exc, MachineFileError):
                 raise
             raise MachineFileError(f"{machine.source}: motor {spec.motor}: {exc}") from None
+    for i, fault in enumerate(machine.wire):
+        try:
+            chain.add_wire_fault(fault)
+        except (ValueError, LookupError) as exc:
+            raise MachineFileError(f"{machine.source}: wire.fault[{i + 1}] ({fault.door} "
+                                   f"{fault.kind}): {exc}") from None
 
 
 def _install(spec: AxisSpec, motor: Motor, chain: MachineHost) -> None:
