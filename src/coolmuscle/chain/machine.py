@@ -146,7 +146,7 @@ class Machine:
         door names the bridge it hits) and its host line, chain and Modbus doors."""
         return Machine([replace(a, bridge=1) for a in self.axes if a.bridge == bridge],
                        self.source if bridge == 1 else f"{self.source} (bridge {bridge})",
-                       self.bridges, self.wire if bridge == 1 else [])
+                       self.bridges, list(self.wire) if bridge == 1 else [])
 
 
 # -- reading ------------------------------------------------------------------------
