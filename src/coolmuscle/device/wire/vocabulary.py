@@ -304,9 +304,9 @@ register("ethercat", "the EtherCAT bridges' segment (ethercat-bridge-users-guide
         Param("way", str, "out", "out: lost on its way to the bridge, which (and every "
               "bridge behind it) never sees it; back: lost on its way back to the master, "
               "after every bridge has processed it", choices=("out", "back")), _BRIDGE),
-              seen="pysoem: receive_processdata returns no working counter (0 or -1, "
-                   "below expected_wkc); a lost mailbox or register frame is retried or "
-                   "times out"),
+              seen="pysoem: receive_processdata returns -1 (no frame) for that cycle; "
+                   "a lost mailbox or register frame is a failed read SOEM retries or "
+                   "reports"),
     FaultKind("ethercat", "wkc", "a datagram's working counter is off when the frame "
               "comes back (ETG.1000.4 table 12: the counter the master checks)", (
                   Param("delta", int, -1, "added to the counter (-1: a slave seems not to "
