@@ -11,6 +11,7 @@ import contextlib
 import json
 import os
 import shutil
+import struct
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -61,3 +62,29 @@ def serving(esc: Any, iface: str) -> Iterator[FrameThread]:
         yield frames
     finally:
         frames.close()
+
+
+MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
+
+
+def frame(*datagrams: tuple[int, int, int, bytes]) -> bytes:
+    """An EtherCAT frame of (cmd, adp, ado, data) datagrams (logical: adp<<16|ado)."""
+    body = b""
+    for n, (cmd, adp, ado, data) in enumerate(datagrams):
+        more = 0x8000 if n < len(datagrams) - 1 else 0
+        body += struct.pack("<BBHHHH", cmd, n, adp, ado, len(data) | more, 0) + data + b"\0\0"
+    return MAC + struct.pack("<H", len(body) | 0x1000) + body
+
+
+def datagrams(buf: bytes | bytearray) -> list[tuple[int, int, bytes, int]]:
+    """(cmd, adp, data, wkc) of every datagram of a returned frame."""
+    out, pos = [], 16
+    while True:
+        cmd, _idx, adp, _ado, ln, _irq = struct.unpack_from("<BBHHHH", buf, pos)
+        n = ln & 0x7FF
+        data = bytes(buf[pos + 10:pos + 10 + n])
+        wkc, = struct.unpack_from("<H", buf, pos + 10 + n)
+        out.append((cmd, adp, data, wkc))
+        pos += 12 + n
+        if not ln & 0x8000:
+            return out

@@ -87,13 +87,14 @@ def _parse(text: str) -> list[ast.Line]:
 class _Stream:
     """Cyclic position mode for one motor (device API ``target_stream``)."""
 
-    def __init__(self, motor: Motor) -> None:
+    def __init__(self, motor: Motor, period_ns: int = 0) -> None:
         self._motor = motor
+        self._period = period_ns
         self.closed = False
 
     def push(self, target: int) -> None:
         if not self.closed:
-            self._motor.follow(float(target))
+            self._motor.follow(float(target), self._period)
 
     def close(self) -> None:
         self.closed = True
@@ -524,11 +525,10 @@ class Chain:
 
     def cyclic_state(self, motor: int) -> CyclicState:
         m = self.bus.require(motor)
-        return CyclicState(
-            motor=m.id, time=self.kernel.now, position=m.position(),
-            speed_pps=m.axis.velocity(), status=m.status, inputs=m.io.input_word(),
-            outputs=m.io.output_word(), enabled=m.axis.enabled,
-            origin_search=bool(m.origin.active), origin_done=bool(m.origin_done))
+        axis, io = m.axis, m.io
+        return CyclicState(       # by position: called every cycle for every axis
+            m.id, self.kernel.now, m.position(), axis.velocity(), m.status, io.input_word(),
+            io.output_word(), axis.enabled, bool(m.origin.active), bool(m.origin_done))
 
     def machine_data(self, motor: int) -> dict[str, float]:
         """The load and drive data ``motor`` runs with, by machine-file key."""
@@ -547,8 +547,8 @@ class Chain:
             raise OutOfRangeError("analog input is 0..1023 (6.6 ?74)")
         self.bus.require(motor).analog = counts
 
-    def target_stream(self, motor: int) -> TargetStream:
-        return _Stream(self.bus.require(motor))
+    def target_stream(self, motor: int, period_ns: int = 0) -> TargetStream:
+        return _Stream(self.bus.require(motor), period_ns)
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         self.bus.require(motor).inject_fault(fault, **params)

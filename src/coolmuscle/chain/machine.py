@@ -9,13 +9,19 @@ actual position, :mod:`coolmuscle.motor.supervision.sensors`), K parameters, and
 the input and fault schedules.  The ``[axis.analog]`` and ``[axis.encoder]`` tables are
 handed to ``coolmuscle.motor.signals.analog.source_from_config`` and
 ``coolmuscle.motor.signals.encoder.gearing_from_config`` (imported when used).
+
+A machine built on an EtherCAT segment (several bridges, each with its own chain of
+motors ID1-ID4) names its bridges in ``[ethercat] bridges`` and each ``[[axis]]`` its
+bridge (``bridge = 2``); :meth:`Machine.for_bridge` is the part of one bridge's chain
+and :func:`apply_machine` installs the tables of bridge 1 (every table's default).
+The bridge codes are checked by the EtherCAT front end that uses them.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -69,9 +75,11 @@ MAX_TIME_S = 1e9
 #: A machine position (pulses) far beyond any travel, still exact in a float.
 MAX_POSITION = 1e12
 _NAMED_SENSORS = ("origin_sensor", "cw_limit", "ccw_limit")
-_AXIS_KEYS = frozenset({"motor", "ppr", "start", "params", "load", "drive", "thermal",
+_AXIS_KEYS = frozenset({"motor", "bridge", "ppr", "start", "params", "load", "drive", "thermal",
                         "stoppers", "sensor", "input", "fault", "analog", "encoder",
                         *_NAMED_SENSORS})
+#: Bridges a segment may have (``[ethercat] bridges``): 8 carry a 32-axis line.
+MAX_BRIDGES = 64
 #: Lasting faults an ``until`` can clear, and the parameters their clearing needs.
 _CLEARABLE = {"overload": (), "supply_voltage": (), "stuck_input": ("input",),
               "broken_cable": ("cable",)}
@@ -106,6 +114,8 @@ class AxisSpec:
     """One ``[[axis]]`` table."""
 
     motor: int
+    #: The EtherCAT bridge whose chain the motor is on (1 = the first; ``[ethercat]``).
+    bridge: int = 1
     ppr: int = 1000
     start: float = 0.0
     params: dict[int, int] = field(default_factory=dict)
@@ -125,8 +135,17 @@ class AxisSpec:
 class Machine:
     axes: list[AxisSpec]
     source: str = "<machine>"
+    #: ``[ethercat] bridges``: the variants of the bridges in line order (empty: none).
+    bridges: tuple[str, ...] = ()
     #: ``[[wire.fault]]``: communication faults (docs/wire-faults.md)
     wire: list[WireFault] = field(default_factory=list)
+
+    def for_bridge(self, bridge: int) -> Machine:
+        """The tables of bridge ``bridge``'s chain, as a machine of one chain (the wire
+        faults go with the first bridge's: its chain is the one the text line serves)."""
+        return Machine([replace(a, bridge=1) for a in self.axes if a.bridge == bridge],
+                       self.source if bridge == 1 else f"{self.source} (bridge {bridge})",
+                       self.bridges, list(self.wire) if bridge == 1 else [])
 
 
 # -- reading ------------------------------------------------------------------------
@@ -152,9 +171,10 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         raise MachineFileError(f"{source}: not valid TOML: {exc}") from None
     except RecursionError:
         raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
-    unknown = set(data) - {"axis", "name", "description", "wire"}
+    unknown = set(data) - {"axis", "name", "description", "ethercat", "wire"}
     if unknown:
         raise MachineFileError(f"{source}: unknown top-level key {sorted(unknown)[0]!r}")
+    bridges = _bridges(data.get("ethercat", {}), source)
     tables = data.get("axis", [])
     if isinstance(tables, dict):
         tables = [tables]
@@ -164,10 +184,30 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         axes = [_axis(t, i, source) for i, t in enumerate(tables)]
     except RecursionError:
         raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
-    ids = [a.motor for a in axes]
+    ids = [(a.bridge, a.motor) for a in axes]
     if len(set(ids)) != len(ids):
         raise MachineFileError(f"{source}: two [[axis]] tables for the same motor")
-    return Machine(axes, source, _wire(data.get("wire", {}), source))
+    for a in axes:
+        if a.bridge > max(1, len(bridges)):
+            raise MachineFileError(f"{source}: axis motor={a.motor} bridge={a.bridge}: "
+                                   f"[ethercat] bridges names {len(bridges)} bridge(s)")
+    return Machine(axes, source, bridges, _wire(data.get("wire", {}), source))
+
+
+def _bridges(value: object, source: str) -> tuple[str, ...]:
+    """``[ethercat] bridges = ["EB02", "EB12"]``: the segment's bridges in line order."""
+    where = f"{source}: ethercat"
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{where}: must be a table")
+    unknown = set(value) - {"bridges"}
+    if unknown:
+        raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r} (known: bridges)")
+    bridges = value.get("bridges", [])
+    if not isinstance(bridges, list) or not all(isinstance(b, str) and b for b in bridges) \
+            or len(bridges) > MAX_BRIDGES:
+        raise MachineFileError(f"{where}.bridges: expected a list of at most {MAX_BRIDGES} "
+                               'bridge names, e.g. ["EB02", "EB12"]')
+    return tuple(b.upper() for b in bridges)
 
 
 def _wire(value: object, source: str) -> list[WireFault]:
@@ -197,8 +237,10 @@ def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
     unknown = set(t) - _AXIS_KEYS
     if unknown:
         raise MachineFileError(f"{where}: unknown key {sorted(unknown)[0]!r}")
-    spec = AxisSpec(motor=_int(t.get("motor", index + 1), f"{where}.motor", 1, 15))
-    where = f"{source}: axis motor={spec.motor}"
+    spec = AxisSpec(motor=_int(t.get("motor", index + 1), f"{where}.motor", 1, 15),
+                    bridge=_int(t.get("bridge", 1), f"{where}.bridge", 1, MAX_BRIDGES))
+    where = f"{source}: axis motor={spec.motor}" + (f" bridge={spec.bridge}"
+                                                    if spec.bridge > 1 else "")
     spec.ppr = _int(t.get("ppr", 1000), f"{where}.ppr", 1, 10_000_000)
     spec.start = _num(t.get("start", 0.0), f"{where}.start", -MAX_POSITION, MAX_POSITION)
     spec.params = _params(t.get("params", {}), f"{where}.params")
@@ -331,8 +373,11 @@ def _scheduled_fault(value: dict[str, Any], where: str) -> ScheduledFault:
 
 # -- installing -----------------------------------------------------------------------
 def apply_machine(machine: Machine, chain: MachineHost) -> None:
-    """Install ``machine`` on ``chain`` now (MachineFileError if it does not fit)."""
+    """Install ``machine`` on ``chain`` now (MachineFileError if it does not fit): the
+    ``[[axis]]`` tables of bridge 1 (:meth:`Machine.for_bridge` gives another's)."""
     for spec in machine.axes:
+        if spec.bridge != 1:
+            continue
         motor = chain.motor(spec.motor)
         if motor is None:
             raise MachineFileError(f"{machine.source}: no motor ID{spec.motor} on the chain")

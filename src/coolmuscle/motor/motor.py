@@ -669,10 +669,12 @@ class Motor:
             if self.axis.moving and self.axis.profile.end_ns is None:
                 self.go()
 
-    def follow(self, target: float) -> None:
-        """Jump the commanded position to ``target``; the servo follows (csp, Dx)."""
+    def follow(self, target: float, period_ns: int = 0) -> None:
+        """Jump the commanded position to ``target``; the servo follows (csp, Dx).  A
+        stepper (CM1) in a stream of one target each ``period_ns`` ramps to it over
+        the period (:meth:`.motion.axis.Axis.follow`)."""
         if self.can_move():
-            self.axis.follow(self.travel.clamp(target))
+            self.axis.follow(self.travel.clamp(target), period_ns)
 
     def set_output_word(self, word: int) -> None:
         """``O.n=X``: set every general-use output from the bits of ``word``."""

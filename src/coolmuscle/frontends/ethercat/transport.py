@@ -4,8 +4,11 @@
 hardware), so the motor model never delays an answer; the model side exchanges
 process data through the slave stack's buffers.  :class:`EthercatTransport` is the
 :class:`~coolmuscle.transports.base.Transport` that ``coolmuscle sim --ethercat``
-starts in the service loop: it owns the frame thread and starts the bridge's 1 ms
-cycle (manual 6.3), kernel events in the model's thread.
+starts in the service loop: it owns the frame thread and starts the bridges' 1 ms
+cycle (manual 6.3), kernel events in the model's thread.  It serves one bridge or
+several in a line (``--bridges``, :class:`~.bridge.segment.BridgeSegment`): the first
+bridge is served from the port's chain, each further one from a chain it has made
+on the same kernel (:data:`BridgeChains`) and closes again.
 
 Needs root or CAP_NET_RAW.  The loopback interface is refused: a frame sent on
 ``lo`` comes back to the sender unchanged, so a master there would read its own
@@ -23,16 +26,20 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
 
+from ...device import Device
 from ...errors import TransportError
+from ...sim.kernel import Kernel
 from ..transports.base import Port, Transport
-from .engine.esc import ETHERTYPE_ECAT, Esc
+from .bridge import identity as ident
+from .engine.esc import ETHERTYPE_ECAT
 
 if TYPE_CHECKING:
     from ...sim.realtime import RealtimeClock
     from .bridge.app import BridgeApp
+    from .bridge.segment import BridgeSegment
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +49,11 @@ MODEL_PRIORITY = 20
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 #: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
 SWITCH_INTERVAL = 0.0002
+
+#: Makes the chain behind bridge ``position`` (2, 3, ... in line order) of a segment,
+#: on the segment's ``kernel``, with its variant's ``firmware`` ("cm1,cm1,cm2,cm2"):
+#: four motors ID1-ID4 (the first bridge is served from the port's own chain).
+BridgeChains = Callable[[Kernel, int, str], Device]
 
 
 def cycle_collector() -> Callable[[], None]:
@@ -104,10 +116,21 @@ def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
     return 0
 
 
-class FrameThread:
-    """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
+class Frames(Protocol):
+    """What answers the frames: one ESC (:class:`~.engine.esc.Esc`) or a line of them
+    (:class:`~.engine.segment.Segment`)."""
 
-    def __init__(self, esc: Esc, iface: str, *, keep: int = 100_000,
+    def process(self, frame: bytes | bytearray | memoryview, now: int = 0
+                ) -> bytearray | None: ...
+
+    def tick(self, now: int) -> None: ...
+
+
+class FrameThread:
+    """Receive, process and send back EtherCAT frames for one ESC or a segment, in a
+    thread."""
+
+    def __init__(self, esc: Frames, iface: str, *, keep: int = 100_000,
                  priority: int = FRAME_PRIORITY) -> None:
         self.esc = esc
         self.priority = priority
@@ -205,34 +228,56 @@ class CycleLateness:
 
 
 class EthercatTransport(Transport):
-    """``sim --ethercat IFACE``: the bridge as an EtherCAT slave on a raw interface."""
+    """``sim --ethercat IFACE``: the bridge as an EtherCAT slave on a raw interface, or
+    several bridges in a line (``bridges``; ``chains`` makes the chains of the second
+    and further ones)."""
 
     name = "ethercat"
 
-    def __init__(self, where: str = "", bridge: str = "EB02", cycle_s: float = 0.001) -> None:
+    def __init__(self, where: str = "", bridge: str = ident.DEFAULT_VARIANT,
+                 cycle_s: float = 0.001, *, bridges: Sequence[str] = (),
+                 chains: BridgeChains | None = None) -> None:
         super().__init__()
         check_interface(where)
         self.iface = where
-        self.bridge = bridge
+        try:
+            self.bridges = tuple(ident.variant(b).code for b in (bridges or (bridge,)))
+        except ValueError as exc:
+            raise TransportError(f"ethercat: {exc}") from None
+        if len(self.bridges) > 1 and chains is None:
+            raise TransportError("ethercat: a segment of several bridges needs a chain for "
+                                 "each further bridge (chains=)")
+        self.bridge = self.bridges[0]
         self.cycle_s = cycle_s
-        self.app: BridgeApp | None = None
+        self.chains = chains
+        self.segment: BridgeSegment | None = None
+        self.app: BridgeApp | None = None          # the first bridge
         self.frames: FrameThread | None = None
         self.lateness: CycleLateness | None = None
         self.realtime_model = True
+        self._made: list[Device] = []
         self._old_policy: tuple[int, os.sched_param] | None = None
         self._collector: Callable[[], None] = lambda: None   # undoes cycle_collector
 
     async def start(self, port: Port) -> None:
-        from .bridge.app import BridgeApp
+        from .bridge.segment import BridgeSegment
         self.port = port
         if port.device is None:
             raise TransportError("ethercat: no device behind this port")
-        self.app = BridgeApp(port.device, self.bridge)
-        self.frames = FrameThread(self.app.stack.esc, self.iface)
+        devices: list[Device | None] = [port.device]
+        for position, code in enumerate(self.bridges[1:], 2):
+            assert self.chains is not None
+            chain = self.chains(port.device.kernel, position,
+                                ",".join(ident.variant(code).firmware))
+            self._made.append(chain)
+            devices.append(chain)
+        self.segment = BridgeSegment(devices, self.bridges)
+        self.app = self.segment.apps[0]
+        self.frames = FrameThread(self.segment.line, self.iface)
         self._collector = cycle_collector()
         self._model_realtime(True)
         self.frames.start()
-        # The bridge's 1 ms cycle (6.3) runs in the model's thread as kernel events on
+        # The bridges' 1 ms cycle (6.3) runs in the model's thread as kernel events on
         # an exact grid (BridgeApp.start_cycles): the paced kernel reaches them with
         # the wall clock.  The master's frames come in wall time, so under a time scale
         # the cycle stays 1 ms of wall time (scale x 1 ms of the motors' time).
@@ -241,12 +286,31 @@ class EthercatTransport(Transport):
             scale = port.driver.clock.scale
             self.lateness = CycleLateness(port.driver.clock, self.cycle_s)
             port.driver.precise = True      # the selector's 1 ms granularity: see PreciseWaker
-        port.call(self.app.start_cycles, max(1, round(self.cycle_s * scale * 1e9)),
+        port.call(self.segment.start_cycles, max(1, round(self.cycle_s * scale * 1e9)),
                   self._cycle_starts)
 
     def _cycle_starts(self) -> None:
-        if self.lateness is not None and self.app is not None and self.app.device is not None:
-            self.lateness.note(self.app.device.kernel.now)
+        if self.lateness is not None and self.segment is not None \
+                and self.segment.device is not None:
+            self.lateness.note(self.segment.device.kernel.now)
+
+    @property
+    def apps(self) -> tuple[BridgeApp, ...]:
+        """The bridges in line order (empty before start)."""
+        return self.segment.apps if self.segment is not None else ()
+
+    def unplug(self, bridge: int) -> None:
+        """Pull the cable into bridge ``bridge``'s port 0 (1 = next to the master): it
+        and the bridges behind it leave the segment."""
+        if self.segment is None:
+            raise TransportError("ethercat: not started")
+        self.segment.unplug(bridge)
+
+    def plug(self, bridge: int) -> None:
+        """Put the cable into bridge ``bridge``'s port 0 back."""
+        if self.segment is None:
+            raise TransportError("ethercat: not started")
+        self.segment.plug(bridge)
 
     @property
     def cycles(self) -> int:
@@ -283,16 +347,25 @@ class EthercatTransport(Transport):
             log.info("model thread stays at normal priority (no CAP_SYS_NICE)")
 
     def describe(self) -> str:
-        return f"ethercat: {self.iface} ({self.bridge}, EtherCAT slave, EtherType 0x88A4)"
+        if len(self.bridges) == 1:
+            return f"ethercat: {self.iface} ({self.bridge}, EtherCAT slave, EtherType 0x88A4)"
+        return (f"ethercat: {self.iface} ({', '.join(self.bridges)}: {len(self.bridges)} "
+                "EtherCAT slaves in a line, EtherType 0x88A4)")
 
     def info(self) -> dict[str, Any]:
-        return {"iface": self.iface, "bridge": self.bridge}
+        return {"iface": self.iface, "bridge": self.bridge, "bridges": list(self.bridges)}
 
     async def close(self) -> None:
-        if self.app is not None and self.port is not None:
-            self.port.call(self.app.stop_cycles)
+        if self.segment is not None and self.port is not None:
+            self.port.call(self.segment.stop_cycles)
         if self.frames is not None:
             self.frames.close()
             self.frames = None
             self._model_realtime(False)
             self._collector()
+        made, self._made = self._made, []
+        for chain in made:                 # the chains this transport made (their state)
+            try:
+                chain.close()
+            except Exception:
+                log.exception("ethercat: closing a bridge's chain failed")

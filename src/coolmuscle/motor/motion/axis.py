@@ -270,11 +270,25 @@ class Axis:
         self.moving = False
         self._resolve()
 
-    def follow(self, user_target: float) -> None:
-        """Step the command to a new target; the servo follows with its lag (csp, Dx)."""
+    def follow(self, user_target: float, period_ns: int = 0) -> None:
+        """Step the command to a new target; the servo follows with its lag (csp, Dx).
+
+        A stepper given the period of the targets' stream (csp: one target a cycle)
+        takes the step as a ramp at constant speed over that period instead: it has no
+        position loop that smooths a step, and a step would ask an infinite
+        acceleration of it, so it would lose its steps (docs/fidelity.md "csp on a
+        stepper")."""
         raw = self.to_raw(user_target)
         self.target_raw = raw
-        self._start(hold(raw, self.kernel.now))
+        now = self.kernel.now
+        if period_ns > 0 and self._drive().stepper:
+            start = self.profile.position_at(now)
+            if start != raw:
+                span = period_ns / 1e9
+                ramp = Segment(0.0, span, start, (raw - start) / span, 0.0, 0.0)
+                self._start(Profile(now, (ramp,), final_position=raw))
+                return
+        self._start(hold(raw, now))
 
     def nudge(self, user_target: float, window: float) -> bool:
         """Shift the target of a motor at rest by no more than the in-position window,

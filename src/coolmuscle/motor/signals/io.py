@@ -17,6 +17,7 @@ ones are evaluated by the motor, which passes a ``function_signal`` callback.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Final
 
 from ..state.output_functions import (
     CML_OUTPUT_FUNCTIONS,
@@ -27,14 +28,17 @@ from ..state.output_functions import (
     OUT_NONE,
 )
 
-#: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
-_POWERS: tuple[int, ...] = tuple(10 ** n for n in range(12))
+#: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call;
+#: Final: a compiled module holds it in a static, not a module dictionary lookup a digit).
+_POWERS: Final[tuple[int, ...]] = tuple(10 ** n for n in range(12))
 
 
 def digit(value: int, position: int) -> int:
     """Digit ``position`` (1 = rightmost) of a digit-wise parameter such as K27 or K34."""
     power = _POWERS[position - 1] if 1 <= position <= len(_POWERS) else 10 ** (position - 1)
-    return (abs(value) // power) % 10
+    if value < 0:               # not abs(): compiled, that is a builtins lookup and a call
+        value = -value
+    return (value // power) % 10
 
 
 class DigitalIO:
@@ -68,18 +72,21 @@ class DigitalIO:
         self.levels[number] = bool(on)
         return before != self.input_signal(number)
 
-    def input_signal(self, number: int) -> bool:
-        """Logical input signal after K26 (ch. 3 K26: 0/2 on when port on, 1/3 inverted)."""
+    def input_signal(self, number: int, k26: int | None = None) -> bool:
+        """Logical input signal after K26 (ch. 3 K26: 0/2 on when port on, 1/3 inverted),
+        K26 now or the value ``k26``."""
         if not 1 <= number <= self.input_count:
             return False
-        inverted = digit(self._param(26), 1 if self._one_logic else number) % 2 == 1
+        value = self._param(26) if k26 is None else k26
+        inverted = digit(value, 1 if self._one_logic else number) % 2 == 1
         return self.levels[number] != inverted
 
     def input_word(self) -> int:
-        """?70: bit 0 = input 1."""
+        """?70: bit 0 = input 1 (K26 read once: a fieldbus reads the word every cycle)."""
+        k26 = self._param(26)
         word = 0
         for n in range(1, self.input_count + 1):      # a loop: compiled, no generator
-            if self.input_signal(n):
+            if self.input_signal(n, k26):
                 word |= 1 << (n - 1)
         return word
 
@@ -89,9 +96,10 @@ class DigitalIO:
         value ``k34`` (a trace's past instant)."""
         return self._functions[digit(self._param(34) if k34 is None else k34, number)]
 
-    def command_of(self, number: int) -> int | None:
-        """The ``O#``/``F#`` number output ``number`` follows now (K34), or ``None``."""
-        fn = self.output_function(number)
+    def command_of(self, number: int, k34: int | None = None) -> int | None:
+        """The ``O#``/``F#`` number output ``number`` follows by K34 (now, or the value
+        ``k34``), or ``None``."""
+        fn = self.output_function(number, k34)
         if fn == OUT_GENERAL:
             return number
         if fn == OUT_FOLLOWS_O1:
@@ -115,11 +123,14 @@ class DigitalIO:
         self.general[number] = bool(on)
         return before != [self.output_port(n) for n in followers]
 
-    def output_signal(self, number: int) -> bool:
-        follows = self.command_of(number)
+    def output_signal(self, number: int, k34: int | None = None) -> bool:
+        """The signal of output ``number`` by K34 (now, or the value ``k34``)."""
+        if k34 is None:
+            k34 = self._param(34)
+        follows = self.command_of(number, k34)
         if follows is not None:
             return self.general[follows]
-        fn = self.output_function(number)
+        fn = self.output_function(number, k34)
         if fn == OUT_NONE or fn == OUT_ANALOG:      # the analog output: no digital signal
             return False
         return self._function_signal(fn, number)
@@ -137,9 +148,11 @@ class DigitalIO:
         return signal != inverted
 
     def output_word(self) -> int:
-        """?50: bit 0 = output 1."""
+        """?50: bit 0 = output 1 (K33 and K34 read once: a fieldbus reads the word every
+        cycle)."""
+        k33, k34 = self._param(33), self._param(34)
         word = 0
         for n in range(1, self.output_count + 1):
-            if self.output_port(n):
+            if self.port_of(n, self.output_signal(n, k34), k33):
                 word |= 1 << (n - 1)
         return word

@@ -26,7 +26,7 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
@@ -50,6 +50,10 @@ from .stopsignals import (
 )
 from .usage import UsageError
 from .version import version_text
+
+if TYPE_CHECKING:
+    from ...chain.machine import Machine
+    from ...frontends.ethercat.transport import BridgeChains
 
 log = logging.getLogger("coolmuscle")
 
@@ -164,19 +168,18 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
     return chosen
 
 
-def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, pty: bool,
-                         pty_link: Path | None, stdio: bool,
+def _ethercat_transports(iface: str, codes: tuple[str, ...], motors: int, tcp: str | None,
+                         pty: bool, pty_link: Path | None, stdio: bool,
                          modbus: tuple[str | None, str | None, str | None],
-                         rfc2217: str | None = None) -> tuple[list[Transport], int, str]:
-    """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
-    from .ethercat import EthercatUsageError, chain_firmware, sim_transport
+                         chains: BridgeChains | None, rfc2217: str | None = None
+                         ) -> tuple[list[Transport], int, str]:
+    """``--ethercat IFACE``: the bridges in a line plus any line transport asked for
+    (those serve the first bridge's chain)."""
+    from .ethercat import chain_firmware, sim_transport
     if motors not in (1, 4):
         raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
-    try:
-        fw = chain_firmware(bridge)
-    except EthercatUsageError as exc:
-        raise UsageError(f"--bridge: {exc}") from None
-    chosen: list[Transport] = [sim_transport(iface, bridge)]
+    fw = chain_firmware(codes[0])               # codes: checked by segment_codes
+    chosen: list[Transport] = [sim_transport(iface, codes, chains)]
     problem = realtime_problem()
     if problem is not None:          # said once: the frame thread and the model's both
         err.print(f"coolmuscle: note: the bridge runs at normal priority ({problem}); "
@@ -184,6 +187,29 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
     if tcp or pty or pty_link or stdio or any(modbus) or rfc2217 is not None:
         chosen += _transports(tcp, pty, pty_link, stdio, modbus, rfc2217=rfc2217)
     return chosen, 4, fw
+
+
+def _segment(iface: str, bridge: str | None, bridges: str | None, motors: int,
+             tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
+             modbus: tuple[str | None, str | None, str | None], state: Path | None,
+             pace: bool, machine: Path | None, rfc2217: str | None = None
+             ) -> tuple[list[Transport], int, str, tuple[str, ...], Machine | None]:
+    """``--ethercat`` with ``--bridge``/``--bridges`` or a machine file's ``[ethercat]``:
+    the transports, motors, the first chain's firmware, the bridges and the machine
+    read (the first chain takes its bridge 1 part)."""
+    from .ethercat import EthercatUsageError, bridge_chains, segment_codes
+    loaded: Machine | None = None
+    if machine is not None:
+        from ...chain.machine import load_machine
+        loaded = load_machine(machine)
+    try:
+        codes = segment_codes(bridge, bridges, loaded)
+    except EthercatUsageError as exc:
+        raise UsageError(str(exc)) from None
+    chains = bridge_chains(chain_factory, state, pace, loaded) if len(codes) > 1 else None
+    chosen, motors, fw = _ethercat_transports(iface, codes, motors, tcp, pty, pty_link, stdio,
+                                              modbus, chains, rfc2217)
+    return chosen, motors, fw, codes, loaded
 
 
 def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> list[Transport]:
@@ -338,8 +364,13 @@ def sim(
         None, "--ethercat", metavar="IFACE",
         help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
              "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
-    bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
-                               help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
+    bridge: str | None = typer.Option(
+        None, "--bridge", metavar="EB01|EB02|EB12",
+        help="Bridge variant for --ethercat (firmware of ID1-ID4; default EB02)."),
+    bridges: str | None = typer.Option(
+        None, "--bridges", metavar="EB02,EB02,EB12",
+        help="Several bridges in a line on --ethercat, in line order: a chain of four "
+             "motors each (--tcp and the like serve the first one's; docs/ethercat.md)."),
     enip: str | None = typer.Option(
         None, "--enip", metavar="[HOST[:PORT]]",
         help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
@@ -361,18 +392,24 @@ def sim(
         raise UsageError("cm1 has no Modbus (its K78-K85 are other parameters)")
     check_stop()
     dashboard = _web_transport(web) if web is not None else None   # docs/web.md
-    fw = ""
+    label: str | None = None
     if ethercat is not None:          # the bridge decides the firmware (--firmware unused)
         if enip is not None:
             raise UsageError("--ethercat and --enip exclude each other (the bridge's four "
                              "motors are not the EtherNet/IP module's CM1)")
-        chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
-                                                  stdio, (modbus_rtu, modbus_tcp, com1),
-                                                  rfc2217)
+        chosen, motors, fw, codes, loaded = _segment(
+            ethercat, bridge, bridges, motors, tcp, pty, pty_link, stdio,
+            (modbus_rtu, modbus_tcp, com1), state_dir, pace, machine, rfc2217)
+        label = fw.upper().replace(",", "/") if len(codes) == 1 else \
+            f"{len(codes)} bridges {'/'.join(codes)}, each"
         if reset:
             _reset_state(state_dir)
-        chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
+            for position in range(2, len(codes) + 1):     # bridge_chains' folders
+                _reset_state(state_dir / f"bridge-{position}" if state_dir else None)
+        chain = make_chain(chain_factory, motors, fw, state_dir, pace, loaded)
     else:
+        if bridges is not None:
+            raise UsageError("--bridges needs --ethercat IFACE")
         chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
                              enip=enip is not None, rfc2217=rfc2217)
         chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
@@ -383,7 +420,6 @@ def sim(
         chosen.append(dashboard)
     try:
         check_stop()
-        label = fw.upper().replace(",", "/") if ethercat is not None else None
         run_served(lambda stop: _serve(chain, chosen, motors, firmware, state_dir, time_scale,
                                        stop, label))
     finally:

@@ -2,7 +2,11 @@
 
 Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typer``.
 The bridge is :mod:`coolmuscle.frontends.ethercat` (docs/ethercat.md): the ESI file
-comes from its description, the lab and the transport are its I/O.
+comes from its description, the lab and the transport are its I/O.  ``sim --ethercat``
+serves one bridge (``--bridge``) or several in a line (``--bridges``, or a machine
+file's ``[ethercat] bridges``): :func:`segment_codes` decides which, and
+:func:`bridge_chains` makes the chain behind each further bridge, with its own state
+folder and its part of the machine file.
 """
 
 from __future__ import annotations
@@ -17,8 +21,11 @@ from ...errors import CoolMuscleError
 from ...frontends.ethercat.bridge import identity as ident
 
 if TYPE_CHECKING:
+    from ...chain.machine import Machine
+    from ...device.api import ChainFactory, Device
     from ...frontends.ethercat.lab import Lab
-    from ...frontends.ethercat.transport import EthercatTransport
+    from ...frontends.ethercat.transport import BridgeChains, EthercatTransport
+    from ...sim.kernel import Kernel
 
 app = typer.Typer(name="ethercat", no_args_is_help=True,
                   help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
@@ -41,13 +48,61 @@ def chain_firmware(bridge: str) -> str:
     return ",".join(v.firmware)
 
 
-def sim_transport(iface: str, bridge: str) -> EthercatTransport:
-    """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
+def segment_codes(bridge: str | None, bridges: str | None,
+                  machine: Machine | None = None) -> tuple[str, ...]:
+    """The bridges of ``sim --ethercat`` in line order: ``--bridges EB02,EB12``, else
+    ``--bridge``, else the machine file's ``[ethercat] bridges``, else one EB02."""
+    if bridge is not None and bridges is not None:
+        raise EthercatUsageError("--bridge and --bridges exclude each other "
+                                 "(--bridges EB02 is one bridge)")
+    if bridges is not None:
+        names = [b.strip() for b in bridges.split(",")]
+        where = "--bridges"
+    elif bridge is not None:
+        names, where = [bridge], "--bridge"
+    elif machine is not None and machine.bridges:
+        names, where = list(machine.bridges), f"{machine.source}: [ethercat] bridges"
+    else:
+        names, where = [ident.DEFAULT_VARIANT], "--bridge"
+    if not names or not all(names):
+        raise EthercatUsageError(f"{where}: a comma-separated list of bridges, "
+                                 "e.g. EB02,EB02,EB12")
+    try:
+        codes = tuple(ident.variant(name).code for name in names)
+    except ValueError as exc:
+        raise EthercatUsageError(f"{where}: {exc}") from None
+    if machine is not None:
+        beyond = [a for a in machine.axes if a.bridge > len(codes)]
+        if beyond:
+            raise EthercatUsageError(
+                f"{machine.source}: axis motor={beyond[0].motor} is on bridge "
+                f"{beyond[0].bridge}, and the segment has {len(codes)}")
+    return codes
+
+
+def bridge_chains(factory: ChainFactory, state: Path | None, pace: bool,
+                  machine: Machine | None) -> BridgeChains:
+    """What makes the chain behind bridge n >= 2 of ``sim --ethercat``: four motors with
+    the variant's firmware on the segment's kernel, its state in ``STATE/bridge-n``,
+    its ``[[axis]]`` tables of the machine file."""
+    def make(kernel: Kernel, position: int, firmware: str) -> Device:
+        folder = None
+        if state is not None:
+            folder = state / f"bridge-{position}"
+            folder.mkdir(parents=True, exist_ok=True)
+        extra = {} if machine is None else {"machine": machine.for_bridge(position)}
+        return factory(kernel, 4, firmware=firmware, state_dir=folder, pacing=pace, **extra)
+    return make
+
+
+def sim_transport(iface: str, codes: tuple[str, ...],
+                  chains: BridgeChains | None = None) -> EthercatTransport:
+    """The transport of ``sim --ethercat IFACE`` for bridges ``codes`` (checks the
+    interface)."""
     from ...frontends.ethercat.transport import EthercatTransport
     from ...needs import needs_af_packet
     needs_af_packet("--ethercat")
-    chain_firmware(bridge)
-    return EthercatTransport(iface, ident.variant(bridge).code)
+    return EthercatTransport(iface, bridges=codes, chains=chains)
 
 
 #: The lab's options, shared by ``up`` and ``down`` (the same names remove what up made).

@@ -16,12 +16,15 @@ import re
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...device.api import ChainFactory, Device
 from ..script.record import LineWriter
 from ..script.runner import ScriptError, load_script, run_script
 from .usage import UsageError
+
+if TYPE_CHECKING:
+    from ...chain.machine import Machine
 
 EXIT_FAILED = 1
 FIRMWARES = ("cm2", "rt3", "cm1")
@@ -121,8 +124,9 @@ def xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
 
 
 def make_chain(factory: ChainFactory, motors: int, firmware: str, state: Path | None,
-               pace: bool, machine: Path | None = None) -> Device:
-    """The chain of a run or a served simulation (``--state`` made when missing)."""
+               pace: bool, machine: Path | Machine | None = None) -> Device:
+    """The chain of a run or a served simulation (``--state`` made when missing;
+    ``machine`` a file, or one read already)."""
     from ...errors import TransportError
     if state is not None:
         try:
@@ -131,9 +135,11 @@ def make_chain(factory: ChainFactory, motors: int, firmware: str, state: Path | 
             raise TransportError(f"cannot use state directory {state}: "
                                  f"{exc.strerror or exc}") from exc
     extra: dict[str, Any] = {}
-    if machine is not None:
+    if isinstance(machine, Path):
         from ...chain.machine import load_machine
         extra["machine"] = load_machine(machine)
+    elif machine is not None:
+        extra["machine"] = machine
     return factory(None, motors, firmware=firmware, state_dir=state, pacing=pace, **extra)
 
 

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ....device import Device
-from ....sim.kernel import PRIO_IO, Timer
+from ....sim.kernel import PRIO_IO, Kernel, Timer
 from ..engine import esm
 from ..engine.dictionary import Dictionary, WriteHook
 from ..engine.od import Table
@@ -61,7 +61,7 @@ class BridgeApp:
         for axis in range(ident.AXES):
             self.dictionary.on_write(0x6060 + AXIS_OFFSET * axis, self._mode_written(axis))
         self.drive: BridgeDrive | None = None   # every mode of ch. 6 and 7 (drive.py)
-        self._cycle_timer: Timer | None = None
+        self._cycles: CycleSchedule | None = None
         if device is not None:
             from .drive import BridgeDrive
             self.drive = BridgeDrive(device, self.dictionary, self.variant.firmware, self.axes)
@@ -108,34 +108,55 @@ class BridgeApp:
         The bridge's CM port has its own fixed cycle (6.3, F511h.3: 1 ms): every motor
         gets a command each millisecond of its own time, whenever the master's frames
         come (a cycle reads the output image as it is then).  So the cycles are kernel
-        events on an exact grid; a paced kernel runs them as the wall clock reaches
-        them, several at once if the model fell behind, and none is lost.  ``on_start``
-        runs at the start of each cycle, before it (the transport's lateness count).
-        A cycle that raises is logged; the next one still comes.  Starting again
-        replaces the schedule.
+        events on an exact grid (:class:`CycleSchedule`); a paced kernel runs them as
+        the wall clock reaches them, several at once if the model fell behind, and none
+        is lost.  ``on_start`` runs at the start of each cycle, before it (the
+        transport's lateness count).  Starting again replaces the schedule.
         """
-        if period_ns <= 0:
-            raise ValueError(f"the bridge cycle must be a positive time, not {period_ns} ns")
         self.stop_cycles()
         if self.device is None:
             raise RuntimeError("the bridge cycles run on a device's kernel: none was given")
-        kernel = self.device.kernel
-
-        def tick() -> None:
-            self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
-                                                   priority=PRIO_IO, name="bridge cycle")
-            try:
-                if on_start is not None:
-                    on_start()
-                self.cycle()
-            except Exception:
-                log.exception("bridge cycle failed at %d ns", kernel.now)
-
-        self._cycle_timer = kernel.schedule_at(kernel.now + period_ns, tick,
-                                               priority=PRIO_IO, name="bridge cycle")
+        self._cycles = CycleSchedule(self.device.kernel, period_ns, self.cycle, on_start)
 
     def stop_cycles(self) -> None:
         """No more cycles from :meth:`start_cycles`."""
-        if self._cycle_timer is not None:
-            self._cycle_timer.cancel()
-            self._cycle_timer = None
+        if self._cycles is not None:
+            self._cycles.cancel()
+            self._cycles = None
+
+
+class CycleSchedule:
+    """``run`` every ``period_ns`` of virtual time on ``kernel``, from one period on.
+
+    Each cycle schedules the next before it runs (an exact grid, whatever the cycle
+    does), calls ``on_start`` and then ``run``; one that raises is logged and the next
+    still comes."""
+
+    def __init__(self, kernel: Kernel, period_ns: int, run: Callable[[], None],
+                 on_start: Callable[[], None] | None = None, name: str = "bridge cycle"
+                 ) -> None:
+        if period_ns <= 0:
+            raise ValueError(f"the bridge cycle must be a positive time, not {period_ns} ns")
+        self.kernel = kernel
+        self.period_ns = period_ns
+        self.run = run
+        self.on_start = on_start
+        self.name = name
+        self._timer: Timer | None = kernel.schedule_at(kernel.now + period_ns, self._tick,
+                                                       priority=PRIO_IO, name=name)
+
+    def _tick(self) -> None:
+        kernel = self.kernel
+        self._timer = kernel.schedule_at(kernel.now + self.period_ns, self._tick,
+                                         priority=PRIO_IO, name=self.name)
+        try:
+            if self.on_start is not None:
+                self.on_start()
+            self.run()
+        except Exception:
+            log.exception("%s failed at %d ns", self.name, kernel.now)
+
+    def cancel(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None

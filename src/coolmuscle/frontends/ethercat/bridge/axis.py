@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable
+from typing import Final
 
 from ....device import CyclicState, Device
 from ....motor.status import ALARM_BITS, Ux
@@ -36,10 +37,13 @@ from .cia402 import State
 log = logging.getLogger(__name__)
 
 AXIS_OFFSET = 0x800
-INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+#: Final, these and the masks: compiled, a static each, not a module dictionary lookup
+#: (read every cycle).
+INT32_MIN: Final = -(1 << 31)
+INT32_MAX: Final = (1 << 31) - 1
 #: The status bits as plain ints (a flag enum's & and | cost a call each, every cycle).
-_ALARM_MASK = int(ALARM_BITS)
-_STILL_MASK = int(Ux.IN_POSITION) | int(ALARM_BITS)
+_ALARM_MASK: Final = int(ALARM_BITS)
+_STILL_MASK: Final = int(Ux.IN_POSITION) | int(ALARM_BITS)
 #: CMD mode: controlword bits 8-11 -> (CML, acknowledgement high byte), 7.1.2 / 7.1.3.
 CMD_WORDS = {0x1: (")", 0xF1), 0x2: ("(", 0xF2), 0x3: ("|", 0xF3), 0x4: ("|2", 0xF4),
              0x6: ("]1", 0xF6)}
@@ -138,7 +142,9 @@ class AxisDrive:
     def _publish(self, snap: CyclicState) -> None:
         od = self.od
         od.set(self.idx(0x6041), 0, self.statusword())
-        od.set(self.idx(0x6064), 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
+        position = int(snap.position)
+        od.set(self.idx(0x6064), 0, INT32_MIN if position < INT32_MIN
+               else INT32_MAX if position > INT32_MAX else position)
         od.set(self.idx(0x6061), 0, self.mode)
 
     # -- modes (6.2.2) ------------------------------------------------------------------

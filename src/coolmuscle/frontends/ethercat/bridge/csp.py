@@ -1,7 +1,8 @@
 """Cyclic synchronous position mode (ethercat-bridge-users-guide.txt 6.3, Appendix 5).
 
 The target position 607Ah of every cycle goes to the motor through the device
-API's ``target_stream``; the servo model follows it with its own lag.  A target
+API's ``target_stream`` (one target each 1 ms cycle, 6.3); the servo model follows
+it with its own lag, a stepper (CM1) ramps to it over the cycle.  A target
 beyond the maximum position of the motor's resolution (Appendix 5, K37) is held at
 that maximum; the motor's own software limits (K58/K59) apply inside the model.
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 from ....device import Device, TargetStream
 from ....motor.state.units import RESOLUTIONS
+from .identity import CYCLE_NS
 
 
 def max_position(k37: int) -> int:
@@ -40,7 +42,7 @@ class Follower:
 
     def start(self) -> None:
         if self._stream is None:
-            self._stream = self.device.target_stream(self.motor)
+            self._stream = self.device.target_stream(self.motor, CYCLE_NS)
             self._last = None
 
     def push(self, target: int) -> None:

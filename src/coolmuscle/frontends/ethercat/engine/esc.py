@@ -48,6 +48,7 @@ REG_TYPE = 0x0000
 REG_STATION = 0x0010
 REG_ALIAS = 0x0012
 REG_DL_CONTROL = 0x0100
+REG_DL_PORT = 0x0101          # DL control bits 8-15: the loop setting of ports 0-3
 REG_DL_STATUS = 0x0110
 REG_AL_CONTROL = 0x0120
 REG_AL_STATUS = 0x0130
@@ -85,6 +86,29 @@ _WRITABLE = (
 )
 
 SM_MODE_MAILBOX = 0x02
+
+# DL status (0x0110, ESC datasheet section II): bit 0 PDI operational, bit 1 PDI watchdog
+# not expired; then per port p: physical link (bit 4 + p), loop closed (bit 8 + 2p),
+# communication established (bit 9 + 2p).  Ports 2 and 3 do not exist: loops closed.
+_DL_BASE = 0x0003 | 0x1000 | 0x4000
+#: DL control loop setting of a port (2 bits): 3 = closed.  0 auto, 1 auto close and 2
+#: open all forward the frame while the port has a link (a forced open port without a
+#: link would lose every frame: not emulated).
+LOOP_CLOSED = 3
+
+
+def dl_status(port0: bool, port1: bool) -> int:
+    """DL status of an ESC with ports 0 and 1: link and communication on each port
+    that has a link, the loop of a port without one closed."""
+    value = _DL_BASE
+    for port, up in ((0, port0), (1, port1)):
+        value |= (1 << (4 + port)) | (1 << (9 + 2 * port)) if up else 1 << (8 + 2 * port)
+    return value
+
+
+def is_ethercat(frame: bytes | bytearray | memoryview) -> bool:
+    """An Ethernet frame of EtherType 0x88A4 with room for the EtherCAT header."""
+    return len(frame) >= 16 and frame[12] == 0x88 and frame[13] == 0xA4
 
 
 class Pdi(Protocol):
@@ -186,7 +210,7 @@ class Esc:
         m[0x0006] = RAM_SIZE // 1024
         m[0x0007] = 0x0F              # ports 0 and 1: MII
         struct.pack_into("<H", m, 0x0008, 0x0000)   # features: bit FMMUs, no DC
-        struct.pack_into("<H", m, REG_DL_STATUS, 0x5613)
+        struct.pack_into("<H", m, REG_DL_STATUS, dl_status(True, False))
         struct.pack_into("<H", m, REG_AL_STATUS, 0x0001)
         if len(self.sii) >= 2:
             m[REG_PDI_CONTROL:REG_PDI_CONTROL + 2] = self.sii[0:2]   # SII word 0: PDI
@@ -217,6 +241,19 @@ class Esc:
     @property
     def al_control_value(self) -> int:
         return self.mem[REG_AL_CONTROL] | self.mem[REG_AL_CONTROL + 1] << 8
+
+    # -- ports (a segment of several ESCs: engine/segment.py) -----------------------------
+    def set_links(self, port0: bool, port1: bool) -> None:
+        """Physical links of ports 0 and 1 (DL status 0x0110).  Power-up: port 0 with
+        a link (the master's side), port 1 without (the last slave of a line)."""
+        struct.pack_into("<H", self.mem, REG_DL_STATUS, dl_status(port0, port1))
+
+    @property
+    def forwards(self) -> bool:
+        """A frame leaves by port 1 (towards the next ESC): port 1 has a link and the
+        master did not close its loop (DL control 0x0101 bits 2-3)."""
+        return bool(self.mem[REG_DL_STATUS] & 0x20) \
+            and (self.mem[REG_DL_PORT] >> 2) & 0x03 != LOOP_CLOSED
 
     @property
     def station(self) -> int:
@@ -274,14 +311,23 @@ class Esc:
     # -- frames ----------------------------------------------------------------
     def process(self, frame: bytes | bytearray | memoryview, now: int = 0) -> bytearray | None:
         """Process one Ethernet frame; return the frame to send on, None if not EtherCAT."""
-        self._now = now
-        if len(frame) < 16 or frame[12] != 0x88 or frame[13] != 0xA4:
+        if not is_ethercat(frame):
+            self._now = now
             return None
         buf = bytearray(frame)
+        self.handle(buf, now)
+        self.tick(now)
+        return buf
+
+    def handle(self, buf: bytearray, now: int) -> None:
+        """Process an EtherCAT frame in place as it passes the processing unit (port 0
+        to the next port), at time ``now`` (ns): its datagrams read and written, auto-
+        increment addresses counted up, working counters added to."""
+        self._now = now
         buf[6] |= 0x02                 # ESC marks the source MAC on its way back (ETG.1000.4)
         header = buf[14] | buf[15] << 8
         if header >> 12 != 1:          # not a datagram frame: passes through untouched
-            return buf
+            return
         self.frames += 1
         end = min(16 + (header & 0x7FF), len(buf))
         pos = 16
@@ -296,8 +342,6 @@ class Esc:
             pos = data_end + 2
             if not more:
                 break
-        self.tick(now)
-        return buf
 
     def _datagram(self, buf: bytearray, pos: int, length: int) -> None:
         cmd = buf[pos]
