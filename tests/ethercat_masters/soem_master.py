@@ -216,9 +216,15 @@ def fault(master) -> dict:
     for _ in range(100):
         now = exchange([0x0F] * 4, start)
     res["faulted"] = [w for w, _p in now]
+    # each controlword for 30 cycles, and longer (3 s at most) until every axis shows the
+    # state it leads to: a sim on a busy machine may answer a few cycles late
+    reached = {0x80: (0x4F, 0x40), 0x06: (0x6F, 0x21), 0x07: (0x6F, 0x23), 0x0F: (0x6F, 0x27)}
     for cw in (0x80, 0x06, 0x07, 0x0F):
-        for _ in range(30):
+        mask, state = reached[cw]
+        for i in range(3000):
             now = exchange([cw] * 4, start)
+            if i >= 29 and all(w & mask == state for w, _p in now):
+                break
         res[f"after_{cw:#04x}"] = [w for w, _p in now]
     return res
 
