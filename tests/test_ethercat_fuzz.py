@@ -325,3 +325,49 @@ def test_fuzzed_mailboxes_are_answered_or_ignored_never_crash_5_4():
             pass
     assert esc.al_status == esm.OP
     assert answered > 1000
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_fuzzed_frames_through_a_segment_with_every_wire_fault_on_never_crash(seed, caplog):
+    """Two bridges on one kernel with every ``ethercat`` wire fault live (lost frames
+    out and back, working counters changed on any datagram, mailbox answers lost, the
+    link going down and up, late cycles): the same fuzzed frames, the same oracles."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.frontends.ethercat.bridge.segment import BridgeSegment
+    from coolmuscle.sim.kernel import Kernel
+
+    rng = random.Random(seed)
+    kernel = Kernel()
+    seg = BridgeSegment([Chain(kernel, 4, firmware="cm2,cm2,cm2,cm2") for _ in range(2)],
+                        ("EB02", "EB02"))
+    seg.start_cycles()
+    device = seg.apps[0].device
+    assert device is not None and seg.faults is not None
+    for kind, params in (("lost_frame", {"way": "out", "bridge": 2}),
+                         ("lost_frame", {"way": "back"}), ("wkc", {"datagram": "any"}),
+                         ("wkc", {"delta": 3}), ("mailbox_lost", {}),
+                         ("late_cycle", {"ms": 2.5})):
+        device.inject_wire_fault("ethercat", kind, probability=0.2, seed=seed, **params)
+    device.inject_wire_fault("ethercat", "link_down", bridge=2, at=0.3, until=0.6)
+    for app in seg.apps:
+        to_op(app)
+    for n in range(1200):
+        kind = n % 3
+        if kind == 0:
+            frame = scapy_frame(rng, safe=True)
+        elif kind == 1:
+            frame = mutate(rng, scapy_frame(rng, safe=rng.random() < 0.3))
+        else:
+            frame = b"\xff" * 12 + b"\x88\xa4" + bytes(rng.randrange(256)
+                                                      for _ in range(rng.randint(2, 200)))
+        out = seg.line.process(frame, kernel.now)
+        assert out is None or len(out) == len(frame)
+        for app in seg.apps:
+            assert_sane(app.stack.esc)
+        kernel.run(until=kernel.now + 1_000_000)
+        if n % 100 == 99:
+            for app in seg.apps:
+                to_op(app)
+    faults = seg.faults
+    assert faults.lost > 50 and faults.changed > 50 and faults.skipped > 0
+    assert not [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]

@@ -75,6 +75,12 @@ def test_the_panel_offers_every_door_and_kind_with_named_controls(page):
     expect(page.by("wire-param-xor")).to_be_visible()
     choose(page, "host-line", "dead")
     expect(page.by("wire-every")).to_be_disabled()            # lasting: from at to until
+    choose(page, "ethercat", "link_down")                     # the EtherCAT door's too
+    expect(page.by("wire-param-bridge")).to_be_visible()
+    expect(page.by("wire-every")).to_be_disabled()
+    choose(page, "ethercat", "lost_frame")
+    expect(page.by("wire-param-way")).to_be_visible()
+    expect(page.by("wire-every")).to_be_enabled()
     unnamed = page.page.evaluate("""() => [...document.querySelectorAll(
         '#wire-h ~ * button, #wire-h ~ * input, #wire-h ~ * select')].filter(el => {
           const named = el.getAttribute('aria-label') || (el.labels && el.labels.length)

@@ -242,12 +242,15 @@ def test_machine_file_refuses_a_chain_fault_for_a_motor_not_there(make_chain):
 
 def test_every_kind_is_described_for_the_web_page():
     doors = describe()
-    assert list(doors) == ["host-line", "chain", "modbus-rtu", "modbus-tcp", "enip"]
+    assert list(doors) == ["host-line", "chain", "modbus-rtu", "modbus-tcp", "enip",
+                           "ethercat"]
     kinds = {door: [k["kind"] for k in d["kinds"]] for door, d in doors.items()}
     assert kinds["host-line"] == ["drop", "garble", "delay", "split", "duplicate",
                                   "latency", "dead"]
     assert kinds["modbus-rtu"] == ["no_reply", "late", "exception", "bad_crc",
                                    "wrong_slave", "silence"]
+    assert kinds["ethercat"] == ["lost_frame", "wkc", "mailbox_lost", "link_down",
+                                 "late_cycle"]
 
 
 # -- the chain ----------------------------------------------------------------------------

@@ -141,8 +141,9 @@ class Machine:
     wire: list[WireFault] = field(default_factory=list)
 
     def for_bridge(self, bridge: int) -> Machine:
-        """The tables of bridge ``bridge``'s chain, as a machine of one chain (the wire
-        faults go with the first bridge's: its chain is the one the text line serves)."""
+        """The tables of bridge ``bridge``'s chain, as a machine of one chain.  The wire
+        faults go with bridge 1: its device holds the segment's faults (the ``ethercat``
+        door names the bridge it hits) and its host line, chain and Modbus doors."""
         return Machine([replace(a, bridge=1) for a in self.axes if a.bridge == bridge],
                        self.source if bridge == 1 else f"{self.source} (bridge {bridge})",
                        self.bridges, list(self.wire) if bridge == 1 else [])

@@ -211,8 +211,9 @@ class Device(Protocol):
                           count: int | None = None, motor: int | None = None,
                           **params: object) -> int:
         """Install a wire fault of ``door`` (``host-line``, ``chain``, ``modbus-rtu``,
-        ``modbus-tcp``, ``enip``) ``at`` seconds from now, until ``until`` seconds from
-        now; returns its number.  ``ValueError`` for an unknown door, kind or parameter."""
+        ``modbus-tcp``, ``enip``, ``ethercat``) ``at`` seconds from now, until ``until``
+        seconds from now; returns its number.  ``ValueError`` for an unknown door, kind
+        or parameter."""
 
     def clear_wire_faults(self, fault: int | None = None, *, door: str | None = None) -> int:
         """End wire faults: number ``fault``, those of ``door``, or all; how many ended."""

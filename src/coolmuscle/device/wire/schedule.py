@@ -214,6 +214,7 @@ class WireFaults:
         self.faults: list[ActiveFault] = []
         self._live: dict[str, list[ActiveFault]] = {}
         self._watchers: dict[str, list[Watcher]] = {}
+        self._every: dict[str, list[Watcher]] = {}
         self._listeners: list[Listener] = []
         self._number = 0
         self.records = 0
@@ -256,6 +257,7 @@ class WireFaults:
         if fault.lasting:
             self.record(fault, "begins")
             self._tell(fault, True)
+        self._tell_every(fault, True)
 
     def _finish(self, fault: ActiveFault) -> None:
         if fault.over:
@@ -275,6 +277,7 @@ class WireFaults:
         if fault.lasting:
             self.record(fault, "ends")
             self._tell(fault, False)
+        self._tell_every(fault, False)
 
     # -- what the doors ask ------------------------------------------------------------------
     def live(self, door: str) -> bool:
@@ -312,12 +315,16 @@ class WireFaults:
         return list(self._live.get(door, ()))
 
     # -- telling -------------------------------------------------------------------------------
-    def watch(self, door: str, watcher: Watcher) -> Callable[[], None]:
-        """Call ``watcher(fault, on)`` when a lasting fault of ``door`` begins or ends."""
-        self._watchers.setdefault(door, []).append(watcher)
+    def watch(self, door: str, watcher: Watcher, *, every_kind: bool = False
+              ) -> Callable[[], None]:
+        """Call ``watcher(fault, on)`` when a lasting fault of ``door`` begins or ends;
+        ``every_kind``: when any fault of ``door`` enters or leaves its window (a door
+        that hands the live faults to another thread republishes them then)."""
+        watchers = self._every if every_kind else self._watchers
+        watchers.setdefault(door, []).append(watcher)
 
         def remove() -> None:
-            found = self._watchers.get(door, [])
+            found = watchers.get(door, [])
             if watcher in found:
                 found.remove(watcher)
         return remove
@@ -330,6 +337,10 @@ class WireFaults:
 
     def _tell(self, fault: ActiveFault, on: bool) -> None:
         for watcher in list(self._watchers.get(fault.door, ())):
+            watcher(fault, on)
+
+    def _tell_every(self, fault: ActiveFault, on: bool) -> None:
+        for watcher in list(self._every.get(fault.door, ())):
             watcher(fault, on)
 
     def record(self, fault: ActiveFault, text: str) -> WireRecord:

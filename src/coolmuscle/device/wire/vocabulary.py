@@ -1,7 +1,7 @@
 """The wire-fault vocabulary: each door, the fault kinds it knows and their parameters.
 
 A *door* is a way into the device that carries bytes (the host line, the daisy chain,
-Modbus RTU and TCP, EtherNet/IP).  Each door registers its
+Modbus RTU and TCP, EtherNet/IP, EtherCAT).  Each door registers its
 kinds here, with the schema of their parameters (:class:`Param`): the machine file's
 ``[[wire.fault]]`` tables, the device API's ``inject_wire_fault`` and the web page's
 fault panel all check against this one registry, and docs/wire-faults.md describes it.
@@ -293,4 +293,47 @@ register("enip", "the CM1 EtherNet/IP module (cm1-ethernetip-interface-manual.tx
               lasting=True,
               seen="input image bytes 0-1 carry the bit; the motor values freeze; "
                    "outputs are not delivered"),
+])
+
+#: The bridge an ``ethercat`` fault acts at (1 = next to the master, line order).
+_BRIDGE = Param("bridge", int, 1, "the bridge, in line order (1: next to the master)", 1, 8)
+
+register("ethercat", "the EtherCAT bridges' segment (ethercat-bridge-users-guide.txt; "
+         "ETG.1000.4): a message is one frame from the master, or one bridge cycle", [
+    FaultKind("ethercat", "lost_frame", "the frame is lost on the wire", (
+        Param("way", str, "out", "out: lost on its way to the bridge, which (and every "
+              "bridge behind it) never sees it; back: lost on its way back to the master, "
+              "after every bridge has processed it", choices=("out", "back")), _BRIDGE),
+              seen="pysoem: receive_processdata returns -1 (no frame) for that cycle; "
+                   "a lost mailbox or register frame is a failed read SOEM retries or "
+                   "reports"),
+    FaultKind("ethercat", "wkc", "a datagram's working counter is off when the frame "
+              "comes back (ETG.1000.4 table 12: the counter the master checks)", (
+                  Param("delta", int, -1, "added to the counter (-1: a slave seems not to "
+                        "have served it; +1: one more than there are)", -3, 3),
+                  Param("datagram", str, "process", "process: the frame's first logical "
+                        "datagram (LRD, LWR, LRW: the process data), frames without one are "
+                        "not messages; any: the frame's first datagram",
+                        choices=("process", "any"))),
+              seen="pysoem: receive_processdata returns expected_wkc - 1 (the process "
+                   "data of that cycle is not to be trusted)"),
+    FaultKind("ethercat", "mailbox_lost", "a mailbox answer is lost: the frame that "
+              "read a bridge's full read mailbox (SM1) is lost on its way back, after the "
+              "ESC has emptied the mailbox (each such frame is a message)", (
+                  Param("bridge", int, 0, "only this bridge's answers (line order); 0: "
+                        "any bridge's", 0, 8),),
+              seen="SOEM: the mailbox read gets no working counter, so it toggles SM1's "
+                   "repeat request and reads the answer again: the SDO completes"),
+    FaultKind("ethercat", "link_down", "the cable into the bridge's port 0 is pulled: "
+              "it and every bridge behind it leave the segment; their SM watchdogs run "
+              "out (OP -> SAFE-OP + ERROR, AL status code 001Bh) while the motors run "
+              "on; at until the cable is back", (_BRIDGE,), lasting=True,
+              seen="pysoem: the working counter drops; read_state shows the bridge in "
+                   "SAFE-OP + ERROR with al_status 0x001B once the link is back; "
+                   "the master takes it to OP again"),
+    FaultKind("ethercat", "late_cycle", "a bridge cycle (6.3: 1 ms) starts late; the "
+              "cycles due meanwhile do not run (each cycle is a message)", (
+                  _ms("ms", 3.0, "how late, milliseconds", 1000.0),),
+              seen="pysoem: the inputs (statusword, position) stay as they were for "
+                   "the cycles skipped; the outputs reach the motors late"),
 ])

@@ -357,7 +357,7 @@ class EthercatTransport(Transport):
 
     async def close(self) -> None:
         if self.segment is not None and self.port is not None:
-            self.port.call(self.segment.stop_cycles)
+            self.port.call(self.segment.close)
         if self.frames is not None:
             self.frames.close()
             self.frames = None

@@ -21,6 +21,10 @@ does does not depend on the others (nor on how many bridges there are).
 everything behind it leave the segment (the frames come back from the bridge in front),
 their SM watchdogs expire (OP -> SAFE-OP + 001Bh) while their motors go on running;
 :meth:`BridgeSegment.plug` puts it back, and a master's new start-up reaches OP again.
+
+The ``ethercat`` wire faults (docs/wire-faults.md) are the first device's
+(:attr:`BridgeSegment.faults`, :mod:`.faults`): each cycle publishes the live ones to
+the frames' tap and may start late.
 """
 
 from __future__ import annotations
@@ -29,8 +33,10 @@ import logging
 from collections.abc import Callable, Sequence
 
 from ....device import Device
+from ....sim.kernel import PRIO_IO, Timer
 from ..engine.segment import Segment
 from .app import CYCLE_NS, BridgeApp, CycleSchedule
+from .faults import EthercatFaults
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +55,10 @@ class BridgeSegment:
         self.line = Segment([app.stack.esc for app in self.apps])
         self.device = next((d for d in devices if d is not None), None)
         self._cycles: CycleSchedule | None = None
+        self._late: Timer | None = None           # a late cycle waiting to run
+        #: The ``ethercat`` wire faults (none without a device: no virtual time).
+        self.faults = None if self.device is None \
+            else EthercatFaults(self.line, self.device.wire_faults)
 
     def __len__(self) -> int:
         return len(self.apps)
@@ -56,7 +66,19 @@ class BridgeSegment:
     # -- the model's thread -------------------------------------------------------------
     def cycle(self) -> None:
         """One bridge cycle of every bridge, in line order (a failing one is logged and
-        the others still run)."""
+        the others still run); a ``late_cycle`` wire fault runs it later."""
+        faults = self.faults
+        if faults is not None:
+            faults.sync()
+            later = faults.late_cycle()
+            if later is not None:
+                if later and self.device is not None:
+                    self._late = self.device.kernel.schedule_at(
+                        later, self._run_apps, priority=PRIO_IO, name="late bridge cycle")
+                return
+        self._run_apps()
+
+    def _run_apps(self) -> None:
         for position, app in enumerate(self.apps, 1):
             try:
                 app.cycle()
@@ -74,9 +96,18 @@ class BridgeSegment:
         self._cycles = CycleSchedule(self.device.kernel, period_ns, self.cycle, on_start)
 
     def stop_cycles(self) -> None:
+        if self._late is not None:
+            self._late.cancel()
+            self._late = None
         if self._cycles is not None:
             self._cycles.cancel()
             self._cycles = None
+
+    def close(self) -> None:
+        """Stop the cycles and let the device's wire faults go (the model's thread)."""
+        self.stop_cycles()
+        if self.faults is not None:
+            self.faults.close()
 
     # -- the cables (any thread) ----------------------------------------------------------
     def unplug(self, bridge: int) -> None:
