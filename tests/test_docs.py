@@ -35,3 +35,16 @@ def test_mkdocs_builds_strict_with_the_api_reference(tmp_path: Path) -> None:
 def test_the_check_schema_is_a_valid_json_schema() -> None:
     schema = json.loads((ROOT / "docs" / "check-schema.json").read_text())
     jsonschema.Draft202012Validator.check_schema(schema)
+
+
+def test_every_image_and_local_link_of_the_docs_exists() -> None:
+    """A picture or a file a page points at is in the checkout (README and docs/)."""
+    missing = []
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)   # not in code blocks
+        for target in re.findall(r"\]\(([^)\s#]+)(?:#[^)]*)?\)", text):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            if not (page.parent / target).exists():
+                missing.append(f"{page.relative_to(ROOT)}: {target}")
+    assert missing == []
