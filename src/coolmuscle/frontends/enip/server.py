@@ -260,9 +260,13 @@ class EnipTransport(StreamServer):
                 before = len(self.table.by_triad)
                 reply = conn.handle(frame)
                 changed = len(self.table.by_triad) != before
+            # the reply first, then the producer: the Forward_Open's answer goes out
+            # before the connection's first T->O packet (the originator learns the
+            # connection IDs from it), as an adapter's does
+            sent = reply is None or self.send(writer, reply)
             if changed:
                 self.wake()
-            if reply is not None and not self.send(writer, reply):
+            if not sent:
                 return False               # the peer reset: answer it no more
         return False
 
