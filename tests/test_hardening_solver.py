@@ -14,7 +14,6 @@ import logging
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.motion import dynamics
 from coolmuscle.sim.kernel import ms
 
 LINES = ["K56.1=32767", "S.1=7027", "A.1=7698", "P.1=1", "^.1", "P.1+=-500000", "^.1",
@@ -25,7 +24,6 @@ LINES = ["K56.1=32767", "S.1=7027", "A.1=7698", "P.1=1", "^.1", "P.1+=-500000", 
 def test_the_fuzzed_sequence_stays_far_below_the_piece_limit(
         gap_ms: int, caplog: pytest.LogCaptureFixture) -> None:
     counts: list[int] = []
-    dynamics.clear_solutions()
     chain = Chain(motors=2)
     for motor in chain.motors.values():          # every motion each axis solves
         axis = motor.axis

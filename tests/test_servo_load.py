@@ -249,8 +249,6 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
     (same drive, same command relative to where it starts); the reused motion is the
     one a fresh solve gives, to the last bit, and the same move elsewhere differs only
     by where it is."""
-    from coolmuscle.motor.motion.dynamics import clear_solutions, solution_reuse
-
     chain, motor = _chain(load_inertia=2e-4)
     chain.execute("S.1=50, A.1=30, M.1=40, P.1=3000")
     chain.execute("^.1")
@@ -258,12 +256,13 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
     axis = motor.axis
     args = (axis.profile, axis.motion.origin_ns, axis.motion.position_at(axis.motion.origin_ns),
             axis.motion.velocity_at(axis.motion.origin_ns), axis.motion.drive)
-    reused_before, _ = solution_reuse()
-    again = Motion(*args)
-    assert solution_reuse()[0] == reused_before + 1
-    clear_solutions()
-    fresh = Motion(*args)
-    assert solution_reuse() == (0, 1)
+    memos = axis.memos                      # the chain's, shared by its motors
+    reused_before, _ = memos.reuse()
+    again = Motion(*args, memos)
+    assert memos.reuse()[0] == reused_before + 1
+    memos.clear()
+    fresh = Motion(*args, memos)
+    assert memos.reuse() == (0, 1)
     for a, b in zip(again.pieces, fresh.pieces, strict=True):
         assert (a.start, a.end, a.mode, a.pos, a.cmd, a.torque, a.err(), a.vel()) == \
                (b.start, b.end, b.mode, b.pos, b.cmd, b.torque, b.err(), b.vel())

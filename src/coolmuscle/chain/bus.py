@@ -19,6 +19,7 @@ from mypy_extensions import mypyc_attr
 from ..device.api import Event, EventListener
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..errors import NoSuchMotorError
+from ..memo import Memo
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
 
@@ -49,7 +50,7 @@ class ChainBus:
     #: motor looks only there while no watcher listens to every motor).
     _watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]]
     _everywhere: int            # watchers without ``motors``
-    _settings_cache: dict[tuple[int, int, int, bool], LineSettings]
+    _settings_cache: Memo[tuple[int, int, int, bool], LineSettings]
     _settings_now: LineSettings
     _settings_version: int      # ID1's params.version of _settings_now
 
@@ -82,9 +83,9 @@ class ChainBus:
         key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0)
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
-            found = self._settings_cache[key] = LineSettings(
+            found = self._settings_cache.put(key, LineSettings(
                 echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3])
+                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3]))
         self._settings_now, self._settings_version = found, version
         return found
 

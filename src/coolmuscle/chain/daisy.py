@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Callable
 from ..cml import ast
 from ..cml.parser import parse
 from ..device.api import CyclicState, MotorSnapshot, TargetStream
+from ..memo import Memo
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
                       OutOfRangeError, StoreError)
 from ..device.hostline import HostLine, LineSettings
@@ -32,6 +33,7 @@ from ..motor.programs.direct import MotorEval, run_statement
 from ..motor.programs.evaluate import evaluate
 from ..motor.state.firmware import get_firmware
 from ..motor.state.memory import VNumber, VState
+from ..motor.motion.dynamics import MotionMemos
 from ..motor.motor import Motor
 from ..motor.context import Context
 from ..motor.status import Report
@@ -44,23 +46,6 @@ if TYPE_CHECKING:
     from ..motor.core import MotorBus, MotorCore
 
 log = logging.getLogger(__name__)
-
-#: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a host
-#: or PLC sends the same few lines over and over.  Bounded; errors are not kept.
-_PARSED: dict[str, tuple[ast.Line, ...]] = {}
-_PARSED_MAX = 256
-
-
-def _parse(text: str) -> list[ast.Line]:
-    """:func:`parse`, remembering recent lines."""
-    found = _PARSED.get(text)
-    if found is None:
-        found = tuple(parse(text))
-        if len(_PARSED) >= _PARSED_MAX:
-            _PARSED.clear()
-        _PARSED[text] = found
-    return list(found)
-
 
 class _Stream:
     """Cyclic position mode for one motor (device API ``target_stream``)."""
@@ -105,14 +90,20 @@ class Chain(ChainBus):
         self._watching = {}
         self._everywhere = 0
         self._observers: list[Callable[[], None]] = []
-        self._settings_cache = {}
+        self._settings_cache = Memo(64)
         self._settings_now = LineSettings()
+        #: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a
+        #: host or PLC sends the same few lines over and over.  Errors are not kept.
+        self._parsed: Memo[str, tuple[ast.Line, ...]] = Memo(256)
+        #: The plans and solved motions of the chain, shared by its motors.
+        self.motion_memos = MotionMemos()
         self._settings_version = -1
         self.motors = {}
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
                 get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
-            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self)
+            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self,
+                                          self.motion_memos)
         self.uploads = BankUploads(self.motors)
         self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
                                   pacing=pacing)
@@ -174,7 +165,7 @@ class Chain(ChainBus):
         if self._baud_answer(text):
             return
         try:
-            lines = _parse(text)
+            lines = self._parse(text)
         except CmlSyntaxError as error:
             self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
             return
@@ -192,6 +183,13 @@ class Chain(ChainBus):
             else:
                 self._run_statements([stmt for stmt, _ in line], line_ctx)
         self.poke()
+
+    def _parse(self, text: str) -> list[ast.Line]:
+        """:func:`parse`, remembering recent lines."""
+        found = self._parsed.get(text)
+        if found is None:
+            found = self._parsed.put(text, tuple(parse(text)))
+        return list(found)
 
     def _baud_answer(self, text: str) -> bool:
         """The line after a K20 prompt (ch. 3 K23 16 "Change Baud Rate ?? XXX kbps

@@ -18,13 +18,14 @@ from ..cml import ast
 from .context import Context
 from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
+from ..memo import Memo
 from ..sim.kernel import Kernel
 from .state import units
 from .signals.analog import AnalogInput, AnalogSource
 from .signals.analog_control import AnalogControl
 from .signals.analog_output import output_volts, volts_to_register
 from .motion.axis import Axis
-from .motion.dynamics import Drive
+from .motion.dynamics import Drive, MotionMemos
 from .signals.encoder import ExternalEncoder, Gearing
 from .programs.evaluate import pack_string
 from .state.firmware import Firmware
@@ -59,14 +60,17 @@ _K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
 class Motor:
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
-    def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
+    def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus,
+                 memos: MotionMemos | None = None) -> None:
+        """``memos``: the plans and solved motions of the chain (shared by its motors);
+        without, the motor keeps its own."""
         self.id = motor_id
         self.kernel = kernel
         self.firmware = firmware
         self.bus = bus
         self.params = ParamTable(firmware)
         #: limits() by (S, A, decel data, params.version): K37/K44/K51/K69/K40 as then
-        self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
+        self._limits_memo: Memo[tuple[int, int, int | None, int], Limits] = Memo(256)
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
         #: ``k(number)``: the current value of K parameter ``number``; the table's own
@@ -89,7 +93,7 @@ class Motor:
         self.axis = Axis(kernel, drive=sup.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
-                         on_passing_point=self._passing_point)
+                         on_passing_point=self._passing_point, memos=memos)
         sup.attach()
         self.estopped = False
         self.origin_done = False
@@ -243,10 +247,7 @@ class Motor:
         top = self.max_speed_pps()
         if lim.speed > top:            # ch. 3 K40: S above the maximum is limited to it
             lim = replace(lim, speed=top, creep=min(lim.creep, top))
-        if len(self._limits_memo) >= 256:
-            self._limits_memo.clear()
-        self._limits_memo[key] = lim
-        return lim
+        return self._limits_memo.put(key, lim)
 
     def max_speed_pps(self) -> float:
         """K40 (the motor's maximum speed, min⁻¹) in pulses/s of the current K37:

@@ -18,12 +18,12 @@ written down in docs/fidelity.md "Motion".
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+from ...memo import Memo
 from ..state import units
-from .profile import _CHECKED, Profile, Segment, State, _check_chain
+from .profile import Profile, Segment, State, _check_chain
 
 #: K69 value of a pure S-curve (ch. 3 K69, range 0..1024).
 SCURVE_MAX = 1024
@@ -107,7 +107,6 @@ def scurve_jerk(accel: float, speed: float, scurve: int) -> float:
     return accel * accel * (2.0 - r) / (r * speed)
 
 
-@lru_cache(maxsize=256)
 def limits_from_data(s_value: int, a_value: int, *, k37: int, k44: int, k51: int,
                      k69: int, decel_a_value: int | None = None) -> Limits:
     """Limits from S and A data (2.1, 2.1.1) and K37, K44, K51, K69 (ch. 3).
@@ -422,31 +421,36 @@ def _path(b: _Builder, waypoints: Sequence[Waypoint]) -> None:
 
 
 # -- public planners ---------------------------------------------------------------
-def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int) -> Profile:
+def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int,
+               plans: Plans | None = None) -> Profile:
     """Point-to-point (one waypoint) or merge motion (several), 4.1.1-4.1.3.
 
     Merge motion passes each point without stopping; a span's S is never exceeded
     between its two points, so a speed increase starts at the passing point and a
     decrease is completed by it.  A reversal stops at the point (4.1.2).  From a
     moving start that cannot make the first point the motor stops, then returns.
+
+    ``plans``: where plans are looked up and kept (a chain's, ``dynamics.MotionMemos``):
+    the segments are relative to the origin and immutable, so a machine cycle that
+    repeats its moves plans each one once (the same numbers: the plan depends on
+    nothing else).
     """
     if not waypoints:
         raise ValueError("plan_moves needs at least one waypoint")
     # Plain numbers as the key: hashing and comparing floats stays in C (the
     # dataclasses' generated __hash__/__eq__ would run interpreted).
     key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
-    found = _PLANNED.get(key)
+    found = None if plans is None else plans.get(key)
     if found is None:
         b = _Builder(start_state)
         _path(b, waypoints)
         found = (tuple(b.segments), tuple(b.passing))
-        if len(_PLANNED) >= _PLANNED_MAX:
-            _PLANNED.clear()
         _check_chain(found[0])
-        _CHECKED.add(found[0])
-        _PLANNED[key] = found
+        if plans is not None:
+            plans.put(key, found)
     return Profile(origin_ns, found[0], start_state=start_state,
-                   final_position=float(waypoints[-1].target), passing_times=found[1])
+                   final_position=float(waypoints[-1].target), passing_times=found[1],
+                   checked=True)
 
 
 def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
@@ -454,11 +458,8 @@ def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
     return (w.target, lim.speed, lim.accel, lim.decel, lim.creep, lim.scurve)
 
 
-#: Planned moves by (start state, waypoints): the segments are relative to the origin
-#: and immutable, so a machine cycle that repeats its moves plans each one once (the
-#: same numbers: the plan depends on nothing else; docs/performance.md).
-_PLANNED: dict[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = {}
-_PLANNED_MAX = 1024
+#: Plans by (start state, waypoints as plain numbers): the segments and passing times.
+Plans = Memo[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]]
 
 
 def plan_velocity(start_state: State, velocity_pps: float, limits: Limits,

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Generator
 
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
+from ...memo import Memo
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
 from .compiled import Compiled, compile_statement
@@ -46,6 +47,8 @@ _GONE = object()
 _PAUSED = object()
 Step = Generator[Request, object, object]
 _Code = tuple[ast.Statement, "Compiled | None", bool]
+#: Banks whose compiled statements a runner keeps (more than a motor has).
+CODES = 64
 
 
 class LadderRunner:
@@ -67,8 +70,8 @@ class LadderRunner:
         self._timer: Timer | None = None
         self._scan_id = 0
         self._running_id = 0
-        self._code_cache: dict[int, list[_Code]] = {}
-        self._code_version = -1
+        #: The compiled statements of each bank, by (number, version of the banks).
+        self._codes: Memo[tuple[int, int], tuple[_Code, ...]] = Memo(CODES)
         self._period = self.period_ns()
         if not motion:
             motor.params.on_change(self._param_changed)
@@ -226,21 +229,19 @@ class LadderRunner:
         result = yield from self._bank(self.bank, (), index, flow)
         return _GONE if self._running_id != self._scan_id else result
 
-    def _code(self, number: int) -> list[_Code] | None:
-        """The compiled statements of a bank (cached until the banks change)."""
-        if self._code_version != self.motor.banks.version:
-            self._code_cache.clear()
-            self._code_version = self.motor.banks.version
-        code = self._code_cache.get(number)
+    def _code(self, number: int) -> tuple[_Code, ...] | None:
+        """The compiled statements of a bank (compiled once per version of the banks)."""
+        key = (number, self.motor.banks.version)
+        code = self._codes.get(key)
         if code is None:
             bank = self.motor.banks.get(True, number)
             if bank is None:
                 return None
-            code = self._code_cache[number] = [
+            code = self._codes.put(key, tuple([
                 (stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
                                          _assigned), unit.quiet)
                 for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
-                for stmt in unit.statements]
+                for stmt in unit.statements]))
         return code
 
     def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,

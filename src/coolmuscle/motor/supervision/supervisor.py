@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable, Sequence
 
+from ...memo import Memo
 from .alarms import alarm_watchers
 from ..motion.dynamics import Drive
 from .faults import Faults
@@ -61,8 +62,8 @@ class Supervisor:
         self._motion_listeners: list[MotionListener] = []
         #: The drives made from the plant as it is (:meth:`drive`), by what else they
         #: were made from.
-        self._drives: dict[tuple[int, float, float, float, tuple[float, float], int],
-                           Drive] = {}
+        self._drives: Memo[tuple[int, float, float, float, tuple[float, float], int],
+                           Drive] = Memo(64)
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
@@ -98,11 +99,9 @@ class Supervisor:
         key = (ppr, limit, scale, extra, walls, speed_limit)
         found = self._drives.get(key)
         if found is None:
-            if len(self._drives) >= 64:
-                self._drives.clear()
-            found = self._drives[key] = plant.drive(
+            found = self._drives.put(key, plant.drive(
                 ppr, limit_percent_of_rated=limit, enabled=True, speed_scale=scale,
-                extra_load_nm=extra, walls=walls, speed_limit=speed_limit)
+                extra_load_nm=extra, walls=walls, speed_limit=speed_limit))
         return found
 
     def _plant_changed(self) -> None:
