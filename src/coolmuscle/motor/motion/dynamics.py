@@ -76,7 +76,7 @@ Conditions = Callable[["Piece"], Sequence[AnyF] | None]
 Exits = list[tuple[str, "list[AnyF] | float"]]
 
 
-@dataclass(init=False, eq=False, slots=True)
+@dataclass(eq=False, slots=True)
 class Drive:
     """What the dynamics need from the motor, the load and the machine.  Immutable by
     convention (``dataclasses.replace`` makes a changed copy)."""
@@ -86,32 +86,18 @@ class Drive:
     a_friction: float               # Coulomb friction as an acceleration
     a_load: float                   # constant load torque as an acceleration (signed)
     v_max: float                    # maximum speed, pulses/s
-    enabled: bool
-    wall_lo: float                  # hard stoppers, raw pulses
-    wall_hi: float
-    percent_per_accel: float        # Ix % per pulses/s² of torque
-
-    def __init__(self, kp: float, a_limit: float, a_friction: float, a_load: float,
-                 v_max: float, enabled: bool = True, wall_lo: float = -math.inf,
-                 wall_hi: float = math.inf, percent_per_accel: float = 0.0) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
-        self.kp = kp
-        self.a_limit = a_limit
-        self.a_friction = a_friction
-        self.a_load = a_load
-        self.v_max = v_max
-        self.enabled = enabled
-        self.wall_lo = wall_lo
-        self.wall_hi = wall_hi
-        self.percent_per_accel = percent_per_accel
+    enabled: bool = True
+    wall_lo: float = -math.inf      # hard stoppers, raw pulses
+    wall_hi: float = math.inf
+    percent_per_accel: float = 0.0  # Ix % per pulses/s² of torque
 
     def _key(self) -> tuple[float, float, float, float, float, bool, float, float, float]:
         return (self.kp, self.a_limit, self.a_friction, self.a_load, self.v_max,
                 self.enabled, self.wall_lo, self.wall_hi, self.percent_per_accel)
 
-    # Written out, not generated, like __init__: the solved motions are cached by the
-    # drive (_placed), so every move hashes one and a chain of alike motors compares them.
+    # Written out, not generated (docs/architecture.md "Fast code"): the solved motions
+    # are remembered by the drive (_placed), so every move hashes one and a chain of
+    # alike motors compares them.
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Drive):
             return NotImplemented

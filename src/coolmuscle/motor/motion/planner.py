@@ -37,7 +37,7 @@ Piece = tuple[float, float, float]  # (duration s, acceleration at its start, je
 _REL_TOL = 1e-12
 
 
-@dataclass(init=False, unsafe_hash=True, slots=True)
+@dataclass(unsafe_hash=True, slots=True)
 class Limits:
     """Speed (pps), acceleration and deceleration (pulses/s²), creep speed (pps, K51)
     and S-curve gain (K69, 0..1024) of one motion.  Immutable by convention."""
@@ -45,20 +45,10 @@ class Limits:
     speed: float
     accel: float
     decel: float
-    creep: float
-    scurve: int
+    creep: float = 0.0
+    scurve: int = 0
 
-    def __init__(self, speed: float, accel: float, decel: float, creep: float = 0.0,
-                 scurve: int = 0) -> None:
-        # Written out (compiled, a generated __init__ runs interpreted; Segment).
-        self.speed = speed
-        self.accel = accel
-        self.decel = decel
-        self.creep = creep
-        self.scurve = scurve
-        self._check()
-
-    def _check(self) -> None:
+    def __post_init__(self) -> None:
         if not (self.speed > 0.0 and self.accel > 0.0 and self.decel > 0.0):
             raise ValueError(f"speed, accel and decel must be > 0: {self!r}")
         if not 0.0 <= self.creep <= self.speed:
@@ -90,7 +80,8 @@ class Waypoint:
     limits: Limits
 
     def __init__(self, target: float, limits: Limits) -> None:
-        self.target = target        # written out: see Segment
+        # written out: built on the hot path (docs/architecture.md "Fast code")
+        self.target = target
         self.limits = limits
 
 
@@ -272,19 +263,12 @@ def _max_exit(u: float, b: float, dist: float, lim: Limits, cap: float) -> float
     return lo if travel(lo) > dist else _bisect(travel, lo, cap, dist)
 
 
-@dataclass(init=False, slots=True)
+@dataclass(slots=True)
 class _Span:
     dist: float
     direction: float
     limits: Limits
     indices: list[int]
-
-    def __init__(self, dist: float, direction: float, limits: Limits,
-                 indices: list[int]) -> None:
-        self.dist = dist            # written out: see Segment
-        self.direction = direction
-        self.limits = limits
-        self.indices = indices
 
 
 def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float,

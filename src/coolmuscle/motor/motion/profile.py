@@ -51,8 +51,7 @@ class Segment:
 
     def __init__(self, start: float, duration: float, p: float, v: float, a: float,
                  j: float) -> None:
-        # Written out, not generated: compiled (coolmuscle/_accel.py), a dataclass's
-        # generated __init__ runs interpreted, 20x slower (docs/performance.md).
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.start = start
         self.duration = duration
         self.p = p

@@ -42,8 +42,7 @@ class Piece:
 
     def __init__(self, start: int, profile: Profile, tracking: Any, zero: float,
                  sign: int) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.start = start
         self.profile = profile
         self.tracking = tracking
