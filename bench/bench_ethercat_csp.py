@@ -15,7 +15,7 @@ Printed side by side, for the axes following (csp moving) and holding (same targ
   still run, back to back, as in the transport: virtual time does not skip them);
 * CPU share: process CPU time over wall time (the spin before each cycle included);
 * the cost of one axis-cycle (CPU time of a bridge cycle with its kernel run, / 4)
-  against the 50 us goal of issue 12 item 9, and the 1 ms cycle it must fit in;
+  against the 50 us goal (docs/performance.md), and the 1 ms cycle it must fit in;
 * what a late cycle was late by (p99, worst) and the CPU time the machine's hypervisor
   took from this virtual machine meanwhile (steal, /proc/stat);
 * the same for an empty cycle: the same wait for each slot at the same priority with

@@ -1,4 +1,4 @@
-"""Kernel benchmark (issue 3 acceptance): simulated seconds per wall second.
+"""Kernel benchmark: simulated seconds per wall second.
 
 Run: ``PYTHONPATH=src python bench/bench_kernel.py`` (about 15-30 s).
 

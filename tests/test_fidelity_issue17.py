@@ -1,7 +1,7 @@
-"""Fidelity points of issue 17, each against the manual's words.
+"""Fidelity points where the manual is read closely, each against its words.
 
 cml-users-guide.txt ch. 3 K20/K23, K37, K55, 2.2.1/2.2.2 "V"; cm-banks-rt3.txt 3.6;
-choices in docs/fidelity.md ("Issue 17: fidelity decisions").
+choices in docs/fidelity.md ("Fidelity decisions: K37 40..70, K20 prompts, ...").
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 17, "the first hour of a newcomer": what a person following README.md meets.
+"""The first hour of a newcomer: what a person following README.md meets.
 
 The K81 switch said in plain words and undone by ``sim --reset`` (5.6.1, 5.6.9);
 errors found before anything runs; CLI conventions (flags without a value, --version,

@@ -1,4 +1,4 @@
-"""Issue 16 item 6: a full disk (a small tmpfs the test mounts and always unmounts).
+"""A full disk (a small tmpfs the test mounts and always unmounts).
 
 ``$`` (cml-users-guide.txt 2.1.2) on a full disk tells the host ``not saved.n: ...``
 instead of ``saved.n``; a K write (ch. 3 "saved automatically") that cannot be

@@ -1,4 +1,4 @@
-"""Issue 16 items 4-5: bounded work per wake-up and bounded memory per client.
+"""Bounded work per wake-up and bounded memory per client.
 
 A Modbus TCP client pipelining 64 KB of FC03 requests (cml-users-guide.txt 5.6.7)
 or a CML client flooding ``$`` must not stop the motor's time or another client's

@@ -1,4 +1,4 @@
-"""Issue 16 item 11: the motion solver's piece count on a command faster than top speed.
+"""The motion solver's piece count on a command faster than top speed.
 
 With K56 raised (ch. 3 K56) and S beyond the top speed, a move reversed while the
 shaft runs at full speed was braked through zero speed onto the command's speed

@@ -1,4 +1,4 @@
-"""Issue 16 items 7 and 10: saved state is validated; the XDG rule for the state dir.
+"""Saved state is validated; the XDG rule for the state dir.
 
 A store whose ``$`` snapshot (cml-users-guide.txt 2.1.2) or automatic K save
 (ch. 3) holds something the motor never writes stops start-up with one line that

@@ -1,4 +1,4 @@
-"""Issue 16 item 9: ``coolmuscle run --trace`` on long runs.
+"""``coolmuscle run --trace`` on long runs.
 
 The trace streams to its file as virtual time passes, with memory that does not
 grow with the run; ``--trace-step`` sets the grid; while the motors are at rest

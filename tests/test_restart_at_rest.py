@@ -1,4 +1,4 @@
-"""A reversal after an early in-position, solved from the command's end (issue 18).
+"""A reversal after an early in-position, solved from the command's end.
 
 Ch. 3 K55: in position may come before the command ends; a bank's next move then
 starts while the command still decelerates.  The planner stops that command and starts

@@ -1,4 +1,4 @@
-"""The servo and load model (issue 3 scope 2): tracking error, torque limit lag, stoppers,
+"""The servo and load model: tracking error, torque limit lag, stoppers,
 coasting when free, and the CM1 stepper (docs/fidelity.md "Servo, load and alarms").
 
 cml-users-guide.txt 6.6 ?95 (Pe), ?98 (Ix), 2.1.1 "M" (torque limit, % of the maximum
