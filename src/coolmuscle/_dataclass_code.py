@@ -1,6 +1,5 @@
 """The compiled code of the methods :mod:`dataclasses` writes for coolmuscle's classes,
-kept between runs as Python keeps a module's byte code (docs/performance.md "Twelfth
-round").
+kept between runs as Python keeps a module's byte code (docs/performance.md).
 
 At import, :func:`dataclasses.dataclass` writes each class's ``__init__``, ``__repr__``,
 ``__eq__``, ``__hash__``, ``__setattr__`` ... as Python source text and compiles it with

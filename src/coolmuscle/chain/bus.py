@@ -5,7 +5,7 @@ line and to the subscribers of the device API), the wake-ups of the bank lines t
 wait for it (:meth:`ChainBus.poke`, :meth:`ChainBus.watch`) and the K23/K70/K20/K81
 settings of each line sent.  :class:`~coolmuscle.chain.daisy.Chain` is a
 :class:`ChainBus`; this part is compiled with the hot modules (coolmuscle/_accel.py,
-docs/performance.md "Eleventh round"), the chain itself stays a plain class (front
+docs/architecture.md "Fast code"), the chain itself stays a plain class (front
 ends and the trace recorder keep weak references to it, tests wrap its methods).
 """
 

@@ -106,7 +106,7 @@ class Motor:
         self.analog_control = AnalogControl(self, self.analog_input)
         self.encoder = ExternalEncoder(self, self.timeline)
         self.manual = ManualMotion(self)
-        # -- banks, ladder, input functions (issue 4).  Imported here: the executors
+        # -- banks, ladder, input functions (2.2.2, 2.2.3, K27-K32).  Imported here: the executors
         # use .direct, which imports this module.
         from .programs.banks import BankStore
         from .signals.inputs import InputFunctions
@@ -529,7 +529,7 @@ class Motor:
         self.supervision.arrival()
         self.motion_settled()
 
-    # -- motion completion (issue 4: bank executors wait on these) -----------------
+    # -- motion completion (the bank executors wait on these) ------------------------
     def motion_settled(self) -> None:
         """A motion ended: let waiting bank lines look again (no polling)."""
         self.bus.poke(self.id)
@@ -641,7 +641,7 @@ class Motor:
 
     def answer_baud(self, yes: bool) -> None:
         """The host answered the K20 prompt: ``Y`` applies the new rate, ``N`` keeps the
-        old one (docs/fidelity.md "Issue 17: fidelity decisions")."""
+        old one (docs/fidelity.md "Fidelity decisions: K37 40..70, K20 prompts, ...")."""
         value, self.pending_baud = self.pending_baud, None
         if yes and value is not None:
             self.params.set(20, value)

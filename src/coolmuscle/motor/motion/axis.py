@@ -156,7 +156,7 @@ class Axis:
         plan from rest once it has begun: the shaft follows that plan (the motion is
         solved on it), the stored profile equals it within float noise, and a cycle
         that repeats the reversal then starts each repeat from the same numbers (and
-        finds its plan planned: docs/performance.md "Sixth round")."""
+        finds its plan remembered: dynamics.MotionMemos)."""
         return self._command_at(t_ns).state_at(t_ns)
 
     def _command_end(self, now: int) -> int | None:
