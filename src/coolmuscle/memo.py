@@ -57,6 +57,11 @@ class Memo(Generic[K, V]):
         self.hits = 0
         self.misses = 0
         self._answers: dict[K, V] = {}
+        #: The keys in the order they were put, a ring once full: ``_oldest`` is the next
+        #: to go (no scan of the dict for its first key: that walks the holes deletions
+        #: leave at its front).
+        self._order: list[K] = []
+        self._oldest = 0
         self._generation = _GENERATION.count
 
     def get(self, key: K) -> V | None:
@@ -74,14 +79,23 @@ class Memo(Generic[K, V]):
         """Keep ``answer`` for ``key`` (the oldest answer goes when the memo is full);
         returns ``answer``."""
         answers = self._answers
-        if len(answers) >= self.size and key not in answers:
-            del answers[next(iter(answers))]        # a dict keeps the order keys came in
+        if key not in answers:
+            order = self._order
+            if len(order) < self.size:
+                order.append(key)
+            else:
+                oldest = self._oldest
+                del answers[order[oldest]]
+                order[oldest] = key
+                self._oldest = oldest + 1 if oldest + 1 < self.size else 0
         answers[key] = answer
         return answer
 
     def clear(self) -> None:
         """Forget every answer and the counts."""
         self._answers.clear()
+        self._order.clear()
+        self._oldest = 0
         self.hits = 0
         self.misses = 0
         self._generation = _GENERATION.count
