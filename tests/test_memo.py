@@ -31,6 +31,15 @@ def test_a_hit_moves_nothing_and_a_known_key_takes_no_room() -> None:
     assert (memo.get("a"), memo.get("b"), memo.get("c")) == (None, 20, 3)
 
 
+def test_two_keys_of_one_hash_never_answer_for_each_other() -> None:
+    assert hash(-1) == hash(-2)            # CPython: -1 is the error value of a hash
+    memo: Memo[int, str] = Memo(4)
+    memo.put(-1, "minus one")
+    assert memo.get(-2) is None
+    memo.put(-2, "minus two")              # takes the place of -1
+    assert (memo.get(-1), memo.get(-2), len(memo)) == (None, "minus two", 1)
+
+
 def test_hits_and_misses_are_counted_until_cleared() -> None:
     memo: Memo[int, str] = Memo(4)
     assert memo.get(1) is None

@@ -28,6 +28,12 @@ from typing import Final, Generic, TypeVar
 K = TypeVar("K")
 V = TypeVar("V")
 
+#: The type of a memo's key made of several values: a plain tuple.  In compiled code a
+#: tuple of fixed size is kept unboxed and boxed anew at every call, so a key typed so
+#: would reach ``get`` and ``put`` as two objects and be hashed twice (``put`` reuses the
+#: hash ``get`` computed only for the very object it was asked).
+Key = tuple[object, ...]
+
 
 class _Generation:
     """How many times :func:`clear_caches` has run; each memo keeps the count it has seen."""
@@ -48,7 +54,17 @@ class Memo(Generic[K, V]):
     """At most ``size`` answers by key; when full, the oldest answer put makes room.
 
     ``get`` answers ``None`` for a key it does not hold, so an answer is never ``None``.
-    ``hits`` and ``misses`` count the ``get`` calls since the last :meth:`clear`."""
+    ``hits`` and ``misses`` count the ``get`` calls since the last :meth:`clear`.
+
+    A key is hashed once.  The model's keys are tuples of floats, whose hash Python
+    does not keep and which costs as much as the rest of a lookup; a miss is a ``get``,
+    a ``put`` and, once full, the removal of the oldest answer.  So the answers are
+    kept by the hash of their key (the key beside the answer, compared on a hit), a
+    ``put`` of the key object the last ``get`` was asked uses the hash ``get`` computed
+    (a key of several values is a :data:`Key`, so that it stays one object), and
+    the oldest answer goes by its hash (a ring of hashes, in the order they came).  Two
+    keys of one hash share a place: the one put later replaces the other, which is
+    then a miss, never a wrong answer."""
 
     def __init__(self, size: int) -> None:
         if size < 1:
@@ -56,39 +72,45 @@ class Memo(Generic[K, V]):
         self.size = size
         self.hits = 0
         self.misses = 0
-        self._answers: dict[K, V] = {}
-        #: The keys in the order they were put, a ring once full: ``_oldest`` is the next
-        #: to go (no scan of the dict for its first key: that walks the holes deletions
-        #: leave at its front).
-        self._order: list[K] = []
-        self._oldest = 0
+        self._answers: dict[int, tuple[K, V]] = {}
+        self._order: list[int] = []         # the hashes as they came; a ring once full
+        self._oldest = 0                    # where the ring's oldest hash is
+        self._asked: object = None          # the key of the last get, and its hash
+        self._asked_hash = 0
         self._generation = _GENERATION.count
 
     def get(self, key: K) -> V | None:
         """The answer kept for ``key``, or ``None``."""
         if self._generation != _GENERATION.count:
             self.clear()
-        found = self._answers.get(key)
-        if found is None:
-            self.misses += 1
-        else:
-            self.hits += 1
-        return found
+        h = hash(key)
+        self._asked = key
+        self._asked_hash = h
+        found = self._answers.get(h)
+        if found is not None:
+            kept = found[0]
+            if kept is key or kept == key:
+                self.hits += 1
+                return found[1]
+        self.misses += 1
+        return None
 
     def put(self, key: K, answer: V) -> V:
         """Keep ``answer`` for ``key`` (the oldest answer goes when the memo is full);
         returns ``answer``."""
+        h = self._asked_hash if key is self._asked else hash(key)
         answers = self._answers
-        if key not in answers:
+        held = len(answers)
+        answers[h] = (key, answer)
+        if len(answers) != held:            # a new place, not a key put again
             order = self._order
             if len(order) < self.size:
-                order.append(key)
+                order.append(h)
             else:
                 oldest = self._oldest
                 del answers[order[oldest]]
-                order[oldest] = key
+                order[oldest] = h
                 self._oldest = oldest + 1 if oldest + 1 < self.size else 0
-        answers[key] = answer
         return answer
 
     def clear(self) -> None:
@@ -96,6 +118,7 @@ class Memo(Generic[K, V]):
         self._answers.clear()
         self._order.clear()
         self._oldest = 0
+        self._asked = None
         self.hits = 0
         self.misses = 0
         self._generation = _GENERATION.count

@@ -19,7 +19,7 @@ from mypy_extensions import mypyc_attr
 from ..device.api import Event, EventListener
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..errors import NoSuchMotorError
-from ..memo import Memo
+from ..memo import Key, Memo
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
 
@@ -50,7 +50,7 @@ class ChainBus:
     #: motor looks only there while no watcher listens to every motor).
     _watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]]
     _everywhere: int            # watchers without ``motors``
-    _settings_cache: Memo[tuple[int, int, int, bool], LineSettings]
+    _settings_cache: Memo[Key, LineSettings]
     _settings_now: LineSettings
     _settings_version: int      # ID1's params.version of _settings_now
 
@@ -80,12 +80,14 @@ class ChainBus:
         version = first.params.version
         if version == self._settings_version:       # ID1's K values unchanged since
             return self._settings_now
-        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0)
+        no_echo, k70, k20, modbus = first.k(23) & _NO_ECHO, first.k(70), first.k(20), \
+            first.k(81) != 0
+        key: Key = (no_echo, k70, k20, modbus)
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
             found = self._settings_cache.put(key, LineSettings(
-                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3]))
+                echo=not no_echo, delimiter=b"\r\n" if k70 == 1 else b"\r",
+                baud=BAUD_RATES.get(k20, 38400), modbus=modbus))
         self._settings_now, self._settings_version = found, version
         return found
 

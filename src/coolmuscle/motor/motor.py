@@ -18,7 +18,7 @@ from ..cml import ast
 from .context import Context
 from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
-from ..memo import Memo
+from ..memo import Key, Memo
 from ..sim.kernel import Kernel
 from .state import units
 from .signals.analog import AnalogInput, AnalogSource
@@ -70,7 +70,7 @@ class Motor:
         self.bus = bus
         self.params = ParamTable(firmware)
         #: limits() by (S, A, decel data, params.version): K37/K44/K51/K69/K40 as then
-        self._limits_memo: Memo[tuple[int, int, int | None, int], Limits] = Memo(256)
+        self._limits_memo: Memo[Key, Limits] = Memo(256)
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
         #: ``k(number)``: the current value of K parameter ``number``; the table's own
@@ -238,7 +238,7 @@ class Motor:
         """
         if s_value == 0 or a_value == 0 or decel_a == 0:
             return None
-        key = (s_value, a_value, decel_a, self.params.version)
+        key: Key = (s_value, a_value, decel_a, self.params.version)
         found = self._limits_memo.get(key)
         if found is not None:                   # the same data under the same K values
             return found

@@ -38,7 +38,7 @@ from bisect import bisect_right
 from dataclasses import dataclass, replace
 from typing import Callable, Final, Sequence
 
-from ...memo import Memo
+from ...memo import Key, Memo
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
 from .expoly import AnyF, F
@@ -225,7 +225,7 @@ def command_pieces(profile: Profile, origin_ns: int,
     if memos is None:
         return _command_pieces(profile, origin_ns)
     segments, base = profile.segments, profile.origin_ns
-    key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
+    key: Key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
            None if profile.end_ns is None else profile.end_ns - base)
     found = memos.commands.get(key)
     if found is not None and found[0] is segments:
@@ -254,10 +254,6 @@ def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float
     return out
 
 
-#: What a solution depends on: the drive, the shaft's position and speed, the command.
-_SolveKey = tuple[Drive, float, float, tuple[tuple[float, float, F], ...]]
-
-
 class Solution:
     """A motion's pieces where they are, with what watchers read of them: the start of
     each piece, the peak of each bound (:meth:`Motion.peak`) and the instants asked of it
@@ -274,7 +270,7 @@ class Solution:
         self.starts = tuple([p.start for p in pieces])
         self.peaks = _peaks(pieces)
         #: Instants found, relative to the motion's origin (:data:`_NEVER`: none).
-        self.instants: Memo[tuple[object, ...], int] = Memo(INSTANTS)
+        self.instants: Memo[Key, int] = Memo(INSTANTS)
 
 
 #: Instants a :class:`Solution` remembers (a repeated move asks the same few again).
@@ -293,18 +289,20 @@ class MotionMemos:
     motion never depends on what ran before (docs/performance.md)."""
 
     def __init__(self, size: int = 1024) -> None:
-        self.plans: Memo[tuple[object, ...],
-                         tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = Memo(size)
-        self.commands: Memo[tuple[object, ...],
-                            tuple[object, tuple[tuple[float, float, F], ...]]] = Memo(size)
-        self.solved: Memo[_SolveKey, tuple[Piece, ...]] = Memo(size)
-        self.placed: Memo[_SolveKey, Solution] = Memo(size)
+        self.plans: Memo[Key, tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = \
+            Memo(size)
+        self.commands: Memo[Key, tuple[object, tuple[tuple[float, float, F], ...]]] = \
+            Memo(size)
+        #: By what a solution depends on: the drive, the shaft's position and speed, the
+        #: command (relative to its start for ``solved``).
+        self.solved: Memo[Key, tuple[Piece, ...]] = Memo(size)
+        self.placed: Memo[Key, Solution] = Memo(size)
         #: (id of the pieces taken from the old motion, their offset in it, its origin
         #: to the new origin, the new origin to the tail's, id of the tail's pieces) ->
         #: (those pieces, the tail's pieces, the splice); the pieces are held, so an id
         #: is never reused while it is a key.
-        self.splices: Memo[tuple[int, int, int, int, int],
-                           tuple[tuple[Piece, ...], tuple[Piece, ...], Solution]] = Memo(size)
+        self.splices: Memo[Key, tuple[tuple[Piece, ...], tuple[Piece, ...], Solution]] = \
+            Memo(size)
 
     def clear(self) -> None:
         """Forget everything (tests, benchmarks: every move planned and solved afresh)."""
@@ -372,7 +370,7 @@ class Motion:
             source = None
             if motion.origin_ns >= old._tail.origin_ns:
                 source, offset = old._tail.pieces, old._tail.origin_ns - old.origin_ns
-        key = (id(source), offset, motion.origin_ns - old.origin_ns, at - motion.origin_ns,
+        key: Key = (id(source), offset, motion.origin_ns - old.origin_ns, at - motion.origin_ns,
                id(tail.pieces))
         if source is not None and memos is not None:
             found = memos.splices.get(key)
@@ -471,7 +469,7 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.settled(window, after_ns)
-        key = (window, after_ns - self.origin_ns)
+        key: Key = (window, after_ns - self.origin_ns)
         instants = self._solution.instants
         found = instants.get(key)
         if found is None:
@@ -488,7 +486,7 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.within(center, window, after_ns)
-        key = ("within", center, window, after_ns - self.origin_ns)
+        key: Key = ("within", center, window, after_ns - self.origin_ns)
         instants = self._solution.instants
         found = instants.get(key)
         if found is None:
@@ -553,7 +551,7 @@ def _solved(drive: Drive, position: float, velocity: float,
     """The pieces of a motion relative to the command's position at its origin.  The
     solution depends on nothing else, so a machine that repeats a cycle solves each of its
     moves once (``memos``, docs/performance.md); a hit and a miss give the same numbers."""
-    key = (drive, position, velocity, cmd)
+    key: Key = (drive, position, velocity, cmd)
     if memos is not None:
         found = memos.solved.get(key)
         if found is not None:
@@ -571,7 +569,7 @@ def _placed(drive: Drive, position: float, velocity: float,
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (kept in ``memos`` too: a cycle repeats its moves in
     place)."""
-    key = (drive, position, velocity, cmd)
+    key: Key = (drive, position, velocity, cmd)
     if memos is not None:
         found = memos.placed.get(key)
         if found is not None:

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from ...memo import Memo
+from ...memo import Key, Memo
 from ..state import units
 from .profile import Profile, Segment, State, _check_chain
 
@@ -423,7 +423,7 @@ def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int
         raise ValueError("plan_moves needs at least one waypoint")
     # Plain numbers as the key: hashing and comparing floats stays in C (the
     # dataclasses' generated __hash__/__eq__ would run interpreted).
-    key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
+    key: Key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
     found = None if plans is None else plans.get(key)
     if found is None:
         b = _Builder(start_state)
@@ -443,7 +443,7 @@ def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
 
 
 #: Plans by (start state, waypoints as plain numbers): the segments and passing times.
-Plans = Memo[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]]
+Plans = Memo[Key, tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]]
 
 
 def plan_velocity(start_state: State, velocity_pps: float, limits: Limits,

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Generator
 
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
-from ...memo import Memo
+from ...memo import Key, Memo
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
 from .compiled import Compiled, compile_statement
@@ -71,7 +71,7 @@ class LadderRunner:
         self._scan_id = 0
         self._running_id = 0
         #: The compiled statements of each bank, by (number, version of the banks).
-        self._codes: Memo[tuple[int, int], tuple[_Code, ...]] = Memo(CODES)
+        self._codes: Memo[Key, tuple[_Code, ...]] = Memo(CODES)
         self._period = self.period_ns()
         if not motion:
             motor.params.on_change(self._param_changed)
@@ -231,7 +231,7 @@ class LadderRunner:
 
     def _code(self, number: int) -> tuple[_Code, ...] | None:
         """The compiled statements of a bank (compiled once per version of the banks)."""
-        key = (number, self.motor.banks.version)
+        key: Key = (number, self.motor.banks.version)
         code = self._codes.get(key)
         if code is None:
             bank = self.motor.banks.get(True, number)

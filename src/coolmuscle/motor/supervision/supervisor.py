@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable, Sequence
 
-from ...memo import Memo
+from ...memo import Key, Memo
 from .alarms import alarm_watchers
 from ..motion.dynamics import Drive
 from .faults import Faults
@@ -62,8 +62,7 @@ class Supervisor:
         self._motion_listeners: list[MotionListener] = []
         #: The drives made from the plant as it is (:meth:`drive`), by what else they
         #: were made from.
-        self._drives: Memo[tuple[int, float, float, float, tuple[float, float], int],
-                           Drive] = Memo(64)
+        self._drives: Memo[Key, Drive] = Memo(64)
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
@@ -96,7 +95,7 @@ class Supervisor:
         ppr = m.resolution.pulses_per_rev
         extra = faults.extra_load_percent / 100.0 * plant.rated_torque
         scale, walls, speed_limit = faults.speed_scale(), self.geometry.walls(ppr), m.k(40)
-        key = (ppr, limit, scale, extra, walls, speed_limit)
+        key: Key = (ppr, limit, scale, extra, walls, speed_limit)
         found = self._drives.get(key)
         if found is None:
             found = self._drives.put(key, plant.drive(
