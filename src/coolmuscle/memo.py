@@ -60,7 +60,7 @@ class Memo(Generic[K, V]):
     does not keep and which costs as much as the rest of a lookup; a miss is a ``get``,
     a ``put`` and, once full, the removal of the oldest answer.  So the answers are
     kept by the hash of their key (the key beside the answer, compared on a hit), a
-    ``put`` of the key object the last ``get`` was asked uses the hash ``get`` computed
+    ``put`` of the key object the last ``get`` missed uses the hash ``get`` computed
     (a key of several values is a :data:`Key`, so that it stays one object), and
     the oldest answer goes by its hash (a ring of hashes, in the order they came).  Two
     keys of one hash share a place: the one put later replaces the other, which is
@@ -75,7 +75,7 @@ class Memo(Generic[K, V]):
         self._answers: dict[int, tuple[K, V]] = {}
         self._order: list[int] = []         # the hashes as they came; a ring once full
         self._oldest = 0                    # where the ring's oldest hash is
-        self._asked: object = None          # the key of the last get, and its hash
+        self._asked: object = None          # the key of the last get missed, its hash
         self._asked_hash = 0
         self._generation = _GENERATION.count
 
@@ -84,14 +84,14 @@ class Memo(Generic[K, V]):
         if self._generation != _GENERATION.count:
             self.clear()
         h = hash(key)
-        self._asked = key
-        self._asked_hash = h
         found = self._answers.get(h)
         if found is not None:
             kept = found[0]
             if kept is key or kept == key:
                 self.hits += 1
                 return found[1]
+        self._asked = key                   # the put that follows a miss needs the hash
+        self._asked_hash = h
         self.misses += 1
         return None
 
