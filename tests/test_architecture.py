@@ -1,6 +1,6 @@
 """The import graph of docs/architecture.md, enforced (grimp, import-linter's engine).
 
-- layers: tools > client > frontends > chain > device > motor > cml > sim > errors > memo; a
+- layers: tools > client > frontends > chain > device > motor > cml > sim > errors; a
   module imports only from its own layer or below (type-only imports included);
 - no import circle between modules, type-only imports counted too: the parts of a motor
   see it through the ``motor.core.MotorCore`` protocol, never the façade ``motor.motor``;
@@ -18,7 +18,7 @@ import pytest
 
 LAYERS = ("coolmuscle.tools", "coolmuscle.client", "coolmuscle.frontends", "coolmuscle.chain",
           "coolmuscle.device", "coolmuscle.motor", "coolmuscle.cml", "coolmuscle.sim",
-          "coolmuscle.errors", "coolmuscle.memo")
+          "coolmuscle.errors")
 #: The one documented exception: an AlarmError decodes its Ux with the motor's status flags.
 ALLOWED_UPWARD = {("coolmuscle.errors", "coolmuscle.motor.status")}
 VIRTUAL_TIME = ("coolmuscle.motor", "coolmuscle.chain", "coolmuscle.device", "coolmuscle.cml",

@@ -1,4 +1,4 @@
-"""The bounded memo (coolmuscle/memo.py, docs/architecture.md "Fast code"): first in,
+"""The bounded memo (coolmuscle/sim/memo.py, docs/architecture.md "Fast code"): first in,
 first out, counted, forgotten by ``clear_caches()``; a chain's memos are its own."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.memo import Memo, clear_caches
+from coolmuscle.sim.memo import Memo, clear_caches
 from coolmuscle.sim.kernel import seconds
 
 

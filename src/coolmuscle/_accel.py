@@ -36,7 +36,7 @@ from typing import Sequence
 
 #: The modules compiled, in the order hashed.  Leaves of the import graph first.
 MODULES: tuple[str, ...] = (
-    "coolmuscle.memo",
+    "coolmuscle.sim.memo",
     "coolmuscle.cml.ast",
     "coolmuscle.motor.state.param_table",
     "coolmuscle.motor.motion.expoly",

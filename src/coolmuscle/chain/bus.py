@@ -19,7 +19,7 @@ from mypy_extensions import mypyc_attr
 from ..device.api import Event, EventListener
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..errors import NoSuchMotorError
-from ..memo import Key, Memo
+from ..sim.memo import Key, Memo
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
 

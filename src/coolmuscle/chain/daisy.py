@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Callable
 from ..cml import ast
 from ..cml.parser import parse
 from ..device.api import CyclicState, MotorSnapshot, TargetStream
-from ..memo import Memo
+from ..sim.memo import Memo
 from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
                       OutOfRangeError, StoreError)
 from ..device.hostline import HostLine, LineSettings

@@ -18,7 +18,7 @@ from ..cml import ast
 from .context import Context
 from .core import MotorBus
 from ..errors import MotorError, OutOfRangeError
-from ..memo import Key, Memo
+from ..sim.memo import Key, Memo
 from ..sim.kernel import Kernel
 from .state import units
 from .signals.analog import AnalogInput, AnalogSource

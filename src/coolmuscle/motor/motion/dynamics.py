@@ -38,7 +38,7 @@ from bisect import bisect_right
 from dataclasses import dataclass, replace
 from typing import Callable, Final, Sequence
 
-from ...memo import Key, Memo
+from ...sim.memo import Key, Memo
 from ...sim.kernel import NS_PER_S
 from . import expoly as xp
 from .expoly import AnyF, F

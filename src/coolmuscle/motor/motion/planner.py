@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
-from ...memo import Key, Memo
+from ...sim.memo import Key, Memo
 from ..state import units
 from .profile import Profile, Segment, State, _check_chain
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Generator
 
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
-from ...memo import Key, Memo
+from ...sim.memo import Key, Memo
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .bankcheck import expr_steps, statement_steps
 from .compiled import Compiled, compile_statement

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Callable, Sequence
 
-from ...memo import Key, Memo
+from ...sim.memo import Key, Memo
 from .alarms import alarm_watchers
 from ..motion.dynamics import Drive
 from .faults import Faults

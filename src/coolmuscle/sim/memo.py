@@ -16,9 +16,9 @@ immutable-by-convention objects), so a hit and a miss hand out the same value an
 nobody can change what another will be given.  A memo is used by the one thread that
 runs its chain.
 
-This module imports nothing from coolmuscle: it is the bottom of the layering, and it
-is compiled with the hot modules (coolmuscle/_accel.py), so the compiled model calls
-:meth:`Memo.get` directly.
+This module imports nothing from coolmuscle: it sits with the kernel at the bottom of
+the layering, below every user, and it is compiled with the hot modules
+(coolmuscle/_accel.py), so the compiled model calls :meth:`Memo.get` directly.
 """
 
 from __future__ import annotations
