@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.sim.memo import Memo, clear_caches
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.sim.memo import Memo, clear_caches
 
 
 def test_a_full_memo_drops_its_oldest_answer_only() -> None:
