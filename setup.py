@@ -2,12 +2,14 @@
 mypyc (docs/performance.md "Compiled hot modules").
 
 ``pip install .``, ``pip install -e .`` and ``python -m build`` run the ``build_accel``
-step after the usual ones.  It compiles :data:`coolmuscle._accel.MODULES` into
-``coolmuscle/_compiled/`` when mypyc, a C compiler and the Python headers are there:
-into the wheel, or in place in the source tree for an editable install (where
-``_accel`` then turns them off as soon as a source differs).  Without a compiler the
-build still succeeds and the sources run; ``COOLMUSCLE_COMPILE=0`` skips compiling and
-``COOLMUSCLE_COMPILE=1`` makes it required (coolmuscle/tools/accel/compiler.py).
+step after the usual ones.  It compiles :data:`coolmuscle._accel.MODULES` when mypyc, a
+C compiler and the Python headers are there, in mypyc's layout (each module's
+extension beside its source): into the wheel, or in place in the source tree for an
+editable install (where ``coolmuscle._accel`` then runs the sources as soon as one of
+them is edited).  It writes the build stamp ``coolmuscle/_build_stamp.py`` last, which
+says at import which copy runs.  Without a compiler the build still succeeds and the
+sources run; ``COOLMUSCLE_COMPILE=0`` skips compiling and ``COOLMUSCLE_COMPILE=1``
+makes it required (coolmuscle/tools/accel/compiler.py).
 """
 
 from __future__ import annotations
@@ -40,6 +42,16 @@ accel = _load("_coolmuscle_build_accel", PACKAGE / "_accel.py")
 compiler = _load("_coolmuscle_build_compiler", PACKAGE / "tools" / "accel" / "compiler.py")
 
 
+#: What starts each line the compile says (pip shows them with ``-v``; scripts/_env.sh
+#: shows these lines and keeps the rest in its log).
+SAY = "coolmuscle build: "
+
+
+def say(text: str) -> None:
+    for line in text.splitlines():
+        print(SAY + line, file=sys.stderr, flush=True)
+
+
 class BuildAccel(Command):
     """Compile the hot modules with mypyc, or record why the sources run."""
 
@@ -55,20 +67,28 @@ class BuildAccel(Command):
 
     def _dest(self) -> Path:
         if self.editable_mode:            # in place: the editable install imports src/
-            return Path(accel.BUILD_DIR)
+            return Path(accel.PACKAGE_DIR)
         assert self.build_lib is not None
-        return Path(self.build_lib, "coolmuscle", "_compiled")
+        return Path(self.build_lib, "coolmuscle")
 
     def run(self) -> None:
-        lock = PACKAGE / ".accel-build.lock" if self.editable_mode else None
-        outcome = compiler.build(accel, self._dest(), lock=lock,
-                                 log=lambda line: print(line, file=sys.stderr))
-        print(f"build_accel: {'compiled' if outcome.compiled else 'sources'}: "
-              f"{outcome.reason}")
+        dest = self._dest()
+        lock = dest / ".accel-build.lock" if self.editable_mode else None
+        outcome = compiler.build(accel, dest, in_place=self.editable_mode, lock=lock,
+                                 log=say)
+        say(f"{'compiled' if outcome.compiled else 'sources'}: {outcome.reason}")
 
     def get_outputs(self) -> list[str]:
+        """The compiled files and the stamp this step wrote."""
         dest = self._dest()
-        return [str(p) for p in sorted(dest.rglob("*")) if p.is_file()] if dest.is_dir() else []
+        try:
+            values = accel.read_stamp(str(dest))
+        except ValueError:
+            values = None
+        if values is None:
+            return []
+        files = values["FILES"] if isinstance(values["FILES"], list) else []
+        return [str(dest / accel.STAMP_FILE)] + [str(dest / str(f)) for f in files]
 
     def get_output_mapping(self) -> dict[str, str]:
         return {}

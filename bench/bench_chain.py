@@ -25,8 +25,9 @@ from __future__ import annotations
 import sys
 import time
 
+from speed_worker import build  # the chain of PTP banks bench_speed.py measures too
+
 from coolmuscle.sim.kernel import seconds
-from speed_worker import build          # the chain of PTP banks bench_speed.py measures too
 
 SIZES = (1, 4, 15)
 GOAL = 500.0

@@ -23,7 +23,8 @@ import argparse
 import asyncio
 import socket
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from coolmuscle import connect, connect_async
 from coolmuscle.chain.daisy import Chain
@@ -63,6 +64,9 @@ def _raw_socket(port: int, seconds: float) -> list[float]:
 
 def _raw_inprocess(seconds: float) -> list[float]:
     import serial
+
+    from coolmuscle import register_url_handler
+    register_url_handler()
     with serial.serial_for_url("coolmuscle://?mode=fast", timeout=1) as port:
         def step() -> None:
             port.write(QUERY)

@@ -33,7 +33,6 @@ import sys
 import time
 from pathlib import Path
 
-
 from pycomm3 import CIPDriver
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,12 +19,19 @@ motor model behind it:
 Needs root.  ``--seconds`` sets each run's length (default 60)::
 
     sudo PYTHONPATH=src python bench/bench_ethercat.py [--seconds 60]
+
+First, without root or a link (``--fmmu-only`` stops there), the cost of one LRD of
+the 24-byte input image through the ESC alone, side by side: a byte-aligned FMMU of
+24 bytes, a bit-wise one of 24 bytes and a bit-wise one of 65,535 bytes (the FMMUs are
+decoded when configured: the work follows the bytes a datagram overlaps, not the
+FMMU's length).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import struct
 import subprocess
 import sys
 import tempfile
@@ -36,7 +43,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
-from coolmuscle.frontends.ethercat.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.engine import esc as E  # noqa: E402
 from coolmuscle.frontends.ethercat.lab import veth_pair  # noqa: E402
 from coolmuscle.frontends.ethercat.transport import EthercatTransport, FrameThread  # noqa: E402
 from coolmuscle.frontends.transports.service import ServiceThread  # noqa: E402
@@ -118,10 +126,43 @@ def with_model(seconds: float) -> dict[str, Any]:
     return summarize("motor model behind", master, turnaround, model_late)
 
 
+def fmmu_lrd(length: int, bitwise: bool, rounds: int = 2000) -> float:
+    """Microseconds per LRD of 24 bytes through one FMMU of ``length`` bytes (bit-wise:
+    logical start bit 3, physical start bit 5), the ESC alone (no model)."""
+    esc = BridgeApp(None).stack.esc
+    lsb, psb = (3, 5) if bitwise else (0, 0)
+    esc.write(E.REG_FMMU, struct.pack("<IHBBHBBB3x", 0x10000, length, lsb, 7, 0x1180, psb,
+                                      1, 1))
+    body = struct.pack("<BBIHH", E.LRD, 0, 0x10000, 24, 0) + bytes(24) + b"\0\0"
+    frame = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4" + struct.pack("<H", len(body) | 0x1000) \
+        + body
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(rounds):
+            esc.process(frame)
+        best = min(best, (time.perf_counter() - t0) / rounds * 1e6)
+    return best
+
+
+def print_fmmu() -> None:
+    rows = [("byte-aligned, 24 B", fmmu_lrd(24, False)), ("bit-wise, 24 B", fmmu_lrd(24, True)),
+            ("bit-wise, 65,535 B", fmmu_lrd(65535, True))]
+    base = rows[0][1]
+    print("One LRD of 24 bytes through the ESC (best of 3), by the FMMU that maps it")
+    for name, us in rows:
+        print(f"  {name:<20} {us:>8.1f} us   {us / base:>5.2f}x the byte-aligned one")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0, help="length of each run")
+    parser.add_argument("--fmmu-only", action="store_true",
+                        help="only the FMMU rows (no root, no link)")
     args = parser.parse_args()
+    print_fmmu()
+    if args.fmmu_only:
+        return
     started = time.time()
     rows = [bare(args.seconds), with_model(args.seconds)]
     print(f"EtherCAT bridge, SOEM master, 1 ms cycle ({CYCLE * 1e6:.0f} us), "

@@ -47,9 +47,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
-from coolmuscle.frontends.ethercat.app import BridgeApp  # noqa: E402
-from coolmuscle.frontends.ethercat.transport import (  # noqa: E402
-    MODEL_PRIORITY, CycleLateness)
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp  # noqa: E402
+from coolmuscle.frontends.ethercat.transport import MODEL_PRIORITY, CycleLateness  # noqa: E402
 from coolmuscle.sim.kernel import Kernel  # noqa: E402
 from coolmuscle.sim.realtime import RealtimeClock  # noqa: E402
 

@@ -34,15 +34,14 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass
-
 from typing import Any
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
-from coolmuscle.motor.signals.analog_output import output_volts
 from coolmuscle.motor.motion.axis import Axis
 from coolmuscle.motor.motion.planner import Waypoint, limits_from_data, plan_moves
 from coolmuscle.motor.motion.profile import Profile, hold
+from coolmuscle.motor.signals.analog_output import output_volts
 from coolmuscle.motor.status import status_line
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S
 from coolmuscle.tools.trace.recorder import record as record_trace

@@ -27,8 +27,9 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 
@@ -169,7 +170,7 @@ def tcp_side_by_side(seconds: float) -> None:
 
 
 def _rtu(body: bytes) -> bytes:
-    from coolmuscle.chain.modbus.rtu import crc16
+    from coolmuscle.chain.firmware_modbus.rtu import crc16
     return body + crc16(body)
 
 

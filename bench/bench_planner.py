@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import random
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from coolmuscle.motor.motion.planner import Limits, Waypoint, limits_from_data, plan_moves
 from coolmuscle.motor.motion.profile import Profile

@@ -38,8 +38,7 @@ from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from load_support import (Flood, connect, round_trip, save_then_kill,  # noqa: E402
-                          saved_value, start_sim)
+from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim  # noqa: E402
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC}

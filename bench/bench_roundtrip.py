@@ -18,8 +18,9 @@ import argparse
 import socket
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.service import ServiceThread
@@ -45,7 +46,7 @@ def _answers(make: Callable[[], Any]) -> bool:
                 while b"Px.1=" not in got and time.monotonic() < deadline:
                     sock.settimeout(max(0.01, deadline - time.monotonic()))
                     got += sock.recv(4096)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 pass
             return b"Px.1=" in got
 

@@ -1,8 +1,9 @@
 """Speed where users feel it: every row of the table of goals in one run.
 
-Run: ``PYTHONPATH=src python bench/bench_speed.py [--baseline REF] [--repeat N] [--quick]``
-(five to ten minutes; ``--quick`` divides the simulated times by ten; the first run
-also builds the baseline's compiled modules, a few minutes, kept in a cache).
+Run: ``PYTHONPATH=src python bench/bench_speed.py [--baseline REF] [--repeat N] [--quick]
+[--only ROW,...]`` (five to ten minutes; ``--quick`` divides the simulated times by ten;
+``--only start`` measures the rows named, keys of :data:`GOALS`; the first run also
+builds the baseline's compiled modules, a few minutes, kept in a cache).
 
 The machine of a user is seldom idle, so the bench starts **one competing CPU-bound
 process** (a Python busy loop) before it measures anything and stops it at the end
@@ -52,8 +53,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -188,7 +189,12 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="simulated times / 10")
     parser.add_argument("--alone", action="store_true",
                         help="no competing process (for comparison; goals are judged with it)")
+    parser.add_argument("--only", default=",".join(GOALS),
+                        help=f"the rows to measure, comma-separated ({', '.join(GOALS)})")
     opts = parser.parse_args()
+    unknown = set(opts.only.split(",")) - set(GOALS)
+    if unknown:
+        parser.error(f"--only: unknown row {sorted(unknown)[0]!r}")
     scale = 0.1 if opts.quick else 1.0
     work = Path(tempfile.mkdtemp(prefix="bench_speed_"))
     competitor = None
@@ -245,30 +251,38 @@ def run(opts: argparse.Namespace, scale: float, work: Path, base_root: Path | No
     def timed_cli(*args: str) -> Callable[[Tree], dict[str, float]]:
         return lambda tree: tree.cli(*args)
 
-    r = best(trees, rep, timed_cli("run", str(b2), "--until", f"{hours:g}"), "wall")
-    results["run1"] = [hours / x["wall"] for x in r]
-    cpu["run1"] = [hours / x["cpu"] for x in r]
-    r = best(trees, rep, timed_cli("run", str(m15), "--motors", "15", "--until",
-                                   f"{600 * scale:g}"), "wall")
-    results["run15"] = [600 * scale / x["wall"] for x in r]
-    cpu["run15"] = [600 * scale / x["cpu"] for x in r]
-    r = best(trees, rep, lambda t: t.worker("chain", "15", f"{60 * scale:g}"), "wall")
-    results["chain"] = [x["ratio"] for x in r]
-    cpu["chain"] = [60 * scale / x["cpu"] for x in r]
-    r = best(trees, max(rep, 5), timed_cli("run", str(one)), "wall")
-    results["start"] = [x["wall"] for x in r]
-    cpu["start"] = [x["cpu"] for x in r]
-    r = best(trees, rep, lambda t: t.worker("moves", f"{2200 * scale:g}"), "wall")
-    results["move"] = [x["us_per_move"] for x in r]
-    cpu["move"] = [x["cpu_us_per_move"] for x in r]
-    extra["move"] = [f"{x['events_per_move']:.2f} events, {x['calls_per_move']:.0f} "
-                     f"Python calls a move (CPU {x['cpu_us_per_move']:.0f} us)" for x in r]
-    r = best(trees, rep, lambda t: t.worker("stream", "4", f"{round(2000 * scale)}"), "wall")
-    results["stream"] = [x["us_per_axis_cycle"] for x in r]
-    cpu["stream"] = [x["cpu_us_per_axis_cycle"] for x in r]
-    extra["stream"] = [f"{x['calls_per_axis_cycle']:.0f} Python calls, "
-                       f"{x['events_per_axis_cycle']:.2f} events an axis-cycle, "
-                       f"lag <= {x['max_lag']:.2f} pulses" for x in r]
+    rows = opts.only.split(",")
+    if "run1" in rows:
+        r = best(trees, rep, timed_cli("run", str(b2), "--until", f"{hours:g}"), "wall")
+        results["run1"] = [hours / x["wall"] for x in r]
+        cpu["run1"] = [hours / x["cpu"] for x in r]
+    if "run15" in rows:
+        r = best(trees, rep, timed_cli("run", str(m15), "--motors", "15", "--until",
+                                       f"{600 * scale:g}"), "wall")
+        results["run15"] = [600 * scale / x["wall"] for x in r]
+        cpu["run15"] = [600 * scale / x["cpu"] for x in r]
+    if "chain" in rows:
+        r = best(trees, rep, lambda t: t.worker("chain", "15", f"{60 * scale:g}"), "wall")
+        results["chain"] = [x["ratio"] for x in r]
+        cpu["chain"] = [60 * scale / x["cpu"] for x in r]
+    if "start" in rows:
+        r = best(trees, max(rep, 5), timed_cli("run", str(one)), "wall")
+        results["start"] = [x["wall"] for x in r]
+        cpu["start"] = [x["cpu"] for x in r]
+    if "move" in rows:
+        r = best(trees, rep, lambda t: t.worker("moves", f"{2200 * scale:g}"), "wall")
+        results["move"] = [x["us_per_move"] for x in r]
+        cpu["move"] = [x["cpu_us_per_move"] for x in r]
+        extra["move"] = [f"{x['events_per_move']:.2f} events, {x['calls_per_move']:.0f} "
+                         f"Python calls a move (CPU {x['cpu_us_per_move']:.0f} us)" for x in r]
+    if "stream" in rows:
+        r = best(trees, rep, lambda t: t.worker("stream", "4", f"{round(2000 * scale)}"),
+                 "wall")
+        results["stream"] = [x["us_per_axis_cycle"] for x in r]
+        cpu["stream"] = [x["cpu_us_per_axis_cycle"] for x in r]
+        extra["stream"] = [f"{x['calls_per_axis_cycle']:.0f} Python calls, "
+                           f"{x['events_per_axis_cycle']:.2f} events an axis-cycle, "
+                           f"lag <= {x['max_lag']:.2f} pulses" for x in r]
 
     names = [t.name for t in trees]
     if len(trees) == 2:
@@ -282,6 +296,8 @@ def run(opts: argparse.Namespace, scale: float, work: Path, base_root: Path | No
           f"{'goal':>9}  {'gain':>6}  verdict")
     failed = 0
     for key, (label, today, goal, unit, higher, open_) in GOALS.items():
+        if key not in results:
+            continue
         values = results[key]
         if len(values) == 2:
             values = [today] + values

@@ -30,6 +30,7 @@ from typing import Any
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.transports import create
 from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.tools.web.server import WebTransport
 
 MOTORS = 15
 QUERY = b"?96.1\r"
@@ -101,7 +102,7 @@ def _pages(url: str, pages: int, seconds: float, out: Any) -> None:
 
 
 def run(web: bool, pages: int, seconds: float) -> tuple[list[float], list[int]]:
-    transports = (lambda: [create("tcp", port=0), create("web", port=0)]) if web \
+    transports = (lambda: [create("tcp", port=0), WebTransport(port=0)]) if web \
         else (lambda: [create("tcp", port=0)])
     with ServiceThread(lambda: Chain(motors=MOTORS), transports) as st:
         port = st.transports[0].info()["port"]

@@ -51,7 +51,7 @@ def build(motors: int, speed_step: int) -> tuple[Chain, list[int]]:
     return chain, moves
 
 
-def count_calls(run: "object") -> int:
+def count_calls(run: object) -> int:
     """Python function calls made by ``run()`` (sys.setprofile 'call' events)."""
     calls = [0]
 

@@ -61,7 +61,8 @@ def stream_item(cycles: int) -> str:
 def bridge_item(cycles: int) -> str:
     """The bridge (EB02) in csp: 6.1.2's enable, a triangle of targets, a disable."""
     import struct
-    from coolmuscle.frontends.ethercat.app import BridgeApp
+
+    from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
     chain = Chain(motors=4)
     app = BridgeApp(chain, "EB02")
     od = app.dictionary

@@ -8,6 +8,7 @@ from typing import Any
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
+from fixtures import new_chain
 
 
 @dataclass
@@ -48,7 +49,7 @@ class Rig:
 def rig(*lines: str, motors: int = 1, firmware: str = "cm2", k23: int = 25,
         **options: Any) -> Rig:
     """A fresh chain with K23 = ``k23`` (no echo, messages on) and ``lines`` typed."""
-    chain = Chain(motors=motors, firmware=firmware, **options)
+    chain = new_chain(motors, firmware, **options)
     result = Rig(chain)
 
     def listen(event: Event) -> None:

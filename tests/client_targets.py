@@ -16,14 +16,16 @@ from __future__ import annotations
 import shutil
 import subprocess
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.client import CoolMuscle, connect
-from coolmuscle.sim.kernel import seconds
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from coolmuscle.sim.kernel import seconds
+from fixtures import wait_until
 
 TARGETS = ("inproc", "tcp", "pty")
 
@@ -106,12 +108,9 @@ class Pty(Served):
         link = tmp / "cm-pty"
         self.proc = subprocess.Popen(["socat", f"PTY,link={link},raw,echo=0",
                                       f"TCP:127.0.0.1:{self.port}"])
-        deadline = time.monotonic() + 5
-        while not link.exists():
-            if time.monotonic() > deadline:
-                self.close()
-                raise RuntimeError("socat did not create its pty")
-            time.sleep(0.01)
+        if not wait_until(link.exists, 5, 0.01):
+            self.close()
+            raise RuntimeError("socat did not create its pty")
         self.url = str(link.resolve())
         time.sleep(0.05)  # socat connects to the server right after making the pty
 

@@ -9,9 +9,11 @@ import json
 import shutil
 import subprocess
 import sys
-import time
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import IO, Iterator, Mapping
+from typing import IO
+
+from fixtures import wait_until
 
 
 def dask_bin() -> str:
@@ -38,12 +40,12 @@ def dask_cluster(folder: Path, workers: int, env: Mapping[str, str]) -> Iterator
             [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
              "--scheduler-file", str(scheduler_file)],
             env=dict(env), stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True))
-        deadline = time.monotonic() + 60
-        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
-            if procs[0].poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("the Dask scheduler did not start: "
-                                   + (folder / "dask-0.log").read_text()[-2000:])
-            time.sleep(0.05)
+        def written() -> bool:
+            return scheduler_file.exists() and bool(scheduler_file.read_text().strip())
+        wait_until(lambda: written() or procs[0].poll() is not None, 60, 0.05)
+        if not written():
+            raise RuntimeError("the Dask scheduler did not start: "
+                               + (folder / "dask-0.log").read_text()[-2000:])
         address = str(json.loads(scheduler_file.read_text())["address"])
         for log in logs[1:]:
             procs.append(subprocess.Popen(

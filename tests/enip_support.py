@@ -12,8 +12,8 @@ import struct
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.enip.server import EnipTransport

@@ -13,9 +13,9 @@ import struct
 from typing import Any
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.ethercat.app import BridgeApp
-from coolmuscle.frontends.ethercat.dictionary import SdoAbort
-from coolmuscle.frontends.ethercat.objects import STRING
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.engine.dictionary import SdoAbort
+from coolmuscle.frontends.ethercat.engine.od import STRING
 from coolmuscle.sim.kernel import Kernel
 
 MS = 1_000_000
@@ -32,7 +32,7 @@ class Bench:
 
     def __init__(self, bridge: str = "EB02", machine: Any = None, firmware: str | None = None,
                  **chain: Any) -> None:
-        from coolmuscle.frontends.ethercat import identity as ident
+        from coolmuscle.frontends.ethercat.bridge import identity as ident
         fw = firmware or ",".join(ident.variant(bridge).firmware)
         self.kernel = Kernel()
         self.chain = Chain(self.kernel, 4, firmware=fw, machine=machine, **chain)

@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from coolmuscle.device.hostline import BAUD_RATES, HostLine, LineSettings
-from coolmuscle.tools.script.runner import parse_script
 from coolmuscle.sim.kernel import Kernel, seconds
+from coolmuscle.tools.script.runner import parse_script
 
 _QUERY = re.compile(r"\?96\.(\d+)")
 _GO = re.compile(r"\^\.(\d+)")

@@ -20,17 +20,15 @@ import re
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping
+from typing import Any
 
 from coolmuscle.motor.state.store import Store
-
-#: The banner item that gives the TCP port of ``coolmuscle sim --tcp 0``.
-TCP_BANNER = "tcp: 127.0.0.1:"
+from fixtures import ServedSim
 
 
 def connect(port: int, timeout: float = 10.0) -> socket.socket:
@@ -59,7 +57,7 @@ class Flood:
         if line is not None:
             self._threads.append(threading.Thread(target=self._pump, daemon=True))
 
-    def __enter__(self) -> "Flood":
+    def __enter__(self) -> Flood:
         self.sock.settimeout(self.poll)
         for thread in self._threads:
             thread.start()
@@ -79,7 +77,7 @@ class Flood:
             try:
                 self.sock.sendall(data)
                 self.sent += self.batch
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 continue
             except OSError:
                 return
@@ -89,7 +87,7 @@ class Flood:
             try:
                 if not self.sock.recv(1 << 16):
                     return
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 continue
             except OSError:
                 return
@@ -120,22 +118,18 @@ def round_trip(sock: socket.socket, query: bytes, reply: bytes, timeout: float =
 
 
 def start_sim(state: Path, env: Mapping[str, str],
-              *extra: str) -> tuple[subprocess.Popen[str], int]:
-    """``coolmuscle sim --tcp 0 --state STATE`` as a process, and its TCP port (from the
-    banner on stderr; stderr stays open for the caller)."""
-    proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", "sim", "--tcp", "0",
-                             "--state", str(state), *extra], stderr=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, text=True, env=dict(env))
-    assert proc.stderr is not None
-    while True:
-        line = proc.stderr.readline()
-        if not line:
-            raise RuntimeError(f"sim ended before it was ready (exit {proc.wait()})")
-        if TCP_BANNER in line:
-            return proc, int(line.split(TCP_BANNER)[1].split()[0])
+              *extra: str) -> tuple[subprocess.Popen[bytes], int]:
+    """``coolmuscle sim --tcp 0 --state STATE`` as a process (:class:`fixtures.ServedSim`;
+    what it prints goes to ``sim.log`` beside STATE), and its TCP port from the banner;
+    ``RuntimeError`` when it ended before it was ready."""
+    try:
+        sim = ServedSim(state.parent / "sim.log", *extra, state=state, env=env)
+    except AssertionError as exc:
+        raise RuntimeError(f"sim ended before it was ready: {exc}") from None
+    return sim.proc, sim.port
 
 
-def save_then_kill(proc: subprocess.Popen[str], port: int, last: int, seconds: float,
+def save_then_kill(proc: subprocess.Popen[Any], port: int, last: int, seconds: float,
                    pause: float = 0.0) -> int:
     """Save ``P1.1`` = ``last`` + 1, + 2, ... (``P1.1=n`` then ``$.1``, each answered
     ``saved.1``) for ``seconds``, send one more save and ``kill -9`` the sim ``pause``

@@ -10,15 +10,16 @@ from __future__ import annotations
 import contextlib
 import shutil
 import subprocess
-import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import pytest
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, ms
+from fixtures import wait_until
 
 needs_socat = pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed")
 needs_mbpoll = pytest.mark.skipif(shutil.which("mbpoll") is None, reason="mbpoll is not installed")
@@ -87,22 +88,14 @@ def socat_pty_pair(directory: Path) -> Iterator[tuple[str, str]]:
     proc = subprocess.Popen(["socat", f"PTY,link={a},raw,echo=0", f"PTY,link={b},raw,echo=0"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 5
-        while not (a.exists() and b.exists()):
-            assert proc.poll() is None and time.monotonic() < deadline, "socat made no ptys"
-            time.sleep(0.02)
+        assert wait_until(lambda: a.exists() and b.exists() or proc.poll() is not None), \
+            "socat made no ptys"
+        assert proc.poll() is None, "socat ended"
         yield str(a), str(b)
     finally:
         proc.terminate()
         proc.wait(5)
 
 
-def wait_for(predicate: Callable[[], bool], timeout: float = 5.0, step: float = 0.02) -> bool:
-    """Poll ``predicate`` (wall clock) until it holds or ``timeout`` passes."""
-    deadline = time.monotonic() + timeout
-    while True:
-        if predicate():
-            return True
-        if time.monotonic() >= deadline:
-            return False
-        time.sleep(step)
+#: The name tests/test_modbus_peers.py imports: the suite's one wall-clock wait.
+wait_for = wait_until

@@ -1,8 +1,9 @@
 """The compiled hot modules (coolmuscle/_accel.py, docs/performance.md "Compiled hot
-modules"): in use when current, never when stale, and giving the same bytes as the
-sources; the build (coolmuscle/tools/accel/compiler.py) compiles, keeps the sources or
-fails as ``COOLMUSCLE_COMPILE`` and the machine say.  tests/test_packaging.py builds and
-installs real wheels.
+modules"): beside their sources, in use when the build stamp says they are current,
+never when stale (an edit, a build cut short, ``COOLMUSCLE_PURE``), and giving the same
+bytes as the sources; the build (coolmuscle/tools/accel/compiler.py) compiles, keeps the
+sources or fails as ``COOLMUSCLE_COMPILE`` and the machine say.  tests/test_packaging.py
+builds and installs real wheels.
 
 The compiled code must not change the motion (traces identical, and the same as the
 exact model): tests/accel_worker.py runs every example and
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -44,14 +46,17 @@ def built() -> None:
     assert accel_tool.build(quiet=True) == 0, "python -m coolmuscle.tools.accel build failed"
 
 
-def test_a_fresh_process_imports_the_compiled_modules(built: None) -> None:
+def test_a_fresh_process_imports_the_compiled_modules_beside_their_sources(
+        built: None) -> None:
     code = ("import coolmuscle._accel as a, coolmuscle.motor.motion.dynamics as d, "
             "coolmuscle.sim.kernel as k; print(a.active(), d.__file__, k.__file__)")
     env = {k: v for k, v in os.environ.items() if k != "COOLMUSCLE_PURE"}
     active, *files = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                                     text=True, check=True).stdout.split()
     assert active == "True"
-    assert all(f.endswith(".so") and "_compiled" in f for f in files), files
+    for found, source in zip(files, ("motor/motion/dynamics", "sim/kernel"), strict=True):
+        assert found.startswith(f"{accel.PACKAGE_DIR}/{source}.cpython-") and \
+            found.endswith(".so"), found
 
 
 def test_compiled_and_pure_give_the_same_bytes_for_every_script_trace_and_stream(
@@ -78,60 +83,139 @@ def test_a_pure_run_imports_the_sources() -> None:
     assert out.endswith("dynamics.py")
 
 
+# -- the stamp: what is refused, and a copy of the package edited for real --------------
 @pytest.fixture
-def fake_build(built: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """A copy of the real manifest in a temporary build directory."""
-    manifest = json.loads((accel.BUILD_DIR / accel.MANIFEST_NAME).read_text(encoding="utf-8"))
-    for rel in manifest["files"].values():
-        dest = tmp_path / rel
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        dest.write_bytes(b"")
-    (tmp_path / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
-    monkeypatch.setattr(accel, "BUILD_DIR", tmp_path)
-    return tmp_path
+def stamp(built: None) -> dict[str, object]:
+    values = accel.read_stamp(accel.PACKAGE_DIR)
+    assert values is not None
+    return values
 
 
-def edit_manifest(build: Path, **changes: object) -> None:
-    data = json.loads((build / "manifest.json").read_text(encoding="utf-8"))
-    data.update(changes)
-    (build / "manifest.json").write_text(json.dumps(data), encoding="utf-8")
+def test_a_current_build_is_accepted(stamp: dict[str, object]) -> None:
+    assert accel.refusal(stamp) is None
+    assert stamp["SOURCES"] == accel.source_stats()      # the sources' sizes and times
 
 
-def test_a_current_build_is_accepted(fake_build: Path) -> None:
-    files, reason = accel.read_manifest()
-    assert files is not None and set(files) >= set(accel.MODULES), reason
-
-
-def test_an_edited_source_turns_the_whole_build_off(fake_build: Path) -> None:
-    edit_manifest(fake_build, digest="0" * 64)
-    files, reason = accel.read_manifest()
-    assert files is None and "a hot module changed since it was compiled" in reason
+def test_an_edited_source_turns_the_whole_build_off(stamp: dict[str, object]) -> None:
+    sources = dict(stamp["SOURCES"])                      # type: ignore[call-overload]
+    size, mtime = sources["motor/motion/planner.py"]
+    sources["motor/motion/planner.py"] = [size + 1, mtime]
+    assert accel.refusal(dict(stamp, SOURCES=sources)) == (
+        "a hot module changed since it was compiled (motor/motion/planner.py); "
+        "python -m coolmuscle.tools.accel build, or pip install again")
 
 
 @pytest.mark.parametrize("change, words", [
-    ({"cache_tag": "cpython-399"}, "compiled for cpython-399"),
-    ({"modules": ["coolmuscle.motor.motion.expoly"]}, "another module list"),
-    ({"files": None}, "malformed"),
+    ({"CACHE_TAG": "cpython-399"}, "compiled for cpython-399"),
+    ({"MODULES": ["coolmuscle.motor.motion.expoly"]}, "another module list"),
+    ({"FILES": None}, "malformed"),
+    ({"FILES": ["sim/gone.cpython-311-x86_64-linux-gnu.so"]}, "a compiled file is missing"),
+    ({"COMPILED": False, "REASON": "not compiled at install time: no C compiler"},
+     "not compiled at install time: no C compiler"),
 ])
-def test_a_build_for_something_else_is_refused(fake_build: Path, change: dict[str, object],
-                                               words: str) -> None:
-    edit_manifest(fake_build, **change)
-    files, reason = accel.read_manifest()
-    assert files is None and words in reason
+def test_a_build_for_something_else_is_refused(stamp: dict[str, object],
+                                               change: dict[str, object], words: str) -> None:
+    why = accel.refusal(dict(stamp, **change))
+    assert why is not None and words in why
 
 
-def test_a_missing_or_damaged_build_is_refused(fake_build: Path) -> None:
-    (fake_build / "manifest.json").write_text("{not json", encoding="utf-8")
-    assert accel.read_manifest()[0] is None
-    (fake_build / "manifest.json").unlink()
-    files, reason = accel.read_manifest()
-    assert files is None and reason.startswith("not compiled; pip install again")
+def test_a_missing_or_damaged_stamp_is_no_build(tmp_path: Path) -> None:
+    assert accel.read_stamp(str(tmp_path)) is None
+    assert accel.refusal(None) == (
+        "not compiled; python -m coolmuscle.tools.accel build, or pip install again")
+    (tmp_path / accel.STAMP_FILE).write_text("COMPILED = (\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="build stamp unreadable"):
+        accel.read_stamp(str(tmp_path))
+
+
+WHICH = ("import coolmuscle, coolmuscle.sim.kernel as k, coolmuscle.motor.motion.dynamics as d;"
+         " from coolmuscle import _accel as a; print(a.describe()); print(k.__file__);"
+         " print(d.__file__)")
+
+
+def which(package: Path, **env: str) -> tuple[str, list[str]]:
+    """In a fresh interpreter on the copy: ``--version``'s line, and the files of two hot
+    modules relative to the copy."""
+    environ = {k: v for k, v in os.environ.items() if k != "COOLMUSCLE_PURE"}
+    environ.update(PYTHONPATH=str(package.parent), **env)
+    line, *files = subprocess.run([sys.executable, "-c", WHICH], env=environ,
+                                  capture_output=True, text=True, check=True,
+                                  timeout=60).stdout.splitlines()
+    return line, [str(Path(f).relative_to(package)) for f in files]
+
+
+@pytest.fixture
+def package_copy(built: None, tmp_path: Path) -> Path:
+    """A copy of the package with its compiled modules and stamp (times kept)."""
+    copy = tmp_path / "src" / "coolmuscle"
+    shutil.copytree(accel.PACKAGE_DIR, copy,
+                    ignore=shutil.ignore_patterns("__pycache__", ".accel-build.lock"))
+    return copy
+
+
+def test_an_edit_a_touch_a_rebuild_and_pure_in_a_copy_of_the_package(package_copy: Path) -> None:
+    """The guarantee end to end, in a fresh interpreter each time: compiled when current;
+    one hot source edited (one byte) turns every compiled module off and says which;
+    the same file only touched too, until the build tool records its time again
+    (comparing the bytes, without compiling); ``COOLMUSCLE_PURE=1`` runs the sources."""
+    so = ".cpython-311-x86_64-linux-gnu.so"
+    compiled = [f"sim/kernel{so}", f"motor/motion/dynamics{so}"]
+    sources = ["sim/kernel.py", "motor/motion/dynamics.py"]
+    line, files = which(package_copy)
+    assert line.startswith("hot modules: compiled (") and files == compiled
+
+    planner = package_copy / "motor" / "motion" / "planner.py"
+    original = planner.read_bytes()
+    planner.write_bytes(original + b"\n")
+    line, files = which(package_copy)
+    assert line == ("hot modules: sources (a hot module changed since it was compiled "
+                    "(motor/motion/planner.py); python -m coolmuscle.tools.accel build, "
+                    "or pip install again)")
+    assert files == sources
+
+    planner.write_bytes(original)                   # the same bytes, a new time
+    assert which(package_copy)[1] == sources
+    environ = {k: v for k, v in os.environ.items() if k != "COOLMUSCLE_PURE"}
+    environ["PYTHONPATH"] = str(package_copy.parent)
+    done = subprocess.run([sys.executable, "-m", "coolmuscle.tools.accel", "build"],
+                          env=environ, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.startswith("current (sources touched"), done
+    assert which(package_copy)[1] == compiled
+    line, files = which(package_copy, COOLMUSCLE_PURE="1")
+    assert line == "hot modules: sources (COOLMUSCLE_PURE is set)" and files == sources
+
+
+def test_a_build_cut_short_runs_the_sources(package_copy: Path) -> None:
+    """While the compiled files are replaced the stamp says so and names them: a build
+    stopped there (here: the stamp of that moment, the old files still present) runs
+    the sources, though the extension modules are beside them."""
+    values = accel.read_stamp(str(package_copy))
+    assert values is not None
+    compiler._write_stamp(accel, package_copy, {
+        "COMPILED": False, "FILES": values["FILES"],
+        "REASON": "a build of the compiled modules was cut short; python -m "
+                  "coolmuscle.tools.accel build, or pip install again"})
+    line, files = which(package_copy)
+    assert line.startswith("hot modules: sources (a build of the compiled modules was cut short")
+    assert files == ["sim/kernel.py", "motor/motion/dynamics.py"]
+
+
+def test_clean_removes_every_compiled_file_and_the_stamp(package_copy: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(accel, "PACKAGE_DIR", str(package_copy))
+    assert accel_tool.main(["clean"]) == 0
+    assert not list(package_copy.rglob("*.so"))
+    assert not (package_copy / accel.STAMP_FILE).exists()
+    line, files = which(package_copy)
+    assert line == ("hot modules: sources (not compiled; python -m coolmuscle.tools.accel "
+                    "build, or pip install again)")
+    assert files == ["sim/kernel.py", "motor/motion/dynamics.py"]
 
 
 def test_the_build_tool_answers_status_and_bad_usage(
         built: None, capsys: pytest.CaptureFixture[str]) -> None:
     assert accel_tool.main(["status"]) == 0
-    assert "built from the current sources" in capsys.readouterr().out
+    assert "built in place from the current sources by mypyc" in capsys.readouterr().out
     assert accel_tool.main(["build"]) == 0               # current: nothing to do
     assert "current" in capsys.readouterr().out
     assert accel_tool.main(["frobnicate"]) == 2
@@ -164,18 +248,22 @@ def test_the_kernel_takes_float_times_and_floors_them(until: float) -> None:
 
 
 def test_a_forced_build_without_mypy_says_so_and_keeps_the_current_build(
-        fake_build: Path, monkeypatch: pytest.MonkeyPatch,
+        stamp: dict[str, object], monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setattr(compiler, "find_spec", lambda name: None)
     assert accel_tool.main(["build", "--force"]) == 1
     assert "no mypy (mypyc)" in capsys.readouterr().err
-    assert accel.read_manifest()[0] is not None                # nothing removed
+    assert accel.read_stamp(accel.PACKAGE_DIR) == stamp        # nothing removed
+    assert accel.refusal(stamp) is None
 
 
 def test_a_read_only_install_gets_one_line_not_a_traceback(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(accel, "PACKAGE_DIR", tmp_path / "no" / "such" / "dir")
+    """The package folder cannot be written (here a path through a file: as root a mode
+    bit would not stop the build)."""
+    (tmp_path / "afile").write_text("")
+    monkeypatch.setattr(accel, "PACKAGE_DIR", str(tmp_path / "afile" / "coolmuscle"))
     assert accel_tool.main(["build"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("coolmuscle.tools.accel build: ") and "Traceback" not in err
@@ -190,34 +278,37 @@ def build_env(monkeypatch: pytest.MonkeyPatch) -> pytest.MonkeyPatch:
     return monkeypatch
 
 
-def test_compile_0_keeps_the_sources_and_says_so(fake_build: Path,
+def test_compile_0_keeps_the_sources_and_says_so(package_copy: Path,
                                                  build_env: pytest.MonkeyPatch) -> None:
     """The escape hatch: ``COOLMUSCLE_COMPILE=0`` removes even a current build."""
     build_env.setenv("COOLMUSCLE_COMPILE", "0")
     assert not compiler.will_compile()
-    outcome = compiler.build(accel, fake_build)
+    outcome = compiler.build(accel, package_copy, in_place=False)
     assert outcome == compiler.Outcome(False, "COOLMUSCLE_COMPILE=0")
-    assert sorted(p.name for p in fake_build.iterdir()) == ["manifest.json"]
-    assert accel.read_manifest(fake_build) == (
-        None, "not compiled at install time: COOLMUSCLE_COMPILE=0")
+    assert not list(package_copy.rglob("*.so"))
+    assert accel.refusal(accel.read_stamp(str(package_copy)), str(package_copy)) == (
+        "not compiled at install time: COOLMUSCLE_COMPILE=0")
 
 
-def test_a_current_build_is_left_as_it_is(fake_build: Path,
+def test_a_current_build_is_left_as_it_is(stamp: dict[str, object],
                                           build_env: pytest.MonkeyPatch) -> None:
-    before = (fake_build / "manifest.json").read_bytes()
-    assert compiler.build(accel, fake_build) == compiler.Outcome(True, "current")
-    assert (fake_build / "manifest.json").read_bytes() == before
+    path = Path(accel.PACKAGE_DIR, accel.STAMP_FILE)
+    before = path.read_bytes()
+    assert compiler.build(accel, Path(accel.PACKAGE_DIR), in_place=True) == \
+        compiler.Outcome(True, "current")
+    assert path.read_bytes() == before
 
 
-def test_without_a_c_compiler_the_sources_run_and_the_manifest_says_why(
+def test_without_a_c_compiler_the_sources_run_and_the_stamp_says_why(
         tmp_path: Path, build_env: pytest.MonkeyPatch) -> None:
     build_env.setenv("CC", "/no/such/cc -pthread")
     assert compiler.missing() == "no C compiler (/no/such/cc not found)"
     assert not compiler.will_compile()
     logged: list[str] = []
-    outcome = compiler.build(accel, tmp_path / "out", log=logged.append)
+    out = tmp_path / "out"
+    outcome = compiler.build(accel, out, in_place=False, log=logged.append)
     assert outcome == compiler.Outcome(False, "no C compiler (/no/such/cc not found)")
-    assert accel.read_manifest(tmp_path / "out")[1] == (
+    assert accel.refusal(accel.read_stamp(str(out)), str(out)) == (
         "not compiled at install time: no C compiler (/no/such/cc not found)")
     assert logged == ["the hot modules are not compiled (no C compiler (/no/such/cc not "
                       "found)); the sources run"]
@@ -235,7 +326,7 @@ def test_compile_1_fails_a_build_that_cannot_compile_and_writes_nothing(
     build_env.setenv("COOLMUSCLE_COMPILE", "1")
     build_env.setenv("CC", "/no/such/cc")
     with pytest.raises(compiler.CompileError, match=r"no C compiler \(/no/such/cc"):
-        compiler.build(accel, tmp_path / "out")
+        compiler.build(accel, tmp_path / "out", in_place=False)
     assert not (tmp_path / "out").exists()
 
 
@@ -246,11 +337,13 @@ def test_a_failed_compile_keeps_the_sources_with_its_last_line(
     build_env.setattr(compiler, "_SETUP", "import sys\nprint('warming up')\n"
                       "sys.exit('error: command gcc failed with exit code 1')\n")
     logged: list[str] = []
-    outcome = compiler.build(accel, tmp_path / "out", log=logged.append)
+    out = tmp_path / "out"
+    outcome = compiler.build(accel, out, in_place=False, log=logged.append)
     why = "mypyc or the C compiler failed: error: command gcc failed with exit code 1"
     assert outcome == compiler.Outcome(False, why)
     assert logged[0] == "warming up\nerror: command gcc failed with exit code 1"
-    assert accel.read_manifest(tmp_path / "out")[1] == f"not compiled at install time: {why}"
+    assert accel.refusal(accel.read_stamp(str(out)), str(out)) == \
+        f"not compiled at install time: {why}"
 
 
 def test_a_bad_compile_setting_is_one_line(build_env: pytest.MonkeyPatch,
@@ -260,18 +353,3 @@ def test_a_bad_compile_setting_is_one_line(build_env: pytest.MonkeyPatch,
     assert accel_tool.main(["build", "--force"]) == 1
     assert capsys.readouterr().err == ("compiling the hot modules failed: "
                                        "COOLMUSCLE_COMPILE must be 0, 1 or auto, not 'yes'\n")
-
-
-def test_a_build_that_does_not_load_leaves_the_sources_running(fake_build: Path) -> None:
-    """A current manifest whose shared library cannot be loaded (here an empty file):
-    :func:`coolmuscle._accel.install` takes its finder back and says why."""
-    code = ("import os, sys; from pathlib import Path; import coolmuscle._accel as a; "
-            "del os.environ['COOLMUSCLE_PURE']; a.BUILD_DIR = Path(sys.argv[1]); "
-            "a.install(); import coolmuscle.sim.kernel as k; print(a.describe()); "
-            "print(k.__file__)")
-    env = dict(os.environ, COOLMUSCLE_PURE="1")
-    described, kernel = subprocess.run(
-        [sys.executable, "-c", code, str(fake_build)], env=env, capture_output=True,
-        text=True, check=True).stdout.splitlines()
-    assert described.startswith("hot modules: sources (the compiled modules do not load: ")
-    assert kernel.endswith("kernel.py")

@@ -16,17 +16,10 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import NS_PER_S, seconds
+from fixtures import ChainFactory, collect_events
 
-
-def _chain(**plant: float) -> tuple[Chain, list[Event]]:
-    chain = Chain()
-    events: list[Event] = []
-    chain.subscribe(events.append)
-    motor = chain.motors[1]
-    for key, value in plant.items():
-        setattr(motor.plant, key, value)
-    chain.execute("K34.1=2, K23.1=17")          # output 1: alarm; reports and messages
-    return chain, events
+#: Output 1 is the alarm output (K34 function 2); reports and messages on (K23 17).
+ALARM_OUTPUT = "K34.1=2, K23.1=17"
 
 
 def _reports(events: list[Event]) -> list[tuple[float, str]]:
@@ -48,8 +41,9 @@ def _free_and_recover(chain: Chain, ux: int, *, by_reset: bool = False) -> None:
     assert motor.axis.enabled
 
 
-def test_ch3_k56_position_error_overflow_at_a_stopper() -> None:
-    chain, events = _chain()
+def test_ch3_k56_position_error_overflow_at_a_stopper(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.motors[1].geometry.stopper_cw = 2000.0
     chain.execute("K56.1=10, S.1=50, A.1=100, P.1=50000")   # 1000 pulses, 5000 pps
     chain.execute("^.1")
@@ -64,8 +58,9 @@ def test_ch3_k56_position_error_overflow_at_a_stopper() -> None:
     _free_and_recover(chain, 1)
 
 
-def test_ch3_k57_overload_after_k57_ms_beyond_rated_torque() -> None:
-    chain, events = _chain()
+def test_ch3_k57_overload_after_k57_ms_beyond_rated_torque(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.motors[1].geometry.stopper_cw = 1000.0
     chain.execute("K57.1=500, S.1=10, A.1=100, P.1=1010")   # pushes 10 pulses past it
     chain.execute("^.1")
@@ -77,10 +72,11 @@ def test_ch3_k57_overload_after_k57_ms_beyond_rated_torque() -> None:
     _free_and_recover(chain, 4, by_reset=True)
 
 
-def test_ch3_k40_over_speed_when_the_load_runs_away() -> None:
+def test_ch3_k40_over_speed_when_the_load_runs_away(make_chain: ChainFactory) -> None:
     # a hanging load of 200 % rated against a torque limit of 30 % (M=10): the shaft is
     # dragged down past 1.2 x K40 = 1200 min⁻¹ = 20 000 pps
-    chain, events = _chain()
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("K40.1=1000, M.1=10")
     chain.inject_fault(1, "overload", torque=200)       # held by +torque: it pulls CCW
     motor = chain.motors[1]
@@ -93,11 +89,12 @@ def test_ch3_k40_over_speed_when_the_load_runs_away() -> None:
     _free_and_recover(chain, 2)
 
 
-def test_ch3_k40_an_s_above_the_maximum_speed_is_limited_to_it() -> None:
+def test_ch3_k40_an_s_above_the_maximum_speed_is_limited_to_it(make_chain: ChainFactory) -> None:
     # ch. 3 K40: "This parameter sets motor's maximum speed" and "S value = speed[min⁻¹]
     # x resolution[ppr] / speed unit / 60": K40=1000 at K37=3 is S 166.7; S=250 runs
     # at that speed, in position at the end, no position error overflow
-    chain, events = _chain()
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("K40.1=1000, S.1=250, A.1=100, P.1=100000")  # 25 000 pps > 16 667
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
@@ -108,9 +105,10 @@ def test_ch3_k40_an_s_above_the_maximum_speed_is_limited_to_it() -> None:
     assert chain.execute("?96.1") == ["Px.1=100000"]
 
 
-def test_ch3_k40_issue_example_k40_600_s200_runs_at_s100() -> None:
+def test_ch3_k40_issue_example_k40_600_s200_runs_at_s100(make_chain: ChainFactory) -> None:
     # the issue's case: K40=600 -> max S = 600 x 1000 / 100 / 60 = 100
-    chain, events = _chain()
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("K40.1=600, S.1=200, A.1=100, P.1=50000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(1))
@@ -120,8 +118,8 @@ def test_ch3_k40_issue_example_k40_600_s200_runs_at_s100() -> None:
     assert chain.execute("?99.1") == ["Ux.1=8"]
 
 
-def test_ch3_k40_limits_continuous_rotation_too() -> None:
-    chain, _ = _chain()
+def test_ch3_k40_limits_continuous_rotation_too(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
     chain.execute("K40.1=600, S.1=-200, A.1=100, P.1=1000000000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(1))
@@ -129,8 +127,11 @@ def test_ch3_k40_limits_continuous_rotation_too() -> None:
     assert chain.execute("?99.1") == ["Ux.1=0"]
 
 
-def test_6_6_temperature_rises_and_cools_in_closed_form_then_alarms() -> None:
-    chain, events = _chain(load_torque=0.9 * 0.32)          # a vertical axis: 90 % held
+def test_6_6_temperature_rises_and_cools_in_closed_form_then_alarms(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(plant={"load_torque": 0.9 * 0.32},      # a vertical axis: 90 % held
+                       setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     motor = chain.motors[1]
     motor.thermal.idle, motor.thermal.time_constant = 60.0, 10.0
     motor.thermal.reset(None, chain.kernel.now)
@@ -148,8 +149,9 @@ def test_6_6_temperature_rises_and_cools_in_closed_form_then_alarms() -> None:
     _free_and_recover(chain, 128)
 
 
-def test_temperature_alarm_returns_when_reset_while_hot() -> None:
-    chain, events = _chain()
+def test_temperature_alarm_returns_when_reset_while_hot(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.inject_fault(1, "over_temperature", temperature=95)
     assert _reports(events) == [(0.0, "Ux.1=128")]
     assert chain.execute("?71.1") == ["Temp.1=95"]
@@ -163,8 +165,9 @@ def test_temperature_alarm_returns_when_reset_while_hot() -> None:
 
 @pytest.mark.parametrize("fault, ux", [("over_current", 64), ("regeneration", 2),
                                        ("over_speed", 2), ("encoder", 1)])
-def test_injected_alarm_faults(fault: str, ux: int) -> None:
-    chain, events = _chain()
+def test_injected_alarm_faults(fault: str, ux: int, make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("S.1=100, A.1=100, P.1=10000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.3))
@@ -176,15 +179,17 @@ def test_injected_alarm_faults(fault: str, ux: int) -> None:
     _free_and_recover(chain, ux)
 
 
-def test_a_second_alarm_adds_its_code() -> None:
-    chain, events = _chain()
+def test_a_second_alarm_adds_its_code(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.inject_fault(1, "over_current")
     chain.inject_fault(1, "over_temperature")
     assert [t for _, t in _reports(events)] == ["Ux.1=64", "Ux.1=192"]
 
 
-def test_overload_fault_is_a_jam_the_motor_answers() -> None:
-    chain, events = _chain()
+def test_overload_fault_is_a_jam_the_motor_answers(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("K57.1=200")
     chain.inject_fault(1, "overload", torque=150)
     assert chain.execute("?98.1") == ["Ix.1=150"]           # holding against it
@@ -195,8 +200,9 @@ def test_overload_fault_is_a_jam_the_motor_answers() -> None:
     _free_and_recover(chain, 4)
 
 
-def test_power_cable_broken_no_torque_then_position_error() -> None:
-    chain, events = _chain()
+def test_power_cable_broken_no_torque_then_position_error(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.inject_fault(1, "broken_cable", cable="power")
     chain.execute("K56.1=5, S.1=10, A.1=100, P.1=2000")
     chain.execute("^.1")
@@ -210,8 +216,8 @@ def test_power_cable_broken_no_torque_then_position_error() -> None:
     assert chain.execute("?96.1") == ["Px.1=2000"]
 
 
-def test_supply_voltage_drop_shows_in_vsen_and_limits_speed() -> None:
-    chain, _ = _chain()
+def test_supply_voltage_drop_shows_in_vsen_and_limits_speed(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
     chain.inject_fault(1, "supply_voltage", volts=12.0)
     assert chain.execute("?72.1") == ["VSEN.1=120"]
     chain.execute("K40.1=4000, K56.1=32767, S.1=500, A.1=1000, P.1=1000000")
@@ -222,8 +228,9 @@ def test_supply_voltage_drop_shows_in_vsen_and_limits_speed() -> None:
     assert chain.execute("?72.1") == ["VSEN.1=240"]
 
 
-def test_stuck_input_and_broken_io_cable() -> None:
-    chain, events = _chain()
+def test_stuck_input_and_broken_io_cable(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
+    events = collect_events(chain)
     chain.execute("K23.1=19")
     chain.inject_fault(1, "stuck_input", input=3, on=True)
     chain.set_input(1, 3, False)
@@ -239,8 +246,8 @@ def test_stuck_input_and_broken_io_cable() -> None:
         ["IN.1=04", "IN.1=05", "IN.1=04", "IN.1=00", "IN.1=01"]
 
 
-def test_unknown_fault_or_parameter_is_refused() -> None:
-    chain, _ = _chain()
+def test_unknown_fault_or_parameter_is_refused(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=ALARM_OUTPUT)
     with pytest.raises(ValueError, match="unknown fault"):
         chain.inject_fault(1, "gremlins")
     with pytest.raises(ValueError, match="no parameter"):
@@ -258,12 +265,12 @@ def test_unknown_fault_or_parameter_is_refused() -> None:
     ("supply_voltage", {"volts": math.nan}), ("supply_voltage", {"volts": 1001}),
 ])
 def test_a_fault_value_out_of_its_bounds_is_refused_and_the_motor_stays_sane(
-        fault: str, params: dict[str, float]) -> None:
+        fault: str, params: dict[str, float], make_chain: ChainFactory) -> None:
     """An injected value beyond what it can mean (10x the rated torque, -40..200 °C,
     0..1000 V) or not finite is refused (ValueError: the web page's and the API's
     error answer) and changes nothing; once a 1e308 % overload turned every position
     into NaN for good (an attack on the web dashboard found it)."""
-    chain, _ = _chain()
+    chain = make_chain(setup=ALARM_OUTPUT)
     chain.execute("S.1=100, A.1=100, P.1=5000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.2))

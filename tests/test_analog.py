@@ -13,18 +13,20 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.signals.analog import (Constant, Ramp, Sine, Table, TorqueSensor,
-                                             adc, source_from_config)
+from coolmuscle.motor.signals.analog import (
+    Constant,
+    Ramp,
+    Sine,
+    Table,
+    TorqueSensor,
+    adc,
+    source_from_config,
+)
 from coolmuscle.motor.signals.analog_control import SAMPLE_NS, TICK_NS, friction_nm
 from coolmuscle.motor.signals.analog_output import output_volts, volts_to_register
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.tools.trace.recorder import record
-
-
-def _chain(firmware: str = "cm2") -> Chain:
-    chain = Chain(firmware=firmware)
-    record(chain)
-    return chain
+from fixtures import ChainFactory, new_chain
 
 
 # -- the converter and the sources ------------------------------------------------------
@@ -88,9 +90,9 @@ def test_machine_file_csv_rows_must_be_numbers(tmp_path: Path) -> None:
 
 
 # -- K39 filter and when the loop runs --------------------------------------------------------
-def test_ch3_k39_first_order_filter_at_5000_samples_per_second() -> None:
+def test_ch3_k39_first_order_filter_at_5000_samples_per_second(make_chain: ChainFactory) -> None:
     """K39 unit "5[rad/sec] = 5000[times/sec]/1024": y += K39/1024 (x - y) per sample."""
-    chain = _chain()
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.set_param(1, 38, 5)                      # P data: the loop runs, nothing moves
     chain.set_param(1, 39, 64)
@@ -104,8 +106,8 @@ def test_ch3_k39_first_order_filter_at_5000_samples_per_second() -> None:
         assert motor.analog_control.filtered == pytest.approx(expected, rel=1e-9)
 
 
-def test_ch3_k39_1024_is_no_filter_and_0_passes_nothing() -> None:
-    chain = _chain()
+def test_ch3_k39_1024_is_no_filter_and_0_passes_nothing(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.set_param(1, 38, 5)
     chain.set_param(1, 41, 1000)
@@ -119,8 +121,8 @@ def test_ch3_k39_1024_is_no_filter_and_0_passes_nothing() -> None:
     assert chain.execute("P.1") == ["P.1=1000"] and motor.analog_control.filtered == 983
 
 
-def test_the_loop_sleeps_on_a_steady_input_and_costs_nothing() -> None:
-    chain = _chain()
+def test_the_loop_sleeps_on_a_steady_input_and_costs_nothing(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_param(1, 41, 10000)
     chain.set_analog(1, 600)
     chain.kernel.run(until=seconds(2))
@@ -130,8 +132,9 @@ def test_the_loop_sleeps_on_a_steady_input_and_costs_nothing() -> None:
     assert chain.kernel.events_run == before
 
 
-def test_the_loop_wakes_for_a_ramp_and_ticks_only_while_it_changes() -> None:
-    chain = _chain()
+def test_the_loop_wakes_for_a_ramp_and_ticks_only_while_it_changes(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.set_param(1, 41, 1000)
     chain.set_param(1, 39, 1024)
@@ -146,8 +149,8 @@ def test_the_loop_wakes_for_a_ramp_and_ticks_only_while_it_changes() -> None:
     assert chain.execute("?96.1") == ["Px.1=1000"]
 
 
-def test_ch3_k38_0_ignores_even_a_changing_input() -> None:
-    chain = _chain()
+def test_ch3_k38_0_ignores_even_a_changing_input(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_param(1, 38, 0)
     chain.motors[1].set_analog_source(Sine(2.5, 2.0, 3.0))
     chain.kernel.run(until=seconds(2))
@@ -155,8 +158,8 @@ def test_ch3_k38_0_ignores_even_a_changing_input() -> None:
     assert chain.execute("?96.1") == ["Px.1=0"]
 
 
-def test_6_6_q74_reads_the_source_at_the_instant_asked() -> None:
-    chain = _chain()
+def test_6_6_q74_reads_the_source_at_the_instant_asked(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_param(1, 38, 0)
     chain.motors[1].set_analog_source(Sine(2.5, 2.0, 1.0))
     chain.kernel.run(until=seconds(0.25))
@@ -166,18 +169,19 @@ def test_6_6_q74_reads_the_source_at_the_instant_asked() -> None:
 
 
 # -- position and speed control ---------------------------------------------------------------
-def test_ch3_k38_1_negative_k41_turns_the_other_way() -> None:
-    chain = _chain()
+def test_ch3_k38_1_negative_k41_turns_the_other_way(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_param(1, 41, -10000)
     chain.set_analog(1, 512)
     chain.kernel.run(until=seconds(2))
     assert chain.execute("?96.1") == ["Px.1=-5000"]
 
 
-def test_ch3_k38_1_follows_a_sine_within_the_in_position_window_silently() -> None:
+def test_ch3_k38_1_follows_a_sine_within_the_in_position_window_silently(
+        make_chain: ChainFactory) -> None:
     """A slowly moving input: the motor follows its filtered value; the status stays
     in-position (no Ux report flood) because each step is within K55."""
-    chain = _chain()
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     events = []
     chain.subscribe(events.append)
@@ -192,9 +196,9 @@ def test_ch3_k38_1_follows_a_sine_within_the_in_position_window_silently() -> No
     assert [e.text for e in events if e.kind == "status"] == []
 
 
-def test_ch3_k38_2_and_3_turn_one_way_up_to_k40() -> None:
+def test_ch3_k38_2_and_3_turn_one_way_up_to_k40(make_chain: ChainFactory) -> None:
     for mode, sign in ((2, 1), (3, -1)):
-        chain = _chain()
+        chain = make_chain(traced=True)
         chain.set_param(1, 40, 1200)               # 20000 pps at 1000 ppr
         chain.set_param(1, 38, mode)
         chain.set_analog(1, 512)
@@ -205,8 +209,8 @@ def test_ch3_k38_2_and_3_turn_one_way_up_to_k40() -> None:
         assert chain.execute("?97.1") == [f"Sx.1={sign * 200}"]
 
 
-def test_ch3_k38_2_not_functional_until_below_0_2_volts_once() -> None:
-    chain = _chain()
+def test_ch3_k38_2_not_functional_until_below_0_2_volts_once(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_analog(1, 700)
     chain.set_param(1, 38, 2)
     chain.kernel.run(until=seconds(1))
@@ -218,8 +222,9 @@ def test_ch3_k38_2_not_functional_until_below_0_2_volts_once() -> None:
     assert chain.execute("?97.1") == ["Sx.1=350"]  # 0.70 of 3000 min⁻¹ at 1000 ppr
 
 
-def test_ch3_k38_speed_control_yields_to_a_commanded_motion_and_resumes() -> None:
-    chain = _chain()
+def test_ch3_k38_speed_control_yields_to_a_commanded_motion_and_resumes(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.set_param(1, 40, 600)
     chain.set_param(1, 38, 2)
     chain.set_analog(1, 512)
@@ -232,8 +237,8 @@ def test_ch3_k38_speed_control_yields_to_a_commanded_motion_and_resumes() -> Non
     assert chain.execute("?97.1") == ["Sx.1=50"]
 
 
-def test_ch3_k38_6_s_data_changes_a_running_continuous_rotation() -> None:
-    chain = _chain()
+def test_ch3_k38_6_s_data_changes_a_running_continuous_rotation(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     chain.execute("S.1=10, A.1=100, P.1=1000000000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
@@ -246,8 +251,8 @@ def test_ch3_k38_6_s_data_changes_a_running_continuous_rotation() -> None:
 
 
 # -- torque control and torque feedback -----------------------------------------------------------
-def test_ch3_k38_9_torque_control_accelerates_the_load_up_to_k40() -> None:
-    chain = _chain()
+def test_ch3_k38_9_torque_control_accelerates_the_load_up_to_k40(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.set_analog(1, 512)
     chain.execute("M.1=50")
@@ -270,7 +275,7 @@ def test_ch3_k38_9_torque_control_accelerates_the_load_up_to_k40() -> None:
 def _torque_feedback(contact: float) -> tuple[Chain, list[str]]:
     """5.5's example: sensor 1 V per 0.2 N·m at 2.5 V, K76=250, K77=200 (0.4 N·m = 100),
     V15=25 (0.1 N·m), S0=100, P0=10000; the load is a spring from ``contact`` on."""
-    chain = _chain()
+    chain = new_chain(traced=True)
     events: list[str] = []
     chain.subscribe(lambda e: events.append(e.text) if e.kind == "status" else None)
     chain.motors[1].set_analog_source(TorqueSensor(offset=2.5, volts_per_nm=5.0,
@@ -303,11 +308,12 @@ def test_5_5_torque_feedback_ends_at_p0_when_nothing_pushes_back() -> None:
     assert chain.kernel.peek() is None             # the loop sleeps again
 
 
-def test_5_5_torque_feedback_that_holds_the_motor_still_reports_nothing_more() -> None:
+def test_5_5_torque_feedback_that_holds_the_motor_still_reports_nothing_more(
+        make_chain: ChainFactory) -> None:
     """K38=10 with in-range but extreme gains (K74=1000, K75=500, K76=0, K77=-1000):
     the feedback's command stands still, and stays one command: no report repeats
     (an attack found ``Ux.1=8`` a thousand times a second while the motor stood)."""
-    chain = _chain()
+    chain = make_chain(traced=True)
     events: list[tuple[int, str]] = []
     chain.subscribe(lambda e: events.append((e.time, e.text)) if e.kind == "status" else None)
     for line in ("K38.1=10", "K74.1=1000", "K75.1=500", "K76.1=0", "K77.1=-1000",
@@ -351,8 +357,8 @@ def test_ch3_k35_analog_output_scales(k35: int, values: dict[str, float], volts:
     assert output_volts(k35, pulses_per_rev=1000, **args) == pytest.approx(volts)
 
 
-def test_ch3_k35_analog_output_of_a_motor_and_its_register_value() -> None:
-    chain = _chain()
+def test_ch3_k35_analog_output_of_a_motor_and_its_register_value(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.set_param(1, 35, 2)
     assert motor.analog_output_volts() == 2.5 and motor.analog_output() == 512
@@ -366,8 +372,8 @@ def test_ch3_k35_analog_output_of_a_motor_and_its_register_value() -> None:
 
 
 # -- CM1 -------------------------------------------------------------------------------------------
-def test_cm1_k64_9_selects_k38_speed_or_position_control() -> None:
-    chain = _chain("cm1")
+def test_cm1_k64_9_selects_k38_speed_or_position_control(make_chain: ChainFactory) -> None:
+    chain = make_chain(firmware="cm1", traced=True)
     motor = chain.motors[1]
     chain.execute("(.1")                           # CM1 K68 is not "servo on at power-up"
     assert motor.analog_control.mode == 0          # K64=0: no analog function
@@ -381,8 +387,8 @@ def test_cm1_k64_9_selects_k38_speed_or_position_control() -> None:
     assert motor.analog_control.mode == 2          # speed control
 
 
-def test_constant_source_and_set_analog_agree() -> None:
-    chain = _chain()
+def test_constant_source_and_set_analog_agree(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     motor.set_analog_source(Constant(2.5))
     assert chain.snapshot(1).analog == 512
@@ -390,11 +396,12 @@ def test_constant_source_and_set_analog_agree() -> None:
     assert chain.snapshot(1).analog == 1023 and chain.execute("?74.1") == ["ADI0.1=1023"]
 
 
-def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> None:
+def test_machine_file_tables_drive_the_motor_through_the_config_attributes(
+        make_chain: ChainFactory) -> None:
     """The machine file loader sets ``analog_config`` / ``encoder_config`` on the motor
     (docs/machine-file.md); that drives the input and connects the encoder at once."""
     from coolmuscle.motor.signals.encoder import gearing_from_config
-    chain = _chain()
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     motor.analog_config = source_from_config({"kind": "constant", "value": 512,
                                               "unit": "counts"})
@@ -409,11 +416,11 @@ def test_machine_file_tables_drive_the_motor_through_the_config_attributes() -> 
     assert motor.encoder_config.ppr == 500 and motor.analog_config.volts(0) == 2.5
 
 
-def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
+def test_5_6_7_modbus_analog_output_register_reads_k35(make_chain: ChainFactory) -> None:
     """K78+54 "Analog Output" (5.6.7 FC03 table) reads the K35 output: 683 for the
     current position 512 (3.335 V), as the device snapshot publishes it."""
-    from coolmuscle.chain.modbus.registers import MotorMap, long_of
-    chain = _chain()
+    from coolmuscle.chain.firmware_modbus.registers import MotorMap, long_of
+    chain = make_chain(traced=True)
     chain.set_param(1, 35, 2)
     chain.execute("S.1=10, A.1=100, P.1=512")
     chain.execute("^.1")
@@ -422,3 +429,17 @@ def test_5_6_7_modbus_analog_output_register_reads_k35() -> None:
     words = MotorMap(chain, 1, chain.get_param(1, 78), little=False).read_holding(
         chain.get_param(1, 78) + 54, 2)
     assert long_of(words[0], words[1], False) == 683
+
+
+def test_trace_analog_out_uses_the_k35_of_each_instant(chain: Chain) -> None:
+    # ch. 3 K35 changed midway: the first part of the trace keeps its own K35
+    trace = record(chain)
+    chain.execute("K35.1=2, S.1=10, A.1=100, P.1=5000")   # position output
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1))
+    early = trace.sample(1, seconds(0.5)).analog_out
+    chain.execute("K35.1=8")                               # torque output
+    chain.kernel.run(until=seconds(7))
+    assert trace.sample(1, seconds(0.5)).analog_out == early
+    assert early != 2.5                                    # a position reads off centre
+    assert trace.sample(1, seconds(6.5)).analog_out == 2.5  # torque 0 at rest: centre

@@ -1,6 +1,7 @@
 """The program bank executor: lines, merge motion, loops, calls, waits, host control.
 
-cml-users-guide.txt 2.1.2, 2.2.2, 4.1-4.3, 6.3, 6.5; docs/fidelity.md "Banks and ladder".
+cml-users-guide.txt 2.1.2, 2.2.1-2.2.2 ("V" alone), 4.1-4.3, 6.3, 6.5, ch. 3 K55 (the next
+line at in-position); docs/fidelity.md "Banks and ladder".
 Facts come from the trace recorder (positions, speeds at exact instants) and the lines
 the motor prints.
 """
@@ -13,6 +14,7 @@ from bank_support import Rig, enters_window
 from bank_support import rig as _rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 
@@ -281,3 +283,48 @@ def test_y_series_on_one_motor_completes_each_motion() -> None:
     first, second = r.times("Ux.1=8")
     assert r.times("V1.1=0") == [first]   # line 2 waited for Y1.1; line 3 not for Y2.1
     assert second > first + seconds(0.2)
+
+
+def test_ch3_k55_the_next_bank_line_starts_at_in_position(make_chain: ChainFactory) -> None:
+    # K55: "When the range is set to small, In-Position may not be detected and can not
+    # execute the next step in a program": the next step follows in-position
+    chain = make_chain(setup=["K23.1=17, K55.1=100, S1.1=10, A1.1=10, P1.1=10000, P2.1=0",
+                              "B1.1", "S1.1, A1.1, P1.1", "?96.1", "END"])
+    events = collect_events(chain)
+    chain.execute("[1.1")
+    end_of_command = chain.motors[1].axis.profile.end_ns
+    chain.kernel.run(until=seconds(12))
+    at = next(e.time for e in events if e.text == "Ux.1=8")
+    px = next(e for e in events if e.text.startswith("Px.1="))
+    assert px.time == at < end_of_command
+    assert 9900 <= int(px.text.split("=")[1]) < 10000
+
+
+def test_ch3_k55_a_path_through_its_target_is_not_in_position_on_the_way(
+        make_chain: ChainFactory) -> None:
+    # only the final approach counts: a merge out to 10000 and back to 0 from 0 is not
+    # in position at its start, though it starts within K55 of its target
+    chain = make_chain(setup=["K23.1=1, S1.1=100, A1.1=100, P1.1=3000, P2.1=0", "B1.1",
+                              "S1.1, A1.1, P1.1, P2.1", "END"])
+    statuses = collect_events(chain, ["status"])
+    chain.execute("[1.1")
+    chain.kernel.run(until=seconds(0.1))
+    assert chain.execute("?99.1") == ["Ux.1=0"]
+    chain.kernel.run(until=seconds(3))
+    assert [e.text for e in statuses] == ["Ux.1=8"]
+    assert abs(chain.motors[1].position()) <= 5
+
+
+def test_2_2_1_v_alone_in_a_bank_displays_the_state_value(make_chain: ChainFactory) -> None:
+    # 2.2.1 / 2.2.2 "V": "When this command is used alone, it displays the specified
+    # variable data. This is used for a message sent to a host."
+    chain = make_chain(setup=['K23.1=17', 'V4.1="Px"', "S.1=10", "A.1=10", "P.1=1234"])
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(3))
+    for line in ("B1.1", "V4.1", "V5.1=V4.1", "V5.1", "END"):
+        chain.execute(line)
+    said = collect_events(chain, ["status", "alarm", "message", "reply"])
+    chain.execute("[1.1")
+    chain.kernel.run(until=seconds(4))
+    assert [e.text for e in said] == ["V4.1=1234", "V5.1=1234"]
+    assert chain.execute("V4.1") == ['V4.1="Px"']         # direct mode: what was assigned

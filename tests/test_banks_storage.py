@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from bank_support import rig
-from coolmuscle.chain.daisy import Chain
+from fixtures import ChainFactory
 
 
 def test_2_2_2_lines_of_a_bank_are_stored_not_executed() -> None:
@@ -223,8 +223,9 @@ def test_6_6_missing_bank_queries() -> None:
                          "error06.1: Ladder Bank does not exist!!"]
 
 
-def test_2_1_2_banks_are_saved_with_dollar_and_restored_at_power_up(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path)
+def test_2_1_2_banks_are_saved_with_dollar_and_restored_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path)
     for line in ("B1.1", "S1.1, A1.1, P1.1; S2.1, P2.1", "T1.1", "END",
                  "L2.1", 'V1.1>V2.1, S.1=S1.1, S.1=S2.1', "END", "$.1"):
         first.execute(line)
@@ -232,7 +233,7 @@ def test_2_1_2_banks_are_saved_with_dollar_and_restored_at_power_up(tmp_path: Pa
     first.execute("T3.1")
     first.execute("END")       # not saved
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     assert second.execute("?1.1") == ["S1.1, A1.1, P1.1;", "S2.1, P2.1", "T1.1"]
     assert second.execute("?L2.1") == ["V1.1>V2.1, S.1=S1.1, S.1=S2.1"]
     assert second.execute("?3.1") == []   # error05 not printed with K23=1
@@ -240,11 +241,11 @@ def test_2_1_2_banks_are_saved_with_dollar_and_restored_at_power_up(tmp_path: Pa
     second.close()
 
 
-def test_unsaved_banks_are_lost_at_power_off(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path)
+def test_unsaved_banks_are_lost_at_power_off(tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path)
     for line in ("B1.1", "T1.1", "END", "K23.1=17"):
         first.execute(line)
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     assert second.execute("?1000.1") == ["Commands.1: program 0, ladder 0, total 0/500"]
     second.close()

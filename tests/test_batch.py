@@ -14,21 +14,21 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import socket
 import subprocess
 import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
+from cli_support import cli
 from coolmuscle.tools.batch.engine import chunks
 from dask_support import dask_cluster as dask_cluster_of
+from fixtures import wait_until
 from load_support import signal_and_wait
-from cli_support import cli
 
 DATA = Path(__file__).parent / "data" / "batch"
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -156,12 +156,6 @@ def test_the_same_batch_through_dask_gives_the_same_results(
 
 
 # -- bad input: one line, exit 2, before anything runs ------------------------
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @pytest.mark.parametrize("args, message", [
     (["batch", str(DATA / "2.1-operation.cml"), "missing.cml"], "missing.cml: no such script"),
     (["batch", str(DATA), "--jobs", "0"], "--jobs must be 1..256, not 0"),
@@ -181,8 +175,8 @@ def test_bad_input_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str],
 
 
 def test_unreachable_scheduler_is_one_line_exit_2_at_once(
-        capsys: pytest.CaptureFixture[str]) -> None:
-    address = f"tcp://127.0.0.1:{_free_port()}"
+        capsys: pytest.CaptureFixture[str], closed_port: int) -> None:
+    address = f"tcp://127.0.0.1:{closed_port}"
     start = time.monotonic()
     code, out, err = cli(capsys, "batch", str(DATA), "--scheduler", address)
     assert code == 2 and out == ""
@@ -229,10 +223,8 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
     # once the pool's two workers exist (the runs are under way), as a user would
-    deadline = time.monotonic() + 60
-    while len(_group(proc.pid)) < 4 and time.monotonic() < deadline:
-        assert proc.poll() is None, proc.communicate()
-        time.sleep(0.05)
+    wait_until(lambda: len(_group(proc.pid)) >= 4 or proc.poll() is not None, 60, 0.05)
+    assert proc.poll() is None, proc.communicate()
     time.sleep(0.5)
     _, err = signal_and_wait(proc, group=True)
     text = err.decode()
@@ -249,10 +241,8 @@ def test_ctrl_c_stops_the_batch_and_reports_what_finished(tmp_path: Path) -> Non
     suite = ET.parse(junit).getroot().find("testsuite")
     assert suite is not None and suite.get("skipped") == str(not_run)
     # the pool's workers are gone; the forkserver and resource tracker follow their parent
-    deadline = time.monotonic() + 10
-    while _group(proc.pid) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not _group(proc.pid), "processes of the batch are still running"
+    assert wait_until(lambda: not _group(proc.pid), 10, 0.1), \
+        "processes of the batch are still running"
 
 
 SLOW = "S.1=100\nP.1=5000\n^.1\n@wait 90\n"
@@ -320,10 +310,8 @@ def test_ctrl_c_at_a_sweep_of_instants_of_a_pool_prints_nothing_more() -> None:
         time.sleep(delay)
         _, err = signal_and_wait(proc, group=True, timeout=60)
         assert err == "stopped\n", (delay, err)
-        deadline = time.monotonic() + 10
-        while _group(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not _group(proc.pid), (delay, "processes of the pool are still running")
+        assert wait_until(lambda pgid=proc.pid: not _group(pgid), 10, 0.1), \
+            (delay, "processes of the pool are still running")
 
 
 def _group(pgid: int) -> list[str]:

@@ -26,80 +26,41 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import pytest
 import serial
 
 from coolmuscle.tools.script import parse_script
+from fixtures import Program, ServedSim, coolmuscle_env, wait_until
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "capture"
 HEAVY = DATA / "heavy.toml"
 PLAIN = DATA / "plain.toml"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "COLUMNS": "200"}
-
-
-class Proc:
-    """A ``coolmuscle`` subprocess whose stderr is read for its banner."""
-
-    def __init__(self, args: list[str], log: Path, **kwargs: Any) -> None:
-        self.log = log
-        with log.open("w") as fh:
-            self.proc = subprocess.Popen([sys.executable, "-m", "coolmuscle", *args],
-                                         stdout=fh, stderr=subprocess.STDOUT, env=ENV,
-                                         stdin=subprocess.DEVNULL, **kwargs)
-
-    def wait_for(self, pattern: str, timeout: float = 30) -> re.Match[str]:
-        deadline = time.monotonic() + timeout
-        while True:
-            match = re.search(pattern, self.log.read_text())
-            if match is not None:
-                return match
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise AssertionError(f"{pattern!r} not printed:\n{self.log.read_text()}")
-            time.sleep(0.05)
-
-    def signal(self, signum: int = signal.SIGINT, timeout: float = 20) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signum)
-        return self.proc.wait(timeout=timeout)
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=10)
-
-    @property
-    def text(self) -> str:
-        return self.log.read_text()
+ENV = coolmuscle_env()
 
 
 @pytest.fixture
-def procs() -> Iterator[list[Proc]]:
-    started: list[Proc] = []
+def procs() -> Iterator[list[Program]]:
+    started: list[Program] = []
     yield started
     for proc in reversed(started):
-        proc.kill()
+        proc.close()
 
 
-def start_sim(procs: list[Proc], tmp: Path, *transport: str) -> Proc:
-    sim = Proc(["sim", "--no-state", "--machine", str(HEAVY), *transport], tmp / "sim.log")
+def start_sim(procs: list[Program], tmp: Path, *, pty: bool | Path = False) -> ServedSim:
+    """The "real motor": ``sim --machine heavy.toml`` on TCP (port 0) or on a pty."""
+    sim = ServedSim(tmp / "sim.log", "--machine", str(HEAVY), tcp=not pty, pty=pty)
     procs.append(sim)
-    sim.wait_for(r"ready")
-    sim.wait_for(r"\(state: ")
     return sim
 
 
-def sim_on_tcp(procs: list[Proc], tmp: Path) -> str:
-    sim = start_sim(procs, tmp, "--tcp", "0")
-    return "socket://" + sim.wait_for(r"tcp: (127\.0\.0\.1:\d+)").group(1)
-
-
-def start_capture(procs: list[Proc], tmp: Path, *args: str) -> tuple[Proc, str]:
+def start_capture(procs: list[Program], tmp: Path, *args: str) -> tuple[Program, str]:
     """``coolmuscle capture ARGS``; returns it and where the host program connects."""
-    cap = Proc(["capture", *args], tmp / "capture.log")
+    cap = Program(["capture", *args], tmp / "capture.log")
     procs.append(cap)
     where = cap.wait_for(r"capture ready: host program on (\S+?)(?: -> \S+)?;").group(1)
     return cap, where
@@ -151,12 +112,12 @@ class Host:
 
 
 # -- the motor is the simulator ---------------------------------------------------
-def test_pyserial_on_the_relay_pty_replays_with_no_difference(procs: list[Proc],
+def test_pyserial_on_the_relay_pty_replays_with_no_difference(procs: list[Program],
                                                              tmp_path: Path) -> None:
     """Motor: sim on TCP.  Host: pyserial on ``--pty``.  A move in position, a move into
     the stopper until the overload alarm, queries at rest, a line typed a byte at a
     time.  Ctrl-C: exit 130, one line, the file complete; the link is gone."""
-    url = sim_on_tcp(procs, tmp_path)
+    url = start_sim(procs, tmp_path).url
     link, session = tmp_path / "motor", tmp_path / "session.cml"
     cap, _ = start_capture(procs, tmp_path, url, "--pty", str(link), "--out", str(session),
                            "--machine", str(HEAVY))
@@ -202,12 +163,12 @@ def test_pyserial_on_the_relay_pty_replays_with_no_difference(procs: list[Proc],
     assert "@until '^Ux\\\\.1=4$' timed out" in alone.stderr, alone.stderr
 
 
-def test_host_library_through_listen_with_the_sim_on_a_pty(procs: list[Proc],
+def test_host_library_through_listen_with_the_sim_on_a_pty(procs: list[Program],
                                                          tmp_path: Path) -> None:
     """Motor: sim on a pty (a serial device to the relay).  Host: ``coolmuscle.connect``
     over ``--listen``; ``--once`` ends the capture when it disconnects (exit 0)."""
     motor = tmp_path / "simport"
-    start_sim(procs, tmp_path, "--pty-link", str(motor))
+    start_sim(procs, tmp_path, pty=motor)
     session = tmp_path / "lib.cml"
     cap, where = start_capture(procs, tmp_path, str(motor), "--listen", "0", "--once",
                                "--out", str(session))
@@ -231,10 +192,10 @@ def test_host_library_through_listen_with_the_sim_on_a_pty(procs: list[Proc],
 
 
 @pytest.mark.peer
-def test_term_in_tmux_through_the_relay(procs: list[Proc], tmp_path: Path) -> None:
+def test_term_in_tmux_through_the_relay(procs: list[Program], tmp_path: Path) -> None:
     """``coolmuscle term`` as a person uses it, through the relay."""
     from test_term import Pane, term_env
-    url = sim_on_tcp(procs, tmp_path)
+    url = start_sim(procs, tmp_path).url
     session = tmp_path / "term.cml"
     cap, where = start_capture(procs, tmp_path, url, "--listen", "0", "--once", "--out",
                                str(session))
@@ -301,7 +262,7 @@ def _read_exactly(read: Callable[[int], bytes], size: int, timeout: float = 60) 
 
 
 @pytest.mark.parametrize("side", ["listen", "pty"])
-def test_a_megabyte_each_way_at_once_loses_no_byte(side: str, procs: list[Proc],
+def test_a_megabyte_each_way_at_once_loses_no_byte(side: str, procs: list[Program],
                                                    tmp_path: Path) -> None:
     """1 MiB of random bytes each way at the same time: both arrive exactly, and the
     file says exactly both (its ``<<`` lines and its sent lines).  SIGTERM ends it
@@ -322,9 +283,7 @@ def test_a_megabyte_each_way_at_once_loses_no_byte(side: str, procs: list[Proc],
         sender.start()
         got = _read_exactly(lambda n: port.read(min(n, 65536)), len(down))
         writer.join(60)
-        deadline = time.monotonic() + 60
-        while len(peer.received) < len(up) and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: len(peer.received) >= len(up), 60, 0.05)
     finally:
         port.close()
     assert got == down
@@ -352,7 +311,7 @@ def _tiny_file_system(path: Path) -> Callable[[], None] | None:
     return lambda: subprocess.run(["umount", str(path)], check=True)
 
 
-def test_a_full_file_system_says_so_and_the_relay_goes_on(procs: list[Proc],
+def test_a_full_file_system_says_so_and_the_relay_goes_on(procs: list[Program],
                                                          tmp_path: Path) -> None:
     """The capture file on a 32 KiB tmpfs (root; otherwise a 32 KiB file size limit,
     RLIMIT_FSIZE, which fails the same way with EFBIG): one line says the file stopped
@@ -371,7 +330,7 @@ def test_a_full_file_system_says_so_and_the_relay_goes_on(procs: list[Proc],
     try:
         peer = Peer(echo=True)
         session = full / "s.cml"
-        cap = Proc(["capture", peer.url, "--listen", "0", "--no-probe", "--out",
+        cap = Program(["capture", peer.url, "--listen", "0", "--no-probe", "--out",
                     str(session)], tmp_path / "capture.log", **limit)
         procs.append(cap)
         where = cap.wait_for(r"host program on (\S+);").group(1)
@@ -393,7 +352,7 @@ def test_a_full_file_system_says_so_and_the_relay_goes_on(procs: list[Proc],
         peer.close()
     finally:
         for proc in procs:
-            proc.kill()
+            proc.close()
         if unmount is not None:
             unmount()
 
@@ -412,8 +371,8 @@ def _capture_bad(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, s
 @pytest.mark.parametrize("args, says", [
     (["/dev/ttyNOSUCH", "--listen", "0", "--out", "{tmp}/s.cml"],
      "cannot open the motor's port /dev/ttyNOSUCH: No such file or directory"),
-    (["socket://127.0.0.1:1", "--listen", "0", "--out", "{tmp}/s.cml"],
-     "cannot open the motor's port socket://127.0.0.1:1: Connection refused"),
+    (["socket://127.0.0.1:{closed}", "--listen", "0", "--out", "{tmp}/s.cml"],
+     "cannot open the motor's port socket://127.0.0.1:{closed}: Connection refused"),
     (["bogus://x", "--listen", "0", "--out", "{tmp}/s.cml"], "protocol 'bogus' not known"),
     (["coolmuscle://", "--listen", "0", "--out", "{tmp}/nodir/s.cml"], "no such directory"),
     (["coolmuscle://", "--listen", "0", "--out", "{tmp}"], "a directory, not a file"),
@@ -435,20 +394,22 @@ def _capture_bad(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, s
       "{tmp}/s.cml"], "use a path without spaces"),
 ])
 def test_bad_input_is_one_line_exit_2_and_nothing_written(
-        args: list[str], says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        args: list[str], says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        closed_port: int) -> None:
     (tmp_path / "afile").write_text("not a link\n")
     (tmp_path / "bad.toml").write_text("[[axis]]\n[axis.load]\ninertai = 1\n")
     (tmp_path / "my machine.toml").write_text(PLAIN.read_text())
     before = sorted(p.name for p in tmp_path.iterdir())
-    code, text = _capture_bad(capsys, *(a.format(tmp=tmp_path) for a in args))
+    code, text = _capture_bad(capsys, *(a.format(tmp=tmp_path, closed=closed_port)
+                                        for a in args))
     assert code == 2, text
     assert text.count("\n") == 1 and text.startswith("coolmuscle: error: "), text
-    assert says.format(tmp=tmp_path) in text
+    assert says.format(tmp=tmp_path, closed=closed_port) in text
     assert sorted(p.name for p in tmp_path.iterdir()) == before      # nothing written
 
 
 def test_a_link_that_breaks_says_so_in_one_line_and_the_file_is_complete(
-        procs: list[Proc], tmp_path: Path) -> None:
+        procs: list[Program], tmp_path: Path) -> None:
     """The motor's end closes: what it said last still reaches the host program, on a
     pty (a small buffer: the relay holds the rest) read late."""
     peer = Peer(echo=True)

@@ -11,7 +11,7 @@ other setting it hears garbage and answers garbage.
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import pytest
 
@@ -110,7 +110,7 @@ def test_no_scan_without_a_wire_or_with_the_rate_given(url: str, scan: bool) -> 
 
 
 def test_the_header_says_what_is_known() -> None:
-    started = datetime(2026, 12, 3, 10, 0, 0, 123456, tzinfo=timezone.utc)
+    started = datetime(2026, 12, 3, 10, 0, 0, 123456, tzinfo=UTC)
     found = LineSettings(baud=9600, parity="even", echo=False, k20=1, k23=9, firmware="rt3")
     assert header_lines("/dev/ttyUSB0", found, started, motors=2, machine="../m 1.toml") == [
         "# coolmuscle capture: port=/dev/ttyUSB0 baud=9600 parity=even echo=off "

@@ -16,7 +16,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.tools.script import parse_script
 from coolmuscle.tools.script.runner import split_lines

@@ -16,6 +16,7 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory
 
 BT_38400 = byte_time_ns(38400)     # 260,416 ns a byte at the default K20 and K65
 
@@ -33,8 +34,9 @@ def type_line(chain: Chain, text: str) -> int:
     return chain.kernel.now + (len(text) + 1) * BT_38400
 
 
-def test_ch3_k65_on_id1_is_written_on_every_motor_and_persists(tmp_path: Path) -> None:
-    chain = Chain(motors=3, state_dir=tmp_path)
+def test_ch3_k65_on_id1_is_written_on_every_motor_and_persists(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=3, state_dir=tmp_path)
     chain.execute("K65.1=5")
     assert [chain.get_param(m, 65) for m in (1, 2, 3)] == [5, 5, 5]
     assert chain.links.baud() == 230400
@@ -42,13 +44,13 @@ def test_ch3_k65_on_id1_is_written_on_every_motor_and_persists(tmp_path: Path) -
     assert [chain.get_param(m, 65) for m in (1, 2, 3)] == [5, 5, 1]
     assert chain.links.baud() == 230400  # "the baud rate between slave motors will not be changed"
     chain.close()
-    again = Chain(motors=3, state_dir=tmp_path)
+    again = make_chain(motors=3, state_dir=tmp_path)
     assert [again.get_param(m, 65) for m in (1, 2, 3)] == [5, 5, 1]
     again.close()
 
 
-def test_1_1_a_query_for_id_n_takes_n_minus_1_hops_each_way() -> None:
-    chain = Chain(motors=3, pacing=True)
+def test_1_1_a_query_for_id_n_takes_n_minus_1_hops_each_way(make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=3, pacing=True)
     received = host(chain)
     arrived = type_line(chain, "?96.3")
     chain.kernel.run(until=seconds(1))
@@ -67,9 +69,9 @@ def test_1_1_a_query_for_id_n_takes_n_minus_1_hops_each_way() -> None:
     assert reply == [arrived + 7 * BT_38400 + 8 * BT_38400]
 
 
-def test_replies_of_one_line_reach_the_host_in_arrival_order() -> None:
+def test_replies_of_one_line_reach_the_host_in_arrival_order(make_chain: ChainFactory) -> None:
     """``?96.3, ?96.1``: ID1 answers first, though its query comes second on the line."""
-    chain = Chain(motors=3, pacing=True)
+    chain = make_chain(motors=3, pacing=True)
     events = []
     chain.subscribe(events.append)
     received = host(chain)
@@ -144,8 +146,9 @@ def test_4_4_adjacent_ids_interpolate_and_a_faster_chain_keeps_the_path() -> Non
     assert at_230400 < 30
 
 
-def test_direct_mode_pair_starts_the_y_axis_when_the_line_reaches_it() -> None:
-    chain = Chain(motors=2, pacing=True)
+def test_direct_mode_pair_starts_the_y_axis_when_the_line_reaches_it(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=2, pacing=True)
     for line in ("S.1=100", "A.1=100", "P.1=1000", "P.2=1000", "R.1=0", "R.2=0"):
         chain.execute(line)
     record(chain)
@@ -157,17 +160,18 @@ def test_direct_mode_pair_starts_the_y_axis_when_the_line_reaches_it() -> None:
     assert chain.execute("?96.1") == ["Px.1=1000"] and chain.execute("?96.2") == ["Px.2=1000"]
 
 
-def test_without_pacing_everything_happens_at_once() -> None:
-    chain = Chain(motors=3)
+def test_without_pacing_everything_happens_at_once(make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=3)
     received = host(chain)
     chain.host_line.feed(b"?96.3\r")
     assert received[-1] == (0, b"Px.3=0\r\n")
 
 
-def test_pause_of_a_paced_path_keeps_each_axis_on_its_own_time_line() -> None:
+def test_pause_of_a_paced_path_keeps_each_axis_on_its_own_time_line(
+        make_chain: ChainFactory) -> None:
     """``]`` while the Y axis runs a hop behind: each axis decelerates from where it is
     (no jump in the command), the pair stops near the arc, ``[`` finishes it exactly."""
-    chain = Chain(motors=2, pacing=True)
+    chain = make_chain(motors=2, pacing=True)
     chain.execute("K65.1=1")
     for line in ("A1.1=100", "S1.1=100", "P2.1=1000", "R1.1=2000", "P2.2=1000", "R1.2=2000",
                  "B1.1", "S1.1,A1.1,R1.1,R1.2,@2.2+,@2.1+", "END"):

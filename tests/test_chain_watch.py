@@ -1,15 +1,16 @@
 """The chain's bank waits (cml-users-guide.txt 2.2 "W", program lines waiting for
-motions): ``Chain.watch`` / ``Chain.poke`` call every watcher concerned, once, in the
-order the watchers came, whatever is added or removed on the way."""
+motions): ``ChainBus.watch`` / ``ChainBus.poke`` (a chain's ``bus``) call every watcher
+concerned, once, in the order the watchers came, whatever is added or removed on the way."""
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
+from fixtures import ChainFactory
 
 MOTORS = (1, 2, 3)
 
@@ -64,7 +65,7 @@ def test_poke_calls_the_watchers_concerned_in_order(operations: list[tuple]) -> 
     for op in operations:
         if op[0] == "watch":
             n = len(removers)
-            removers.append(chain.watch(watcher(n), op[1]))
+            removers.append(chain.bus.watch(watcher(n), op[1]))
             ref_removers.append(ref.watch(n, op[1]))
         elif op[0] == "remove":
             if op[1] < len(removers):
@@ -75,17 +76,17 @@ def test_poke_calls_the_watchers_concerned_in_order(operations: list[tuple]) -> 
             expected = ref.poke(op[1])
             if op[0] == "poke-removing" and op[2] < len(removers) and expected:
                 pending.append(op[2])
-                chain.poke(op[1])
+                chain.bus.poke(op[1])
                 ref_removers[op[2]]()
             else:
-                chain.poke(op[1])
+                chain.bus.poke(op[1])
             pending.clear()
             assert calls == expected
     chain.close()
 
 
-def test_a_watcher_removed_during_a_poke_still_runs_in_that_poke() -> None:
-    chain = Chain(motors=2)
+def test_a_watcher_removed_during_a_poke_still_runs_in_that_poke(make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=2)
     calls: list[str] = []
     removers: dict[str, Callable[[], None]] = {}
 
@@ -93,19 +94,19 @@ def test_a_watcher_removed_during_a_poke_still_runs_in_that_poke() -> None:
         calls.append("first")
         removers["second"]()
 
-    removers["first"] = chain.watch(first, [1])
-    removers["second"] = chain.watch(lambda: calls.append("second"), [1, 2])
-    removers["third"] = chain.watch(lambda: calls.append("third"), [1])
-    chain.watch(lambda: calls.append("other"), [2])
-    chain.poke(1)
+    removers["first"] = chain.bus.watch(first, [1])
+    removers["second"] = chain.bus.watch(lambda: calls.append("second"), [1, 2])
+    removers["third"] = chain.bus.watch(lambda: calls.append("third"), [1])
+    chain.bus.watch(lambda: calls.append("other"), [2])
+    chain.bus.poke(1)
     assert calls == ["first", "second", "third"]
     calls.clear()
-    chain.poke(1)
+    chain.bus.poke(1)
     assert calls == ["first", "third"]
     calls.clear()
-    chain.poke(2)
+    chain.bus.poke(2)
     assert calls == ["other"]
     calls.clear()
-    chain.poke()                        # about nothing in particular: every watcher
+    chain.bus.poke()                        # about nothing in particular: every watcher
     assert calls == ["first", "third", "other"]
     chain.close()

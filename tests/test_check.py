@@ -16,14 +16,15 @@ from pathlib import Path
 from typing import Any
 
 import jsonschema
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.client.program import parse_program
 from coolmuscle.tools.check.lint import RULES, check_program
 from coolmuscle.tools.check.output import format_human, to_json
+from coolmuscle.tools.cli import app as cli
+from fixtures import run_coolmuscle
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.cml"))
@@ -173,3 +174,12 @@ def test_any_file_gives_a_report_that_fits_the_schema(lines: list[str], firmware
 @settings(max_examples=200, deadline=None)
 def test_arbitrary_text_never_crashes_the_checker(text: str) -> None:
     validate(to_json([check_program(parse_program(text))]))
+
+
+def test_check_rejects_the_directives_run_rejects(tmp_path: Path) -> None:
+    script = tmp_path / "typo.cml"
+    script.write_text("S.1=10\n@wiat 1\n")
+    done = run_coolmuscle("check", str(script))
+    assert done.returncode == 1
+    assert f"{script}:2:1: error[script] unknown directive @wiat" in done.stdout
+    assert run_coolmuscle("run", str(script)).returncode == 2

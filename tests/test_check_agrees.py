@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from coolmuscle.client.program import parse_program
 from coolmuscle.cml import ast
 from coolmuscle.cml.parser import parse
-from coolmuscle.client.program import parse_program
 from coolmuscle.errors import CmlSyntaxError, MotorError
 from coolmuscle.motor.programs.bankcheck import check_line, fill_motor
 from coolmuscle.motor.state.firmware import get_firmware

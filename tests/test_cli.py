@@ -1,5 +1,8 @@
 """The ``coolmuscle`` command: ``sim`` as a real subprocess, ``run`` in-process and as a
-subprocess."""
+subprocess; its conventions (flags without a value, ``--version``, a script's
+``# coolmuscle:`` line against options) and the K81 switch said in plain words and
+undone by ``sim --reset`` (cml-users-guide.txt 5.6.1, 5.6.9; docs/fidelity.md "K81
+persists")."""
 
 from __future__ import annotations
 
@@ -17,10 +20,13 @@ import pexpect
 import pytest
 import serial
 
+from coolmuscle import __version__
 from coolmuscle.tools.cli import app as cli
 from fakes import ROUNDTRIP, fake_factory
+from fixtures import ChainFactory, SimFactory, run_coolmuscle
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
+ROOT = Path(__file__).resolve().parents[1]
+SRC = str(ROOT / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC, "COLUMNS": "200"}
 ENV.pop("COOLMUSCLE_DEBUG", None)
 
@@ -245,3 +251,65 @@ def test_sim_stdio_on_a_terminal_echoes_as_typed_and_stops_on_ctrl_c() -> None:
     finally:
         if child.isalive():
             child.terminate(force=True)
+
+
+# -- the K81 switch, said in plain words ----------------------------------------------
+def _ask(port: int, line: bytes) -> bytes:
+    """What the sim says to ``line`` on TCP within a second (until a ``Px.1=``)."""
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+        sock.settimeout(1.0)
+        sock.sendall(line)
+        got = b""
+        try:
+            while b"Px.1=" not in got:
+                chunk = sock.recv(4096)
+                if not chunk:
+                    break
+                got += chunk
+        except TimeoutError:
+            pass
+        return got
+
+
+def test_5_6_9_k81_kept_in_the_state_is_said_and_sim_reset_brings_the_text_back(
+        tmp_path: Path, make_chain: ChainFactory, served_sim: SimFactory) -> None:
+    # 5.6.1 / ch. 3 K81: K81 != 0 puts COM0 in Modbus mode; the motor keeps its K values
+    chain = make_chain(state_dir=tmp_path)
+    chain.set_param(1, 81, 1)
+    chain.close()                                         # one chain per state directory
+    sim = served_sim(state=tmp_path)
+    assert _ask(sim.port, b"?96.1\r") == b""             # Modbus: no text answer
+    note = sim.wait_for(r"note: .*\(5\.6\.9\)\.").group(0)
+    assert "K81.1=1" in note and "not CML text" in note and "--reset" in note
+    assert sim.stop() == 0
+    sim = served_sim("--reset", state=tmp_path)
+    assert b"Px.1=0" in _ask(sim.port, b"?96.1\r") and "note:" not in sim.text
+    assert sim.stop() == 0
+    sim = served_sim(state=tmp_path)                      # the reset was saved
+    assert b"Px.1=0" in _ask(sim.port, b"?96.1\r") and "note:" not in sim.text
+    assert sim.stop() == 0
+
+
+def test_the_demo_serves_from_its_own_state_directory() -> None:
+    demo = (ROOT / "scripts" / "demo").read_text()
+    assert 'sim --state "$ROOT/out/demo-state"' in demo
+
+
+# -- conventions: flags, --version, a script's own defaults ------------------------------
+def test_flags_show_no_value_and_there_is_a_version_option() -> None:
+    help_text = run_coolmuscle("sim", "--help").stdout
+    assert "--pty" in help_text and "<bool>" not in help_text
+    assert "[HOST:]PORT" in help_text                      # options with values keep theirs
+    done = run_coolmuscle("--version")
+    version, hot = done.stdout.splitlines()
+    assert done.returncode == 0 and version == f"coolmuscle {__version__}"
+    assert hot.startswith(("hot modules: compiled (", "hot modules: sources ("))
+
+
+def test_a_scripts_coolmuscle_line_is_the_default_and_an_option_wins_with_a_note() -> None:
+    arc = str(ROOT / "examples" / "4.4.1-circular-radius.cml")   # "# coolmuscle: motors=2"
+    done = run_coolmuscle("run", arc)
+    assert done.returncode == 0 and "Px.2=" in done.stdout and "note" not in done.stderr
+    done = run_coolmuscle("run", arc, "--motors", "1")
+    assert "note: --motors 1 overrides the script's motors=2" in done.stderr
+    assert "Px.2=" not in done.stdout

@@ -5,8 +5,9 @@ something else), and reads back banks that hold the ``?96`` fence's own text (6.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 
@@ -142,6 +143,7 @@ def test_an_emergency_stop_from_another_thread_does_not_wait_for_a_wait() -> Non
     """2.1.2 "*": sent while another thread waits for in-position, it goes out at once."""
     import threading
     import time
+
     from coolmuscle.errors import CoolMuscleError
 
     m = connect("coolmuscle://?scale=1")        # real time: a wait takes wall time
@@ -223,6 +225,7 @@ def test_a_lone_wait_on_a_fast_port_takes_no_wall_time() -> None:
     """docs/user-guide.md: on ``mode=fast`` "a 5 s wait takes no wall time"; a wait with
     no other thread about does not stop between its reads to make way."""
     import time
+
     from coolmuscle.errors import CoolMuscleTimeout
 
     m = connect("coolmuscle://?mode=fast")

@@ -13,10 +13,11 @@ from typing import Any
 import pytest
 
 from client_targets import Tcp
-from coolmuscle.tools.cli import app as cli
 from coolmuscle import connect, connect_async
 from coolmuscle.client import UploadError, parse_program
 from coolmuscle.errors import NotAllowedInBankError
+from coolmuscle.tools.cli import app as cli
+from fixtures import run_coolmuscle
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -177,3 +178,10 @@ def test_a_1000_listing_splits_into_banks() -> None:
              "V1.1==P1.1, S0.1, CL3.1", "END.1", "Steps.1: program 4, ladder 13, total 17/200"]
     assert parse_bank_listing(lines) == {"B1.1": ["A1.1=V1.1"], "B2.1": [],
                                          "L2.1": ["V1.1==P1.1, S0.1, CL3.1"]}
+
+
+def test_upload_of_an_rt3_file_to_a_cm2_hints_at_the_firmware() -> None:
+    done = run_coolmuscle("upload", str(EXAMPLES / "rt3-7.2-analog-speed.cml"), "--port",
+                          "coolmuscle://?mode=fast")
+    assert done.returncode == 1
+    assert "hint: the file is written for rt3" in done.stdout and "motor is cm2" in done.stdout

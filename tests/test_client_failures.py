@@ -4,7 +4,9 @@
   timeout (a TCP proxy that stops forwarding, like a pulled cable; also behind socat);
 * a garbled reply is reported (event, log, exception text) and never hangs the client;
 * a connection that drops raises :class:`TransportError` at once;
-* an alarm in polling mode (K23 without 1) surfaces as :class:`AlarmError` too.
+* an alarm in polling mode (K23 without 1) surfaces as :class:`AlarmError` too;
+* a refused value is a :class:`CoolMuscleError` that is also a ``ValueError``; a
+  ``socket://`` URL without a port names the form it needs.
 """
 
 from __future__ import annotations
@@ -15,15 +17,24 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
+import coolmuscle
 from client_targets import InProcess, Tcp
 from coolmuscle.client import MotorEvent, connect
-from coolmuscle.errors import (AlarmError, CoolMuscleTimeout, ProtocolError,
-                               TransportError)
+from coolmuscle.errors import (
+    AlarmError,
+    CoolMuscleError,
+    CoolMuscleTimeout,
+    InvalidArgumentError,
+    ProtocolError,
+    TransportError,
+)
+from fixtures import ROOT, run_coolmuscle, wait_until
 
 
 class FreezingProxy:
@@ -99,10 +110,7 @@ def test_silence_behind_a_socat_pty_times_out_in_time(proxy: FreezingProxy,
     socat = subprocess.Popen(["socat", f"PTY,link={link},raw,echo=0",
                               f"TCP:127.0.0.1:{proxy.port}"])
     try:
-        deadline = time.monotonic() + 5
-        while not link.exists():
-            assert time.monotonic() < deadline, "socat did not create its pty"
-            time.sleep(0.01)
+        assert wait_until(link.exists, 5, 0.01), "socat did not create its pty"
         with connect(str(link), timeout=0.5) as m:
             m.write_param(23, 0)                      # polling mode this time
             m.move_to(200000, speed=10, accel=100)
@@ -224,8 +232,31 @@ def test_an_alarm_while_polling_is_an_alarm_error() -> None:
         assert caught.value.status == 4 and "Ux.1=4" in str(caught.value)
 
 
-def test_connect_to_nothing_is_a_transport_error() -> None:
+def test_connect_to_nothing_is_a_transport_error(closed_port: int) -> None:
     with pytest.raises(TransportError, match="cannot open"):
-        connect("socket://127.0.0.1:1")
+        connect(f"socket://127.0.0.1:{closed_port}")
     with pytest.raises(TransportError):
         connect("/dev/does-not-exist")
+
+
+# -- the exception tree and bad URLs -----------------------------------------------------
+def test_public_names_and_the_exception_tree() -> None:
+    assert coolmuscle.Ux.IN_POSITION == 8 and coolmuscle.Version.__name__ == "Version"
+    assert coolmuscle.CoolMuscleError is CoolMuscleError
+    with coolmuscle.connect("coolmuscle://?mode=fast") as m:
+        with pytest.raises(CoolMuscleError) as info:
+            m.write_param(20, 99)
+        assert isinstance(info.value, (InvalidArgumentError, ValueError))
+        with pytest.raises(CoolMuscleError):
+            m.write_param(23, 99999)
+        version = m.version
+        assert (version.motor, version.series) == (1, "CM2")
+
+
+def test_socket_url_without_a_port_names_the_form() -> None:
+    with pytest.raises(TransportError, match=r"socket://HOST:PORT"):
+        coolmuscle.connect("socket://127.0.0.1")
+    done = run_coolmuscle("upload", str(ROOT / "examples" / "2.1-operation.cml"), "--port",
+                          "socket://127.0.0.1")
+    assert done.returncode == 1 and "socket://HOST:PORT" in done.stderr + done.stdout
+    assert "NoneType" not in done.stderr + done.stdout

@@ -8,10 +8,8 @@ from hypothesis import strategies as st
 
 from coolmuscle.client.ops import named
 from coolmuscle.client.protocol import Exchange, LineSplitter, Protocol
-from coolmuscle.client.replies import (classify, parse_io_word, parse_listing,
-                                       parse_version)
-from coolmuscle.errors import (CmlSyntaxError, OutOfRangeError, ProtocolError,
-                               TooManyStepsError)
+from coolmuscle.client.replies import classify, parse_io_word, parse_listing, parse_version
+from coolmuscle.errors import CmlSyntaxError, OutOfRangeError, ProtocolError, TooManyStepsError
 
 
 def px(motor: int = 1) -> Exchange:

@@ -10,15 +10,21 @@ one scenario on all three and compares the records.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 
 from client_targets import TARGETS, Target, make_target, target_fixture
 from coolmuscle.client import CoolMuscle, MotorEvent
-from coolmuscle.errors import (AlarmError, CmlSyntaxError, CoolMuscleTimeout,
-                               MotionInterruptedError, OutOfRangeError)
+from coolmuscle.errors import (
+    AlarmError,
+    CmlSyntaxError,
+    CoolMuscleTimeout,
+    MotionInterruptedError,
+    OutOfRangeError,
+)
 from coolmuscle.motor.status import Ux
 
 

@@ -8,8 +8,28 @@ from hypothesis import given, settings
 from cml_support import corpus_lines, expressions, lines, simple_statements
 from coolmuscle.cml import format_expr, format_line, format_statement, parse
 from coolmuscle.cml.ast import (
-    Alloc, Assign, BankBegin, BankEnd, BinOp, Branch, ClearBanks, Compare, Exec, Func,
-    Input, Line, Logic, Not, Num, Output, Query, Ref, Reg, StartBank, StopBank, Str,
+    Alloc,
+    Assign,
+    BankBegin,
+    BankEnd,
+    BinOp,
+    Branch,
+    ClearBanks,
+    Compare,
+    Exec,
+    Func,
+    Input,
+    Line,
+    Logic,
+    Not,
+    Num,
+    Output,
+    Query,
+    Ref,
+    Reg,
+    StartBank,
+    StopBank,
+    Str,
 )
 
 

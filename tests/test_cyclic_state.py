@@ -4,14 +4,15 @@ origin search (cml-users-guide.txt 5.3; ethercat-bridge-users-guide.txt 6.3, 6.4
 
 from __future__ import annotations
 
-from hypothesis import given, settings, strategies as st
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device import CyclicState, Device
 from coolmuscle.errors import NoSuchMotorError
 from coolmuscle.sim.kernel import NS_PER_MS
-
-import pytest
+from fixtures import ChainFactory
 
 
 def same(chain: Chain, motor: int) -> None:
@@ -54,6 +55,6 @@ def test_the_cyclic_state_is_the_snapshot_of_the_same_instant(
             same(chain, 1)
 
 
-def test_no_such_motor() -> None:
+def test_no_such_motor(make_chain: ChainFactory) -> None:
     with pytest.raises(NoSuchMotorError):
-        Chain(motors=1).cyclic_state(2)
+        make_chain(motors=1).cyclic_state(2)

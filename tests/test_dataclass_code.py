@@ -1,8 +1,10 @@
-"""The cache of the methods :mod:`dataclasses` writes (coolmuscle/_dataclass_code.py).
+"""The cache of the methods :mod:`dataclasses` writes (coolmuscle/_dataclass_code.py),
+which the ``coolmuscle`` command installs for its own process.
 
 The classes must be exactly what :mod:`dataclasses` makes of them with and without the
 cache; the file must never break a start (damaged, foreign, read-only, ``-B``); only
-coolmuscle's own classes go through it.
+coolmuscle's own classes go through it; the command installs it and importing
+coolmuscle does not (tests/test_import.py checks the whole of :mod:`dataclasses`).
 """
 
 from __future__ import annotations
@@ -18,11 +20,13 @@ import pytest
 #: Every dataclass method of every coolmuscle module a wide import loads, described by
 #: what makes its code (byte code, constants, names, lines) and its signature.
 DUMP = r"""
-import dataclasses, importlib, inspect, json, sys, types
+import dataclasses, importlib, inspect, json, os, re, sys, types
 import coolmuscle
+from coolmuscle import _dataclass_code as d
+d.install()                                 # as the command's entry point does
 for name in ("coolmuscle.chain.daisy", "coolmuscle.tools.script.runner",
              "coolmuscle.client", "coolmuscle.tools.cli.app",
-             "coolmuscle.frontends.enip.cip", "coolmuscle.frontends.ethercat.objects",
+             "coolmuscle.frontends.enip.cip.messages", "coolmuscle.frontends.ethercat.bridge.table",
              "coolmuscle.tools.twin.compare", "coolmuscle.chain.machine"):
     importlib.import_module(name)
 
@@ -33,6 +37,10 @@ def code_key(code):
             code.co_cellvars, code.co_argcount, code.co_posonlyargcount,
             code.co_kwonlyargcount, code.co_flags, code.co_firstlineno, code.co_filename,
             code.co_qualname, code.co_linetable.hex(), code.co_exceptiontable.hex()]
+
+def stable(text):
+    # a default that is a function prints its address, which differs between processes
+    return re.sub(r" at 0x[0-9a-f]+", " at 0x...", text)
 
 out = {}
 for modname, module in sorted(sys.modules.items()):
@@ -47,10 +55,10 @@ for modname, module in sorted(sys.modules.items()):
             if code is None:
                 continue
             out[f"{modname}.{cls.__qualname__}.{attr}"] = [
-                code_key(code), str(inspect.signature(value)), repr(value.__defaults__)]
+                code_key(code), stable(str(inspect.signature(value))),
+                stable(repr(value.__defaults__))]
         out[f"{modname}.{cls.__qualname__}"] = [repr(cls.__dataclass_params__),
                                                sorted(getattr(cls, "__slots__", ()))]
-from coolmuscle import _dataclass_code as d
 json.dump({"methods": out, "added": d._state["added"], "installed": d._state["installed"],
            "path": str(d.cache_path())}, sys.stdout)
 """
@@ -91,8 +99,9 @@ def test_the_file_is_where_byte_code_goes(dumps: dict[str, dict]) -> None:
     assert path.is_file() and not list(path.parent.glob("*.tmp"))
 
 
-START = ("import coolmuscle.chain.daisy, json, sys; from coolmuscle import _dataclass_code as d;"
-         " json.dump({'added': d._state['added'], 'path': str(d.cache_path())}, sys.stdout)")
+START = ("import json, sys; from coolmuscle import _dataclass_code as d; d.install(); "
+         "import coolmuscle.chain.daisy; "
+         "json.dump({'added': d._state['added'], 'path': str(d.cache_path())}, sys.stdout)")
 
 
 @pytest.mark.parametrize("content", [b"", b"garbage", b"\x00" * 64, "header"])
@@ -126,8 +135,10 @@ def test_a_read_only_cache_folder_is_one_no_cache_not_an_error(tmp_path: Path) -
 
 
 def test_other_modules_dataclasses_are_not_cached(tmp_path: Path) -> None:
-    code = ("import coolmuscle, coolmuscle.cml.ast, dataclasses, json, sys\n"
+    code = ("import json, sys, dataclasses\n"
             "from coolmuscle import _dataclass_code as d\n"
+            "d.install()\n"
+            "import coolmuscle.cml.ast\n"
             "@dataclasses.dataclass(frozen=True)\n"
             "class UsersOwn:\n"
             "    a_field_of_the_users: int = 3\n"
@@ -161,3 +172,28 @@ def test_exec_without_namespaces_uses_the_callers_as_exec_does() -> None:
         cached_exec("here['x'] = 41 + 1")
         return here
     assert caller() == {"x": 42}
+
+
+def test_the_command_keeps_the_cache_and_a_library_import_does_not(tmp_path: Path) -> None:
+    """``coolmuscle run`` writes the cache at its exit and takes every method from it at
+    the next start; importing coolmuscle and its model installs nothing."""
+    script = tmp_path / "one.cml"
+    script.write_text("?96.1\n")
+    environ = {k: v for k, v in os.environ.items()
+               if k not in ("PYTHONDONTWRITEBYTECODE", "COOLMUSCLE_DATACLASS_CACHE")}
+    environ["PYTHONPYCACHEPREFIX"] = str(tmp_path / "pycache")
+    library = _python("import coolmuscle, coolmuscle.chain.daisy, dataclasses, json, sys; "
+                      "from coolmuscle import _dataclass_code as d; "
+                      "json.dump({'installed': d._state['installed'], "
+                      "'exec': getattr(dataclasses, 'exec', None) is d.cached_exec, "
+                      "'path': str(d.cache_path())}, sys.stdout)", tmp_path / "pycache")
+    assert library["installed"] is False and library["exec"] is False
+    assert not Path(library["path"]).exists()
+    cached = Path(library["path"])
+    written = []
+    for _ in range(2):
+        subprocess.run([sys.executable, "-m", "coolmuscle", "run", str(script)], env=environ,
+                       capture_output=True, check=True, timeout=120)
+        assert cached.is_file() and cached.stat().st_size > 10_000
+        written.append(cached.stat().st_mtime_ns)
+    assert written[0] == written[1]        # the second start compiled nothing new

@@ -16,10 +16,14 @@ text tells the user to have running:
     address), then it is stopped;
 ``<!-- docs-example: continues -->``
     a Python block that goes on from the previous Python block of the same page;
-``<!-- docs-example: hardware -->`` / ``interactive`` / ``setup``
+``<!-- docs-example: hardware -->`` / ``interactive`` / ``setup`` / ``project``
     not run here: a real motor on /dev/ttyUSB0 or a raw network interface, a terminal
     or a second shell a person works in (the EtherCAT lab; its tests run the same
-    session), or the README's install commands (CI runs those itself).
+    session), the README's install commands (CI runs those itself), or a command run in
+    the reader's own project (tests/test_testing_plugin.py runs the sample project,
+    examples/user-project/, the same way).
+
+Blocks in ``yaml`` (a CI job) must parse.
 
 Everything runs in a private network namespace (``unshare -n``, loopback only), so
 the documented ports (5150, 1502) are the ones used and nothing else on the machine
@@ -36,9 +40,9 @@ import subprocess
 import sys
 import time
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -48,7 +52,7 @@ _BLOCK = re.compile(r"(?:^<!-- docs-example: (?P<note>[^>]*?) -->\n)?^```(?P<lan
                     r"(?P<body>.*?)^```[ \t]*$", re.M | re.S)
 RUN_TIMEOUT = 60
 READY_TIMEOUT = 15
-NOT_RUN = ("hardware", "interactive", "setup")
+NOT_RUN = ("hardware", "interactive", "setup", "project")
 
 
 @dataclass
@@ -87,7 +91,7 @@ RUNNABLE = [b for b in BLOCKS if b.lang in ("sh", "python") and b.kind not in NO
 def test_every_block_names_its_language_and_notes_are_known() -> None:
     assert len(BLOCKS) > 30
     for block in BLOCKS:
-        assert block.lang in ("sh", "python", "toml", "text"), block.id
+        assert block.lang in ("sh", "python", "toml", "text", "yaml"), block.id
         assert block.kind in ("", "sim", "servers", "continues") + NOT_RUN, block.id
         if block.kind == "hardware":         # a serial device or a raw network interface
             assert "/dev/tty" in block.body or "--ethercat" in block.body, \
@@ -96,8 +100,15 @@ def test_every_block_names_its_language_and_notes_are_known() -> None:
     # the exceptions stay few: a real serial port or NIC, a shell per process, the set-up
     # itself (the two newest, docs/twin.md's capture from /dev/ttyUSB0 and docs/wireshark.md's
     # three-shell EtherCAT capture, are run without hardware by tests/test_twin_loop.py and
-    # tests/test_wireshark.py)
-    assert len(not_run) <= 16, [b.id for b in not_run]
+    # tests/test_wireshark.py), and the two commands of docs/testing-your-project.md that
+    # run in the reader's own project (tests/test_testing_plugin.py runs the sample project)
+    assert len(not_run) <= 18, [b.id for b in not_run]
+
+
+@pytest.mark.parametrize("block", [b for b in BLOCKS if b.lang == "yaml"], ids=lambda b: b.id)
+def test_yaml_blocks_parse(block: Block) -> None:
+    import yaml
+    assert yaml.safe_load(block.body), block.id
 
 
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.lang == "toml"], ids=lambda b: b.id)

@@ -26,6 +26,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+
 from wireshark_support import in_net, private_net, sim_process
 
 HERE = Path(__file__).resolve().parent

@@ -14,14 +14,7 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.signals.encoder import Gearing, gearing_from_config
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.tools.trace.recorder import record
-
-
-def _chain(gearing: Gearing | None = None, firmware: str = "cm2") -> Chain:
-    chain = Chain(firmware=firmware)
-    record(chain)
-    if gearing is not None:
-        chain.motors[1].encoder.set_gearing(gearing)
-    return chain
+from fixtures import ChainFactory, new_chain
 
 
 def _run(chain: Chain, *lines: str, until: float = 20.0) -> None:
@@ -36,10 +29,12 @@ def _index_stop(chain: Chain) -> int:
     return [t for t, profile, *_ in history if profile.end_ns is not None][-1]
 
 
-def test_5_4_1_index_operation_runs_until_the_count_reaches_p_and_does_not_return() -> None:
+def test_5_4_1_index_operation_runs_until_the_count_reaches_p_and_does_not_return(
+        make_chain: ChainFactory) -> None:
     """5.4.1: K71=1, P=10000, S=10, A=100: the count overruns by the stopping distance
     (1000 pps at 100 kpps²: 5 pulses) plus the servo lag when the count was seen."""
-    chain = _chain(Gearing(ppr=1000))             # one encoder pulse per motor pulse
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))  # one encoder pulse per motor pulse
     events: list[str] = []
     chain.subscribe(lambda e: events.append(e.text) if e.kind == "status" else None)
     motor = chain.motors[1]
@@ -55,10 +50,11 @@ def test_5_4_1_index_operation_runs_until_the_count_reaches_p_and_does_not_retur
     assert chain.kernel.events_run - before <= 3  # start, solved stop, in-position
 
 
-def test_5_4_1_index_is_not_affected_by_k72_and_counts_down_too() -> None:
+def test_5_4_1_index_is_not_affected_by_k72_and_counts_down_too(make_chain: ChainFactory) -> None:
     finals = []
     for k72 in (400, 32767):
-        chain = _chain(Gearing(ppr=500, ratio=2.0))   # 1 count per motor pulse again
+        chain = make_chain(traced=True)
+        chain.motors[1].encoder.set_gearing(Gearing(ppr=500, ratio=2.0))  # 1 count per pulse again
         _run(chain, f"K72.1={k72}", "K71.1=1", "P.1=-3000", "S.1=20", "A.1=200", "^.1")
         finals.append((chain.execute("?76.1"), chain.execute("?96.1")))
     assert finals[0] == finals[1]
@@ -66,9 +62,10 @@ def test_5_4_1_index_is_not_affected_by_k72_and_counts_down_too() -> None:
     assert -3000 - 20 < count < -3000           # overrun past P going down
 
 
-def test_5_4_1_a_and_b_index_counts_a_quarter_of_the_sub_count() -> None:
+def test_5_4_1_a_and_b_index_counts_a_quarter_of_the_sub_count(make_chain: ChainFactory) -> None:
     """K71=3: four edges per cycle; "count value will be 1/4 integral part of sub-count"."""
-    chain = _chain(Gearing(ppr=100))            # 0.1 encoder cycle per motor pulse
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=100))  # 0.1 encoder cycle per motor pulse
     motor = chain.motors[1]
     _run(chain, "K71.1=3", "P.1=50", "S.1=1", "A.1=10", "^.1")
     stop = _index_stop(chain)
@@ -77,16 +74,18 @@ def test_5_4_1_a_and_b_index_counts_a_quarter_of_the_sub_count() -> None:
     assert motor.axis.position() == pytest.approx(500 + 0.5 + 1 / 3, abs=0.01)
 
 
-def test_5_4_1_index_on_an_encoder_that_moves_by_itself() -> None:
+def test_5_4_1_index_on_an_encoder_that_moves_by_itself(make_chain: ChainFactory) -> None:
     """A conveyor encoder at 2000 pulses/s: the stop comes at the solved instant."""
-    chain = _chain(Gearing(kind="independent", rate=2000.0))
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(kind="independent", rate=2000.0))
     _run(chain, "K71.1=1", "P.1=5000", "S.1=10", "A.1=100", "^.1", until=10)
     assert _index_stop(chain) == seconds(2.5)
     assert chain.execute("?76.1") == ["Ecnt.1=20000"]   # it kept running after the stop
 
 
-def test_5_4_1_a_stop_command_cancels_the_index_operation() -> None:
-    chain = _chain(Gearing(ppr=1000))
+def test_5_4_1_a_stop_command_cancels_the_index_operation(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     _run(chain, "K71.1=1", "P.1=10000", "S.1=10", "A.1=100", "^.1", until=2)
     _run(chain, "].1", until=3)
     position = chain.execute("?96.1")
@@ -94,8 +93,9 @@ def test_5_4_1_a_stop_command_cancels_the_index_operation() -> None:
     assert chain.execute("?96.1") == position == ["Px.1=2000"]
 
 
-def test_5_4_1_a_new_speed_during_index_is_solved_again() -> None:
-    chain = _chain(Gearing(ppr=1000))
+def test_5_4_1_a_new_speed_during_index_is_solved_again(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     motor = chain.motors[1]
     _run(chain, "K71.1=1", "P.1=10000", "S.1=10", "A.1=100", "^.1", until=2)
     motor.write_state("ST", 40)                # St: the running rotation speeds up
@@ -104,10 +104,11 @@ def test_5_4_1_a_new_speed_during_index_is_solved_again() -> None:
     assert motor.encoder.count(stop - 1) == 9999 and motor.encoder.count(stop) == 10000
 
 
-def test_5_4_2_feedback_operation_puts_the_load_on_the_count() -> None:
+def test_5_4_2_feedback_operation_puts_the_load_on_the_count(make_chain: ChainFactory) -> None:
     """5.4.2: K71=4, K72=1000; with belt slip and backlash the motor goes further so
     that the load encoder reads exactly P."""
-    chain = _chain(Gearing(slip=0.1, backlash=20.0))
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(slip=0.1, backlash=20.0))
     _run(chain, "K71.1=4", "K72.1=1000", "P.1=10000", "S.1=10", "A.1=100", "^.1", until=15)
     assert chain.execute("?76.1") == ["Ecnt.1=10000"]
     position = chain.motors[1].axis.position()
@@ -118,10 +119,11 @@ def test_5_4_2_feedback_operation_puts_the_load_on_the_count() -> None:
                                                              abs=0.01)
 
 
-def test_5_4_3_pulse_counting_with_v_ecnt() -> None:
+def test_5_4_3_pulse_counting_with_v_ecnt(make_chain: ChainFactory) -> None:
     """5.4.3: K71=5 counts only; V1="Ecnt" reads the count (here a direct-mode branch
     stands in for the ladder bank of 2.2.3)."""
-    chain = _chain(Gearing(ppr=1000))
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     _run(chain, "K71.1=5", 'V1.1="Ecnt"', "S.1=10", "A.1=100", "P.1=3000", "^.1", until=5)
     _run(chain, "V1.1>5000, V3.1=50, V3.1=10", until=5)
     assert chain.execute("V3.1") == ["V3.1=10"]
@@ -132,12 +134,13 @@ def test_5_4_3_pulse_counting_with_v_ecnt() -> None:
     assert chain.execute("V2.1") == ["V2.1=10000"]
 
 
-def test_ch3_k71_a_phase_counts_rising_edges_by_direction() -> None:
+def test_ch3_k71_a_phase_counts_rising_edges_by_direction(make_chain: ChainFactory) -> None:
     """A-phase: a rising edge each whole cycle going forward, half a cycle later going
     back; A&B: the integral part of a quarter of the sub-count."""
     counts = {}
     for k71 in (5, 7):
-        chain = _chain(Gearing(ppr=10))       # one cycle per 100 motor pulses
+        chain = make_chain(traced=True)
+        chain.motors[1].encoder.set_gearing(Gearing(ppr=10))  # one cycle per 100 motor pulses
         seen = []
         for target in (1020, 960, 940, 1000, 1050, 0, -60):
             _run(chain, f"K71.1={k71}", f"P.1={target}", "S.1=10", "A.1=100", "^.1",
@@ -148,20 +151,23 @@ def test_ch3_k71_a_phase_counts_rising_edges_by_direction() -> None:
     assert counts[7] == [10, 9, 9, 10, 10, 0, 0]
 
 
-def test_2_2_1_v_states_ct_and_ecnt_and_rt3_cx_fx() -> None:
-    chain = _chain(Gearing(ppr=1000))
+def test_2_2_1_v_states_ct_and_ecnt_and_rt3_cx_fx(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     _run(chain, "K71.1=5", 'V1.1="CT"', 'V2.1="Ecnt"', "S.1=10", "P.1=1234", "^.1", until=5)
     _run(chain, "V3.1=V1.1", "V4.1=V2.1")
     assert chain.execute("V3.1") + chain.execute("V4.1") == ["V3.1=1234", "V4.1=1234"]
-    rt3 = _chain(Gearing(ppr=1000), firmware="rt3")
+    rt3 = make_chain(firmware="rt3", traced=True)
+    rt3.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     _run(rt3, "K71.1=5", 'V1.1="Cx"', 'V2.1="Fx"', "S.1=10", "P.1=5000", "^.1", until=2)
     _run(rt3, "V3.1=V1.1", "V4.1=V2.1", until=2)
     assert rt3.execute("V4.1") == ["V4.1=1000"]          # 1000 pulses/s while cruising
     assert 1900 < int(rt3.execute("V3.1")[0].split("=")[1]) < 2000
 
 
-def test_the_trace_carries_the_encoder_count() -> None:
-    chain = _chain(Gearing(ppr=1000))
+def test_the_trace_carries_the_encoder_count(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     _run(chain, "K71.1=5", "S.1=10", "A.1=100", "P.1=2000", "^.1", until=3)
     rec = record(chain)
     assert rec.sample(1, seconds(1.0)).encoder == int(rec.sample(1, seconds(1.0)).position)
@@ -169,8 +175,9 @@ def test_the_trace_carries_the_encoder_count() -> None:
     assert "m1.encoder" in rec.header()
 
 
-def test_ch3_k71_change_keeps_the_count_and_frees_inputs_1_and_2() -> None:
-    chain = _chain(Gearing(ppr=1000))
+def test_ch3_k71_change_keeps_the_count_and_frees_inputs_1_and_2(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=1000))
     encoder = chain.motors[1].encoder
     _run(chain, "K71.1=5", "S.1=10", "P.1=700", "^.1", until=2)
     assert not encoder.uses_input(2) and encoder.uses_input(1)
@@ -182,8 +189,9 @@ def test_ch3_k71_change_keeps_the_count_and_frees_inputs_1_and_2() -> None:
     assert chain.execute("?76.1") == ["Ecnt.1=900"] and not encoder.uses_input(1)
 
 
-def test_cm1_k63_counts_with_k88_resolution() -> None:
-    chain = _chain(Gearing(), firmware="cm1")
+def test_cm1_k63_counts_with_k88_resolution(make_chain: ChainFactory) -> None:
+    chain = make_chain(firmware="cm1", traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing())
     chain.execute("(.1")
     _run(chain, "K88.1=1500", "K63.1=2", "S.1=10", "P.1=501", "^.1", until=3)
     assert chain.execute("?76.1") == ["Ecnt.1=751"]    # 1500 ppr encoder, 1000 ppr motor
@@ -211,7 +219,8 @@ def test_5_4_1_index_stop_is_solved_at_the_count_edge(target: int, speed: int, a
                                                        ppr: int, k71: int) -> None:
     """Property: the stop starts at the very nanosecond the count becomes P, and the
     count never comes back (no overrun correction)."""
-    chain = _chain(Gearing(ppr=ppr))
+    chain = new_chain(traced=True)
+    chain.motors[1].encoder.set_gearing(Gearing(ppr=ppr))
     motor = chain.motors[1]
     _run(chain, f"K71.1={k71}", f"P.1={target}", f"S.1={speed}", f"A.1={accel}", "^.1",
          until=0)

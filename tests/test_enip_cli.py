@@ -6,8 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from coolmuscle.frontends.enip.cli import optional_value_argv, parse_enip
-from coolmuscle.frontends.enip.eds import generate
+from coolmuscle.frontends.enip.cm1.eds import generate
+from coolmuscle.tools.cli.enip import optional_value_argv, parse_enip
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 

@@ -17,12 +17,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip import cip, connmgr
-from coolmuscle.frontends.enip import encapsulation as enc
-from coolmuscle.frontends.enip.adapter import Cm1Module
-from coolmuscle.frontends.enip.io import ConnectionTable, multicast_address
-from coolmuscle.frontends.enip.objects import ObjectModel
-from coolmuscle.frontends.enip.router import Router
+from coolmuscle.frontends.enip.cip import connmgr
+from coolmuscle.frontends.enip.cip import encapsulation as enc
+from coolmuscle.frontends.enip.cip import messages as cip
+from coolmuscle.frontends.enip.cip.io import ConnectionTable, multicast_address
+from coolmuscle.frontends.enip.cip.router import Router
+from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
+from coolmuscle.frontends.enip.cm1.objects import DESCRIPTION, ObjectModel
 from coolmuscle.sim.kernel import Kernel
 from enip_support import enip_service, ports
 
@@ -38,7 +39,7 @@ class Rig:
         self.chain = Chain(self.kernel, motors=1, firmware="cm1", state_dir=None)
         self.module = Cm1Module(self.chain)
         self.now = 1_000_000_000
-        self.table = ConnectionTable(self.module, "127.0.0.1", 2222)
+        self.table = ConnectionTable(self.module, DESCRIPTION, "127.0.0.1", 2222)
         objects = ObjectModel(self.module, output_owned=lambda: self.table.owner is not None)
         self.router = Router(objects, self.table, 44818, clock=lambda: self.now)
         self.sessions = enc.Sessions()
@@ -211,6 +212,43 @@ def test_vol1_duplicate_owner_and_close(rig):
     assert open_via(rig, conn, handle, close)[1] == (0x0107,)
 
 
+def class3_open(serial: int) -> bytes:
+    """A class 3 Forward_Open to the Message Router (20 02 24 01), as pycomm3 sends one."""
+    return forward_open(serial=serial, ot_size=504, to_size=504, transport=0xA3,
+                        path=bytes.fromhex("20 02 24 01"))
+
+
+def test_eds_capacity_per_kind_class3_never_starves_class1(rig):
+    """EDS [Capacity]: MaxMsgConnections 3, MaxIOConnections 1.  Four class 3 requests
+    from one idle client: three open, the fourth is out of connections (0x0113); the
+    PLC's Class 1 exclusive owner still opens; a second one is an ownership conflict
+    (0x0106).  Closing a class 3 connection frees its place for another."""
+    client = rig.connection()
+    handle = register(client)
+    class3 = [open_via(rig, client, handle, class3_open(serial)) for serial in (11, 12, 13, 14)]
+    plc = rig.connection()
+    plc_handle = register(plc)
+    assert open_via(rig, plc, plc_handle, forward_open(serial=1))[0] == 0      # Class 1
+    assert [status for status, _e, _b in class3] == [0, 0, 0, 0x01]
+    assert class3[3][1] == (0x0113,)
+    assert open_via(rig, plc, plc_handle, forward_open(serial=2))[1] == (0x0106,)
+    assert (rig.table.count(io=False), rig.table.count(io=True)) == (3, 1)
+    close = bytes((0x4E, 2, 0x20, 0x06, 0x24, 0x01)) + struct.pack(
+        "<BBHHIBB", 0x0A, 0xF0, 11, 0x00FE, 0xDEAD0000, 0, 0)
+    assert open_via(rig, client, handle, close)[0] == 0
+    assert open_via(rig, client, handle, class3_open(15))[0] == 0
+
+
+def test_message_router_and_eds_say_the_same_capacity(rig):
+    from coolmuscle.frontends.enip.cm1.eds import generate
+    conn = rig.connection()
+    reply = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(get_request(2, 1, 2)),
+                                        register(conn))))
+    assert reply[2] == 0 and struct.unpack_from("<H", reply, 4)[0] == 3
+    eds = generate()
+    assert "MaxIOConnections = 1;" in eds and "MaxMsgConnections = 3;" in eds
+
+
 def test_vol1_modeless_output_accepted_and_key_wildcards(rig):
     conn = rig.connection()
     key = bytes.fromhex("34 04 00 00 00 00 00 00 00 00")
@@ -377,8 +415,9 @@ def test_fuzz_cip_parsers_raise_only_cip_errors(rig, data):
 
 def test_fuzz_live_server_other_client_untouched():
     """Garbage over real sockets (TCP 44818-style and UDP I/O) while a pycomm3 client works."""
-    from pycomm3 import CIPDriver
     import random
+
+    from pycomm3 import CIPDriver
     rng = random.Random(13)
     with enip_service() as service:
         tcp_port, io_port = ports(service)
@@ -414,3 +453,35 @@ def test_identity_reset_closes_connections_and_clears_outputs(rig):
     assert rig.table.owner is None and rig.module.output_image() == bytes(14)
     bad = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(reset + b"\x05"), handle)))
     assert bad[2] == cip.INVALID_PARAMETER
+
+
+# -- TCP/IP Interface attribute 13, the encapsulation inactivity timeout (CIP Vol 2 5-3) --
+def _cip(conn: enc.Connection, handle: int, request: bytes) -> tuple[int, bytes]:
+    reply = cip_reply(conn.handle(frame(enc.SEND_RR_DATA, rr_data(request), handle)))
+    return reply[2], reply[4 + 2 * reply[3]:]
+
+
+def set_request(cls: int, inst: int, attr: int, data: bytes) -> bytes:
+    path = cip.encode_path(cls, inst, attr)
+    return bytes((0x10, len(path) // 2)) + path + data
+
+
+def test_vol2_inactivity_timeout_get_set_range_and_out_of_box_reset(rig):
+    conn = rig.connection()
+    handle = register(conn)
+    assert _cip(conn, handle, get_request(0xF5, 1, 13)) == (0, struct.pack("<H", 120))
+    all_before = _cip(conn, handle, bytes((0x01, 2)) + cip.encode_path(0xF5, 1))
+    for value, status in ((3601, 0x09), (0xFFFF, 0x09), (3600, 0), (0, 0), (1, 0)):
+        assert _cip(conn, handle, set_request(0xF5, 1, 13, struct.pack("<H", value)))[0] \
+            == status, value
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x05"))[0] == 0x13
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x05\x00\x01"))[0] == 0x15
+    assert _cip(conn, handle, set_request(0xF5, 1, 13, b"\x07\x00\x00\x00"))[0] == 0  # + route
+    assert _cip(conn, handle, get_request(0xF5, 1, 13)) == (0, struct.pack("<H", 7))
+    assert rig.router.objects.inactivity.seconds == 7
+    assert _cip(conn, handle, bytes((0x01, 2)) + cip.encode_path(0xF5, 1)) == all_before
+    path = cip.encode_path(1, 1)
+    assert _cip(conn, handle, bytes((0x05, len(path) // 2)) + path + b"\x00")[0] == 0
+    assert rig.router.objects.inactivity.seconds == 7         # type 0: a power cycle
+    assert _cip(conn, handle, bytes((0x05, len(path) // 2)) + path + b"\x01")[0] == 0
+    assert rig.router.objects.inactivity.seconds == 120       # type 1: out of box

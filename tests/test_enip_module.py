@@ -12,7 +12,7 @@ import struct
 import pytest
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip.adapter import Cm1Module
+from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
 from coolmuscle.sim.kernel import Kernel, seconds
 
 

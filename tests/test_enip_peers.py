@@ -15,8 +15,8 @@ import time
 
 import pytest
 
-from coolmuscle.frontends.enip import objects
-from coolmuscle.frontends.enip.eds import generate
+from coolmuscle.frontends.enip.cm1 import objects
+from coolmuscle.frontends.enip.cm1.eds import generate
 from enip_support import KernelStamps, enip_process, enip_service, ports
 
 pycomm3 = pytest.importorskip("pycomm3")
@@ -305,7 +305,7 @@ def test_pycomm3_unconnected_send_is_unwrapped(service):
 def test_multicast_t_o_reaches_a_joined_member():
     """A hand-written originator (ours, not a peer): Forward_Open with T->O multicast; the
     reply's T->O sockaddr item names the group (CIP Vol 2 3-5.3); packets arrive there."""
-    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
     with enip_service() as st:
         tcp_port, io_port = ports(st)
@@ -398,9 +398,9 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
     set back when it stops."""
     import sys
 
-    from coolmuscle.frontends.enip import encapsulation as enc
-    from coolmuscle.frontends.enip.adapter import Cm1Module
-    from coolmuscle.frontends.enip.producer import SWITCH_INTERVAL
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip.producer import SWITCH_INTERVAL
+    from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
     from test_enip_encapsulation import decode, forward_open, frame, o_t, rr_data
     held: dict[str, list[bool]] = {"write_output": [], "input_image": []}
     box: list = []
@@ -440,7 +440,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
 def test_adapter_closes_completely_with_class1_running(caplog):
     """Stopping the service while T->O packets flow ends the producer thread, closes the
     connections and frees the TCP, UDP 44818 and I/O ports; nothing is logged as failed."""
-    from coolmuscle.frontends.enip import encapsulation as enc
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, forward_open, frame, rr_data
     with enip_service() as st:
         transport = st.transports[0]
@@ -466,8 +466,8 @@ def test_adapter_closes_completely_with_class1_running(caplog):
 def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypatch):
     """At most MAX_TCP_CLIENTS encapsulation clients at once (docs/reliability.md
     "Bounds"): one more is closed as it arrives, the others keep their sessions."""
-    from coolmuscle.frontends.enip import encapsulation as enc
     from coolmuscle.frontends.enip import server as enip_server
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
     from test_enip_encapsulation import decode, frame
     monkeypatch.setattr(enip_server, "MAX_TCP_CLIENTS", 4)
     with enip_service() as st:
@@ -488,3 +488,119 @@ def test_more_tcp_clients_than_the_bound_are_closed_and_the_rest_served(monkeypa
         finally:
             for sock in held:
                 sock.close()
+
+
+def _raw_open(tcp_port: int, request: bytes) -> tuple[int, tuple[int, ...]]:
+    """A Forward_Open by hand (CIP Vol 1 3-5.5.2 bytes) on a session of its own: the
+    general status and the extended status words of the reply."""
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from test_enip_encapsulation import decode, frame, rr_data
+    with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as tcp:
+        tcp.sendall(frame(enc.REGISTER_SESSION, struct.pack("<HH", 1, 0)).encode())
+        handle = decode(tcp.recv(1024)).session
+        tcp.sendall(frame(enc.SEND_RR_DATA, rr_data(request), handle).encode())
+        reply = enc.parse_cpf(decode(tcp.recv(1024)).data[6:])[1].data
+    return reply[2], struct.unpack_from(f"<{reply[3]}H", reply, 4)
+
+
+def test_idle_class3_connections_never_keep_the_plcs_class1_out(monkeypatch):
+    """EDS [Capacity]: MaxMsgConnections 3, MaxIOConnections 1, counted apart.  An idle
+    client tries four class 3 connections with pycomm3 (one CIPDriver each, its
+    Large_Forward_Open): three open, the fourth is refused.  The PLC (the ``ethernetip``
+    package's Class 1 originator) still opens its exclusive owner and T->O flows.  By
+    hand, one more class 3 request gets 0x01/0x0113 (out of connections, CIP Vol 1
+    table 3-5.33) and a second Class 1 owner 0x01/0x0106 (ownership conflict)."""
+    from pycomm3.exceptions import ResponseError
+
+    from test_enip_encapsulation import class3_open, forward_open
+    with enip_service() as st:
+        tcp_port, io_port = ports(st)
+        idle: list[CIPDriver] = []
+        opened = []
+        try:
+            for _ in range(4):
+                d = CIPDriver(f"127.0.0.1:{tcp_port}")
+                d.open()
+                idle.append(d)
+                try:
+                    opened.append(get(d, 1, 1, 7, connected=True).error is None)
+                except ResponseError:             # pycomm3: "Target did not connected"
+                    opened.append(False)
+            scanner = _Scanner(monkeypatch, tcp_port, io_port)
+            try:
+                assert scanner.forward_open() == 0
+                assert _wait(lambda: len(scanner.times) > 5, 2)        # T->O flows
+                assert opened == [True, True, True, False]
+                assert _raw_open(tcp_port, class3_open(21)) == (0x01, (0x0113,))
+                assert _raw_open(tcp_port, forward_open(serial=22)) == (0x01, (0x0106,))
+                assert (st.transports[0].table.count(io=False),
+                        st.transports[0].table.count(io=True)) == (3, 1)
+            finally:
+                scanner.close()
+        finally:
+            for d in idle:
+                d.close()
+
+
+def _closed_within(sock: socket.socket, limit: float) -> float | None:
+    """Seconds until the adapter closes ``sock``; ``None`` if still open after ``limit``."""
+    start = time.monotonic()
+    sock.settimeout(limit)
+    try:
+        data = sock.recv(1024)
+    except TimeoutError:
+        return None
+    except ConnectionResetError:
+        data = b""
+    assert data == b"", data
+    return time.monotonic() - start
+
+
+def test_encapsulation_inactivity_timeout_closes_silent_connections_cip_vol2_5_3():
+    """TCP/IP attribute 13 set to 1 s with pycomm3: a connection that never sends and an
+    idle pycomm3 client holding a class 3 connection are closed after about 1 s (the
+    class 3 place is freed); a client sending NOP every 0.25 s stays.  Set to 0, an idle
+    connection stays open."""
+    from coolmuscle.frontends.enip.cip import encapsulation as enc
+    from test_enip_encapsulation import decode, frame
+    with enip_service() as st:
+        tcp_port, _ = ports(st)
+        table = st.transports[0].table
+        with driver(st) as d:
+            assert get(d, 0xF5, 1, 13).value == struct.pack("<H", 120)
+            assert generic_status(d, service=0x10, class_code=0xF5, instance=1, attribute=13,
+                                  request_data=struct.pack("<H", 3601)) == 0x09
+            assert set_(d, 0xF5, 1, 13, struct.pack("<H", 1)).error is None
+            assert get(d, 0xF5, 1, 13).value == struct.pack("<H", 1)
+        holder = CIPDriver(f"127.0.0.1:{tcp_port}")
+        holder.open()
+        assert get(holder, 1, 1, 7, connected=True).error is None
+        assert table.count(io=False) == 1
+        talker = socket.create_connection(("127.0.0.1", tcp_port), timeout=3)
+        silent = socket.create_connection(("127.0.0.1", tcp_port), timeout=3)
+        try:
+            started, closed = time.monotonic(), None
+            while time.monotonic() - started < 2.5:
+                talker.sendall(frame(enc.NOP, b"").encode())
+                if closed is None:
+                    waited = _closed_within(silent, 0.25)
+                    if waited is not None:
+                        closed = time.monotonic() - started
+                else:
+                    time.sleep(0.25)
+            assert closed is not None and 0.7 <= closed <= 2.0, closed
+            assert _wait(lambda: table.count(io=False) == 0, 1)        # holder's place
+            talker.sendall(frame(enc.LIST_IDENTITY, b"").encode())
+            assert decode(talker.recv(1024)).status == 0                 # talker stays
+            assert st.transports[0].idle_closed == 2
+        finally:
+            talker.close()
+            silent.close()
+            try:
+                holder.close()
+            except Exception:       # pycomm3 cannot say goodbye on a closed socket
+                pass
+        with driver(st) as d:
+            assert set_(d, 0xF5, 1, 13, struct.pack("<H", 0)).error is None
+        with socket.create_connection(("127.0.0.1", tcp_port), timeout=3) as quiet:
+            assert _closed_within(quiet, 1.5) is None                    # 0: never

@@ -15,15 +15,15 @@ import struct
 import time
 
 import pytest
-from ethercat_support import needs_net_admin
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.ethercat.app import CYCLE_NS, BridgeApp
+from coolmuscle.frontends.ethercat.bridge.app import CYCLE_NS, BridgeApp
 from coolmuscle.frontends.ethercat.lab import veth_pair
 from coolmuscle.frontends.ethercat.transport import CycleLateness, EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.sim.kernel import Kernel
 from coolmuscle.sim.realtime import RealtimeClock
+from ethercat_support import needs_net_admin
 
 MS = 1_000_000
 

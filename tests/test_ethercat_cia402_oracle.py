@@ -17,9 +17,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from canopen.profiles.p402 import Homing, OperationMode, State402
-from ethercat_drive_support import Bench
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
+from ethercat_drive_support import Bench
 
 COMMANDS = sorted(State402.CW_CODE_COMMANDS)          # 0x80, 0x00, 0x06, 0x07, 0x0F, 0x02
 STOPPERS = Path(__file__).parent / "data" / "ethercat_stoppers.toml"

@@ -14,9 +14,8 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 
-from ethercat_support import needs_net_admin
-
 from coolmuscle.frontends.ethercat.lab import ip
+from ethercat_support import needs_net_admin
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
 LAB = ["--namespace", "cmecatclins", "--master-if", "cmecatclim", "--slave-if", "cmecatclis"]

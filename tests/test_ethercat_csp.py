@@ -11,13 +11,13 @@ import subprocess
 import sys
 
 import pytest
-from ethercat_support import MASTERS, link, needs_net_admin, run_master
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.ethercat import cia402
-from coolmuscle.frontends.ethercat.cia402 import State
+from coolmuscle.frontends.ethercat.bridge import cia402
+from coolmuscle.frontends.ethercat.bridge.cia402 import State
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
+from ethercat_support import MASTERS, link, needs_net_admin, run_master
 
 pytestmark = pytest.mark.realtime
 

@@ -12,10 +12,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ethercat_drive_support import Bench
 
-from coolmuscle.frontends.ethercat.dictionary import (DEVICE_STATE, LENGTH_HIGH, NO_SUBINDEX,
-                                                       VALUE_HIGH, VALUE_LOW, VALUE_RANGE)
+from coolmuscle.frontends.ethercat.engine.dictionary import (
+    DEVICE_STATE,
+    LENGTH_HIGH,
+    NO_SUBINDEX,
+    VALUE_HIGH,
+    VALUE_LOW,
+    VALUE_RANGE,
+)
+from ethercat_drive_support import Bench
 
 STOPPERS = Path(__file__).parent / "data" / "ethercat_stoppers.toml"
 NULL = "Null\r\n"
@@ -388,7 +394,7 @@ def test_appendix_6_table_details():
     """7.3 F511h-F514h: "Number of Entries 4: Fixed" (4h reserved, N/A); 6.4.1 60E3h
     INT16 entries (the methods 1-4 of 6098h); 7.2.2 F591h-F594h "Max String Size
     64bytes" (a longer reply is read in 64-byte pieces)."""
-    from coolmuscle.frontends.ethercat.objects import INT16
+    from coolmuscle.frontends.ethercat.engine.od import INT16
     b = Bench("EB12")
     assert [b.read(0xF511 + i, 0) for i in range(4)] == [4, 4, 4, 4]
     assert [b.read(0x60E3, s) for s in range(1, 5)] == [1, 2, 3, 4]

@@ -12,10 +12,10 @@ import random
 import struct
 
 import pytest
-from ethercat_drive_support import Bench
 
-from coolmuscle.frontends.ethercat import dictionary as D
-from coolmuscle.frontends.ethercat.coe import SDO_REQUEST, SDO_RESPONSE, coe_header
+from coolmuscle.frontends.ethercat.engine import dictionary as D
+from coolmuscle.frontends.ethercat.engine.coe import SDO_REQUEST, SDO_RESPONSE, coe_header
+from ethercat_drive_support import Bench
 
 #: Manual 5.4.1, every code.
 ABORT_CODES = {v for k, v in vars(D).items() if k.isupper() and isinstance(v, int)

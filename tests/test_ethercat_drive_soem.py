@@ -19,13 +19,13 @@ import sys
 from pathlib import Path
 
 import pytest
-from ethercat_drive_support import Bench
-from ethercat_support import master_command, needs_net_admin, run_master
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.ethercat.lab import veth_pair
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
+from ethercat_drive_support import Bench
+from ethercat_support import master_command, needs_net_admin, run_master
 
 pytestmark = [needs_net_admin, pytest.mark.realtime]
 

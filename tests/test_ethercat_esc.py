@@ -9,14 +9,16 @@ from __future__ import annotations
 import struct
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from coolmuscle.frontends.ethercat import esc as E
-from coolmuscle.frontends.ethercat import esm
-from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.app import BridgeApp
-from coolmuscle.frontends.ethercat.coe import CoeServer
-from coolmuscle.frontends.ethercat.dictionary import Dictionary
-from coolmuscle.frontends.ethercat.objects import build_table
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge.table import build_table
+from coolmuscle.frontends.ethercat.engine import esc as E
+from coolmuscle.frontends.ethercat.engine import esm
+from coolmuscle.frontends.ethercat.engine.coe import CoeServer
+from coolmuscle.frontends.ethercat.engine.dictionary import Dictionary
 
 MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
 
@@ -197,6 +199,8 @@ def test_safeop_checks_outputs_inputs_and_watchdog_001d_001e_001f(app):
     request_state(app, esm.PREOP)
 
     def sm(n: int, start: int, length: int, ctl: int) -> None:
+        # deactivated first: an ESC keeps the settings of an activated SyncManager
+        one(app, E.FPWR, 0x1001, E.REG_SM + 8 * n + 6, b"\x00")
         one(app, E.FPWR, 0x1001, E.REG_SM + 8 * n, struct.pack("<HHBBBB", start, length, ctl,
                                                                 0, 1, 0))
     sm(2, 0x1100, 20, 0x64)
@@ -385,3 +389,203 @@ def test_an_unavailable_mode_of_operation_is_set_to_csp_6_2_2_note_3():
     assert app.dictionary.get(0x6860, 0) == 8
     assert sdo(server, 0x2F, 0x6860, 0, b"\x06\0\0\0")[2] == 0x60     # hm
     assert app.dictionary.get(0x6860, 0) == 6
+
+
+# -- SyncManagers a master points at the registers (ESC datasheet II 0x0800, 5.2.2) -----
+SDO_1018 = (struct.pack("<HHBB", 10, 0, 0, 0x13) + struct.pack("<H", 0x2000)
+            + struct.pack("<BHBI", 0x40, 0x1018, 1, 0)).ljust(128, b"\0")
+
+
+def sm_regs(app: BridgeApp, n: int) -> tuple[int, int, int, int]:
+    """(start, length, control, activate) as the master reads them back."""
+    data = one(app, E.FPRD, 0x1001, E.REG_SM + 8 * n, bytes(8))[1]
+    start, length, control, _status, activate = struct.unpack_from("<HHBBB", data)
+    return start, length, control, activate
+
+
+def to_op(app: BridgeApp) -> None:
+    """What SOEM does: INIT with acknowledge, SyncManagers cleared, configured, up to OP."""
+    request_state(app, esm.INIT | esm.ACK)
+    one(app, E.FPWR, 0x1001, E.REG_SM, bytes(32))
+    configure_mailbox(app)
+    for n, (start, ctl) in enumerate(((0x1100, 0x64), (0x1180, 0x20))):
+        one(app, E.FPWR, 0x1001, E.REG_SM + 8 * (n + 2),
+            struct.pack("<HHBBBB", start, 24, ctl, 0, 1, 0))
+    for state in (esm.PREOP, esm.SAFEOP, esm.OP):
+        assert request_state(app, state) == state, hex(app.stack.esc.al_code)
+
+
+def test_an_activated_syncmanager_keeps_its_settings(app):
+    """Start, length and control are written only while the SyncManager is deactivated."""
+    configure_mailbox(app)
+    assert request_state(app, esm.PREOP) == esm.PREOP
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8, struct.pack("<HHBBBB", 0x0130, 128, 0x22, 0, 1, 0))
+    assert sm_regs(app, 1) == (ident.MBX_IN_START, 128, 0x22, 1)
+    assert one(app, E.FPWR, 0x1001, ident.MBX_OUT_START, SDO_1018)[2] == 1
+    _a, answer, wkc = one(app, E.FPRD, 0x1001, ident.MBX_IN_START, bytes(128))
+    assert wkc == 1 and struct.unpack_from("<I", answer, 12)[0] == ident.VENDOR_ID
+    assert app.stack.esc.al_status == esm.PREOP
+
+
+def test_a_read_mailbox_pointed_at_the_registers_never_writes_them_0016_5_2_2(app):
+    """The attack: SM1 deactivated, pointed at AL status (0x0130), activated, then an SDO
+    request.  The ESC does not activate a SyncManager outside the process RAM; the slave,
+    whose mailbox configuration changed in PRE-OP, goes to INIT with 0016h; nothing is
+    written over the registers; a master that configures it again reaches OP."""
+    configure_mailbox(app)
+    assert request_state(app, esm.PREOP) == esm.PREOP
+    registers = bytes(app.stack.esc.mem[0x0130:0x01B0])
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8 + 6, b"\x00")                  # SM1 deactivated
+    assert app.stack.esc.al_status == esm.INIT | esm.ERROR_FLAG
+    assert app.stack.esc.al_code == 0x0016
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8, struct.pack("<HHBBBB", 0x0130, 128, 0x22, 0, 1, 0))
+    assert sm_regs(app, 1) == (0x0130, 128, 0x22, 0)                     # not activated
+    one(app, E.FPWR, 0x1001, ident.MBX_OUT_START, SDO_1018)
+    assert request_state(app, esm.PREOP) == esm.INIT | esm.ERROR_FLAG    # not acknowledged
+    assert bytes(app.stack.esc.mem[0x0130:0x01B0])[:4] == bytes((0x11, 0, 0, 0))
+    assert bytes(app.stack.esc.mem[0x0138:0x01B0]) == registers[8:]
+    assert request_state(app, esm.PREOP | esm.ACK) == esm.INIT | esm.ERROR_FLAG
+    assert app.stack.esc.al_code == 0x0016                               # still pointed there
+    to_op(app)
+    assert app.stack.esc.al_status == esm.OP and app.stack.esc.al_code == 0
+
+
+@pytest.mark.parametrize("n, start, code", [(1, 0x0FF0, 0x0016), (0, 0x2FC0, 0x0016)])
+def test_a_syncmanager_reaching_outside_the_process_ram_is_not_activated(app, n, start, code):
+    configure_mailbox(app)
+    request_state(app, esm.PREOP)
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8 * n + 6, b"\x00")
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8 * n, struct.pack("<HHBBBB", start, 128,
+                                                            0x22 | 4 * (n == 0), 0, 1, 0))
+    assert sm_regs(app, n)[3] == 0
+    assert len(app.stack.esc.mem) == E.MEM_SIZE
+    assert (app.stack.esc.al_status, app.stack.esc.al_code) == (esm.INIT | esm.ERROR_FLAG, code)
+
+
+@pytest.mark.parametrize("n, code", [(2, 0x001D), (3, 0x001E)])
+def test_a_process_data_syncmanager_deactivated_in_op_goes_to_preop(app, n, code):
+    to_op(app)
+    one(app, E.FPWR, 0x1001, E.REG_SM + 8 * n + 6, b"\x00")
+    assert (app.stack.esc.al_status, app.stack.esc.al_code) == (esm.PREOP | esm.ERROR_FLAG, code)
+    assert (esm.OP, esm.PREOP, code) in app.stack.transitions
+    to_op(app)
+
+
+def test_syncmanagers_cleared_in_init_change_nothing(app):
+    configure_mailbox(app)
+    one(app, E.FPWR, 0x1001, E.REG_SM, bytes(32))
+    assert (app.stack.esc.al_status, app.stack.esc.al_code) == (esm.INIT, 0)
+
+
+@settings(max_examples=400, deadline=None)
+@given(status=st.integers(0, 0xFFFF), code=st.integers(0, 0xFFFF),
+       control=st.integers(0, 0xFFFF), refuse=st.sampled_from([0, 0x0016, 0x001D]))
+def test_the_state_machine_is_total(status, code, control, refuse):
+    """No AL status and no AL control value makes it raise; the outcome names a state."""
+    for out in (esm.request(status, code, control, lambda a, b: refuse),
+                esm.fault(status, esm.SAFEOP, esm.SM_WATCHDOG),
+                esm.fault(status, esm.INIT, esm.INVALID_MAILBOX_CONFIG)):
+        assert out.state in (esm.INIT, esm.PREOP, esm.SAFEOP, esm.OP)
+        assert out.al_status & ~0x1F == 0
+
+
+def test_an_al_status_naming_no_state_counts_as_init():
+    out = esm.request(0x000A, 0x1300, esm.INIT | esm.ACK, lambda a, b: 0)
+    assert (out.al_status, out.code, out.changed) == (esm.INIT, 0, True)
+    out = esm.request(0x000A, 0x1300, 0x0007, lambda a, b: 0)
+    assert (out.state, out.error, out.code) == (esm.INIT, True, 0x0012)
+
+
+# -- bit-wise FMMUs (ETG.1000.4; ESC datasheet II 0x0600) -----------------------------------
+def _reference_lrd(mem: bytes, addr: int, length: int, fm: tuple[int, ...],
+                   before: bytes) -> bytes:
+    """Bit by bit: what a read FMMU puts into an LRD at ``addr`` (LSB first)."""
+    lstart, llen, lsb, leb, pstart, psb = fm
+    out = bytearray(before)
+    for k in range((llen - 1) * 8 + leb - lsb + 1):
+        lbit = (lstart - addr) * 8 + lsb + k
+        pbit = pstart * 8 + psb + k
+        if 0 <= lbit < length * 8:
+            value = mem[pbit // 8] >> (pbit % 8) & 1 if pbit // 8 < len(mem) else 0
+            out[lbit // 8] = out[lbit // 8] & ~(1 << lbit % 8) | value << lbit % 8
+    return bytes(out)
+
+
+def _reference_lwr(mem: bytes, addr: int, data: bytes, fm: tuple[int, ...]) -> bytes:
+    lstart, llen, lsb, leb, pstart, psb = fm
+    out = bytearray(mem)
+    for k in range((llen - 1) * 8 + leb - lsb + 1):
+        lbit = (lstart - addr) * 8 + lsb + k
+        pbit = pstart * 8 + psb + k
+        if 0 <= lbit < len(data) * 8:
+            value = data[lbit // 8] >> (lbit % 8) & 1
+            out[pbit // 8] = out[pbit // 8] & ~(1 << pbit % 8) | value << pbit % 8
+    return bytes(out)
+
+
+def _bitwise_app(fm: tuple[int, ...], kind: int) -> BridgeApp:
+    a = BridgeApp(None)
+    lstart, llen, lsb, leb, pstart, psb = fm
+    one(a, E.APWR, 0, E.REG_FMMU, struct.pack("<IHBBHBBB3x", lstart, llen, lsb, leb, pstart,
+                                               psb, kind, 1))
+    return a
+
+
+@settings(max_examples=150, deadline=None)
+@given(lstart=st.integers(0x10000, 0x10010), llen=st.integers(1, 12),
+       lsb=st.integers(0, 7), leb=st.integers(0, 7), pstart=st.integers(0x1400, 0x1410),
+       psb=st.integers(0, 7), addr=st.integers(0x0FFF8, 0x10020), length=st.integers(1, 24),
+       seed=st.integers(0, 1 << 16))
+def test_bitwise_fmmu_matches_the_bit_by_bit_mapping(lstart, llen, lsb, leb, pstart, psb,
+                                                     addr, length, seed):
+    import random
+    rng = random.Random(seed)
+    fm = (lstart, llen, lsb, leb, pstart, psb)
+    a = _bitwise_app(fm, 1)
+    a.stack.esc.mem[0x1400:0x1420] = rng.randbytes(32)
+    before = rng.randbytes(length)
+    _x, data, _w = one(a, E.LRD, addr & 0xFFFF, addr >> 16, before)
+    assert data == _reference_lrd(bytes(a.stack.esc.mem), addr, length, fm, before)
+    b = _bitwise_app(fm, 2)
+    b.stack.esc.mem[0x1400:0x1420] = rng.randbytes(32)
+    old = bytes(b.stack.esc.mem)
+    incoming = rng.randbytes(length)
+    one(b, E.LWR, addr & 0xFFFF, addr >> 16, incoming)
+    assert bytes(b.stack.esc.mem) == _reference_lwr(old, addr, incoming, fm)
+
+
+def _lines_run(fn) -> int:
+    """Python lines executed in the engine's modules while ``fn`` runs (the work, counted)."""
+    import sys
+    from pathlib import Path
+
+    engine = str(Path(E.__file__).parent)
+    count = 0
+
+    def local(frame, event, arg):
+        nonlocal count
+        if event == "line":
+            count += 1
+        return local
+
+    def calls(frame, event, arg):
+        return local if frame.f_code.co_filename.startswith(engine) else None
+    old = sys.gettrace()
+    sys.settrace(calls)
+    try:
+        fn()
+    finally:
+        sys.settrace(old)
+    return count
+
+
+def test_a_bitwise_fmmu_costs_what_it_overlaps_not_what_it_spans():
+    """An LRD of 4 bytes into a bit-wise FMMU of 65,535 bytes does the work of one into a
+    bit-wise FMMU of 8 bytes (it was a loop over every bit of the FMMU, 524,273 of them)."""
+    def lrd(llen: int) -> int:
+        a = _bitwise_app((0x10000, llen, 3, 7, 0x1000, 5), 1)
+        request = frame((E.LRD, 0x0002, 0x0001, bytes(4)))
+        return _lines_run(lambda: a.stack.esc.process(request))
+    small, large = lrd(8), lrd(65535)
+    assert large <= small + 5, (small, large)
+    assert small < 200

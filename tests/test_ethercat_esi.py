@@ -12,11 +12,13 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.dictionary import NO_OBJECT, Dictionary, SdoAbort
-from coolmuscle.frontends.ethercat.esi import esi_text
-from coolmuscle.frontends.ethercat.objects import VAR, build_table
-from coolmuscle.frontends.ethercat.sii import build_sii, crc8, parse
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.description import describe
+from coolmuscle.frontends.ethercat.bridge.esi import esi_text
+from coolmuscle.frontends.ethercat.bridge.table import build_table
+from coolmuscle.frontends.ethercat.engine.dictionary import NO_OBJECT, Dictionary, SdoAbort
+from coolmuscle.frontends.ethercat.engine.od import VAR
+from coolmuscle.frontends.ethercat.engine.sii import build_sii, crc8, parse
 
 #: ETG.2000 EtherCATInfo DeviceType: the order of its child elements.
 DEVICE_ORDER = ["Type", "HideType", "AlternativeType", "SubDevice", "Name", "Comment", "URL",
@@ -52,10 +54,10 @@ def test_esi_is_etg2000_shaped(esi):
 
 @pytest.mark.parametrize("code", ["EB01", "EB02", "EB12"])
 def test_esi_agrees_with_the_sii_image_and_the_dictionary(esi, code):
-    table = build_table(code)
-    image = build_sii(table)
+    slave = describe(code)
+    image = build_sii(slave)
     sii = parse(image)
-    od = Dictionary(table)
+    od = Dictionary(slave.table)
     device = devices(esi)[code]
     assert sii.crc_ok and crc8(image[:14]) == image[14]
     kind = device.find("Type")
@@ -113,7 +115,7 @@ def test_the_eb12_bridge_has_cm1_on_id1_2_and_cm2_on_id3_4_1_4_3():
 
 def test_an_eb12_chain_has_one_firmware_per_motor_1_4_3():
     from coolmuscle.chain import Chain
-    from coolmuscle.frontends.ethercat.cli import chain_firmware
+    from coolmuscle.tools.cli.ethercat import chain_firmware
     chain = Chain(None, 4, firmware=chain_firmware("EB12"))
     try:
         assert [m.firmware.name for m in chain.motors.values()] == ["cm1", "cm1", "cm2", "cm2"]

@@ -8,10 +8,10 @@ from __future__ import annotations
 import struct
 
 import pytest
-from ethercat_support import link, needs_net_admin, run_master, serving
 
-from coolmuscle.frontends.ethercat import esm
-from coolmuscle.frontends.ethercat.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.engine import esm
+from ethercat_support import link, needs_net_admin, run_master, serving
 
 pytest.importorskip("kickcat")
 pytestmark = [needs_net_admin, pytest.mark.realtime]

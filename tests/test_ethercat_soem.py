@@ -9,13 +9,14 @@ from __future__ import annotations
 import struct
 
 import pytest
-from ethercat_support import link, needs_net_admin, run_master, serving
 
 from coolmuscle.chain import Chain
-from coolmuscle.frontends.ethercat import esm, identity as ident
-from coolmuscle.frontends.ethercat.app import BridgeApp
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
+from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
+from ethercat_support import link, needs_net_admin, run_master, serving
 
 pytestmark = [needs_net_admin, pytest.mark.realtime]
 
@@ -73,3 +74,31 @@ def test_soem_silent_master_trips_the_sm_watchdog_into_safeop_001b_5_2_2():
     assert r["after_silence"] == esm.SAFEOP | esm.ERROR_FLAG
     assert r["al_status_code"] == 0x001B
     assert app.stack.state == esm.SAFEOP
+
+
+def test_soem_reaches_op_after_a_master_pointed_the_read_mailbox_at_the_registers_5_2_2():
+    """A master rewrites SM1 in PRE-OP to AL status (0x0130): in place (the ESC keeps an
+    activated SyncManager's settings: SDO still works), then deactivated and activated
+    there (the ESC does not activate it outside the process RAM; the slave goes to
+    INIT with 0016h).  AL status stays a state throughout; a fresh SOEM master then
+    scans, maps and runs cycles in OP."""
+    app = BridgeApp(None)
+    with link("s4") as lab, serving(app.stack.esc, lab.slave_if):
+        bad = run_master(lab, "soem_master.py", "misconfigure")
+        try:
+            fresh = run_master(lab, "soem_master.py", "full", "200")
+        except AssertionError as exc:
+            raise AssertionError(f"a fresh master fails after {bad}") from exc
+    assert fresh["found"] == 1 and fresh["safeop"] == esm.SAFEOP and fresh["op"] == esm.OP
+    assert fresh["wkc_ok"] >= 0.99 * fresh["cycles"]
+    assert fresh["init"] == esm.INIT
+    assert app.stack.esc.al_status == esm.INIT
+    sm1 = f"{ident.MBX_IN_START:04x}"
+    assert bad["preop"] == esm.PREOP
+    assert bad["in_place_sm1"][:4] == bytes.fromhex(sm1)[::-1].hex()   # kept at 0x1080
+    assert bad["in_place_sdo"] == struct.pack("<I", ident.VENDOR_ID).hex()
+    assert bad["in_place_al"] == [esm.PREOP, 0]
+    assert bad["deactivated_al"] == [esm.INIT | esm.ERROR_FLAG, 0x0016]
+    assert bad["pointed_sm1"] == "3001800022000000"                   # not activated
+    assert bad["pointed_sdo"] != struct.pack("<I", ident.VENDOR_ID).hex()
+    assert bad["pointed_al"] == [esm.INIT | esm.ERROR_FLAG, 0x0016]

@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion import expoly as xp
@@ -37,7 +38,7 @@ class EventOverload(alarms._AlarmWatch):
         self.since: int | None = None
         self._action = ""
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             self.since = None
             return None
@@ -60,7 +61,7 @@ class EventOverload(alarms._AlarmWatch):
         self._action = "alarm"
         return max(deadline, after_ns)
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         now = self.motor.kernel.now
         if self._action == "enter":
             self.since = now

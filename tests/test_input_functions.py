@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from bank_support import Rig, rig
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory
 
 MS = NS_PER_MS
 
@@ -201,11 +201,12 @@ def test_k28_jog_or_banks_2_and_3(k36: int, expected: list[str]) -> None:
     assert (seen if k36 == 0 else [t for t in r.texts() if not t.startswith("Ux")]) == expected
 
 
-def test_input_levels_at_power_up_hold_their_level_functions(tmp_path: Path) -> None:
-    chain = Chain(state_dir=tmp_path)
+def test_input_levels_at_power_up_hold_their_level_functions(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(state_dir=tmp_path)
     chain.execute("K26.1=000001")
     chain.execute("K27.1=000007")
     chain.close()
-    again = Chain(state_dir=tmp_path)   # input 1 not wired: inverted, so on: e-stop
+    again = make_chain(state_dir=tmp_path)   # input 1 not wired: inverted, so on: e-stop
     assert again.motors[1].status == 512
     again.close()

@@ -12,10 +12,24 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.motor.motion.interp import (_CHECK_SPEED_ERROR, MAX_ERROR, MIN_PIECE, Arc,
-                                            Leg, Line, PathError, SpiralArc, SubPath, _knots,
-                                            _pieces, arc_from_center, arc_from_radius,
-                                            follow_path, plan_interpolation, plan_path)
+from coolmuscle.motor.motion.interp import (
+    _CHECK_SPEED_ERROR,
+    MAX_ERROR,
+    MIN_PIECE,
+    Arc,
+    Leg,
+    Line,
+    PathError,
+    SpiralArc,
+    SubPath,
+    _knots,
+    _pieces,
+    arc_from_center,
+    arc_from_radius,
+    follow_path,
+    plan_interpolation,
+    plan_path,
+)
 from coolmuscle.motor.motion.planner import limits_from_data, plan_stop
 
 S100_A100 = limits_from_data(100, 100, k37=3, k44=100, k51=0, k69=0)   # 10000 pps path speed

@@ -11,7 +11,8 @@ are worked out here from the manual's numbers, not taken from the model.
 from __future__ import annotations
 
 import math
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
 

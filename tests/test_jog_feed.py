@@ -8,26 +8,19 @@ from __future__ import annotations
 
 import pytest
 
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.sim.kernel import seconds
 from coolmuscle.tools.trace.recorder import record
-
-
-def _chain() -> tuple[Chain, list[Event]]:
-    chain = Chain()
-    events: list[Event] = []
-    chain.subscribe(events.append)
-    record(chain)
-    return chain, events
+from fixtures import ChainFactory, collect_events
 
 
 def _status_times(events: list[Event]) -> list[tuple[float, str]]:
     return [(e.time / 1e9, e.text) for e in events if e.kind == "status"]
 
 
-def test_5_1_jog_moves_k50_pulses_each_one_shot() -> None:
-    chain, events = _chain()
+def test_5_1_jog_moves_k50_pulses_each_one_shot(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    events = collect_events(chain)
     motor = chain.motors[1]
     chain.set_param(1, 50, 10)
     motor.jog(1)
@@ -45,12 +38,13 @@ def test_5_1_jog_moves_k50_pulses_each_one_shot() -> None:
     assert [text for _, text in _status_times(events)] == ["Ux.1=8"] * 4
 
 
-def test_table_6_1_k50_jog_speed_and_acceleration_are_automatic() -> None:
+def test_table_6_1_k50_jog_speed_and_acceleration_are_automatic(make_chain: ChainFactory) -> None:
     """K50: "Speed and acceleration are set automatically and can not be changed":
     S, A, K49, K43, K51 and K69 make no difference to a jog."""
     timings = []
     for s, a, k49, k43, k51, k69 in ((100, 100, 10, 100, 0, 0), (5, 3, 900, 7, 3, 1024)):
-        chain, events = _chain()
+        chain = make_chain(traced=True)
+        events = collect_events(chain)
         chain.execute(f"S.1={s}, A.1={a}")
         for k, v in ((49, k49), (43, k43), (51, k51), (69, k69), (50, 100)):
             chain.set_param(1, k, v)
@@ -63,8 +57,8 @@ def test_table_6_1_k50_jog_speed_and_acceleration_are_automatic() -> None:
     assert 0.1 < timings[0][0][0] < 0.11
 
 
-def test_5_1_jog_while_moving_is_ignored() -> None:
-    chain, _ = _chain()
+def test_5_1_jog_while_moving_is_ignored(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.execute("S.1=10, A.1=100, P.1=1000")
     chain.execute("^.1")
@@ -74,8 +68,9 @@ def test_5_1_jog_while_moving_is_ignored() -> None:
     assert chain.execute("?96.1") == ["Px.1=1000"]
 
 
-def test_5_1_jog_cw_is_the_physical_direction_under_reverse_coordinates() -> None:
-    chain, _ = _chain()
+def test_5_1_jog_cw_is_the_physical_direction_under_reverse_coordinates(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     motor.axis.sign = -1          # K45 first digit 2/3 (the origin search owns setting it)
     motor.jog(1)
@@ -84,8 +79,9 @@ def test_5_1_jog_cw_is_the_physical_direction_under_reverse_coordinates() -> Non
     assert motor.axis.raw_actual() == pytest.approx(10, abs=0.01)
 
 
-def test_5_1_feed_runs_at_k49_with_k43_while_the_signal_is_on() -> None:
-    chain, events = _chain()
+def test_5_1_feed_runs_at_k49_with_k43_while_the_signal_is_on(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
+    events = collect_events(chain)
     motor = chain.motors[1]
     chain.set_param(1, 49, 20)            # 2000 pps at K37=3
     chain.set_param(1, 43, 50)            # 50 kpps²: 40 ms to full speed
@@ -108,10 +104,11 @@ def test_5_1_feed_runs_at_k49_with_k43_while_the_signal_is_on() -> None:
 
 
 @pytest.mark.parametrize("interrupt", ["alarm", "pause", "estop"])
-def test_5_1_feed_stopped_by_alarm_or_stop_needs_signal_off_then_on(interrupt: str) -> None:
+def test_5_1_feed_stopped_by_alarm_or_stop_needs_signal_off_then_on(
+        interrupt: str, make_chain: ChainFactory) -> None:
     """5.1: "If a motion is stopped by an alarm or stop command ... cancel an alarm then
     turn signal off then back on"."""
-    chain, _ = _chain()
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     motor.feed(1)
     chain.kernel.run(until=seconds(0.5))
@@ -133,8 +130,9 @@ def test_5_1_feed_stopped_by_alarm_or_stop_needs_signal_off_then_on(interrupt: s
     assert chain.execute("?97.1") == ["Sx.1=10"]
 
 
-def test_5_1_feed_while_another_motion_runs_waits_for_the_signal_to_go_off() -> None:
-    chain, _ = _chain()
+def test_5_1_feed_while_another_motion_runs_waits_for_the_signal_to_go_off(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.execute("S.1=10, A.1=100, P.1=500")
     chain.execute("^.1")
@@ -149,8 +147,8 @@ def test_5_1_feed_while_another_motion_runs_waits_for_the_signal_to_go_off() -> 
     assert chain.execute("?97.1") == ["Sx.1=-10"]
 
 
-def test_5_1_motor_free_refuses_jog_and_feed() -> None:
-    chain, _ = _chain()
+def test_5_1_motor_free_refuses_jog_and_feed(make_chain: ChainFactory) -> None:
+    chain = make_chain(traced=True)
     motor = chain.motors[1]
     chain.execute(").1")
     motor.jog(1)

@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bank_support import Rig, rig
-from coolmuscle.chain.daisy import Chain
-from coolmuscle.sim.kernel import NS_PER_MS, seconds
+from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 STEP = 250_000
@@ -197,35 +197,37 @@ def test_4_5_1_cm2_ladder_assignments_are_silent_a_register_alone_displays() -> 
     assert r.chain.execute("S.1") == ["S.1=10"] and r.chain.execute("V3.1") == ["V3.1=21"]
 
 
-def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path)
+def test_2_2_3_k62_starts_a_ladder_bank_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path)
     for line in ("K63.1=10", "K62.1=2", "L2.1", "V1.1=V1.1+V2.1;", "END", "V2.1=1", "$.1"):
         first.execute(line)
     first.close()
-    second = Chain(state_dir=tmp_path)
+    second = make_chain(state_dir=tmp_path)
     second.kernel.run(until=seconds(0.095))
     assert second.get_register(1, "V", 1) == 10
     second.close()
 
 
-def test_rt3_3_5_1_k85_starts_a_logic_bank_at_power_up(tmp_path: Path) -> None:
-    first = Chain(state_dir=tmp_path, firmware="rt3")
+def test_rt3_3_5_1_k85_starts_a_logic_bank_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    first = make_chain(state_dir=tmp_path, firmware="rt3")
     for line in ("K87.1=1", "K85.1=1", 'V1="AIN4"', "V2=4", "S0.1=0", "A0.1=50",
                  "P0.1=1000000000", "L1.1", "S0.1=V1.1/V2.1;", "^.1", "END.1", "$.1"):
         first.execute(line)
     first.close()
-    second = Chain(state_dir=tmp_path, firmware="rt3")
+    second = make_chain(state_dir=tmp_path, firmware="rt3")
     second.set_analog(1, 800)
     second.kernel.run(until=seconds(1))
     assert second.execute("?97.1") == ["Sx.1=200"]      # 7.2: analog 800 / 4
     second.close()
 
 
-def test_k62_with_a_missing_bank_starts_nothing(tmp_path: Path) -> None:
-    chain = Chain(state_dir=tmp_path)
+def test_k62_with_a_missing_bank_starts_nothing(tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(state_dir=tmp_path)
     chain.execute("K62.1=3")
     chain.close()
-    again = Chain(state_dir=tmp_path)
+    again = make_chain(state_dir=tmp_path)
     assert again.motors[1].ladder.state == "idle"
     again.close()
 
@@ -322,3 +324,28 @@ def test_the_same_go_again_does_not_replan() -> None:
     assert r.motor().axis.profile is profile
     r.type("A.1=50", "^.1")
     assert r.motor().axis.profile is not profile
+
+
+def test_2_2_3_ladder_v_alone_displays_the_state_value(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=["K23.1=17, K63.1=100", 'V4.1="Ux"', "L1.1", "V4.1", "END"])
+    said = collect_events(chain, ["status", "alarm", "message", "reply"])
+    chain.execute("[L1.1")
+    chain.kernel.run(until=seconds(0.15))
+    assert [e.text for e in said] == ["V4.1=8", "V4.1=8"]
+
+
+def test_rt3_3_6_logic_motion_bank_scans_every_1_ms_and_its_sine_has_that_period(
+        make_chain: ChainFactory) -> None:
+    # RT3 3.6: "These banks execute on 1 ms intervals and are independent of K87" and of
+    # its 6-step example: "in this case the timing is less than 1ms"
+    chain = make_chain(firmware="rt3", setup=["K87.1=100", "K56.1=32767", 'V3="Dx"', "V2=10",
+                                              "L1", "V1=V1+V2", "V3=U2(V1)", "END"])
+    trace = record(chain)
+    chain.execute("[LM1")
+    chain.kernel.run(until=seconds(2.5))
+    motor = chain.motors[1]
+    assert motor.logic_motion.scans == 2501
+    # V1 grows by 10 a ms: U2 = 10000 cos(2π V1/10000) repeats every 1000 ms
+    ups = [t for t in range(seconds(0.5), seconds(2.5), 1_000_000)
+           if trace.sample(1, t).target < 0 <= trace.sample(1, t + 1_000_000).target]
+    assert len(ups) == 2 and math.isclose((ups[1] - ups[0]) / NS_PER_S, 1.0, abs_tol=0.002)

@@ -13,15 +13,15 @@ import shutil
 import socket
 import subprocess
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import coolmuscle  # noqa: F401  (registers the coolmuscle:// URL handler)
+import coolmuscle
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.cml.parser import parse
 from coolmuscle.errors import CmlSyntaxError
@@ -29,6 +29,7 @@ from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from fakes import play_over_serial
+from fixtures import wait_until, wait_until_async
 
 TRANSCRIPT = (Path(__file__).parent / "transcripts" / "2.1-operation-example.cml").read_text()
 SCALE = 10.0   # virtual time runs 10x the wall clock: the 1.1 s move takes 0.11 s
@@ -59,6 +60,7 @@ def test_2_1_transcript_over_pyserial_socket_url(served: ServiceThread) -> None:
 
 
 def test_2_1_transcript_over_the_coolmuscle_url() -> None:
+    coolmuscle.register_url_handler()
     with serial.serial_for_url(f"coolmuscle://?scale={SCALE:g}", timeout=1) as port:
         play_over_serial(port, TRANSCRIPT)
 
@@ -71,10 +73,7 @@ def test_2_1_transcript_through_a_socat_pty_bridged_to_tcp(served: ServiceThread
                                f"TCP:127.0.0.1:{tcp_port(served)}"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 5
-        while not link.exists():
-            assert time.monotonic() < deadline, "socat did not create its pty"
-            time.sleep(0.02)
+        assert wait_until(link.exists), "socat did not create its pty"
         with serial.Serial(str(link), baudrate=38400, timeout=1) as port:
             play_over_serial(port, TRANSCRIPT)
     finally:
@@ -134,10 +133,8 @@ async def _run_clients(port: int, st_: ServiceThread, clients: int,
 
     go = asyncio.Event()
     tasks = asyncio.gather(*(client(c, go) for c in range(clients)))
-    deadline = time.monotonic() + 10
-    while transport.clients < clients:
-        assert time.monotonic() < deadline, "clients did not connect"
-        await asyncio.sleep(0.01)
+    assert await wait_until_async(lambda: transport.clients >= clients, 10), \
+        "clients did not connect"
     go.set()
     return await asyncio.wait_for(tasks, 60)
 

@@ -9,17 +9,18 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import NS_PER_S, seconds
+from coolmuscle.tools.cli import app as cli
+from fixtures import ChainFactory
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
-def test_examples_load(path: Path) -> None:
-    chain = Chain(machine=path)
+def test_examples_load(path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(machine=path)
     chain.kernel.run(until=seconds(40))
     assert chain.execute("?99.1")
 
@@ -79,24 +80,24 @@ def test_schema_mistakes_name_the_key(text: str, message: str) -> None:
     ("[[axis]]\n[axis.encoder]\nkind = 'load'\nratoi = 0.5\n", "unknown key 'ratoi'"),
     ("[[axis]]\n[axis.encoder]\nkind = 'load'\nrate = 100\n", "unknown key 'rate'"),
 ])
-def test_install_mistakes(text: str, message: str) -> None:
-    chain = Chain(firmware="cm2" if "input = 6" not in text else "rt3")
+def test_install_mistakes(text: str, message: str, make_chain: ChainFactory) -> None:
+    chain = make_chain(firmware="cm2" if "input = 6" not in text else "rt3")
     with pytest.raises(MachineFileError, match=message):
         chain.load_machine(parse_machine(text))
 
 
-def test_reserved_tables_go_to_their_modules_or_say_so() -> None:
+def test_reserved_tables_go_to_their_modules_or_say_so(make_chain: ChainFactory) -> None:
     text = "[[axis]]\n[axis.encoder]\nratio = 2\n"
     try:
         import coolmuscle.motor.signals.encoder as encoder  # noqa: F401
     except ImportError:
         with pytest.raises(MachineFileError, match="gearing_from_config"):
-            Chain(machine=parse_machine(text))
+            make_chain(machine=parse_machine(text))
 
 
-def test_start_position_and_resolution_scaling() -> None:
+def test_start_position_and_resolution_scaling(make_chain: ChainFactory) -> None:
     text = ("[[axis]]\nppr = 500\nstart = 1000\n[axis.stoppers]\ncw = 1500\n")
-    chain = Chain(machine=parse_machine(text))        # K37=3: 1000 ppr, twice the file's
+    chain = make_chain(machine=parse_machine(text))   # K37=3: 1000 ppr, twice the file's
     motor = chain.motors[1]
     assert motor.axis.raw_actual() == 2000.0 and chain.execute("?96.1") == ["Px.1=0"]
     chain.execute("S.1=10, P.1=5000")
@@ -138,10 +139,10 @@ fault = "over_current"
     assert events == [(0.5, "IN.1=02"), (0.75, "IN.1=00"), (2.0, "Ux.1=64")]
 
 
-def test_sensors_follow_the_actual_position_not_the_command() -> None:
+def test_sensors_follow_the_actual_position_not_the_command(make_chain: ChainFactory) -> None:
     text = "[[axis]]\nparams = { K23 = 2 }\n[[axis.sensor]]\nname = 'flag'\ninput = 4\n" \
            "on = [1000, 2000]\n"
-    chain = Chain(machine=load_machine_text(text))
+    chain = make_chain(machine=load_machine_text(text))
     events: list[tuple[float, str]] = []
     chain.subscribe(lambda ev: events.append((ev.time / NS_PER_S, ev.text)))
     chain.execute("S.1=100, A.1=100, P.1=3000")
@@ -185,4 +186,3 @@ def test_a_machine_file_that_is_not_utf8_is_refused_in_one_line(tmp_path: Path) 
     path.write_bytes(b'name = "\xff"\n')
     with pytest.raises(MachineFileError, match="not UTF-8 text"):
         load_machine(path)
-

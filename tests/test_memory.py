@@ -10,8 +10,15 @@ import pytest
 
 from coolmuscle.errors import OutOfRangeError
 from coolmuscle.motor.state.firmware import CM1, CM2, RT3
-from coolmuscle.motor.state.memory import (Memory, NoSuchRegisterError, VNumber, VState,
-                                           VString, parse_v_text, state_name)
+from coolmuscle.motor.state.memory import (
+    Memory,
+    NoSuchRegisterError,
+    VNumber,
+    VState,
+    VString,
+    parse_v_text,
+    state_name,
+)
 
 
 @pytest.fixture

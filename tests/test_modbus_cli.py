@@ -14,7 +14,6 @@ import pytest
 import serial
 
 from coolmuscle.tools.cli import app as cli
-
 from modbus_support import crc, frame
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")

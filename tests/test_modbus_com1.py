@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import pytest
 
-from coolmuscle.chain.modbus.master import RESPONSE_TIMEOUT_NS
+from coolmuscle.chain.firmware_modbus.master import RESPONSE_TIMEOUT_NS
 from coolmuscle.sim.kernel import ms
-
 from modbus_support import Wire, frame
 
 

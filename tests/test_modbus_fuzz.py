@@ -14,17 +14,16 @@ from __future__ import annotations
 import random
 import socket
 import time
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 import serial
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.sim.kernel import ms
 from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.serial_line import ModbusRtuTransport
 from coolmuscle.frontends.transports.service import ServiceThread
-
+from coolmuscle.sim.kernel import ms
 from modbus_support import Wire, crc
 
 UNIT = 1

@@ -12,8 +12,9 @@ import re
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator, Protocol
+from typing import Any, Protocol
 
 import pytest
 import serial
@@ -23,7 +24,6 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.serial_line import Com1Transport, ModbusRtuTransport
 from coolmuscle.frontends.transports.service import ServiceThread
-
 from modbus_support import needs_mbpoll, needs_socat, socat_pty_pair, wait_for
 
 pytestmark = pytest.mark.peer
@@ -205,7 +205,9 @@ def test_5_6_6_com1_against_a_pymodbus_server_as_io_slave(tmp_path: Path) -> Non
 
 def test_pymodbus_client_on_the_coolmuscle_url() -> None:
     """pymodbus opens ports with ``serial_for_url``, so it can drive an in-process chain."""
-    import coolmuscle  # noqa: F401  (registers the coolmuscle:// handler)
+    import coolmuscle
+
+    coolmuscle.register_url_handler()
 
     client = ModbusSerialClient("coolmuscle://?motors=2", baudrate=38400, timeout=2, retries=0)
     assert client.connect()

@@ -13,13 +13,10 @@ from pathlib import Path
 
 import pytest
 
-import coolmuscle.chain.modbus
-
+import coolmuscle.chain.firmware_modbus
 from coolmuscle.chain.daisy import Chain
-
-from coolmuscle.chain.modbus.rtu import silent_interval_ns
+from coolmuscle.chain.firmware_modbus.rtu import silent_interval_ns
 from coolmuscle.sim.kernel import ms, seconds
-
 from modbus_support import Wire, crc, frame, gap_ns
 
 #: 5.6.7 "In case of using the following parameter settings": K78=100, K79=200, K80=300, K81=1.
@@ -29,7 +26,7 @@ MANUAL = {"K78_1": 100, "K79_1": 200, "K80_1": 300, "K81_1": 1}
 def test_crc_anchor_and_model_crc_agree_with_pymodbus() -> None:
     from pymodbus.framer.rtu import FramerRTU
 
-    from coolmuscle.chain.modbus import crc16
+    from coolmuscle.chain.firmware_modbus import crc16
     assert crc(bytes.fromhex("010300000001")) == bytes.fromhex("840A")
     rng = random.Random(16)
     for body in [b"", b"\x01", bytes(range(256)), b"\xff" * 7] + \
@@ -39,7 +36,7 @@ def test_crc_anchor_and_model_crc_agree_with_pymodbus() -> None:
 
 def test_the_modbus_model_imports_no_clock_sockets_threads_or_pymodbus() -> None:
     """docs/architecture.md rule 1: the pure Modbus logic does no I/O and reads no clock."""
-    package = Path(coolmuscle.chain.modbus.__file__).parent
+    package = Path(coolmuscle.chain.firmware_modbus.__file__).parent
     for path in package.glob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)

@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
+from fixtures import ChainFactory
 
 EDGE = st.sampled_from([0, 1, -1, 2, 100, -100, 32767, -32768, 1000000000, -1000000000,
                         2147483647, 999999999, 5])
@@ -61,8 +62,8 @@ def test_random_statements_with_edge_values_never_raise(setup, bank, ladder, aft
     assert chain.execute("?99.1")[0].startswith("Ux.1=")
 
 
-def test_zero_speed_data_means_no_motion_and_the_bank_goes_on() -> None:
-    chain = Chain()
+def test_zero_speed_data_means_no_motion_and_the_bank_goes_on(make_chain: ChainFactory) -> None:
+    chain = make_chain()
     for line in ("S1.1=0", "A1.1=100", "P1.1=5000", "S2.1=100", "P2.1=-200",
                  "B1.1", "S1.1, A1.1, P1.1", "S2.1, P2.1", "END", "[1.1"):
         chain.execute(line)

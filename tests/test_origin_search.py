@@ -15,6 +15,7 @@ import pytest
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import parse_machine
 from coolmuscle.sim.kernel import seconds
+from fixtures import ChainFactory
 
 
 def _search(machine: str, params: str, *, start: bool = True,
@@ -89,10 +90,10 @@ def test_5_3_2_signal_on_at_the_start(k46: int, direction: int, machine: str,
     assert abs(chain.motors[1].axis.raw_actual() - origin) < 1e-3
 
 
-def test_5_3_2_limit_sensor_reverses_at_double_speed() -> None:
+def test_5_3_2_limit_sensor_reverses_at_double_speed(make_chain: ChainFactory) -> None:
     machine = ("[axis.origin_sensor]\ninput = 1\non = [-1500, -1000]\n"
                "[axis.cw_limit]\ninput = 2\non = [2000, inf]\n")
-    chain = Chain(machine=parse_machine("[[axis]]\n" + machine))
+    chain = make_chain(machine=parse_machine("[[axis]]\n" + machine))
     chain.execute("K27.1=62, K46.1=2, K45.1=0, K42.1=10")
     speeds: list[float] = []
     chain.execute("|.1")
@@ -125,9 +126,9 @@ def test_ch3_k48_offset_in_k45_units(k45: int, k48: int, offset: float) -> None:
     assert chain.execute("?96.1") == ["Px.1=0"]
 
 
-def test_ch3_k46_odd_searches_at_power_up() -> None:
+def test_ch3_k46_odd_searches_at_power_up(make_chain: ChainFactory) -> None:
     text = "[[axis]]\nparams = { K46 = 1 }\n[axis.stoppers]\nccw = -1234\n"
-    chain = Chain(machine=parse_machine(text))
+    chain = make_chain(machine=parse_machine(text))
     events: list[str] = []
     chain.subscribe(lambda ev: events.append(ev.text))
     chain.kernel.run(until=seconds(10))
@@ -154,11 +155,12 @@ def test_a_stop_abandons_the_search() -> None:
     assert events == ["Ux.1=8"] and not chain.motors[1].origin_done
 
 
-def test_ch3_k45_saved_reverse_coordinates_apply_at_power_up(tmp_path: Path) -> None:
-    chain = Chain(state_dir=tmp_path)
+def test_ch3_k45_saved_reverse_coordinates_apply_at_power_up(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(state_dir=tmp_path)
     chain.execute("K45.1=3")
     chain.close()
-    chain = Chain(state_dir=tmp_path)
+    chain = make_chain(state_dir=tmp_path)
     chain.execute("S.1=10, P.1=100")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(1))

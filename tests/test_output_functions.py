@@ -1,7 +1,8 @@
 """Output functions K34 with the output logic of K33, and the K23 output reports.
 
-cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K73;
-6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and push motion (9) belong to other models.
+cml-users-guide.txt ch. 3 K23 (function 4: "only for general output"), K33, K34, K55
+(in position before the target), K73; 6.6 ?50 / ?51-?54.  Rotation pulses (K34 = 7) and
+push motion (9) belong to other models.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import pytest
 from bank_support import Rig, rig
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, collect_events
 
 MS = NS_PER_MS
 
@@ -102,13 +104,13 @@ def test_k34_0_and_5_have_no_function(function: int) -> None:
 
 
 # -- CM1: cm1-ethernetip-interface-manual.txt Appendix A K33, K34 ----------------------
-def test_cm1_appendix_a_factory_outputs_are_off_and_k34_0_follows_its_own_command() -> None:
+def test_cm1_appendix_a_factory_outputs_are_off_and_k34_0_follows_its_own_command(
+        make_chain: ChainFactory) -> None:
     """A CM1 at its factory K33=0, K34=0 read ``OUT.1=03`` (its K33 0
     was taken for CM2's "Low Active").  Appendix A: "K33 Output Logic 0:Normally open
     1: Normally closed" (open: the port is on while its signal is) and "K34 ... 0:Command"
     (the output follows the commands ``O#``/``F#`` of its own number)."""
-    from coolmuscle.chain.daisy import Chain
-    chain = Chain(firmware="cm1")
+    chain = make_chain(firmware="cm1")
     assert chain.execute("K33.1") == ["K33.1=0"] and chain.execute("K34.1") == ["K34.1=0"]
     assert chain.execute("?50.1") == ["OUT.1=00"]
     chain.execute("O2.1")
@@ -122,12 +124,11 @@ def test_cm1_appendix_a_factory_outputs_are_off_and_k34_0_follows_its_own_comman
     assert chain.execute("?50.1") == ["OUT.1=02"]
 
 
-def test_cm1_k34_digit_3_follows_o1_f1_and_4_follows_o2_f2() -> None:
+def test_cm1_k34_digit_3_follows_o1_f1_and_4_follows_o2_f2(make_chain: ChainFactory) -> None:
     """CM1 manual, K34 (N2 output 2, N1 output 1): "3:CML O1/F1 4:CML O2/F2": the digit
     names the command an output follows, whichever output it is (on CM2, 3 is general
     use of the output's own number and 4 the origin-search output)."""
-    from coolmuscle.chain.daisy import Chain
-    chain = Chain(firmware="cm1")                   # K33=0, normally open: port = signal
+    chain = make_chain(firmware="cm1")              # K33=0, normally open: port = signal
     chain.execute("K34.1=43")                       # output 2: O2/F2, output 1: O1/F1
     assert chain.execute("?50.1") == ["OUT.1=00"]
     chain.execute("O2.1")
@@ -142,7 +143,7 @@ def test_cm1_k34_digit_3_follows_o1_f1_and_4_follows_o2_f2() -> None:
     assert chain.execute("?50.1") == ["OUT.1=00"]
     chain.execute("O2.1")                           # no output follows O2 now: ignored
     assert chain.execute("?50.1") == ["OUT.1=00"]
-    cm2 = Chain()
+    cm2 = make_chain()
     cm2.execute("K33.1=1111")
     cm2.execute("K34.1=0043")                       # CM2: output 1 general, 2 origin done
     cm2.execute("O1.1")
@@ -150,11 +151,10 @@ def test_cm1_k34_digit_3_follows_o1_f1_and_4_follows_o2_f2() -> None:
     assert cm2.execute("?50.1") == ["OUT.1=01"]
 
 
-def test_cm1_k34_5_is_the_analog_output_no_digital_signal() -> None:
+def test_cm1_k34_5_is_the_analog_output_no_digital_signal(make_chain: ChainFactory) -> None:
     """Appendix A K34 "5:Analog Output" (CM2's 5 is "—"): the output carries the K35
     analog value, no digital signal; ``O#`` does not reach it."""
-    from coolmuscle.chain.daisy import Chain
-    chain = Chain(firmware="cm1")
+    chain = make_chain(firmware="cm1")
     chain.execute("K34.1=55")
     chain.execute("O1.1")
     chain.execute("O2.1")
@@ -163,16 +163,16 @@ def test_cm1_k34_5_is_the_analog_output_no_digital_signal() -> None:
     assert chain.execute("?50.1") == ["OUT.1=03"]
 
 
-def test_cm1_k34_9_is_on_when_the_push_reaches_its_torque_not_while_it_approaches() -> None:
+def test_cm1_k34_9_is_on_when_the_push_reaches_its_torque_not_while_it_approaches(
+        make_chain: ChainFactory) -> None:
     """Appendix A K34 "9: Torque Limit reached - Push Mode Only"; CML ch. 3 K34 9 "In Push
     Motion" is on from the ``Q`` (4.1.4).  The object is a stopper at 5000 pulses; at
     2000 pps the shaft meets it after 2.5 s and presses at the K60 level (K61=30001:
     endless, Appendix A K61)."""
-    from coolmuscle.chain.daisy import Chain
     from coolmuscle.chain.machine import parse_machine
     machine = "[[axis]]\n[axis.stoppers]\ncw = 5000\n"
-    cm1 = Chain(firmware="cm1", machine=parse_machine(machine))
-    cm2 = Chain(machine=parse_machine(machine))
+    cm1 = make_chain(firmware="cm1", machine=parse_machine(machine))
+    cm2 = make_chain(machine=parse_machine(machine))
     for chain, endless in ((cm1, 30001), (cm2, 0)):
         chain.execute(f"K34.1=9, K61.1={endless}, P1.1=8000, S.1=20, A.1=100")
         chain.execute("Q1.1")
@@ -185,11 +185,10 @@ def test_cm1_k34_9_is_on_when_the_push_reaches_its_torque_not_while_it_approache
         assert chain.execute("?51.1") == ["OUT1.1=1"]              # pressing the object
 
 
-def test_cm1_k26_and_k33_are_one_logic_for_every_input_and_output() -> None:
+def test_cm1_k26_and_k33_are_one_logic_for_every_input_and_output(make_chain: ChainFactory) -> None:
     """CM1 manual: "K26 Invert input signal 0/1", "K33 Output Logic 0:Normally open
     1: Normally closed": one value, not a digit per channel as on CM2."""
-    from coolmuscle.chain.daisy import Chain
-    chain = Chain(firmware="cm1")
+    chain = make_chain(firmware="cm1")
     assert chain.execute("?70.1") == ["IN.1=00"]
     chain.execute("K26.1=1")
     assert chain.execute("?70.1") == ["IN.1=0F"]                # all four inverted
@@ -199,3 +198,31 @@ def test_cm1_k26_and_k33_are_one_logic_for_every_input_and_output() -> None:
     assert chain.execute("?50.1") == ["OUT.1=00"]               # K33=0: both normally open
     chain.execute("K33.1=1")
     assert chain.execute("?50.1") == ["OUT.1=03"]               # both normally closed
+
+
+def test_ch3_k55_in_position_is_detected_before_reaching_the_target(
+        make_chain: ChainFactory) -> None:
+    # K55: "in-position is detected when the current position is within the set range
+    # against the target position" ... "In-Position may be detected before reaching the
+    # target position"; "K55=5 ... In-position signals will be sent out between 995 and
+    # 1005, when the target position is 1000."
+    chain = make_chain()
+    events = collect_events(chain)
+    trace = record(chain)
+    chain.execute("K23.1=1, K34.1=1, K55.1=100, S.1=10, A.1=10, P.1=10000")  # out 1: in-pos
+    chain.execute("^.1")
+    end_of_command = chain.motors[1].axis.profile.end_ns
+    chain.kernel.run(until=seconds(12))
+    at = next(e.time for e in events if e.text == "Ux.1=8")
+    assert at < end_of_command - seconds(0.02)            # the command still runs then
+    assert abs(trace.sample(1, at).position - 10000) <= 100
+    assert abs(trace.sample(1, at - 1000).position - 10000) > 100
+    assert trace.sample(1, at).command < 10000
+    # the in-position output (K34 function 1) is on from that instant
+    chain2 = make_chain()
+    chain2.execute("K34.1=1, K55.1=100, S.1=10, A.1=10, P.1=10000")
+    chain2.execute("^.1")
+    chain2.kernel.run(until=at - 1000)
+    assert chain2.execute("?51.1") == ["OUT1.1=0"] and chain2.execute("?99.1") == ["Ux.1=0"]
+    chain2.kernel.run(until=at)
+    assert chain2.execute("?51.1") == ["OUT1.1=1"] and chain2.execute("?99.1") == ["Ux.1=8"]

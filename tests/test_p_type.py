@@ -7,6 +7,7 @@ import pytest
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import NS_PER_S
+from fixtures import ChainFactory
 
 
 def pulses(chain: Chain, count: int, number: int = 1) -> int:
@@ -21,18 +22,18 @@ def pulses(chain: Chain, count: int, number: int = 1) -> int:
     return chain.snapshot(1).position
 
 
-def test_k26_xxxx22_p_type_at_all_times_cw_ccw_pulses() -> None:
+def test_k26_xxxx22_p_type_at_all_times_cw_ccw_pulses(make_chain: ChainFactory) -> None:
     """K26 "XXXX22: P type Operation Only"; K36=0 "rising edge of Input Signal 1, count
     up in CW direction ... Input Signal 2, count up in CCW direction"."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=000022")
     assert pulses(chain, 5) == 5
     assert pulses(chain, 2, number=2) == 3
 
 
-def test_k26_3_counts_the_falling_edge_of_the_port() -> None:
+def test_k26_3_counts_the_falling_edge_of_the_port(make_chain: ChainFactory) -> None:
     """K26 1/3: "Effective edge: Falling edge of input port" (the signal's rising edge)."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=000033")
     kernel = chain.kernel
     chain.set_input(1, 1, True)                 # port on: signal off (inverted logic)
@@ -43,18 +44,18 @@ def test_k26_3_counts_the_falling_edge_of_the_port() -> None:
     assert chain.snapshot(1).position == 1
 
 
-def test_k26_2xxx00_p_type_only_while_input_6_is_on() -> None:
+def test_k26_2xxx00_p_type_only_while_input_6_is_on(make_chain: ChainFactory) -> None:
     """K26 "2XXX00": "P type Operation is executed as long as the input signal is ON"."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=200000")
     assert pulses(chain, 5) == 0                # input 6 off: pulses refused
     chain.set_input(1, 6, True)
     assert pulses(chain, 5) == 5
 
 
-def test_k36_1_pulse_and_direction() -> None:
+def test_k36_1_pulse_and_direction(make_chain: ChainFactory) -> None:
     """K36 1: "Input Signal 1 to command pulse, Input Signal 2 to direction"."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=000022")
     chain.execute("K36.1=1")
     assert pulses(chain, 3) == -3               # input 2 off: CCW
@@ -62,9 +63,9 @@ def test_k36_1_pulse_and_direction() -> None:
     assert pulses(chain, 5) == 2                # input 2 on: CW
 
 
-def test_no_p_type_while_a_program_bank_runs() -> None:
+def test_no_p_type_while_a_program_bank_runs(make_chain: ChainFactory) -> None:
     """"During the execution of Bank Program, it can not be switched to P type"."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=200000")
     for line in ("B1.1", "T1.1=5000", "T1.1", "END"):
         chain.execute(line)
@@ -73,10 +74,10 @@ def test_no_p_type_while_a_program_bank_runs() -> None:
     assert pulses(chain, 4) == 0
 
 
-def test_a_host_motion_has_priority_over_the_pulses() -> None:
+def test_a_host_motion_has_priority_over_the_pulses(make_chain: ChainFactory) -> None:
     """"When COOL MUSCLE receives commands from the host during P type Operation, the
     processing of the command is given priority and executed"."""
-    chain = Chain()
+    chain = make_chain()
     chain.execute("K26.1=000022")
     for line in ("S.1=10", "A.1=100", "P.1=3000", "^.1"):
         chain.execute(line)
@@ -88,7 +89,8 @@ def test_a_host_motion_has_priority_over_the_pulses() -> None:
 
 
 @pytest.mark.parametrize("k26", ["000000", "000011"])
-def test_without_digit_2_or_3_inputs_1_and_2_are_ordinary_inputs(k26: str) -> None:
-    chain = Chain()
+def test_without_digit_2_or_3_inputs_1_and_2_are_ordinary_inputs(
+        k26: str, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     chain.execute(f"K26.1={k26}")
     assert pulses(chain, 5) == 0

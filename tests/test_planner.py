@@ -6,10 +6,18 @@ import math
 
 import pytest
 
-from coolmuscle.motor.motion.planner import (ESTOP_DECEL, Limits, Waypoint,
-                                             limits_from_data, minimum_time,
-                                             plan_emergency_stop, plan_moves, plan_stop,
-                                             plan_velocity, scurve_jerk)
+from coolmuscle.motor.motion.planner import (
+    ESTOP_DECEL,
+    Limits,
+    Waypoint,
+    limits_from_data,
+    minimum_time,
+    plan_emergency_stop,
+    plan_moves,
+    plan_stop,
+    plan_velocity,
+    scurve_jerk,
+)
 
 NS = 1_000_000_000
 MS = 1_000_000

@@ -17,11 +17,17 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.motor.state import units
-from coolmuscle.motor.motion.planner import (Limits, Waypoint, limits_from_data,
-                                             minimum_time, plan_moves, plan_stop,
-                                             plan_velocity)
+from coolmuscle.motor.motion.planner import (
+    Limits,
+    Waypoint,
+    limits_from_data,
+    minimum_time,
+    plan_moves,
+    plan_stop,
+    plan_velocity,
+)
 from coolmuscle.motor.motion.profile import Profile, Segment
+from coolmuscle.motor.state import units
 
 NS = 1_000_000_000
 #: Multiply the example counts for a long local run: COOLMUSCLE_STRESS=50 pytest ...

@@ -8,12 +8,13 @@ from typing import Any
 
 import pytest
 
-from coolmuscle.tools.cli import app as cli
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.tools.trace.plot import interpolated_pairs
 from coolmuscle.sim.kernel import seconds
-from coolmuscle.tools.trace.recorder import record
+from coolmuscle.tools.cli import app as cli
+from coolmuscle.tools.trace.plot import interpolated_pairs
 from coolmuscle.tools.trace.plot import plot as plot_chain
+from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory
 
 TRANSCRIPTS = Path(__file__).parent / "transcripts"
 
@@ -42,8 +43,9 @@ def test_pairs_that_interpolated_get_an_xy_panel(tmp_path: Path) -> None:
     assert with_xy[0] > without[0] * 1.4 and with_xy[1] == without[1]
 
 
-def test_a_chain_without_interpolation_has_no_xy_panel(tmp_path: Path) -> None:
-    chain = Chain(motors=2)
+def test_a_chain_without_interpolation_has_no_xy_panel(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain(motors=2)
     record(chain)
     chain.execute("S.1=100, A.1=100, P.1=1000, ^.1")
     chain.kernel.run(until=seconds(1))

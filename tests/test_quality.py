@@ -2,12 +2,13 @@
 
 * ``mypy`` (pinned in the ``accel`` extra: the one that compiles the hot modules) checks the
   whole package with ``--strict``, with the settings of ``[tool.mypy]`` in pyproject.toml.
-  Every module is strict, a new one too.  Among what it checks: ``Chain`` is every motor's
-  ``MotorBus`` and a ``Device``, ``Motor`` is the ``MotorCore`` its parts see (the
-  ``_meets_its_protocol*`` functions in chain/daisy.py and motor/motor.py, and every call
-  that hands the chain or the motor to a part).
+  Every module is strict, a new one too.  Among what it checks: ``Chain`` is a ``Device``
+  and its ``ChainBus`` every motor's ``MotorBus``, ``Motor`` is the ``MotorCore`` its
+  parts see (the ``_meets_its_protocol*`` functions in chain/daisy.py and motor/motor.py,
+  and every call that hands the chain or the motor to a part).
 * ``ruff`` (pinned in the ``test`` extra) lints the repository with the rules of
-  ``[tool.ruff]`` (pycodestyle, pyflakes, bugbear; lines up to 100 characters).
+  ``[tool.ruff]`` (pycodestyle, pyflakes, bugbear, import order, pyupgrade; lines up to
+  100 characters).
 
 A new error in either fails the suite; each test also shows that its tool, with the
 project's settings, finds an error in a module written to have one.

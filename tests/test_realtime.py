@@ -9,8 +9,13 @@ import pytest
 
 from coolmuscle.device.hostline import byte_time_ns
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S, Kernel, ms, seconds
-from coolmuscle.sim.realtime import (FastClock, PreciseWaker, RealtimeClock, RealtimeDriver,
-                                     make_clock)
+from coolmuscle.sim.realtime import (
+    FastClock,
+    PreciseWaker,
+    RealtimeClock,
+    RealtimeDriver,
+    make_clock,
+)
 from fakes import FakeChain
 
 

@@ -10,7 +10,8 @@
 
 The long versions (20 x 1,000, 100+ kill -9 rounds, a 10-hour trace) are in
 bench/bench_reliability.py.  Full disk, corrupted state and signals have their
-own files (tests/test_hardening_*.py).
+own files (tests/test_store_full_disk.py, test_store_validation.py,
+test_cli_signals.py).
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ import random
 import socket
 import struct
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 import serial
@@ -32,6 +33,7 @@ from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
 from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from fixtures import wait_until_async
 from load_support import Flood, connect, round_trip, save_then_kill, saved_value, start_sim
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -160,10 +162,7 @@ def test_twenty_clients_on_the_real_chain_lose_nothing_and_keep_order() -> None:
         async def main() -> list[list[bytes]]:
             go = asyncio.Event()
             tasks = asyncio.gather(*(client(n, go) for n in range(clients)))
-            deadline = time.monotonic() + 10
-            while st_.transports[0].clients < clients:
-                assert time.monotonic() < deadline
-                await asyncio.sleep(0.01)
+            assert await wait_until_async(lambda: st_.transports[0].clients >= clients, 10)
             go.set()
             return await asyncio.wait_for(tasks, 90)
 
@@ -274,6 +273,7 @@ def _http_alive(port: int, timeout: float = 3.0) -> None:
 
 def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
     from coolmuscle.frontends.transports import create
+    from coolmuscle.tools.web.server import WebTransport
 
     rng = random.Random(8080)
     requests = [b"GET / HTTP/1.1\r\nHost: x\r\n\r\n",
@@ -282,7 +282,7 @@ def test_fuzz_the_web_front_end_with_a_liveness_check_between_batches() -> None:
                 b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
                 b"\x16\x03\x01\x00\xa5", b"GET /" + b"A" * 9000 + b" HTTP/1.1\r\n\r\n"]
     with ServiceThread(lambda: Chain(), lambda: [create("tcp", port=0),
-                                                 create("web", port=0)]) as st_:
+                                                 WebTransport(port=0)]) as st_:
         cml, web = (t.info()["port"] for t in st_.transports)
         for _batch in range(15):
             with socket.create_connection(("127.0.0.1", web), timeout=5) as sock:

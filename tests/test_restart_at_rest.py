@@ -12,7 +12,8 @@ to a shift of 2 ns at every sample, and every repeat of a cycle reusing its solv
 
 from __future__ import annotations
 
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion.planner import Limits, plan_moves

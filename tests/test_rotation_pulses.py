@@ -16,15 +16,12 @@ from hypothesis import strategies as st
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.sim.kernel import NS_PER_S, seconds
 from coolmuscle.tools.trace.recorder import record
+from fixtures import ChainFactory, new_chain
 
 
-def _chain(k34: int, *, k24: int = 1000, k37: int = 3) -> Chain:
-    chain = Chain()
-    chain.set_param(1, 37, k37)
-    chain.set_param(1, 24, k24)
-    chain.set_param(1, 34, k34)
-    record(chain)
-    return chain
+def _pulses(k34: int, *, k24: int = 1000, k37: int = 3) -> list[str]:
+    """The setup of rotation pulses: resolution K37, pulses per turn K24, K34 output."""
+    return [f"K37.1={k37}", f"K24.1={k24}", f"K34.1={k34}"]
 
 
 def _move(chain: Chain, target: int, s: int = 50, a: int = 100) -> None:
@@ -39,9 +36,9 @@ def _ab(chain: Chain, t: int) -> tuple[bool, bool]:
     return bits[1], bits[2]
 
 
-def test_5_2_quadrature_a_leads_b_going_cw_and_lags_going_ccw() -> None:
+def test_5_2_quadrature_a_leads_b_going_cw_and_lags_going_ccw(make_chain: ChainFactory) -> None:
     """K34=77: outputs 1 and 2 are A and B, 90° apart (ch. 3 K24 "quadrature")."""
-    chain = _chain(77)
+    chain = make_chain(setup=_pulses(77), traced=True)
     motor = chain.motors[1]
     assert motor.pulses.quadrature()
     _move(chain, 3000)
@@ -56,8 +53,8 @@ def test_5_2_quadrature_a_leads_b_going_cw_and_lags_going_ccw() -> None:
     assert len(cw) == len(ccw) == 3000 // 250 - 1
 
 
-def test_5_2_single_output_switches_every_half_period() -> None:
-    chain = _chain(7, k24=400)
+def test_5_2_single_output_switches_every_half_period(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=_pulses(7, k24=400), traced=True)
     motor = chain.motors[1]
     _move(chain, 2000)
     edges = motor.pulses.edge_times(0, chain.kernel.now)
@@ -68,9 +65,10 @@ def test_5_2_single_output_switches_every_half_period() -> None:
     assert gaps == {40_000}                          # 200 pulses at 5000 pps: 40 ms
 
 
-def test_5_2_edges_sit_exactly_on_boundary_plus_hysteresis() -> None:
+def test_5_2_edges_sit_exactly_on_boundary_plus_hysteresis(make_chain: ChainFactory) -> None:
     """Each edge is the instant the actual position is one hysteresis past a quarter."""
-    chain = _chain(77, k24=1000, k37=10)          # 50000 ppr: h = 10 pulses
+    # 50000 ppr: h = 10 pulses
+    chain = make_chain(setup=_pulses(77, k24=1000, k37=10), traced=True)
     motor = chain.motors[1]
     _move(chain, 4000)
     _move(chain, 1000)
@@ -112,7 +110,7 @@ def test_5_2_solved_states_agree_with_a_sampled_schmitt_trigger(
     """Property: with new targets given mid-move (so the shaft reverses inside a
     trajectory), the closed-form state equals a Schmitt trigger fed with the actual
     position every 50 µs (a reversal's excursion within 50 µs is far below 1e-3 pulse)."""
-    chain = _chain(77, k24=k24, k37=k37)
+    chain = new_chain(setup=_pulses(77, k24=k24, k37=k37), traced=True)
     motor = chain.motors[1]
     chain.execute(f"S.1={speed}, A.1=200")
     for target, delay_ms in plan:
@@ -133,10 +131,12 @@ def test_5_2_solved_states_agree_with_a_sampled_schmitt_trigger(
     assert track.state() == state
 
 
-def test_5_2_a_reversal_inside_one_trajectory_keeps_the_hysteresis() -> None:
+def test_5_2_a_reversal_inside_one_trajectory_keeps_the_hysteresis(
+        make_chain: ChainFactory) -> None:
     """A new target just before a switching point: the shaft overshoots past it and
     comes back within the hysteresis band, all in one trajectory; B stays switched."""
-    chain = _chain(77, k24=1000, k37=10)          # quarters of 250, h = 10: 1260 up / 1240 down
+    # quarters of 250, h = 10: 1260 up / 1240 down
+    chain = make_chain(setup=_pulses(77, k24=1000, k37=10), traced=True)
     motor = chain.motors[1]
     lim = motor.limits(10, 100)                   # 1000 pps, 5 pulses to stop
     motor.move_to([(5000.0, lim)])
@@ -152,8 +152,8 @@ def test_5_2_a_reversal_inside_one_trajectory_keeps_the_hysteresis() -> None:
     assert chain.execute("?52.1") == ["OUT2.1=1"]   # passed 1260, never back below 1240
 
 
-def test_5_2_live_reads_agree_with_the_trace() -> None:
-    chain = _chain(77)
+def test_5_2_live_reads_agree_with_the_trace(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=_pulses(77), traced=True)
     chain.execute("S.1=80, A.1=200, P.1=5000")
     chain.execute("^.1")
     live = []
@@ -179,8 +179,8 @@ def test_5_2_pulses_cost_no_kernel_events() -> None:
     assert counts[0] == counts[1] <= 5
 
 
-def test_ch3_k24_change_restarts_from_the_current_position() -> None:
-    chain = _chain(7, k24=1000)
+def test_ch3_k24_change_restarts_from_the_current_position(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=_pulses(7, k24=1000), traced=True)
     _move(chain, 700)
     assert chain.execute("?51.1") == ["OUT1.1=0"]       # 700 of 1000: second half
     chain.set_param(1, 24, 2000)
@@ -190,8 +190,8 @@ def test_ch3_k24_change_restarts_from_the_current_position() -> None:
     assert chain.execute("?51.1") == ["OUT1.1=0"]
 
 
-def test_5_2_reverse_coordinates_follow_the_user_position() -> None:
-    chain = _chain(7, k24=1000)
+def test_5_2_reverse_coordinates_follow_the_user_position(make_chain: ChainFactory) -> None:
+    chain = make_chain(setup=_pulses(7, k24=1000), traced=True)
     motor = chain.motors[1]
     motor.axis.sign = -1                  # reverse coordinates (K45 first digit 2/3)
     motor.axis.hold_here()

@@ -11,11 +11,20 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from coolmuscle.device.hostline import byte_time_ns
-from coolmuscle.tools.script.runner import (DEFAULT_UNTIL_TIMEOUT, ScriptError, TranscriptEntry,
-                                     escape, load_script, parse_script, run_script,
-                                     split_lines, unescape)
 from coolmuscle.sim.kernel import seconds
+from coolmuscle.tools.script.runner import (
+    DEFAULT_UNTIL_TIMEOUT,
+    ScriptError,
+    TranscriptEntry,
+    escape,
+    load_script,
+    parse_script,
+    run_script,
+    split_lines,
+    unescape,
+)
 from fakes import ROUNDTRIP, FakeChain
+from fixtures import ROOT, ChainFactory
 
 
 # -- format ---------------------------------------------------------------
@@ -317,3 +326,9 @@ def test_a_wait_beyond_the_kernels_clock_is_a_script_error(line: str) -> None:
     OverflowError in the middle of the run (an attack found that)."""
     with pytest.raises(ScriptError, match=r"seconds must be 0..1e\+09"):
         parse_script(line + "\n")
+
+
+def test_run_script_refuses_a_path_that_names_no_file(make_chain: ChainFactory) -> None:
+    with pytest.raises(ScriptError, match="no such script file"):
+        run_script("tests/transcripts/example.cml", make_chain())
+    assert run_script(str(ROOT / "examples" / "2.1-operation.cml"), make_chain()).ok

@@ -19,8 +19,13 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 from coolmuscle.sim.kernel import to_seconds
-from coolmuscle.tools.script.record import (LineWriter, Recorder, TranscriptEntry, seconds_text,
-                                            strip_end)
+from coolmuscle.tools.script.record import (
+    LineWriter,
+    Recorder,
+    TranscriptEntry,
+    seconds_text,
+    strip_end,
+)
 
 
 # -- the time ---------------------------------------------------------------

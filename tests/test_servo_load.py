@@ -8,6 +8,7 @@ attempt to 'catch up' to its calculated position").
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -18,17 +19,8 @@ from hypothesis import strategies as st
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion import expoly as xp
 from coolmuscle.motor.motion.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
-from coolmuscle.motor.motor import Motor
-from coolmuscle.sim.kernel import NS_PER_S, seconds
-
-
-def _chain(firmware: str = "cm2", **plant: float) -> tuple[Chain, Motor]:
-    chain = Chain(firmware=firmware)
-    motor = chain.motors[1]
-    for key, value in plant.items():
-        setattr(motor.plant, key, value)
-    motor.axis.refresh()
-    return chain, motor
+from coolmuscle.sim.kernel import NS_PER_S, ms, seconds
+from fixtures import ChainFactory, new_chain
 
 
 def _samples(motion: Motion, t0: int, t1: int, n: int = 4000) -> list[int]:
@@ -64,8 +56,9 @@ def _continuous(motion: Motion) -> None:
             assert abs(v0 - v1) <= 1e-5 * max(1.0, abs(v0)) + snap + 1e-6, (prev, nxt)
 
 
-def test_6_6_pe_is_speed_over_loop_gain_while_cruising() -> None:
-    chain, motor = _chain()
+def test_6_6_pe_is_speed_over_loop_gain_while_cruising(make_chain: ChainFactory) -> None:
+    chain = make_chain()
+    motor = chain.motors[1]
     chain.execute("S.1=100, A.1=100, P.1=10000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
@@ -74,8 +67,9 @@ def test_6_6_pe_is_speed_over_loop_gain_while_cruising() -> None:
     assert abs(motor.axis.position() - (0.5 * 10000 - 500 - 33.33)) < 0.5
 
 
-def test_tracking_matches_a_numerical_integration_of_the_loop() -> None:
-    chain, motor = _chain()
+def test_tracking_matches_a_numerical_integration_of_the_loop(make_chain: ChainFactory) -> None:
+    chain = make_chain()
+    motor = chain.motors[1]
     chain.execute("K69.1=600, K51.1=3")
     chain.execute("S.1=120, A.1=300, P.1=7000")
     chain.execute("^.1")
@@ -97,8 +91,9 @@ def test_tracking_matches_a_numerical_integration_of_the_loop() -> None:
     assert worst < 0.05
 
 
-def test_2_1_1_torque_limit_m_makes_the_motor_lag_and_catch_up() -> None:
-    chain, motor = _chain(load_inertia=1.0e-3)           # 220 times the rotor
+def test_2_1_1_torque_limit_m_makes_the_motor_lag_and_catch_up(make_chain: ChainFactory) -> None:
+    chain = make_chain(plant={"load_inertia": 1.0e-3})           # 220 times the rotor
+    motor = chain.motors[1]
     chain.execute("S.1=100, A.1=100, P.1=10000, M.1=20")  # 20 % of 300 % rated = 60 %
     reports: list[tuple[int, str]] = []
     chain.subscribe(lambda ev: reports.append((ev.time, ev.text)))
@@ -118,8 +113,9 @@ def test_2_1_1_torque_limit_m_makes_the_motor_lag_and_catch_up() -> None:
     assert motor.position() == 10000 and abs(motor.axis.position_error()) < 0.5
 
 
-def test_m0_written_while_moving_applies_at_once() -> None:
-    chain, motor = _chain(load_inertia=2.0e-4)
+def test_m0_written_while_moving_applies_at_once(make_chain: ChainFactory) -> None:
+    chain = make_chain(plant={"load_inertia": 2.0e-4})
+    motor = chain.motors[1]
     chain.execute("S.1=100, A.1=100, P.1=10000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.02))
@@ -129,8 +125,10 @@ def test_m0_written_while_moving_applies_at_once() -> None:
     assert abs(motor.torque()) <= 15
 
 
-def test_stopper_contact_stops_the_shaft_pe_grows_torque_at_the_limit() -> None:
-    chain, motor = _chain()
+def test_stopper_contact_stops_the_shaft_pe_grows_torque_at_the_limit(
+        make_chain: ChainFactory) -> None:
+    chain = make_chain()
+    motor = chain.motors[1]
     motor.geometry.stopper_cw = 3000.0
     motor.axis.refresh()
     chain.execute("K56.1=100, S.1=50, A.1=100, P.1=20000")
@@ -147,8 +145,9 @@ def test_stopper_contact_stops_the_shaft_pe_grows_torque_at_the_limit() -> None:
     assert math.isclose(motor.axis.position_error() - pe1, 0.2 * 5000, rel_tol=1e-6)
 
 
-def test_servo_off_the_shaft_coasts_on_friction() -> None:
-    chain, motor = _chain()
+def test_servo_off_the_shaft_coasts_on_friction(make_chain: ChainFactory) -> None:
+    chain = make_chain()
+    motor = chain.motors[1]
     chain.execute("S.1=100, A.1=100, P.1=100000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
@@ -162,8 +161,9 @@ def test_servo_off_the_shaft_coasts_on_friction() -> None:
     assert math.isclose(motor.axis.position() - x0, v0 * v0 / (2 * decel), rel_tol=1e-6)
 
 
-def test_cm1_stepper_has_no_tracking_error_within_its_torque() -> None:
-    chain, motor = _chain("cm1")
+def test_cm1_stepper_has_no_tracking_error_within_its_torque(make_chain: ChainFactory) -> None:
+    chain = make_chain(firmware="cm1")
+    motor = chain.motors[1]
     assert motor.axis.enabled            # CM1 K68 is the S-curve function, not motor free
     chain.execute("S.1=100, A.1=100, P.1=10000")
     chain.execute("^.1")
@@ -176,8 +176,9 @@ def test_cm1_stepper_has_no_tracking_error_within_its_torque() -> None:
     assert chain.execute("?96.1") == ["Px.1=10000"]
 
 
-def test_cm1_stepper_loses_steps_beyond_its_torque() -> None:
-    chain, motor = _chain("cm1", load_inertia=2.0e-3)
+def test_cm1_stepper_loses_steps_beyond_its_torque(make_chain: ChainFactory) -> None:
+    chain = make_chain(firmware="cm1", plant={"load_inertia": 2.0e-3})
+    motor = chain.motors[1]
     events: list[str] = []
     chain.subscribe(lambda ev: events.append(ev.text))
     chain.execute("S.1=100, A.1=100, P.1=10000")
@@ -193,7 +194,8 @@ def test_cm1_stepper_loses_steps_beyond_its_torque() -> None:
        s=st.integers(5, 300), a=st.integers(10, 2000), target=st.integers(-50000, 50000))
 def test_any_load_and_limit_settles_at_the_target(inertia: float, friction: float, m: int,
                                                   s: int, a: int, target: int) -> None:
-    chain, motor = _chain(load_inertia=inertia, coulomb_friction=friction)
+    chain = new_chain(plant={"load_inertia": inertia, "coulomb_friction": friction})
+    motor = chain.motors[1]
     chain.execute(f"K56.1=32767, K57.1=10000, S.1={s}, A.1={a}, M.1={m}, P.1={target}")
     chain.execute("^.1")
     motion = motor.axis.motion
@@ -209,8 +211,9 @@ def test_any_load_and_limit_settles_at_the_target(inertia: float, friction: floa
         assert abs(motor.axis.position() - target) <= 5
 
 
-def test_6_6_ix_is_friction_while_cruising_and_zero_at_rest() -> None:
-    chain, motor = _chain()
+def test_6_6_ix_is_friction_while_cruising_and_zero_at_rest(make_chain: ChainFactory) -> None:
+    chain = make_chain()
+    motor = chain.motors[1]
     chain.execute("S.1=100, A.1=100, P.1=10000")
     chain.execute("^.1")
     chain.kernel.run(until=seconds(0.5))
@@ -229,7 +232,8 @@ def test_replanning_at_any_moment_keeps_the_motion_finite(
         steps: list[tuple[object, int, int]], inertia: float, m: int) -> None:
     """New targets arriving at arbitrary instants, also the very instant a move comes in
     position (where Pe and the speed are nearly zero), never chatter."""
-    chain, motor = _chain(load_inertia=inertia)
+    chain = new_chain(plant={"load_inertia": inertia})
+    motor = chain.motors[1]
     chain.execute(f"K56.1=32767, K57.1=10000, A.1=100, M.1={m}")
     for delay, target, s in steps:
         if delay == "arrive":
@@ -244,12 +248,15 @@ def test_replanning_at_any_moment_keeps_the_motion_finite(
     assert abs(motor.axis.position() - steps[-1][1]) <= 5
 
 
-def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> None:
+def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers(
+        make_chain: ChainFactory) -> None:
     """docs/performance.md: a move solved once is reused when the machine repeats it
     (same drive, same command relative to where it starts); the reused motion is the
     one a fresh solve gives, to the last bit, and the same move elsewhere differs only
     by where it is."""
-    chain, motor = _chain(load_inertia=2e-4)
+    chain = make_chain(plant={"load_inertia": 2e-4})
+
+    motor = chain.motors[1]
     chain.execute("S.1=50, A.1=30, M.1=40, P.1=3000")
     chain.execute("^.1")
     chain.kernel.run(until=chain.kernel.now + seconds(0.01))
@@ -278,3 +285,34 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers() -> 
         assert a.pos[0] - 1_000_000 == pytest.approx(b.pos[0], abs=1e-6)
         assert xp.value(a.err(), a.k, 0.0) == pytest.approx(xp.value(b.err(), b.k, 0.0),
                                                           abs=1e-6)
+
+
+# -- a command faster than the top speed --------------------------------------------------
+# With K56 raised (ch. 3 K56) and S beyond the top speed, a move reversed while the shaft
+# runs at full speed was braked through zero speed onto the command's speed with no
+# top-speed exit: the shaft passed v_max and the modes after it chattered (sat -> track
+# -> vmax, 1 ns each) until the 2000-piece safety net held the motor still.  The braking
+# mode now ends at the top speed like the others.
+FASTER_THAN_TOP_SPEED = ["K56.1=32767", "S.1=7027", "A.1=7698", "P.1=1", "^.1",
+                         "P.1+=-500000", "^.1", "P.1+=-1", "^.1"]
+
+
+@pytest.mark.parametrize("gap_ms", [50, 200, 1000])
+def test_the_fuzzed_sequence_stays_far_below_the_piece_limit(
+        gap_ms: int, caplog: pytest.LogCaptureFixture) -> None:
+    counts: list[int] = []
+    chain = Chain(motors=2)
+    for motor in chain.motors.values():          # every motion each axis solves
+        axis = motor.axis
+        axis.trajectory_listeners.append(
+            lambda axis=axis: counts.append(len(axis.motion.pieces)))
+    with caplog.at_level(logging.WARNING):
+        for line in FASTER_THAN_TOP_SPEED:
+            chain.host_line.feed((line + "\r").encode())
+            chain.kernel.run(until=chain.kernel.now + ms(gap_ms))
+        chain.kernel.run(until=chain.kernel.now + ms(120_000))
+    assert "piece limit" not in caplog.text
+    assert counts and max(counts) < 100, max(counts)
+    axis_speed = max(abs(chain.motors[1].axis.motion.velocity_at(chain.kernel.now - ms(t)))
+                     for t in range(0, 100, 10))
+    assert axis_speed == 0.0                           # standing (the K56 alarm or arrived)

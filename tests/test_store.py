@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 import sqlite3
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -14,8 +14,13 @@ from coolmuscle.errors import StoreError
 from coolmuscle.motor.state.firmware import CM2
 from coolmuscle.motor.state.memory import Memory
 from coolmuscle.motor.state.param_table import ParamTable
-from coolmuscle.motor.state.store import (APPLICATION_ID, DEFAULT_FILENAME, SCHEMA_VERSION,
-                                          Store, default_state_dir)
+from coolmuscle.motor.state.store import (
+    APPLICATION_ID,
+    DEFAULT_FILENAME,
+    SCHEMA_VERSION,
+    Store,
+    default_state_dir,
+)
 
 
 @pytest.fixture

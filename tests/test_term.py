@@ -16,14 +16,15 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
+from fixtures import wait_until
 
 pytestmark = pytest.mark.peer
 
@@ -163,11 +164,8 @@ def test_term_as_a_person_uses_it(served: ServiceThread, tmp_path: Path) -> None
 
 def logged(log: Path, text: str, timeout: float = 10.0) -> None:
     """Wait until the session log holds ``text``."""
-    deadline = time.monotonic() + timeout
-    while text not in (log.read_text() if log.exists() else ""):
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{text!r} not in the log:\n{log.read_text()}")
-        time.sleep(0.02)
+    if not wait_until(lambda: text in (log.read_text() if log.exists() else ""), timeout):
+        raise AssertionError(f"{text!r} not in the log:\n{log.read_text()}")
 
 
 def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None:
@@ -200,8 +198,9 @@ def test_a_logged_session_replays_as_a_golden_transcript(tmp_path: Path) -> None
     assert out.stdout.startswith("coolmuscle: ok: 10 expectation(s) matched")
 
 
-def test_a_port_that_cannot_be_opened_is_one_line(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "coolmuscle", "term", "socket://127.0.0.1:1"],
+def test_a_port_that_cannot_be_opened_is_one_line(tmp_path: Path, closed_port: int) -> None:
+    url = f"socket://127.0.0.1:{closed_port}"
+    out = subprocess.run([sys.executable, "-m", "coolmuscle", "term", url],
                          capture_output=True, text=True, timeout=60, env=term_env(tmp_path))
     assert out.returncode == 1
-    assert out.stderr.startswith("coolmuscle: error: cannot open socket://127.0.0.1:1")
+    assert out.stderr.startswith(f"coolmuscle: error: cannot open {url}")

@@ -2,6 +2,8 @@
 
 The trace samples the closed-form history exactly; position-derived outputs
 (rotation pulses) are evaluated at each sample and their edges are sample instants.
+A plot is titled and labelled (status names, output rows by their K34 function, the
+stopper, the XY command path); a plot file it cannot write fails before the run.
 """
 
 from __future__ import annotations
@@ -12,18 +14,21 @@ import types
 from pathlib import Path
 from typing import Any
 
+import matplotlib.figure
 import matplotlib.image
 import pytest
 
-from coolmuscle.tools.cli import app as cli
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.signals.encoder import Gearing
-from coolmuscle.tools.trace.plot import status_class
-from coolmuscle.tools.trace import recorder as trace_module
 from coolmuscle.sim.kernel import NS_PER_S, seconds
-from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError
-from coolmuscle.tools.trace.recorder import record, trace as start_trace
+from coolmuscle.tools.cli import app as cli
+from coolmuscle.tools.trace import recorder as trace_module
 from coolmuscle.tools.trace.plot import plot as plot_chain
+from coolmuscle.tools.trace.plot import status_class
+from coolmuscle.tools.trace.recorder import FIELDS, TraceFormatError, record
+from coolmuscle.tools.trace.recorder import trace as start_trace
+from fixtures import ROOT, ChainFactory, run_coolmuscle
+
+EXAMPLES = ROOT / "examples"
 
 SCRIPT = """\
 K34.1=77
@@ -44,8 +49,9 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
     return rows[0], rows[1:]
 
 
-def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) -> None:
-    chain = Chain()
+def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(
+        tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     handle = start_trace(chain, tmp_path / "run.csv", step=0.01)
     chain.set_param(1, 34, 77)
     chain.set_param(1, 24, 2000)
@@ -74,8 +80,8 @@ def test_trace_csv_has_every_column_and_the_pulse_edges_as_rows(tmp_path: Path) 
     assert float(last[col["m1.position"]]) == pytest.approx(6000, abs=0.01)
 
 
-def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
-    chain = Chain()
+def test_trace_analog_out_follows_k35(tmp_path: Path, make_chain: ChainFactory) -> None:
+    chain = make_chain()
     rec = record(chain)
     chain.set_param(1, 35, 2)                    # current position, ±1024 pulses
     chain.execute("S.1=10, A.1=100, P.1=512")
@@ -86,10 +92,11 @@ def test_trace_analog_out_follows_k35(tmp_path: Path) -> None:
 
 
 def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: Any,
+        make_chain: ChainFactory) -> None:
     monkeypatch.setattr(trace_module, "parquet_available", lambda: False)
     with pytest.raises(TraceFormatError, match="pyarrow"):
-        start_trace(Chain(), tmp_path / "run.parquet")
+        start_trace(make_chain(), tmp_path / "run.parquet")
     script = tmp_path / "s.cml"
     script.write_text("?96.1\n")
     with pytest.raises(SystemExit) as info:
@@ -100,8 +107,8 @@ def test_parquet_without_pyarrow_is_a_clear_error_before_anything_runs(
     assert not (tmp_path / "run.parquet").exists()
 
 
-def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
-                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_parquet_columns_and_types_with_pyarrow(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, make_chain: ChainFactory) -> None:
     """The Parquet writer against a stand-in for pyarrow (it is an optional
     dependency): one int64 or float64 array per column, written to the path."""
     written: dict[str, Any] = {}
@@ -122,7 +129,7 @@ def test_parquet_columns_and_types_with_pyarrow(tmp_path: Path,
     monkeypatch.setitem(sys.modules, "pyarrow", pa)
     monkeypatch.setitem(sys.modules, "pyarrow.parquet", pq)
     monkeypatch.setattr(trace_module, "parquet_available", lambda: True)
-    chain = Chain()
+    chain = make_chain()
     handle = start_trace(chain, tmp_path / "run.parquet", step=0.1)
     chain.execute("S.1=100, A.1=100, P.1=1000")
     chain.execute("^.1")
@@ -149,10 +156,10 @@ def test_cli_run_writes_trace_and_plot(tmp_path: Path, capsys: Any) -> None:
     capsys.readouterr()
 
 
-def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
+def test_plot_grows_with_the_number_of_motors(tmp_path: Path, make_chain: ChainFactory) -> None:
     heights = []
     for motors in (1, 15):
-        chain = Chain(motors=motors)
+        chain = make_chain(motors=motors)
         record(chain)
         for mid in chain.motor_ids:
             chain.set_param(mid, 34, 1)
@@ -169,3 +176,69 @@ def test_plot_grows_with_the_number_of_motors(tmp_path: Path) -> None:
                                       (512, "emergency stop"), (256, "moving")])
 def test_6_6_status_classes_of_the_timeline(ux: int, name: str) -> None:
     assert status_class(ux) == name
+
+
+# -- what a plot says: title, legend, output rows, the XY panel ----------------------------
+def test_plot_with_an_unknown_extension_fails_before_the_run(tmp_path: Path) -> None:
+    done = run_coolmuscle("run", str(EXAMPLES / "2.1-operation.cml"), "--plot",
+                          str(tmp_path / "x.jpgx"))
+    assert done.returncode == 2
+    assert done.stdout == ""                                # nothing ran
+    assert "cannot plot to" in done.stderr and ".png" in done.stderr
+    assert "internal error" not in done.stderr
+
+
+@pytest.fixture
+def figures(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
+    """Every figure saved during the test."""
+    saved: list[Any] = []
+    original = matplotlib.figure.Figure.savefig
+
+    def keep(self: Any, *args: Any, **kwargs: Any) -> Any:
+        saved.append(self)
+        return original(self, *args, **kwargs)
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", keep)
+    return saved
+
+
+def _legend_texts(fig: Any) -> set[str]:
+    return {t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().texts}
+
+
+def test_plot_title_legend_outputs_and_stopper(tmp_path: Path, figures: list[Any]) -> None:
+    with pytest.raises(SystemExit) as info:
+        cli.main(["run", str(EXAMPLES / "4.1.4-push-motion.cml"), "--plot",
+                  str(tmp_path / "push.png")])
+    assert info.value.code in (0, None)
+    fig = figures[-1]
+    assert fig._suptitle.get_text().startswith("4.1.4-push-motion.cml")
+    legend = _legend_texts(fig)
+    assert {"moving", "push", "push complete"} <= legend       # Ux 0, 32, 40 occur
+    assert not legend & {"alarm", "emergency stop", "motor free"}
+    timeline = fig.axes[-1]
+    labels = [t.get_text() for t in timeline.get_yticklabels()]
+    assert "status" in labels
+    stoppers = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert any("stopper 11000" in t for t in stoppers)        # the pushed object
+
+
+def test_plot_output_rows_name_their_k34_function(tmp_path: Path, figures: list[Any]) -> None:
+    script = tmp_path / "out.cml"
+    script.write_text("K34.1=31\nO2.1\nS.1=100\nA.1=100\nP.1=1000\n^.1\n@wait 1\n")
+    with pytest.raises(SystemExit):
+        cli.main(["run", str(script), "--plot", str(tmp_path / "o.png")])
+    labels = [t.get_text() for t in figures[-1].axes[-1].get_yticklabels()]
+    assert "OUT1 in-position" in labels and "OUT2 general" in labels
+
+
+def test_xy_panel_draws_the_dashed_command_path(tmp_path: Path, figures: list[Any]) -> None:
+    with pytest.raises(SystemExit):
+        cli.main(["run", str(EXAMPLES / "4.4.1-circular-radius.cml"), "--plot",
+                  str(tmp_path / "arc.png")])
+    fig = figures[-1]
+    xy = [ax for ax in fig.axes if "XY path" in ax.get_title()]
+    assert len(xy) == 1 and "command dashed" in xy[0].get_title()
+    dashed = [line for line in xy[0].get_lines() if line.get_linestyle() == "--"
+              and len(line.get_xdata()) > 10]
+    assert dashed and dashed[0].get_zorder() > 2                # drawn over the actual path
+    assert "command" in _legend_texts(fig)

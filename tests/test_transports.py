@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.frontends import transports
 from coolmuscle.errors import TransportError
+from coolmuscle.frontends import transports
 from coolmuscle.frontends.transports.base import Port, split_after_line_ends
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.stdio import StdioTransport
@@ -82,7 +82,7 @@ def test_split_after_line_ends() -> None:
 
 def test_port_survives_a_failing_line_and_runs_the_lines_after_it() -> None:
     chain = FakeChain()
-    port = Port(chain.host_line)
+    port = Port(chain)
     out: list[bytes] = []
     port.add_listener(out.append)
     port.feed(b"boom\r?96.1\r")
@@ -102,7 +102,7 @@ def test_several_hosts_each_lines_echo_is_a_whole_line_however_the_bytes_come(
     whole line (its echo) or a reply, each line sent is echoed once, and the echo comes
     before the reply to it (ch. 3 K23 8: the echo is part of the answer)."""
     chain = FakeChain()
-    port = Port(chain.host_line)
+    port = Port(chain)
     out: list[bytes] = []
     port.add_listener(out.append)
     hosts = data.draw(st.integers(2, 3))
@@ -129,7 +129,7 @@ def test_several_hosts_each_lines_echo_is_a_whole_line_however_the_bytes_come(
 
 def test_port_discard_partial_forgets_a_half_line() -> None:
     chain = FakeChain()
-    port = Port(chain.host_line)
+    port = Port(chain)
     out: list[bytes] = []
     port.add_listener(out.append)
     port.feed(b"?9")

@@ -6,8 +6,9 @@ import os
 import shutil
 import subprocess
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import pytest
 import serial
@@ -17,6 +18,7 @@ from coolmuscle.frontends.transports.pty import PtyTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport
 from fakes import ROUNDTRIP, fake_factory, play_over_serial
+from fixtures import wait_until
 
 Starter = Callable[..., ServiceThread]
 needs_socat = pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed")
@@ -127,10 +129,7 @@ def test_socat_pty_pair_bridged_to_tcp(tmp_path: Path) -> None:
     port = st_.transports[0].info()["port"]
     proc = subprocess.Popen(["socat", f"PTY,link={link},raw,echo=0", f"TCP:127.0.0.1:{port}"])
     try:
-        deadline = time.monotonic() + 5
-        while not link.exists():
-            assert time.monotonic() < deadline, "socat did not create its pty"
-            time.sleep(0.02)
+        assert wait_until(link.exists), "socat did not create its pty"
         with serial.Serial(str(link), timeout=1) as ser:
             play_over_serial(ser, ROUNDTRIP)
     finally:

@@ -7,7 +7,8 @@ import re
 import socket
 import struct
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import pytest
 import serial
@@ -18,6 +19,7 @@ from coolmuscle.errors import TransportError
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.frontends.transports.tcp import TcpTransport, parse_address
 from fakes import ROUNDTRIP, fake_factory, play_over_serial
+from fixtures import wait_until_async
 
 Starter = Callable[..., ServiceThread]
 
@@ -190,10 +192,8 @@ def test_twenty_clients_thousand_queries_each_nothing_lost(start_tcp: Starter) -
     async def main() -> list[list[bytes]]:
         all_connected = asyncio.Event()
         tasks = asyncio.gather(*(client(m, all_connected) for m in range(1, clients + 1)))
-        deadline = time.monotonic() + 10
-        while transport.clients < clients:
-            assert time.monotonic() < deadline, "clients did not connect"
-            await asyncio.sleep(0.01)
+        assert await wait_until_async(lambda: transport.clients >= clients, 10), \
+            "clients did not connect"
         all_connected.set()
         return await asyncio.wait_for(tasks, 30)
 

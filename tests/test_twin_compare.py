@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 from coolmuscle.tools.twin.compare import Tolerance, compare_session
-
 from twin_support import write_capture, write_hidden
 
 

@@ -27,26 +27,25 @@ fails with that lag named if every try was stalled.
 from __future__ import annotations
 
 import bisect
-import os
 import random
 import re
 import shutil
 import signal
 import subprocess
 import sys
-import time
 import tomllib
 from pathlib import Path
 
 import pytest
 
 from coolmuscle.tools.twin.session import read_session
+from fixtures import Program, ServedSim, coolmuscle_env, run_coolmuscle
 from twin_support import HIDDEN
 
 ROOT = Path(__file__).resolve().parents[1]
 HIDDEN_TOML = ROOT / "examples" / "twin" / "hidden.toml"
 IDENTIFY = ROOT / "examples" / "twin" / "identify.py"
-ENV = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "COLUMNS": "200"}
+ENV = coolmuscle_env()
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime, pytest.mark.timeout(400)]
 
@@ -59,26 +58,7 @@ CAPTURE_TRIES = 4
 
 
 def coolmuscle(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "coolmuscle", *args], capture_output=True,
-                          text=True, timeout=timeout, env=ENV)
-
-
-def _wait_for(log: Path, proc: subprocess.Popen[bytes], pattern: str,
-              seconds: float = 60) -> re.Match[str]:
-    deadline = time.monotonic() + seconds
-    while True:
-        match = re.search(pattern, log.read_text())
-        if match is not None:
-            return match
-        if proc.poll() is not None or time.monotonic() > deadline:
-            raise AssertionError(f"{pattern!r} not printed:\n{log.read_text()}")
-        time.sleep(0.05)
-
-
-def _start(args: list[str], log: Path, prefix: list[str]) -> subprocess.Popen[bytes]:
-    with log.open("w") as out:
-        return subprocess.Popen([*prefix, sys.executable, "-m", "coolmuscle", *args], stdout=out,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=ENV)
+    return run_coolmuscle(*args, timeout=timeout)
 
 
 def _realtime_prefix() -> list[str]:
@@ -105,31 +85,27 @@ def stand_in_lag(session: Path) -> float:
 
 def _capture_once(folder: Path) -> Path:
     """Play the identification plan through ``coolmuscle capture`` to a hidden-machine sim."""
-    procs: list[subprocess.Popen[bytes]] = []
+    procs: list[Program] = []
     rt = _realtime_prefix()
     try:
-        sim = _start(["sim", "--no-state", "--machine", str(HIDDEN_TOML), "--tcp", "0"],
-                     folder / "sim.log", rt)
+        sim = ServedSim(folder / "sim.log", "--machine", str(HIDDEN_TOML), prefix=rt,
+                        ready_timeout=60)
         procs.append(sim)
-        port = _wait_for(folder / "sim.log", sim, r"tcp: (127\.0\.0\.1:\d+)").group(1)
         link = folder / "motor"
         session = folder / "session.cml"
-        relay = _start(["capture", f"socket://{port}", "--pty", str(link), "--out",
-                        str(session)], folder / "capture.log", rt)
+        relay = Program(["capture", sim.url, "--pty", str(link), "--out", str(session)],
+                        folder / "capture.log", prefix=rt)
         procs.append(relay)
-        _wait_for(folder / "capture.log", relay, r"capture ready")
+        relay.wait_for(r"capture ready", 60)
         played = subprocess.run([sys.executable, str(IDENTIFY), str(link), "--push-to",
                                  "25000"], capture_output=True, text=True, timeout=120,
                                 env=ENV)
         assert played.returncode == 0, played.stderr
-        relay.send_signal(signal.SIGINT)
-        assert relay.wait(timeout=30) == 130, (folder / "capture.log").read_text()
+        assert relay.signal(signal.SIGINT, 30) == 130, relay.text
         return session
     finally:
         for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(timeout=10)
+            proc.close()
 
 
 @pytest.fixture(scope="module")

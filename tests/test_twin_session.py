@@ -10,11 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from coolmuscle.chain.daisy import Chain
 from coolmuscle.chain.machine import parse_machine
 from coolmuscle.tools.script import run_script
 from coolmuscle.tools.twin.session import CaptureError, parse_session, read_session
-
+from fixtures import ChainFactory
 from twin_support import HIDDEN_TOML, capture_text, session_plan
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,11 +58,11 @@ def test_the_agreed_format_example_reads_with_its_instants() -> None:
 
 
 def test_a_capture_of_the_hidden_machine_replays_with_check_and_no_difference(
-        exact_text: str) -> None:
+        exact_text: str, make_chain: ChainFactory) -> None:
     """The capture is a golden transcript: `run --check` on the hidden machine matches
     every line (a capture replays with --check with 0 differences)."""
     session = parse_session(exact_text)
-    chain = Chain(machine=parse_machine(HIDDEN_TOML))
+    chain = make_chain(machine=parse_machine(HIDDEN_TOML))
     try:
         result = run_script(session.script, chain)
     finally:

@@ -4,17 +4,20 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 import serial
 from serial.serialutil import PortNotOpenError, SerialException
 
-import coolmuscle  # noqa: F401  (registers the handler)
-from coolmuscle.sim.kernel import NS_PER_S, seconds
+import coolmuscle
 from coolmuscle.frontends.urlhandler import protocol_coolmuscle as handler
+from coolmuscle.sim.kernel import NS_PER_S, seconds
 from fakes import ROUNDTRIP, FakeChain, fake_factory, play_over_serial
+
+coolmuscle.register_url_handler()      # pyserial's protocol_handler_packages (once)
 
 
 @pytest.fixture
@@ -30,10 +33,49 @@ def fake(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[dict[str, Any]]]:
     yield calls
 
 
-def test_import_coolmuscle_registers_the_handler() -> None:
-    assert "coolmuscle.frontends.urlhandler" in serial.protocol_handler_packages
-    coolmuscle.frontends.urlhandler.register()
+def test_register_appends_the_package_to_pyserials_list_once() -> None:
+    coolmuscle.register_url_handler()
+    assert serial.protocol_handler_packages[0] == "serial.urlhandler"   # pyserial's own first
     assert serial.protocol_handler_packages.count("coolmuscle.frontends.urlhandler") == 1
+
+
+#: A fresh interpreter: the scheme before and after registering, and through connect().
+FRESH = r"""
+import json, sys, serial, coolmuscle
+import coolmuscle.frontends.urlhandler
+out = {"listed": list(serial.protocol_handler_packages)}
+try:
+    serial.serial_for_url("coolmuscle://?mode=fast", timeout=0.5)
+except ValueError as exc:
+    out["before"] = str(exc)
+if sys.argv[1] == "register":
+    coolmuscle.register_url_handler()
+    with serial.serial_for_url("coolmuscle://?mode=fast", timeout=0.5) as port:
+        port.write(b"?96.1\r")
+        out["echo"] = port.read_until(b"\r\n").decode()
+else:
+    with coolmuscle.connect("coolmuscle://?mode=fast") as m:
+        out["echo"] = m.id
+out["after"] = list(serial.protocol_handler_packages)
+json.dump(out, sys.stdout)
+"""
+
+
+@pytest.mark.parametrize("how", ["register", "connect"])
+def test_the_scheme_is_known_once_registered_not_on_import(how: str) -> None:
+    """Importing coolmuscle leaves pyserial's list alone (``coolmuscle://`` is an unknown
+    protocol); ``register_url_handler()`` or a ``connect("coolmuscle://...")`` adds it."""
+    import json
+    import os
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, "-c", FRESH, how], capture_output=True, text=True,
+                          env=dict(os.environ), timeout=60, check=True)
+    out = json.loads(done.stdout)
+    assert out["listed"] == ["serial.urlhandler"]
+    assert out["before"] == "invalid URL, protocol 'coolmuscle' not known"
+    assert out["after"] == ["serial.urlhandler", "coolmuscle.frontends.urlhandler"]
+    assert out["echo"] == ("?96.1\r\n" if how == "register" else 1)
 
 
 def test_default_chain_answers_with_the_real_host_line() -> None:

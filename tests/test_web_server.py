@@ -20,9 +20,8 @@ import time
 import aiohttp
 import pytest
 
-from coolmuscle.frontends.web.access import Access, expand_web_flag, parse_web_address
 from coolmuscle.errors import TransportError
-
+from coolmuscle.tools.web.access import Access, expand_web_flag, parse_web_address
 from web_support import ROOT, HostLine, ask, count_snapshots, serve, ws_frames
 
 
@@ -133,6 +132,10 @@ def test_huge_websocket_message_closes_that_socket_1009_only(served):
     async def body(ws, hello):
         await ws.send_str(json.dumps({"t": "cml", "line": "x" * 400_000}))
         msg = await ws.receive(timeout=5)
+        for _ in range(50):     # feed frames sent before the close arrive first under load
+            if msg.type != aiohttp.WSMsgType.TEXT or json.loads(msg.data).get("t") == "result":
+                break
+            msg = await ws.receive(timeout=5)
         return msg.type, ws.close_code
     kind, code = _run(_with_ws(_url(served), body))
     assert kind in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.CLOSING)
@@ -158,6 +161,50 @@ def test_bank_with_checker_errors_is_not_sent_and_names_its_line(served):
     finally:
         host.query("K23.2=1", r"K23\.2=1")
         host.close()
+
+
+def test_bank_lines_without_an_id_go_to_the_pages_motor_and_into_the_log():
+    """2.2.2: ``B3`` typed for motor 2 is bank 3 of ID2; every line the upload sends
+    (the bank, its read-back ``?3.2``) shows in the page's log as sent (``>``)."""
+    st = serve(motors=2)
+    host = HostLine(st.transports[0].info()["port"])
+    try:
+        async def body(ws, hello):
+            result = await ask(ws, {"t": "bank_upload", "motor": 2, "text": "B3\nS1\nEND"})
+            sent = []
+            while "?3.2" not in sent:
+                frame = await ws_frames(ws, lambda f: f["t"] == "log")
+                sent += [line[2] for line in frame["lines"] if line[1] == ">"]
+            return result, sent
+        result, sent = _run(_with_ws(_url(st), body))
+        assert result["ok"] and result["uploaded"] is True
+        assert (result["banks"], result["differences"]) == (["B3.2"], [])
+        assert [line for line in sent if not line.startswith("?96")] == ["B3", "S1", "END",
+                                                                         "?3.2"]
+        assert host.query("?3.2", r"S1.*") == "S1.2"
+    finally:
+        host.close()
+        st.stop()
+
+
+def test_the_upload_is_the_clients_reporting_motor_errors_and_read_back_differences():
+    """The page's upload is :func:`coolmuscle.client.banks.upload` on the device: with
+    K23 16 the motor's own ``error02`` (no room left, 2.2.2) is reported on the file
+    line that met it, and the read-back (6.6 ``?3.2``) names the lines that are missing."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.tools.web.banks import upload_banks
+
+    chain = Chain(motors=2)
+    filled = upload_banks(chain, 2, "B2.2\n" + "T1.2\n" * 495 + "END", lambda _n: None)
+    assert filled["uploaded"] and filled["differences"] == []
+    text = "B3.2\n" + "T2.2\n" * 8 + "END"
+    missing = [f"B3.2 line {n} (file line {n + 1}): missing on the motor: 'T2.2'"
+               for n in (6, 7, 8)]
+    silent = upload_banks(chain, 2, text, lambda _n: None)
+    assert silent["uploaded"] and silent["differences"] == missing
+    chain.execute("K23.2=17")
+    told = upload_banks(chain, 2, text, lambda _n: None)
+    assert told["differences"] == ["line 7: error02.2: too many steps!!", *missing]
 
 
 def _raw_websocket(port: int) -> socket.socket:
@@ -208,9 +255,9 @@ def test_token_required_off_loopback_and_checked():
 
 
 def test_non_loopback_bind_refuses_websocket_without_token():
-    from coolmuscle.frontends.transports.service import ServiceThread
     from coolmuscle.chain import Chain
-    from coolmuscle.frontends.web.server import WebTransport
+    from coolmuscle.frontends.transports.service import ServiceThread
+    from coolmuscle.tools.web.server import WebTransport
     with ServiceThread(lambda: Chain(), lambda: [WebTransport("0.0.0.0", 0)]) as st:
         web = st.transports[0]
         token, port = web.access.token, web.info()["port"]
@@ -325,15 +372,14 @@ def test_trace_download_writes_what_run_trace_writes(tmp_path):
     from coolmuscle.chain import Chain
     from coolmuscle.sim.kernel import seconds
     from coolmuscle.tools.trace.recorder import record
-    from coolmuscle.tools.web.dashboard import DashboardTools
+    from coolmuscle.tools.web import traces
 
     chain = Chain(motors=2)
     recorder = record(chain)
     chain.execute("S.1=100, A.1=100, P.1=3000, ^.1, S.2=50, A.2=50, P.2=-800, ^.2")
     chain.kernel.run(until=seconds(2))
-    tools = DashboardTools()
-    header, rows = tools.trace_rows(recorder, 0.001, chain.kernel.now)
-    tools.write_rows(tmp_path / "page.csv", header, list(rows))
+    header, rows = traces.trace_rows(recorder, 0.001, chain.kernel.now)
+    traces.write_rows(tmp_path / "page.csv", header, list(rows))
     recorder.write_csv(tmp_path / "run.csv", 0.001)
     assert (tmp_path / "page.csv").read_text() == (tmp_path / "run.csv").read_text()
 
@@ -348,7 +394,7 @@ def test_no_polling_storm_while_nothing_moves(served):
             try:
                 frames.append(await ws_frames(ws, lambda f: True,
                                               timeout=max(0.05, end - time.monotonic())))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
         return frames
     frames = _run(_with_ws(_url(served), body))    # 3.5 s since the hello in all
@@ -376,7 +422,7 @@ def _raw(port: int, data: bytes, wait: float = 2.0) -> bytes:
                 if not chunk:
                     break
                 out += chunk
-        except socket.timeout:
+        except TimeoutError:
             pass
         return out
 
@@ -412,7 +458,7 @@ def test_a_connection_flood_is_capped_and_trickled_headers_time_out(monkeypatch)
     """At most MAX_CONNECTIONS connections at once (more are closed as they come: a
     flood once used up the file descriptors the motor's TCP and Modbus ports share); a
     connection whose request never completes is closed after IDLE_TIMEOUT."""
-    from coolmuscle.frontends.web import server as web_server
+    from coolmuscle.tools.web import server as web_server
     monkeypatch.setattr(web_server, "MAX_CONNECTIONS", 20)
     monkeypatch.setattr(web_server, "IDLE_TIMEOUT", 0.5)
     st = serve()
@@ -448,7 +494,7 @@ def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
     again to that page (found as "trace recording started" twice on run --web)."""
     import asyncio
 
-    from coolmuscle.frontends.web.hub import Client, Hub
+    from coolmuscle.tools.web.hub import Client, Hub
 
     async def body() -> tuple[list[str], list[str]]:
         hub = Hub(device=None, call=lambda fn, *a: fn(*a))
@@ -473,7 +519,7 @@ def test_a_page_greeted_while_a_log_batch_waits_gets_each_line_once() -> None:
 def test_the_page_beyond_max_pages_is_refused_and_api_info_says_why(monkeypatch):
     """docs/web.md Robustness: the 101st page's WebSocket gets 503; /api/info tells the
     page how many are open, so it can say so instead of only "reconnecting"."""
-    from coolmuscle.frontends.web import server as web_server
+    from coolmuscle.tools.web import server as web_server
     monkeypatch.setattr(web_server, "MAX_PAGES", 2)
     st = serve()
     try:
@@ -503,7 +549,7 @@ def test_the_plot_import_beside_the_loop_is_waited_for_at_exit(monkeypatch) -> N
     exception", seen in CI); the thread is not a daemon, so the exit waits for it."""
     import threading
 
-    import coolmuscle.tools.web.dashboard as web
+    import coolmuscle.tools.web.traces as web
     from coolmuscle.chain import Chain
 
     started: list[threading.Thread] = []
@@ -516,7 +562,7 @@ def test_the_plot_import_beside_the_loop_is_waited_for_at_exit(monkeypatch) -> N
     monkeypatch.setattr(web.threading, "Thread", Recorded)
     chain = Chain()
     try:
-        assert web.DashboardTools().start_recording(chain) is not None
+        assert web.start_recording(chain) is not None
     finally:
         chain.close()
     assert [t.name for t in started] == ["coolmuscle-web-plot-import"]

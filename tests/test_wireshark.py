@@ -26,8 +26,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from coolmuscle.chain import Chain
+from coolmuscle.frontends.enip.cm1 import objects as enip_objects
+from coolmuscle.frontends.ethercat.bridge import identity as ident
+from coolmuscle.frontends.ethercat.lab import veth_pair
+from coolmuscle.frontends.ethercat.transport import EthercatTransport
+from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
+from coolmuscle.frontends.transports.service import ServiceThread
 from ethercat_support import run_master
-from modbus_support import wait_for
+from fixtures import wait_until
 from web_support import ask, serve, ws_frames
 from wireshark_support import (
     Frame,
@@ -41,14 +49,6 @@ from wireshark_support import (
     sim_process,
     values,
 )
-
-from coolmuscle.chain import Chain
-from coolmuscle.frontends.enip import objects as enip_objects
-from coolmuscle.frontends.ethercat import identity as ident
-from coolmuscle.frontends.ethercat.lab import veth_pair
-from coolmuscle.frontends.ethercat.transport import EthercatTransport
-from coolmuscle.frontends.transports.modbus_tcp import ModbusTcpTransport
-from coolmuscle.frontends.transports.service import ServiceThread
 
 WHY = capture_unavailable()
 if WHY is not None and "tshark" in WHY and os.environ.get("CI"):
@@ -378,7 +378,7 @@ def test_modbus_tcp_function_codes_and_exceptions_dissect_as_sent_5_6_7(tmp_path
                     (client.read_coils(0, count=8, device_id=1), 1),
                     (client.write_register(200, 7, device_id=1), 6),
                 ]
-                assert wait_for(lambda: st.call(lambda: st.chain.snapshot(1).position) == 2000)
+                assert wait_until(lambda: st.call(lambda: st.chain.snapshot(1).position) == 2000)
             finally:
                 client.close()
     finally:

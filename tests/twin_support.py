@@ -85,9 +85,8 @@ def capture_text(plan: list[tuple[float, str]], machine_toml: str | None = HIDDE
         found = parse_poll(data.rstrip(b"\r\n").decode("latin-1")) if entry.direction == "<" \
             else None
         if found is not None and noise:
-            motor = chain.motor(found[1])
-            assert motor is not None
-            value = round(exact_value(motor, found[0]) + rng.uniform(-1.0, 1.0))
+            assert found[1] in chain.motor_ids
+            value = round(exact_value(chain, found[1], found[0]) + rng.uniform(-1.0, 1.0))
             data = f"{found[0]}.{found[1]}={value}\r\n".encode("ascii")
         events.append((entry, data))
 

@@ -12,12 +12,14 @@ import os
 import re
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.transports import create
 from coolmuscle.frontends.transports.service import ServiceThread
+from coolmuscle.tools.web.server import WebTransport
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,7 +39,7 @@ def output_dir() -> Path:
 def serve(motors: int = 1, **web: Any) -> ServiceThread:
     """A started chain with ``tcp`` (transports[0]) and ``web`` (transports[1]) on free ports."""
     return ServiceThread(lambda: Chain(motors=motors),
-                         lambda: [create("tcp", port=0), create("web", port=0, **web)]).start()
+                         lambda: [create("tcp", port=0), WebTransport(port=0, **web)]).start()
 
 
 class HostLine:

@@ -90,7 +90,7 @@ def plan(period: float = 0.01, rounds: int = 1,
 
 def play(port: str, lines: list[tuple[float, str]]) -> None:
     """Send each line at its time (wall clock) and print everything the motor says."""
-    import serial        # pyserial: a dependency of coolmuscle
+    import serial  # pyserial: a dependency of coolmuscle
 
     link = serial.serial_for_url(port, baudrate=38400, timeout=0.05)
     done = threading.Event()

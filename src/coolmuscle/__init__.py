@@ -1,60 +1,90 @@
 """coolmuscle: a byte-faithful virtual Cool Muscle servo motor and host tools.
 
-See README.md and docs/.  The public API grows issue by issue; names exported here
-are stable.
+What a simulator user needs, loaded on first use (``import coolmuscle`` itself loads
+none of it)::
+
+    from coolmuscle import Chain, seconds
+    chain = Chain(motors=2)                     # the virtual motors (a Device)
+    chain.execute("?96.1")
+    chain.kernel.run(until=seconds(1))
+
+    from coolmuscle import connect              # a real or virtual motor over a port
+    with connect("coolmuscle://?mode=fast") as m:
+        print(m.status)
+
+* :class:`Chain` - up to 15 virtual motors on one host line; it implements
+  :class:`Device`, the device API every front end uses, whose :class:`Event` it emits;
+* :class:`Kernel`, :func:`seconds` - virtual time (integer nanoseconds);
+* :func:`connect`, :func:`connect_async`, :class:`Version` - the host library;
+* :class:`Ux` - the 6.6 ``?99`` status flags; :class:`CoolMuscleError` - the root of
+  every exception;
+* :func:`register_url_handler` - pyserial's ``coolmuscle://`` URL.
+
+Importing coolmuscle changes nothing in the process: no signal handler, exit hook,
+import hook or patched module.  It reads the build stamp of the compiled hot modules
+(:mod:`coolmuscle._accel`), which says whether they run.  See README.md and docs/.
 """
 
-from __future__ import annotations
+from . import _accel
 
-import os as _os
-import sys as _sys
+_accel.choose(__path__[0])   # the compiled hot modules or the sources (the build stamp)
 
-
-def _run_as_the_command() -> bool:
-    """``python -m coolmuscle ...`` (argv[0] is "-m" while the package loads) or the
-    ``coolmuscle`` script."""
-    if _sys.argv[:1] == ["-m"]:
-        orig = list(getattr(_sys, "orig_argv", []))
-        return "-m" in orig and orig[orig.index("-m") + 1:][:1] == ["coolmuscle"]
-    return _os.path.basename(_sys.argv[0] if _sys.argv else "") == "coolmuscle"
-
-
-if _run_as_the_command():
-    # Started as the command: stop signals are handled from here on,
-    # before anything else loads (docs/reliability.md "signals").  A library import
-    # leaves the program's signal handlers alone.
-    from .tools.cli.stopsignals import install_startup_handlers as _install
-
-    _install()
-
-from . import _dataclass_code  # noqa: E402
-
-_dataclass_code.install()  # the dataclasses' generated methods kept compiled between runs
-
-from . import _accel  # noqa: E402
-
-_accel.install()  # compiled hot modules, when built from these sources (docs/performance.md)
-
+#: The one place the version is written (pyproject.toml reads it from here).
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "connect", "connect_async", "Ux", "Version", "CoolMuscleError"]
+__all__ = ["__version__", "Chain", "Kernel", "seconds", "Device", "Event", "connect",
+           "connect_async", "Version", "Ux", "CoolMuscleError", "register_url_handler"]
+
+#: Each exported name's module (imported on first use).
+_HOMES = {
+    "Chain": "coolmuscle.chain",
+    "Kernel": "coolmuscle.sim.kernel",
+    "seconds": "coolmuscle.sim.kernel",
+    "Device": "coolmuscle.device",
+    "Event": "coolmuscle.device",
+    "connect": "coolmuscle.client",
+    "connect_async": "coolmuscle.client",
+    "Version": "coolmuscle.client",
+    "Ux": "coolmuscle.motor.status",
+    "CoolMuscleError": "coolmuscle.errors",
+}
+
+
+def register_url_handler() -> None:
+    """Make ``serial.serial_for_url("coolmuscle://...")`` work: pyserial's documented
+    ``serial.protocol_handler_packages`` gets coolmuscle's handler package (once).
+    :func:`connect` does it itself for a ``coolmuscle://`` URL (docs/transports.md)."""
+    from .frontends.urlhandler import register
+
+    register()
 
 
 def __getattr__(name: str) -> object:
-    """``connect`` / ``connect_async`` / ``Version`` load the host library on first use;
-    ``Ux`` (the 6.6 ?99 status flags) and ``CoolMuscleError`` (the root of every
-    exception) are the names its results and errors carry."""
-    if name in ("connect", "connect_async", "Version"):
-        from . import client
-        return getattr(client, name)
-    if name == "Ux":
-        from .motor.status import Ux
-        return Ux
-    if name == "CoolMuscleError":
-        from .errors import CoolMuscleError
-        return CoolMuscleError
-    raise AttributeError(f"module 'coolmuscle' has no attribute {name!r}")
+    """The names of :data:`__all__`, imported from their module on first use."""
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'coolmuscle' has no attribute {name!r}")
+    from importlib import import_module
 
-from .frontends.urlhandler import register as _register_url_handler  # noqa: E402
+    value = getattr(import_module(home), name)
+    globals()[name] = value
+    return value
 
-_register_url_handler()  # serial.serial_for_url("coolmuscle://...")
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+TYPE_CHECKING = False      # typing.TYPE_CHECKING without importing typing at start
+if TYPE_CHECKING:
+    from .chain import Chain as Chain
+    from .client import Version as Version
+    from .client import connect as connect
+    from .client import connect_async as connect_async
+    from .device import Device as Device
+    from .device import Event as Event
+    from .errors import CoolMuscleError as CoolMuscleError
+    from .motor.status import Ux as Ux
+    from .sim.kernel import Kernel as Kernel
+    from .sim.kernel import seconds as seconds
+del TYPE_CHECKING

@@ -1,10 +1,12 @@
 """The compiled code of the methods :mod:`dataclasses` writes for coolmuscle's classes,
-kept between runs as Python keeps a module's byte code (docs/performance.md).
+kept between runs as Python keeps a module's byte code: a cache the ``coolmuscle``
+command installs for its own process (:func:`coolmuscle.tools.cli.entry.main`);
+importing coolmuscle never does (docs/performance.md "Starting a run").
 
 At import, :func:`dataclasses.dataclass` writes each class's ``__init__``, ``__repr__``,
 ``__eq__``, ``__hash__``, ``__setattr__`` ... as Python source text and compiles it with
 ``exec``: for ``coolmuscle run`` about 370 methods, parsed and compiled at every start
-(163 M of its 538 M instructions).  :func:`install` puts a cache in front of that
+(about a fifth of its CPU time).  :func:`install` puts a cache in front of that
 ``exec`` for the classes of coolmuscle's own modules: the code objects, keyed by their
 source text and ``__future__`` flags, are kept in one file in the package's
 ``__pycache__``.  The same text compiled the same way (``compile(text, "<string>",
@@ -25,8 +27,8 @@ equality, pickling.
 """
 
 from __future__ import annotations
-
 import __future__
+
 import builtins
 import dataclasses
 import importlib.util
@@ -165,7 +167,8 @@ def save() -> None:
 
 
 def install() -> None:
-    """Put the cache in front of :mod:`dataclasses`' ``exec`` (once)."""
+    """Put the cache in front of :mod:`dataclasses`' ``exec`` (once) and write it at exit:
+    for a program (the ``coolmuscle`` command), not for a library import."""
     if _state["installed"] or os.environ.get("COOLMUSCLE_DATACLASS_CACHE", "") == "0":
         return
     import atexit

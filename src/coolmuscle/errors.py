@@ -156,16 +156,7 @@ class MotionInterruptedError(CoolMuscleError):
         super().__init__(message or f"motion interrupted: Ux={status}")
 
 
-class BankVerifyError(CoolMuscleError):
-    """A bank read back (``?#.n``, ``?L#.n``) differs from what was uploaded;
-    ``differences`` lists what differs, one human-readable line each."""
-
-    def __init__(self, message: str, differences: list[str] | None = None) -> None:
-        self.differences = list(differences or [])
-        super().__init__(message)
-
-
-def alarm_flags(status: int) -> "object":
+def alarm_flags(status: int) -> object:
     """The Ux value decoded as :class:`coolmuscle.motor.status.Ux` flags (6.6 ?99)."""
     from .motor.status import Ux
     return Ux(status)

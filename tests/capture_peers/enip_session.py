@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import ethernetip.ethernetip as E  # type: ignore[import-untyped]
 from pycomm3 import CIPDriver
+
 from test_enip_peers import _Scanner, _wait, generic_status, get, set_
 
 HOST = "127.0.0.1"

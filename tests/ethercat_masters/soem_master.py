@@ -3,7 +3,8 @@
 Run inside the test's network namespace: ``python soem_master.py IFACE SCENARIO``.
 Scenarios: ``full`` (scan, SDO, map, SAFE-OP, OP, cycles, INIT), ``invalid`` (INIT to
 OP refused with 0011h), ``watchdog`` (the master stops sending in OP), ``csp``, ``fault``,
-``wire`` (every kind of SDO transfer, SDO information, csp cycles: the capture test).
+``wire`` (every kind of SDO transfer, SDO information, csp cycles: the capture test),
+``misconfigure`` (SM1 pointed at the registers in PRE-OP).
 """
 
 from __future__ import annotations
@@ -128,6 +129,36 @@ def watchdog(master) -> dict:
     return res
 
 
+def misconfigure(master) -> dict:
+    """A careless master in PRE-OP: SM1 (the read mailbox) rewritten in place at AL status
+    (0x0130), then deactivated, pointed there and activated again, an SDO request between
+    each; what the slave's AL status, code and SM1 registers read after each step."""
+    master.config_init()
+    s = master.slaves[0]
+    res = {"preop": s.state_check(pysoem.PREOP_STATE, 500_000)}
+
+    def al() -> list[int]:
+        return list(struct.unpack("<HxxH", s._fprd(0x0130, 6)))
+
+    def sdo() -> str:
+        try:
+            return s.sdo_read(0x1018, 1).hex()
+        except Exception as exc:               # the mailbox is down: SOEM gives up
+            return type(exc).__name__
+    bad = struct.pack("<HHBBBB", 0x0130, 128, 0x22, 0, 1, 0)
+    s._fpwr(0x0808, bad)                              # in place, still activated
+    res["in_place_sm1"] = s._fprd(0x0808, 8).hex()
+    res["in_place_sdo"] = sdo()
+    res["in_place_al"] = al()
+    s._fpwr(0x080E, b"\x00")                          # deactivated
+    res["deactivated_al"] = al()
+    s._fpwr(0x0808, bad)                              # pointed at the registers, activated
+    res["pointed_sm1"] = s._fprd(0x0808, 8).hex()
+    res["pointed_sdo"] = sdo()
+    res["pointed_al"] = al()
+    return res
+
+
 def csp(master) -> dict:
     """6.1.2: 0x06, 0x07, 0x0F on every axis, then a 2 s csp ramp of 4,000 pulses."""
     master.config_init()
@@ -235,7 +266,8 @@ def main() -> None:
     master.open(sys.argv[1])
     try:
         result = {"full": full, "invalid": invalid, "watchdog": watchdog,
-                  "csp": csp, "fault": fault, "wire": wire}[sys.argv[2]](master)
+                  "csp": csp, "fault": fault, "wire": wire,
+                  "misconfigure": misconfigure}[sys.argv[2]](master)
     finally:
         master.close()
     print(json.dumps(result))

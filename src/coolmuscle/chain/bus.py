@@ -3,29 +3,34 @@
 Every move passes here: its arrival's status report (:meth:`ChainBus.emit`, on the host
 line and to the subscribers of the device API), the wake-ups of the bank lines that
 wait for it (:meth:`ChainBus.poke`, :meth:`ChainBus.watch`) and the K23/K70/K20/K81
-settings of each line sent.  :class:`~coolmuscle.chain.daisy.Chain` is a
-:class:`ChainBus`; this part is compiled with the hot modules (coolmuscle/_accel.py,
-docs/architecture.md "Fast code"), the chain itself stays a plain class (front
-ends and the trace recorder keep weak references to it, tests wrap its methods).
+settings of each line sent.  :class:`ChainBus` is the :class:`~coolmuscle.motor.core.MotorBus`
+every motor of the chain is handed: the motors call it directly on their hot path,
+and it hands the chain-wide commands (``]``, ``[``, ``?#``, ``$``, COM1) on to the
+:class:`ChainCommands` it was built with.  The :class:`~coolmuscle.chain.daisy.Chain`
+builds one and holds it (composition; the chain itself stays a plain class that front
+ends and the trace recorder may keep weak references to).  This module is compiled
+with the hot modules (coolmuscle/_accel.py, docs/performance.md "Compiled hot modules").
 """
 
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Callable, Final, Iterable
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Final, Protocol
 
-from mypy_extensions import mypyc_attr
-
+from ..cml import ast
 from ..device.api import Event, EventListener
 from ..device.hostline import BAUD_RATES, HostLine, LineSettings
 from ..errors import NoSuchMotorError
-from ..sim.memo import Key, Memo
+from ..motor.context import Context
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
+from ..sim.memo import Key, Memo
+from .links import ChainLinks
 
 if TYPE_CHECKING:
+    from ..motor.core import MotorCore
     from ..motor.motor import Motor
-    from .links import ChainLinks
 
 log = logging.getLogger("coolmuscle.chain.daisy")
 
@@ -34,27 +39,55 @@ _NO_ECHO: Final = int(Report.NO_ECHO)
 #: Origins whose replies are printed on the host line (docs/device-api.md).
 HOST_LINE_ORIGINS: Final = frozenset({"host", "bank", "ladder", "motor"})
 
+#: A bank wait: its callback and the motors it waits for (``None``: any poke).
+Watcher = tuple[Callable[[], None], frozenset[int] | None]
 
-@mypyc_attr(allow_interpreted_subclasses=True)
+
+class ChainCommands(Protocol):
+    """What acts on the whole chain rather than on one motor (the chain implements it):
+    the part of :class:`~coolmuscle.motor.core.MotorBus` the bus hands on."""
+
+    def chain_command(self, motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
+        """Chain-wide execution commands (``]``, ``*``, ``*1`` ...; 2.1.2)."""
+
+    def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
+        """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
+
+    def bank_query(self, motor: MotorCore, query: ast.Query) -> list[str] | None:
+        """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6)."""
+
+    def save(self, motor: int) -> None:
+        """``$``: store parameters, data and banks of motor ``motor`` (2.1.2)."""
+
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
+        """A statement for an ID not on the chain (the COM1 Modbus slave, 5.6.6)."""
+
+
 class ChainBus:
-    """Events, bank waits and line settings of a chain of motors (the chain sets the
-    attributes when it builds itself)."""
+    """Events, bank waits, line settings and chain timing of a chain of ``count``
+    motors (the chain fills :attr:`motors` right after building it, before power-up).
 
-    kernel: Kernel
-    motors: dict[int, Motor]
-    host_line: HostLine
-    links: ChainLinks
-    _listeners: list[EventListener]
-    _watchers: list[tuple[Callable[[], None], frozenset[int] | None]]
-    #: The watchers naming each motor, in the order they came (:meth:`poke` about one
-    #: motor looks only there while no watcher listens to every motor).
-    _watching: dict[int, list[tuple[Callable[[], None], frozenset[int] | None]]]
-    _everywhere: int            # watchers without ``motors``
-    _settings_cache: Memo[Key, LineSettings]
-    _settings_now: LineSettings
-    _settings_version: int      # ID1's params.version of _settings_now
+    ``on_line`` is called with each complete host line; ``commands`` takes the
+    chain-wide commands of :class:`ChainCommands`."""
 
-    # -- device API: identity ---------------------------------------------
+    def __init__(self, kernel: Kernel, count: int, on_line: Callable[[str], None],
+                 commands: ChainCommands, *, pacing: bool = False) -> None:
+        self.kernel = kernel
+        self.motors: dict[int, Motor] = {}
+        self.commands = commands
+        self._listeners: list[EventListener] = []
+        self._watchers: list[Watcher] = []
+        #: The watchers naming each motor, in the order they came (:meth:`poke` about one
+        #: motor looks only there while no watcher listens to every motor).
+        self._watching: dict[int, list[Watcher]] = {}
+        self._everywhere = 0            # watchers without ``motors``
+        self._settings_cache: Memo[Key, LineSettings] = Memo(64)
+        self._settings_now = LineSettings()
+        self._settings_version = -1     # ID1's params.version of _settings_now
+        self.host_line = HostLine(kernel, on_line, self._line_settings, pacing=pacing)
+        self.links = ChainLinks(count, self._k65)
+
+    # -- the motors ---------------------------------------------------------------------
     @property
     def motor_ids(self) -> tuple[int, ...]:
         return tuple(self.motors)
@@ -63,16 +96,18 @@ class ChainBus:
         """The motor with ``motor_id``, or ``None`` when it is not on the chain."""
         return self.motors.get(motor_id)
 
-    def _require(self, motor_id: int) -> Motor:
+    def require(self, motor_id: int) -> Motor:
+        """The motor with ``motor_id``; :class:`NoSuchMotorError` when it is not there."""
         motor = self.motors.get(motor_id)
         if motor is None:
+            ids = self.motor_ids
             raise NoSuchMotorError(f"no motor ID{motor_id} on this chain "
-                                   f"(IDs {self.motor_ids[0]}..{self.motor_ids[-1]})")
+                                   f"(IDs {ids[0]}..{ids[-1]})")
         return motor
 
-    # -- device API: data -------------------------------------------------------
     def get_param(self, motor: int, k: int) -> int:
-        return self._require(motor).k(k)
+        """K parameter ``k`` of ``motor`` (the device API's ``get_param``)."""
+        return self.require(motor).k(k)
 
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:
@@ -92,6 +127,10 @@ class ChainBus:
         return found
 
     # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
+    def _k65(self) -> int:
+        """ID1's K65: the baud rate of every link (ch. 3 K65)."""
+        return self.motors[1].k(65)
+
     @property
     def paced(self) -> bool:
         """Wire-time pacing is on: bytes take their time on the host line and the links."""
@@ -108,7 +147,7 @@ class ChainBus:
         """Call ``callback`` at every :meth:`poke` until the returned remover is called;
         with ``motors``, only at pokes about one of them (or about nothing in particular):
         a bank line waiting for motions is not woken by the other motors' milestones."""
-        entry = (callback, None if motors is None else frozenset(motors))
+        entry: Watcher = (callback, None if motors is None else frozenset(motors))
         self._watchers.append(entry)
         if entry[1] is None:
             self._everywhere += 1
@@ -165,9 +204,27 @@ class ChainBus:
                 log.exception("event listener failed")
 
     def subscribe(self, listener: EventListener) -> Callable[[], None]:
+        """Hand every :class:`~coolmuscle.device.api.Event` to ``listener``; returns a
+        remover."""
         self._listeners.append(listener)
 
         def remove() -> None:
             if listener in self._listeners:
                 self._listeners.remove(listener)
         return remove
+
+    # -- chain-wide commands: handed on (cold paths) ----------------------------------
+    def chain_command(self, motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
+        self.commands.chain_command(motor, stmt, ctx)
+
+    def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
+        self.commands.bank_command(motor, stmt, ctx)
+
+    def bank_query(self, motor: MotorCore, query: ast.Query) -> list[str] | None:
+        return self.commands.bank_query(motor, query)
+
+    def save(self, motor: int) -> None:
+        self.commands.save(motor)
+
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
+        return self.commands.beyond_chain(motor_id, stmt, ctx)

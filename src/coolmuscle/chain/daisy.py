@@ -6,44 +6,57 @@ A statement without an ID goes to ID1 in direct mode.  A statement for an ID tha
 not on the chain goes around the chain unanswered (docs/fidelity.md "Daisy chain"),
 unless it is for "final ID + 1" while COM1 is a Modbus host (5.6.6, :mod:`.modbus`).
 
-This module is the :class:`coolmuscle.device.api.Device` every front end uses.
+:class:`Chain` is the :class:`coolmuscle.device.api.Device` every front end uses: every
+member of the device API is defined here.  Its event bus, bank waits, host line settings
+and chain timing are a compiled :class:`.bus.ChainBus` it builds and holds
+(:attr:`Chain.bus`); the motors are handed that bus, their hot path, and the bus hands
+the chain-wide commands back to the chain (:class:`.bus.ChainCommands`).
 """
 
 from __future__ import annotations
 
 import logging
+import os
+from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from ..cml import ast
-from ..cml.parser import parse
-from ..device.api import CyclicState, MotorSnapshot, TargetStream
-from ..sim.memo import Memo
-from ..errors import (CmlSyntaxError, MotorError, NoLadderBankError, NoProgramBankError,
-                      OutOfRangeError, StoreError)
-from ..device.hostline import HostLine, LineSettings
-from ..motor.programs.banks import BankUploads
-from .bus import ChainBus
-from .links import ChainLinks
-from ..motor.programs.coordinated import LINE_PAIRS, end_of_line, pair_line
 from ..cml.ast import inner_motor
+from ..cml.parser import parse
+from ..device.api import CyclicState, EventListener, MotorSnapshot, TargetStream
+from ..errors import (
+    CmlSyntaxError,
+    MotorError,
+    NoLadderBankError,
+    NoProgramBankError,
+    OutOfRangeError,
+    StoreError,
+)
+from ..motor.context import Context
+from ..motor.motion.dynamics import MotionMemos
+from ..motor.motor import Motor
+from ..motor.programs.banks import BankUploads
+from ..motor.programs.coordinated import LINE_PAIRS, end_of_line, pair_line
 from ..motor.programs.direct import MotorEval, run_statement
 from ..motor.programs.evaluate import evaluate
 from ..motor.state.firmware import get_firmware
 from ..motor.state.memory import VNumber, VState
-from ..motor.motion.dynamics import MotionMemos
-from ..motor.motor import Motor
-from ..motor.context import Context
-from ..motor.status import Report
 from ..motor.state.store import Store, bad_state_message, snapshot_problem
+from ..motor.status import Report
 from ..sim.kernel import PRIO_IO, Kernel
+from ..sim.memo import Memo
+from .bus import ChainBus, ChainCommands
 
 if TYPE_CHECKING:
-    from .machine import Machine
     from ..device.api import Device
+    from ..device.banklines import BankLineListener
+    from ..device.trace import TraceFeed
     from ..motor.core import MotorBus, MotorCore
+    from .banklines import BankLineObservers
+    from .machine import Machine
 
 log = logging.getLogger(__name__)
 
@@ -62,53 +75,51 @@ class _Stream:
         self.closed = True
 
 
-class Chain(ChainBus):
-    """Motors 1..N behind one host line; the device API (its event bus, bank waits and
-    host line settings: :class:`.bus.ChainBus`, compiled)."""
+class Chain:
+    """Motors 1..N behind one host line: the device API (:class:`~coolmuscle.device.api.Device`).
+
+    Its event bus, bank waits, host line settings and chain timing are :attr:`bus`
+    (:class:`.bus.ChainBus`, compiled), which the motors are handed; :attr:`motors`,
+    :attr:`host_line` and :attr:`links` are the bus's."""
 
     def __init__(self, kernel: Kernel | None = None, motors: int = 1, *,
                  firmware: str = "cm2", state_dir: Path | str | None = None,
-                 pacing: bool = False, machine: "Path | str | Machine | None" = None) -> None:
+                 pacing: bool = False,
+                 machine: str | os.PathLike[str] | Machine | None = None) -> None:
         if not 1 <= motors <= 15:
             raise ValueError("a chain has 1 to 15 motors (cml-users-guide.txt 1.1)")
         self.kernel = kernel or Kernel()
         per_motor = firmware.split(",")   # "cm1,cm1,cm2,cm2": one profile per motor (EB12)
         self.firmware = get_firmware(per_motor[0])
-        self.state_dir = Path(state_dir) if state_dir else None
-        self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
-                      if self.state_dir else None)
-        try:
-            self._build(motors, per_motor, pacing, machine)
-        except BaseException:      # a damaged store, a bad machine file: let the state go
-            self.close()
-            raise
-
-    def _build(self, motors: int, per_motor: list[str], pacing: bool,
-               machine: "Path | str | Machine | None") -> None:
-        self._listeners = []            # the attributes of ChainBus (chain/bus.py)
-        self._watchers = []
-        self._watching = {}
-        self._everywhere = 0
+        self.bus = ChainBus(self.kernel, motors, self._on_host_line, self, pacing=pacing)
+        self.motors = self.bus.motors
+        self.host_line = self.bus.host_line
+        self.links = self.bus.links
         self._observers: list[Callable[[], None]] = []
-        self._settings_cache = Memo(64)
-        self._settings_now = LineSettings()
         #: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a
         #: host or PLC sends the same few lines over and over.  Errors are not kept.
         self._parsed: Memo[str, tuple[ast.Line, ...]] = Memo(256)
         #: The plans and solved motions of the chain, shared by its motors.
         self.motion_memos = MotionMemos()
-        self._settings_version = -1
-        self.motors = {}
+        self._bank_lines: BankLineObservers | None = None   # observe_bank_lines
+        self.state_dir = Path(state_dir) if state_dir else None
+        self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
+                      if self.state_dir else None)
+        try:
+            self._build(motors, per_motor, machine)
+        except BaseException:      # a damaged store, a bad machine file: let the state go
+            self.close()
+            raise
+
+    def _build(self, motors: int, per_motor: list[str],
+               machine: str | os.PathLike[str] | Machine | None) -> None:
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
                 get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
-            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self,
+            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self.bus,
                                           self.motion_memos)
         self.uploads = BankUploads(self.motors)
-        self.host_line = HostLine(self.kernel, self._on_host_line, self._line_settings,
-                                  pacing=pacing)
         self.host_line.on_source_end = self._source_ended
-        self.links = ChainLinks(motors, lambda: self.motors[1].k(65))
         self.motors[1].params.on_change(
             lambda k, _old, new: self._k65_written(new) if k == 65 else None)
         self._attach_modbus()
@@ -118,10 +129,27 @@ class Chain(ChainBus):
         for motor in self.motors.values():
             motor.power_on()
 
-    def load_machine(self, machine: "Path | str | Machine") -> None:
-        """Install a machine file (docs/machine-file.md) on the motors it names."""
+    # -- device API: identity -------------------------------------------------------
+    @property
+    def motor_ids(self) -> tuple[int, ...]:
+        """IDs on the chain, 1..N."""
+        return tuple(self.motors)
+
+    def motor(self, motor_id: int) -> Motor | None:
+        """The motor with ``motor_id``, or ``None`` (model code: the machine file)."""
+        return self.motors.get(motor_id)
+
+    @property
+    def paced(self) -> bool:
+        """Wire-time pacing is on: bytes take their time on the host line and the links."""
+        return self.host_line.pacing
+
+    def load_machine(self, machine: str | os.PathLike[str] | Machine) -> None:
+        """Install a machine file (docs/machine-file.md) on the motors it names: its
+        path, or one :func:`.machine.load_machine` or :func:`.machine.parse_machine` read."""
         from .machine import Machine, apply_machine, load_machine
-        apply_machine(machine if isinstance(machine, Machine) else load_machine(machine), self)
+        apply_machine(machine if isinstance(machine, Machine) else load_machine(Path(machine)),
+                      self)
         self._changed()
 
     # -- the host line ----------------------------------------------------
@@ -140,6 +168,14 @@ class Chain(ChainBus):
         self._observers.append(observer)
         return lambda: self._observers.remove(observer) if observer in self._observers else None
 
+    def observe_bank_lines(self, listener: BankLineListener) -> Callable[[], None]:
+        """Tell ``listener`` of every bank line run from now on (device/banklines.py);
+        returns its remover.  Unobserved, the banks run as if this did not exist."""
+        if self._bank_lines is None:
+            from .banklines import BankLineObservers
+            self._bank_lines = BankLineObservers(self.kernel, self.motors)
+        return self._bank_lines.add(listener)
+
     def _changed(self) -> None:
         """State may have changed outside a kernel event: let the observers look."""
         for observer in self._observers:
@@ -154,7 +190,7 @@ class Chain(ChainBus):
         takes only the lines of the sender that opened it).
         """
         ctx = Context(origin=origin, replies=[], session=session,
-                      default_motor=1 if motor is None else self._require(motor).id)
+                      default_motor=1 if motor is None else self.bus.require(motor).id)
         self._execute_text(line, ctx)
         self._changed()
         return ctx.replies or []
@@ -182,7 +218,7 @@ class Chain(ChainBus):
                 self._relay_line(line, line_ctx, arrivals)
             else:
                 self._run_statements([stmt for stmt, _ in line], line_ctx)
-        self.poke()
+        self.bus.poke()
 
     def _parse(self, text: str) -> list[ast.Line]:
         """:func:`parse`, remembering recent lines."""
@@ -243,7 +279,7 @@ class Chain(ChainBus):
 
     def _relayed(self, statements: list[ast.Statement], ctx: Context) -> None:
         self._run_statements(statements, ctx)
-        self.poke()
+        self.bus.poke()
         self._changed()
 
     def _k65_written(self, value: int) -> None:
@@ -324,7 +360,7 @@ class Chain(ChainBus):
     # -- saving ---------------------------------------------------------------
     def save(self, motor: int) -> None:
         """``$``: store parameters, data and banks of motor ``motor`` (2.1.2)."""
-        found = self._require(motor)
+        found = self.bus.require(motor)
         if self.store is not None:
             self.store.save_snapshot(motor, found.to_snapshot())
 
@@ -354,22 +390,22 @@ class Chain(ChainBus):
             self.store.save_param(motor_id, k, value)
         except StoreError as exc:
             log.warning("K%d.%d=%d not stored: %s", k, motor_id, value, exc)
-            self.emit(motor_id, "message", f"K{k}.{motor_id} not stored: {exc}")
+            self.bus.emit(motor_id, "message", f"K{k}.{motor_id} not stored: {exc}")
 
     def close(self) -> None:
         """Close the store (unsaved data is lost, as at power off)."""
         if self.store is not None:
             self.store.close()
 
-    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.chain.modbus ----------
+    # -- Modbus (5.6): COM0 slave mode, COM1 host, see coolmuscle.chain.firmware_modbus --
     def _attach_modbus(self) -> None:
-        from .modbus import Com1Port, ModbusSlave, RtuSlaveLine
+        from .firmware_modbus import Com1Port, ModbusSlave, RtuSlaveLine
         self.modbus = ModbusSlave(self)
         self.modbus_line = RtuSlaveLine(self, self.modbus)
         self.host_line.mode = self.modbus_line
         self.motors[1].params.on_change(
             lambda k, _old, _new: self.modbus_line.k81_written() if k == 81 else None)
-        self.com1 = Com1Port(self, self.emit)
+        self.com1 = Com1Port(self, self.bus.emit)
 
     def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
         """A statement for an ID not on the chain (also from banks): the COM1 Modbus
@@ -405,72 +441,103 @@ class Chain(ChainBus):
             text = OutOfRangeError().motor_line(io)
             if ctx.replies is not None:
                 ctx.replies.append(text)
-            self.emit(io, "message", text, origin=ctx.origin)
+            self.bus.emit(io, "message", text, origin=ctx.origin)
 
     # -- device API: data -------------------------------------------------------
+    def get_param(self, motor: int, k: int) -> int:
+        return self.bus.get_param(motor, k)
+
     def set_param(self, motor: int, k: int, value: int) -> None:
-        self._require(motor).params.set(k, value)
+        self.bus.require(motor).params.set(k, value)
 
     def get_register(self, motor: int, kind: str, index: int) -> int | str:
         from ..motor.programs.queries import format_value
-        value = self._require(motor).memory.get(kind, index)
+        value = self.bus.require(motor).memory.get(kind, index)
         if isinstance(value, VNumber):
             return value.value
         return int(value) if isinstance(value, int) else format_value(value)
 
     def register_value(self, motor: int, kind: str, index: int) -> int:
         """The number the motor computes with: V strings packed, V states read live."""
-        m = self._require(motor)
+        m = self.bus.require(motor)
         return m.register_number(ast.Reg(kind.upper(), index, None))
 
     def set_register(self, motor: int, kind: str, index: int, value: int | str) -> None:
-        self._require(motor).write_register(kind, index, value)
+        self.bus.require(motor).write_register(kind, index, value)
 
+    # -- device API: live values --------------------------------------------------
     def snapshot(self, motor: int) -> MotorSnapshot:
-        m = self._require(motor)
+        m = self.bus.require(motor)
         target = m.axis.target()
+        position, error, torque = m.axis.position(), m.axis.position_error(), m.torque_exact()
         return MotorSnapshot(
-            motor=m.id, time=self.kernel.now, position=m.position(),
+            motor=m.id, time=self.kernel.now, position=round(position),
             target=round(target) if abs(target) != float("inf") else 0,
-            position_error=round(m.axis.position_error()), speed=m.speed_units(),
-            speed_pps=m.axis.velocity(), torque=m.torque(), status=m.status,
+            position_error=round(error), speed=m.speed_units(),
+            speed_pps=m.axis.velocity(), torque=round(torque), status=m.status,
             inputs=m.io.input_word(), outputs=m.io.output_word(),
             temperature=m.temperature, voltage=m.voltage, analog=m.analog,
             encoder_count=m.encoder_count, enabled=m.axis.enabled,
+            position_exact=position, position_error_exact=error, torque_exact=torque,
             extra={"analog_output": m.analog_output(),   # K35 (Modbus K78+54)
                    "origin_search": int(m.origin.active),  # 5.3 running (fieldbus homing)
                    "origin_done": int(m.origin_done)})     # 5.3 completed since the last |
 
     def cyclic_state(self, motor: int) -> CyclicState:
-        m = self._require(motor)
+        m = self.bus.require(motor)
         return CyclicState(
             motor=m.id, time=self.kernel.now, position=m.position(),
             speed_pps=m.axis.velocity(), status=m.status, inputs=m.io.input_word(),
             outputs=m.io.output_word(), enabled=m.axis.enabled,
             origin_search=bool(m.origin.active), origin_done=bool(m.origin_done))
 
+    def machine_data(self, motor: int) -> dict[str, float]:
+        """The load and drive data ``motor`` runs with, by machine-file key."""
+        from .machine import DRIVE_KEYS, LOAD_KEYS
+        plant = self.bus.require(motor).plant
+        return {key: float(getattr(plant, attr))
+                for key, attr in {**LOAD_KEYS, **DRIVE_KEYS}.items()}
+
+    # -- device API: signals and faults -------------------------------------------
     def set_input(self, motor: int, number: int, on: bool) -> None:
-        self._require(motor).set_input_level(number, on)
+        self.bus.require(motor).set_input_level(number, on)
         self._changed()
 
     def set_analog(self, motor: int, counts: int) -> None:
         if not 0 <= counts <= 1023:
             raise OutOfRangeError("analog input is 0..1023 (6.6 ?74)")
-        self._require(motor).analog = counts
+        self.bus.require(motor).analog = counts
 
     def target_stream(self, motor: int) -> TargetStream:
-        return _Stream(self._require(motor))
+        return _Stream(self.bus.require(motor))
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
-        self._require(motor).inject_fault(fault, **params)
+        self.bus.require(motor).inject_fault(fault, **params)
         self._changed()
+
+    # -- device API: events, observers and traces ---------------------------------
+    def subscribe(self, listener: EventListener) -> Callable[[], None]:
+        return self.bus.subscribe(listener)
+
+    def trace_feed(self) -> TraceFeed:
+        """Record every motor from now on (:class:`coolmuscle.device.trace.TraceFeed`)."""
+        from ..device.trace import TraceFeed  # traces are optional: loaded when used
+        return TraceFeed(self.kernel, self.motors, self.observe)
+
+    # -- device API: Modbus (5.6) -------------------------------------------------
+    def modbus_request(self, unit: int, pdu: bytes, *, tcp: bool = False) -> bytes | None:
+        return self.modbus.handle(unit, pdu, tcp=tcp)
+
+    def modbus_station(self) -> int:
+        return self.modbus_line.station() if self.modbus_line.active() else 0
 
 
 if TYPE_CHECKING:
-    def _meets_its_protocols(chain: Chain) -> tuple[MotorBus, Device]:
-        """For mypy (tests/test_quality.py): a chain is the bus of its motors
-        (``motor.core.MotorBus``) and the device API (``device.api.Device``)."""
-        return chain, chain
+    def _meets_its_protocols(chain: Chain) -> tuple[Device, ChainCommands, MotorBus]:
+        """For mypy (tests/test_quality.py): a chain is the device API
+        (``device.api.Device``) and the chain-wide commands of its bus, which is the bus
+        of its motors (``motor.core.MotorBus``)."""
+        return chain, chain, chain.bus
 
 
 __all__ = ["Chain", "VState", "MotorError"]

@@ -15,7 +15,7 @@ The choices made where the manual is silent are in docs/fidelity.md "Daisy chain
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from ..device.hostline import BAUD_RATES, byte_time_ns
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 from functools import partial
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ..errors import CoolMuscleError
@@ -35,7 +35,7 @@ class MachineHost(Protocol):
 
     kernel: Kernel
 
-    def motor(self, motor_id: int) -> "Motor | None": ...
+    def motor(self, motor_id: int) -> Motor | None: ...
 
     def set_input(self, motor: int, number: int, on: bool) -> None: ...
 
@@ -303,7 +303,7 @@ def _scheduled_fault(value: dict[str, Any], where: str) -> ScheduledFault:
 
 
 # -- installing -----------------------------------------------------------------------
-def apply_machine(machine: Machine, chain: "MachineHost") -> None:
+def apply_machine(machine: Machine, chain: MachineHost) -> None:
     """Install ``machine`` on ``chain`` now (MachineFileError if it does not fit)."""
     for spec in machine.axes:
         motor = chain.motor(spec.motor)
@@ -317,7 +317,7 @@ def apply_machine(machine: Machine, chain: "MachineHost") -> None:
             raise MachineFileError(f"{machine.source}: motor {spec.motor}: {exc}") from None
 
 
-def _install(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
+def _install(spec: AxisSpec, motor: Motor, chain: MachineHost) -> None:
     for k, value in spec.params.items():
         motor.params.set(k, value)
     for attr, amount in {**spec.load, **spec.motor_data}.items():
@@ -345,7 +345,7 @@ def _install(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
         motor.encoder_config = gearing_from_config(spec.encoder)
 
 
-def _schedule(spec: AxisSpec, motor: "Motor", chain: "MachineHost") -> None:
+def _schedule(spec: AxisSpec, motor: Motor, chain: MachineHost) -> None:
     kernel, now, mid = chain.kernel, chain.kernel.now, motor.id
     for item in spec.inputs:
         kernel.schedule_at(now + seconds(item.at),

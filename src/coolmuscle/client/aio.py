@@ -19,8 +19,9 @@ from __future__ import annotations
 import asyncio
 import math
 import weakref
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import serial
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import serial
 
@@ -132,7 +133,7 @@ class AsyncDriver:
         """Why the port stopped working (``None``: it works)."""
         return self._failure
 
-    def waiting(self, seconds: float) -> "_Waiting":
+    def waiting(self, seconds: float) -> _Waiting:
         """While inside, a fast port's virtual time may move ``seconds`` on."""
         return _Waiting(self._reader, seconds)
 
@@ -181,7 +182,7 @@ class AsyncDriver:
                         remaining = min(remaining, 0.05)
                     try:
                         await asyncio.wait_for(self._changed.wait(), remaining)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         pass
         return True
 
@@ -250,7 +251,7 @@ class _Waiting:
         self._reader = reader
         self._end = reader.clock() + seconds if reader.fast else 0.0
 
-    def __enter__(self) -> "_Waiting":
+    def __enter__(self) -> _Waiting:
         if self._reader.fast:
             self._reader.horizons.append(self._end)
         return self

@@ -16,10 +16,11 @@ what the file says and what the motor holds, parsed and printed by the one forma
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..cml import ast
 from ..cml.parser import parse
@@ -147,15 +148,16 @@ def compare_bank(block: BankBlock, got: list[str]) -> list[BankDifference]:
     return diffs
 
 
-def _send_direct(session: Session, line: SourceLine, result: UploadResult) -> Op[None]:
-    motor = _motor_of(line)
+def _send_direct(session: Session, line: SourceLine, result: UploadResult,
+                 default: int) -> Op[None]:
+    motor = _motor_of(line, default)
     try:
         yield from fenced(session, motor, (line.send,))
     except MotorError as error:
         result.errors.append((line.number, error))
 
 
-def _motor_of(line: SourceLine) -> int:
+def _motor_of(line: SourceLine, default: int = 1) -> int:
     for statement in line.statements:
         motor = getattr(statement, "motor", None)
         if motor is None and hasattr(statement, "target"):
@@ -164,7 +166,7 @@ def _motor_of(line: SourceLine) -> int:
             motor = statement.reg.motor
         if motor is not None:
             return int(motor)
-    return 1
+    return default
 
 
 def _send_bank(session: Session, block: BankBlock, line_delay: float,
@@ -215,15 +217,19 @@ def _error_of(text: str) -> MotorError:
 
 
 def upload(session: Session, program: ProgramFile, *, verify: bool = True,
-           line_delay: float = DEFAULT_LINE_DELAY,
-           progress: Progress | None = None) -> Op[UploadResult]:
-    """Send ``program``; then read every bank back and compare (module docstring)."""
+           line_delay: float = DEFAULT_LINE_DELAY, progress: Progress | None = None,
+           motor: int = 1) -> Op[UploadResult]:
+    """Send ``program``; then read every bank back and compare (module docstring).
+
+    ``motor``: the ID the lines without ``.n`` address (ID1 on a host line; a
+    driver whose line takes another default, such as the web page's, says so)."""
     result = UploadResult()
+    program = _addressed(program, motor)
     total = program.send_count()
     if session.protocol.echo is None and program.items:
         first = program.items[0]
-        motor = first.motor_id if isinstance(first, BankBlock) else _motor_of(first)
-        yield from fenced(session, motor, ())   # learn whether the motor echoes
+        fence = first.motor_id if isinstance(first, BankBlock) else _motor_of(first, motor)
+        yield from fenced(session, fence, ())   # learn whether the motor echoes
 
     def tick() -> None:
         result.sent += 1
@@ -234,7 +240,7 @@ def upload(session: Session, program: ProgramFile, *, verify: bool = True,
         if isinstance(item, BankBlock):
             yield from _send_bank(session, item, line_delay, result, tick)
         else:
-            yield from _send_direct(session, item, result)
+            yield from _send_direct(session, item, result, motor)
             tick()
     if verify:
         for block in program.banks:
@@ -246,6 +252,17 @@ def upload(session: Session, program: ProgramFile, *, verify: bool = True,
             result.differences += compare_bank(block, got)
         result.verified = True
     return result
+
+
+def _addressed(program: ProgramFile, motor: int) -> ProgramFile:
+    """``program`` with its bank headers without ``.n`` given ``motor`` (a copy)."""
+    if all(block.motor is not None for block in program.banks):
+        return program
+    items: list[BankBlock | SourceLine] = [
+        dataclasses.replace(item, motor=motor)
+        if isinstance(item, BankBlock) and item.motor is None else item
+        for item in program.items]
+    return dataclasses.replace(program, items=items)
 
 
 def save(session: Session, motor: int, timeout: float = 5.0) -> Op[None]:

@@ -15,12 +15,12 @@ Motion (2.1.1, 2.1.2): ``S.n``/``A.n``/``M.n``/``P.n`` then ``^.n``, followed by
 from __future__ import annotations
 
 from ..errors import InvalidArgumentError, OutOfRangeError
-from . import args
+from ..motor.programs.queries import format_value
 from ..motor.state.firmware import Firmware, get_firmware
 from ..motor.state.memory import Memory, NoSuchRegisterError
-from ..motor.programs.queries import format_value
-from ..motor.status import Ux
 from ..motor.state.units import resolution
+from ..motor.status import Ux
+from . import args
 from .ops import Op, Session, exchange, fenced, param, query
 from .replies import Received, parse_int_reply, parse_version
 

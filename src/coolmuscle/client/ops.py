@@ -21,11 +21,17 @@ every command learns whether it failed.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generator, TypeVar
+from typing import Any, TypeVar
 
-from ..errors import (AlarmError, CoolMuscleTimeout, InvalidArgumentError, MotionInterruptedError,
-                      OutOfRangeError, ProtocolError)
+from ..errors import (
+    AlarmError,
+    CoolMuscleTimeout,
+    InvalidArgumentError,
+    MotionInterruptedError,
+    ProtocolError,
+)
 from ..motor.status import ALARM_BITS, Report, Ux
 from . import args
 from .protocol import Exchange, MotorEvent, Protocol
@@ -293,9 +299,3 @@ def wait_in_position(session: Session, motor: int, timeout: float) -> Op[Ux]:
         since = session.protocol.status_seen.get(motor, (since, 0))[0]
         if settled(motor, parse_int_reply(line, "Ux", motor)):
             return Ux(parse_int_reply(line, "Ux", motor))
-
-
-def check_range(ok: bool, message: str) -> None:
-    """Raise :class:`OutOfRangeError` (the motor's error00) before sending anything."""
-    if not ok:
-        raise OutOfRangeError(message)

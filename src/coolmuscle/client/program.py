@@ -23,9 +23,10 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Final, Iterator, Literal
+from typing import Final, Literal
 
 from ..cml import ast
 from ..cml.formatter import format_line

@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import re
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Final, Literal
+from typing import Final, Literal
 
 from ..errors import MotorError
 from .replies import Received, classify

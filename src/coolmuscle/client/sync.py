@@ -22,8 +22,9 @@ its timeout.  Errors: :class:`~coolmuscle.errors.CoolMuscleTimeout`,
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 from urllib.parse import urlsplit
 
 import serial
@@ -41,8 +42,10 @@ __all__ = ["connect", "CoolMuscle", "Motor", "open_port"]
 
 
 def open_port(url: str, *, baudrate: int = 38400, **kwargs: Any) -> Any:
-    """Open any pyserial URL or device path (``coolmuscle://`` included)."""
-    register_url_handler()
+    """Open any pyserial URL or device path; a ``coolmuscle://`` URL registers its
+    handler with pyserial first (:func:`coolmuscle.register_url_handler`)."""
+    if url.lower().startswith("coolmuscle://"):
+        register_url_handler()
     _check_socket_url(url)
     try:
         return serial.serial_for_url(url, baudrate=baudrate, timeout=ops.DEFAULT_TIMEOUT,

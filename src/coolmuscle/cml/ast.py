@@ -24,7 +24,7 @@ is not yet while its classes are made).
 from __future__ import annotations
 
 from dataclasses import Field, dataclass, fields
-from typing import Any, ClassVar, Literal, Union
+from typing import Any, ClassVar, Literal
 
 
 class Frozen:
@@ -133,7 +133,7 @@ class Not(Frozen):
     operand: Expr
 
 
-Expr = Union[Num, Str, Reg, Input, BinOp, Func, Compare, Logic, Not]
+Expr = Num | Str | Reg | Input | BinOp | Func | Compare | Logic | Not
 
 # --------------------------------------------------------------------------
 # Statements
@@ -357,10 +357,10 @@ class Branch(Frozen):
     orelse: tuple[Statement, ...] = ()
 
 
-Statement = Union[
-    Assign, Ref, Move, Interp, Exec, Output, OutputWord, Capture, StartBank, StopBank,
-    Query, Call, Loop, LoopEnd, Wait, BankBegin, ClearBanks, BankEnd, Alloc, Branch,
-]
+Statement = (
+    Assign | Ref | Move | Interp | Exec | Output | OutputWord | Capture | StartBank | StopBank |
+    Query | Call | Loop | LoopEnd | Wait | BankBegin | ClearBanks | BankEnd | Alloc | Branch
+)
 
 
 @dataclass(frozen=True, slots=True)

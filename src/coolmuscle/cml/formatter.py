@@ -16,12 +16,42 @@ holding ``"``) raises :class:`ValueError` instead of printing a lie.
 
 from __future__ import annotations
 
-from typing import Callable, Final
+from collections.abc import Callable
+from typing import Final
 
 from coolmuscle.cml.ast import (
-    Alloc, Assign, BankBegin, BankEnd, BinOp, Branch, Call, Capture, ClearBanks,
-    Compare, Exec, Expr, Func, Input, Interp, Line, Logic, Loop, LoopEnd, Move, Not,
-    Num, Output, OutputWord, Query, Ref, Reg, StartBank, Statement, StopBank, Str, Wait,
+    Alloc,
+    Assign,
+    BankBegin,
+    BankEnd,
+    BinOp,
+    Branch,
+    Call,
+    Capture,
+    ClearBanks,
+    Compare,
+    Exec,
+    Expr,
+    Func,
+    Input,
+    Interp,
+    Line,
+    Logic,
+    Loop,
+    LoopEnd,
+    Move,
+    Not,
+    Num,
+    Output,
+    OutputWord,
+    Query,
+    Ref,
+    Reg,
+    StartBank,
+    Statement,
+    StopBank,
+    Str,
+    Wait,
 )
 
 __all__ = ["format_line", "format_statement", "format_expr"]

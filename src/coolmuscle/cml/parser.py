@@ -18,13 +18,43 @@ listed in docs/fidelity.md, "CML language".
 
 from __future__ import annotations
 
-from typing import Callable, Final, NoReturn
+from collections.abc import Callable
+from typing import Final, NoReturn
 
 from coolmuscle.cml.ast import (
-    REGISTER_KINDS, Alloc, Assign, BankBegin, BankEnd, BinOp, Branch, Call, Capture,
-    ClearBanks, Compare, Exec, Expr, Func, Input, Interp, Line, Logic, Loop, LoopEnd,
-    Move, Not, Num, Output, OutputWord, Query, Ref, Reg, StartBank, Statement, StopBank,
-    Str, Wait,
+    REGISTER_KINDS,
+    Alloc,
+    Assign,
+    BankBegin,
+    BankEnd,
+    BinOp,
+    Branch,
+    Call,
+    Capture,
+    ClearBanks,
+    Compare,
+    Exec,
+    Expr,
+    Func,
+    Input,
+    Interp,
+    Line,
+    Logic,
+    Loop,
+    LoopEnd,
+    Move,
+    Not,
+    Num,
+    Output,
+    OutputWord,
+    Query,
+    Ref,
+    Reg,
+    StartBank,
+    Statement,
+    StopBank,
+    Str,
+    Wait,
 )
 from coolmuscle.cml.scanner import MAX_INDEX, MAX_LOOP, MAX_MOTOR, Tok, fail, scan
 

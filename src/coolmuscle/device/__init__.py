@@ -1,10 +1,22 @@
-"""The device API (:mod:`.api`) and the host line every text front end feeds (:mod:`.hostline`).
+"""The device API (:mod:`.api`), the host line every text front end feeds (:mod:`.hostline`)
+and the trace feed traces and plots read (:mod:`.trace`, imported when used: it needs the
+motor model).
 
 ``from coolmuscle.device import Device, Event, MotorSnapshot`` is the stable import.
 """
 
-from .api import (CyclicState, Device, Event, EventKind, EventListener, MotorSnapshot,
-                  Origin, TargetStream)
+from .api import (
+                  ChainFactory,
+                  Com1Line,
+                  CyclicState,
+                  Device,
+                  Event,
+                  EventKind,
+                  EventListener,
+                  MotorSnapshot,
+                  Origin,
+                  TargetStream,
+)
 
-__all__ = ["CyclicState", "Device", "Event", "EventKind", "EventListener", "MotorSnapshot",
-           "Origin", "TargetStream"]
+__all__ = ["ChainFactory", "Com1Line", "CyclicState", "Device", "Event", "EventKind",
+           "EventListener", "MotorSnapshot", "Origin", "TargetStream"]

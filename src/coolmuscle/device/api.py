@@ -1,9 +1,10 @@
 """The device API: the one narrow door into the motor model.
 
-Every front end goes through it: the text line (via :attr:`Device.host_line`),
-Modbus, EtherCAT, EtherNet/IP, the web page and the in-process Python API.
-None of them re-implements motor behaviour; they translate their protocol to
-these calls and map :mod:`coolmuscle.errors` exceptions to their own error form.
+Every front end and tool goes through it: the text line (via :attr:`Device.host_line`),
+Modbus (RTU on COM0 and COM1, TCP), EtherCAT, EtherNet/IP, the web page, the script
+runner, traces and plots, and the in-process Python API.  None of them re-implements
+motor behaviour; they translate their protocol to these calls and map
+:mod:`coolmuscle.errors` exceptions to their own error form.
 
 The concrete implementation is :class:`coolmuscle.chain.daisy.Chain`.  All calls must
 come from the thread that drives the kernel (the asyncio loop in ``sim``).
@@ -12,11 +13,17 @@ See docs/device-api.md.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
-from .hostline import HostLine
 from ..sim.kernel import Kernel
+from .hostline import ByteListener, HostLine
+
+if TYPE_CHECKING:
+    from ..motor.state.firmware import Firmware
+    from .trace import TraceFeed
 
 EventKind = Literal["reply", "status", "input", "output", "message", "origin", "alarm"]
 Origin = Literal["host", "api", "modbus", "bank", "ladder", "motor", "fieldbus", "web"]
@@ -59,6 +66,11 @@ class MotorSnapshot:
     analog: int            # ?74 0..1023
     encoder_count: int     # ?76 Ecnt
     enabled: bool = True
+    #: ``position``, ``position_error`` and ``torque`` before they are rounded (what the
+    #: twin's fit compares: coolmuscle.tools.twin)
+    position_exact: float = 0.0
+    position_error_exact: float = 0.0
+    torque_exact: float = 0.0
     extra: dict[str, int] = field(default_factory=dict)
 
 
@@ -82,6 +94,11 @@ class CyclicState:
 
 EventListener = Callable[[Event], None]
 
+#: Builds a device as :class:`coolmuscle.chain.daisy.Chain` does: ``factory(kernel,
+#: motors, firmware=..., state_dir=..., pacing=..., machine=...)`` (the command line, the
+#: ``coolmuscle://`` URL and the twin take one; tests and embedders hand their own).
+ChainFactory = Callable[..., "Device"]
+
 
 @runtime_checkable
 class TargetStream(Protocol):
@@ -95,11 +112,39 @@ class TargetStream(Protocol):
 
 
 @runtime_checkable
+class Com1Line(Protocol):
+    """COM1 of the final motor as a front end sees it: a Modbus host while the final
+    motor's K84 is 1 (5.6.6), at its K65 baud rate and K82 parity
+    (:class:`coolmuscle.chain.firmware_modbus.master.Com1Port`)."""
+
+    def feed(self, data: bytes) -> None:
+        """Bytes the slave device on COM1 sent, arrived now."""
+
+    def add_listener(self, listener: ByteListener) -> Callable[[], None]:
+        """Receive every byte the motor sends on COM1; returns an unsubscribe function."""
+
+    def baud(self) -> int:
+        """Bits per second of COM1 (the final motor's K65)."""
+
+    def parity(self) -> str:
+        """``"N"``, ``"E"`` or ``"O"`` (the final motor's K82)."""
+
+
+@runtime_checkable
 class Device(Protocol):
     """What every front end may call.  Implemented by :class:`coolmuscle.chain.daisy.Chain`."""
 
     kernel: Kernel
+    #: COM0: ``feed(bytes)`` in, ``add_listener(callback)`` out (docs/device-api.md)
     host_line: HostLine
+
+    @property
+    def com1(self) -> Com1Line:
+        """COM1 of the final motor (5.6.6, docs/modbus.md)."""
+
+    @property
+    def firmware(self) -> Firmware:
+        """The firmware profile of ID1 (CM2, RT3 or CM1: parameters, I/O, Modbus)."""
 
     @property
     def motor_ids(self) -> tuple[int, ...]:
@@ -149,5 +194,35 @@ class Device(Protocol):
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         """Inject a fault now (see docs/machine-file.md for names)."""
 
+    def machine_data(self, motor: int) -> dict[str, float]:
+        """The load and drive data ``motor`` runs with, by the keys of a machine
+        file's ``[axis.load]`` and ``[axis.drive]`` (docs/machine-file.md)."""
+
+    def load_machine(self, machine: str | os.PathLike[str]) -> None:
+        """Install a machine file (docs/machine-file.md) on the motors it names;
+        raises :class:`~coolmuscle.chain.machine.MachineFileError`."""
+
+    def observe(self, observer: Callable[[], None]) -> Callable[[], None]:
+        """Call ``observer()`` whenever state may have changed outside a kernel event
+        (a host line, an API call); returns a remover.  Kernel events are observed
+        with ``kernel.add_observer``."""
+
+    def trace_feed(self) -> TraceFeed:
+        """Start recording every motor: exact values at any instant from now on, and
+        every change (:class:`coolmuscle.device.trace.TraceFeed`)."""
+
+    def modbus_request(self, unit: int, pdu: bytes, *, tcp: bool = False) -> bytes | None:
+        """The response PDU the chain's Modbus map (5.6.7) gives to ``pdu`` sent to
+        station ``unit``, or ``None`` (no reply: another station, a broadcast).
+        ``tcp``: the Modbus TCP door, which answers while COM0 speaks text too."""
+
+    def modbus_station(self) -> int:
+        """The station COM0 answers as while it speaks Modbus RTU (ID1's K81, 5.6.1),
+        0 while it speaks CML text."""
+
     def save(self, motor: int) -> None:
         """Same as ``$.n``: store parameters, data and banks."""
+
+    def close(self) -> None:
+        """Close the saved state (once, when done; unsaved data is lost, as at
+        power off)."""

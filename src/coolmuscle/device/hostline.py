@@ -7,7 +7,12 @@ This is motor behaviour, so it lives in the model, not in a transport:
   second half of a CRLF and ends nothing (docs/fidelity.md "line endings");
 * every reply line ends with the delimiter of K70 (0: CR, 1: CRLF);
 * optional wire-time pacing: bytes leave at the K20 baud rate, 10 bits a byte
-  (start, 8 data, stop; 5.6.1), scheduled in virtual time.
+  (start, 8 data, stop; 5.6.1), scheduled in virtual time;
+* with pacing, a host whose port is set to another rate than K20 (ch. 3 K20: "the host
+  baud rate needs to be changed to match") sends the motor garbage and reads garbage:
+  each side reads what its UART makes of the other's bytes (:mod:`.uart`).  A transport
+  that knows its host's rate tells the line (:meth:`HostLine.set_host_baud`: the pty
+  reads the rate the client set); one that does not (TCP, stdio) is always matched.
 
 Transports (TCP, pty, stdio, pyserial URL) only shuttle bytes: they call
 :meth:`HostLine.feed` with what the host sent and subscribe to the bytes the
@@ -33,10 +38,12 @@ and text replies are not sent while it is active.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 from ..sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
+from .uart import as_read_at
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +54,8 @@ BAUD_RATES: dict[int, int] = {0: 38400, 1: 9600, 2: 19200, 3: 57600, 4: 115200, 
 MAX_LINE = 512
 
 ByteListener = Callable[[bytes], None]
+#: The baud rate a host's port is set to now, or ``None`` when not known (matched).
+HostBaud = Callable[[], int | None]
 
 #: :attr:`HostLine._open_echo` when no sender's echo is half-way out (``None`` is a sender).
 _NOBODY = object()
@@ -102,6 +111,9 @@ class HostLine:
         #: Called with a source that went away (its bank upload ends with it).
         self.on_source_end: Callable[[object], None] | None = None
         self._listeners: list[ByteListener] = []
+        #: source -> its port's baud rate (:meth:`set_host_baud`); listener -> its source
+        self._host_baud: dict[object, HostBaud] = {}
+        self._listener_source: dict[ByteListener, object] = {}
         self._tx_free_at = 0  # virtual time the transmitter is free again (pacing)
         self._rx_free_at = 0
         self.bytes_in = 0
@@ -111,14 +123,34 @@ class HostLine:
         self.mode: LineMode | None = None
 
     # -- output ---------------------------------------------------------
-    def add_listener(self, listener: ByteListener) -> Callable[[], None]:
-        """Receive every byte the motor sends; returns an unsubscribe function."""
+    def add_listener(self, listener: ByteListener,
+                     source: object = None) -> Callable[[], None]:
+        """Receive every byte the motor sends; returns an unsubscribe function.
+
+        ``source``: the host this listener reads for; with pacing it reads what its port
+        makes of the motor's bytes at the rate :meth:`set_host_baud` gives for it."""
         self._listeners.append(listener)
+        if source is not None:
+            self._listener_source[listener] = source
 
         def remove() -> None:
             if listener in self._listeners:
                 self._listeners.remove(listener)
+            self._listener_source.pop(listener, None)
         return remove
+
+    def set_host_baud(self, source: object, baud: HostBaud | None) -> None:
+        """How to read the baud rate ``source``'s port is set to (``None``: not known,
+        always matched).  Asked as bytes cross the wire, with pacing only (docs/
+        fidelity.md "Baud rate of the host")."""
+        if baud is None:
+            self._host_baud.pop(source, None)
+        else:
+            self._host_baud[source] = baud
+
+    def _host_rate(self, source: object) -> int | None:
+        baud = self._host_baud.get(source)
+        return baud() if baud is not None else None
 
     def write(self, data: bytes | bytearray | memoryview) -> None:
         """Send raw bytes to the host (paced when pacing is on)."""
@@ -129,10 +161,10 @@ class HostLine:
         if not self.pacing:
             self._deliver(data)
             return
-        settings = self._settings()
+        baud = self._settings().baud
         start = max(self.kernel.now, self._tx_free_at)
-        self._tx_free_at = start + len(data) * byte_time_ns(settings.baud)
-        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data),
+        self._tx_free_at = start + len(data) * byte_time_ns(baud)
+        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data, baud),
                                 priority=PRIO_REPORT, name="hostline-tx")
 
     def send_line(self, text: str) -> None:
@@ -142,13 +174,20 @@ class HostLine:
             return
         self.write(text.encode("latin-1", "replace") + settings.delimiter)
 
-    def _deliver(self, data: bytes) -> None:
+    def _deliver(self, data: bytes, baud: int = 0) -> None:
+        """``baud``: the motor's rate on the wire (paced), 0 when unpaced."""
         self.bytes_out += len(data)
+        mismatched = bool(baud and self._host_baud)
         for listener in list(self._listeners):
             try:
-                listener(data)
+                listener(self._as_heard(listener, data, baud) if mismatched else data)
             except Exception:  # a broken client must not stop the motor
                 log.exception("host line listener failed")
+
+    def _as_heard(self, listener: ByteListener, data: bytes, baud: int) -> bytes:
+        """What ``listener``'s host reads of ``data`` sent at ``baud`` (.uart)."""
+        host = self._host_rate(self._listener_source.get(listener))
+        return data if host is None else as_read_at(data, baud, host)
 
     # -- input ----------------------------------------------------------
     def feed(self, data: bytes | bytearray | memoryview, source: object = None) -> None:
@@ -159,9 +198,15 @@ class HostLine:
         if not self.pacing:
             self._receive(data, source)
             return
-        bt = byte_time_ns(self._settings().baud)
+        baud = self._settings().baud
+        wire = len(data) * byte_time_ns(baud)
+        if self._host_baud:
+            host = self._host_rate(source)
+            if host is not None and host != baud:    # sent at the host's rate, read at K20
+                wire = len(data) * byte_time_ns(host)
+                data = as_read_at(data, host, baud)
         start = max(self.kernel.now, self._rx_free_at)
-        self._rx_free_at = start + len(data) * bt
+        self._rx_free_at = start + wire
         self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data, source),
                                 priority=PRIO_IO, name="hostline-rx")
 
@@ -176,7 +221,7 @@ class HostLine:
             return
         self.receive_text(data, source)
 
-    def _assembly_of(self, source: object) -> "_Assembly":
+    def _assembly_of(self, source: object) -> _Assembly:
         found = self._assembly.get(source)
         if found is None:
             found = self._assembly[source] = _Assembly()
@@ -231,7 +276,7 @@ class HostLine:
         hosts = self._hosts
         return not hosts or (len(hosts) == 1 and source in hosts)
 
-    def _echo_line_end(self, asm: "_Assembly", source: object, echo: bytearray,
+    def _echo_line_end(self, asm: _Assembly, source: object, echo: bytearray,
                        delimiter: bytes, typed: bool) -> None:
         """The echo at the end of a line: the rest of the line and the delimiter; the
         whole line when what was shown of it was cut off by another host's line (or,
@@ -273,7 +318,7 @@ class HostLine:
         if self.on_source_end is not None:
             self.on_source_end(source)
 
-    def _end_line(self, asm: "_Assembly", source: object) -> None:
+    def _end_line(self, asm: _Assembly, source: object) -> None:
         raw = bytes(asm.buf)
         asm.buf.clear()
         if asm.overflow:

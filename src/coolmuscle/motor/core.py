@@ -8,7 +8,8 @@ live in those sub-packages are typed with the narrow protocols below.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Protocol, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Protocol
 
 from ..cml import ast
 from ..errors import MotorError
@@ -35,7 +36,7 @@ class MotorBus(Protocol):
              origin: str = "motor") -> None:
         """Report a line (host line + event stream)."""
 
-    def motor(self, motor_id: int) -> "MotorCore | None":
+    def motor(self, motor_id: int) -> MotorCore | None:
         """Another motor of the chain (None when absent)."""
 
     def watch(self, callback: Callable[[], None],
@@ -45,13 +46,13 @@ class MotorBus(Protocol):
     def poke(self, motor: int | None = None) -> None:
         """Something changed (input, data, motion of ``motor``): re-check the bank waits."""
 
-    def chain_command(self, motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
+    def chain_command(self, motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
         """Chain-wide execution commands (``]``, ``*``, ``*1`` ...)."""
 
-    def bank_command(self, motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+    def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
         """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
 
-    def bank_query(self, motor: "MotorCore", query: ast.Query) -> list[str] | None:
+    def bank_query(self, motor: MotorCore, query: ast.Query) -> list[str] | None:
         """Bank listings ``?#``, ``?L#``, ``?1000`` (6.6)."""
 
     def relay(self, src: int, dst: int, nbytes: int) -> int:
@@ -60,7 +61,7 @@ class MotorBus(Protocol):
     def save(self, motor: int) -> None:
         """``$``: store parameters, data and banks of motor ``motor`` (2.1.2)."""
 
-    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: "Context") -> bool:
+    def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
         """A statement for an ID not on the chain (the COM1 Modbus slave, 5.6.6)."""
 
 

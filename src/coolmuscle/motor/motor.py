@@ -11,38 +11,47 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING
 
 from ..cml import ast
+from ..errors import MotorError, OutOfRangeError
+from ..sim.kernel import Kernel
+from ..sim.memo import Key, Memo
 from .context import Context
 from .core import MotorBus
-from ..errors import MotorError, OutOfRangeError
-from ..sim.memo import Key, Memo
-from ..sim.kernel import Kernel
-from .state import units
-from .signals.analog import AnalogInput, AnalogSource
-from .signals.analog_control import AnalogControl
-from .signals.analog_output import output_volts, volts_to_register
 from .motion.axis import Axis
 from .motion.dynamics import Drive, MotionMemos
-from .signals.encoder import ExternalEncoder, Gearing
-from .programs.evaluate import pack_string
-from .state.firmware import Firmware
-from .signals.io import (OUT_ALARM, OUT_IN_POSITION, OUT_MERGE_PULSE, OUT_MOTOR_FREE,
-                         OUT_ORIGIN_DONE, OUT_PUSH, OUT_PUSH_AT_LEVEL, OUT_ROTATION_PULSE,
-                         DigitalIO)
-from .signals.manual import ManualMotion
-from .state.memory import Memory, VNumber, VState, VString
-from .state.param_table import ParamTable
 from .motion.planner import ESTOP_DECEL, Limits, limits_from_data
 from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
 from .motion.profile import Profile
+from .motion.trajectory import Timeline
+from .programs.evaluate import pack_string
+from .signals.analog import AnalogInput, AnalogSource
+from .signals.analog_control import AnalogControl
+from .signals.analog_output import output_volts, volts_to_register
+from .signals.encoder import ExternalEncoder, Gearing
+from .signals.io import DigitalIO
+from .signals.manual import ManualMotion
 from .signals.pulses import RotationPulses
+from .state import units
+from .state.firmware import Firmware
+from .state.memory import Memory, VNumber, VState, VString
+from .state.output_functions import (
+    OUT_ALARM,
+    OUT_IN_POSITION,
+    OUT_MERGE_PULSE,
+    OUT_MOTOR_FREE,
+    OUT_ORIGIN_DONE,
+    OUT_PUSH,
+    OUT_PUSH_AT_LEVEL,
+    OUT_ROTATION_PULSE,
+)
+from .state.param_table import ParamTable
 from .status import Report, Ux, io_word_hex, status_line
 from .supervision.origin import STOPPER
 from .supervision.supervisor import Supervisor
-from .motion.trajectory import Timeline
 
 if TYPE_CHECKING:
     from .core import MotorCore
@@ -109,9 +118,9 @@ class Motor:
         # -- banks, ladder, input functions (2.2.2, 2.2.3, K27-K32).  Imported here: the executors
         # use .direct, which imports this module.
         from .programs.banks import BankStore
-        from .signals.inputs import InputFunctions
         from .programs.ladder import LadderRunner
         from .programs.program import ProgramExecutor
+        from .signals.inputs import InputFunctions
         self.banks = BankStore(firmware)
         self.program = ProgramExecutor(self)
         self.ladder = LadderRunner(self)
@@ -123,7 +132,7 @@ class Motor:
         self._state_readers: dict[str, Callable[[], int]] | None = None
         # -- interpolation (4.4, :mod:`.coordinated`): the path this axis follows and
         # which of R0 / N0 direct-mode "@" uses (the one written last)
-        self.path: "PairMotion | None" = None
+        self.path: PairMotion | None = None
         self.direct_interp_kind = "R"
         #: a K20 value waiting for the host's Y/N (ch. 3 K23 16)
         self.pending_baud: int | None = None
@@ -281,7 +290,7 @@ class Motor:
         sensor (which reports its error, as for a move)."""
         return self.can_move() and self.supervision.allowed_target(user_end) == user_end
 
-    def run_path(self, path: "PairMotion", profile: Profile, limits: Limits) -> bool:
+    def run_path(self, path: PairMotion, profile: Profile, limits: Limits) -> bool:
         """Follow one axis of an interpolation path (4.4); False if the motor cannot move."""
         self._go_target = None
         if not self.can_move():

@@ -16,9 +16,10 @@ Real-time pacing is a thin layer on top (:mod:`coolmuscle.sim.realtime`).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from heapq import heappop, heappush
-from typing import Callable, Final
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 

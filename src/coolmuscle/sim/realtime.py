@@ -27,7 +27,8 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Callable, Protocol, TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 from .kernel import NS_PER_S, Kernel
 
@@ -45,20 +46,6 @@ BehindCallback = Callable[[float], None]
 
 #: A precise driver hands waits shorter than this to its :class:`PreciseWaker`.
 PRECISE_BELOW = 0.005
-
-
-class VirtualClock(Protocol):
-    """What a front end needs from a clock, paced or not."""
-
-    kernel: Kernel
-    paced: bool
-
-    def catch_up(self) -> int:
-        """Bring the kernel to "now"; return the number of events run."""
-
-    def seconds_until_next(self) -> float | None:
-        """Wall seconds until the next kernel event is due (``None``: nothing pending
-        or the clock does not follow the wall clock)."""
 
 
 class RealtimeClock:

@@ -3,13 +3,18 @@
 :class:`EnipTransport` is started by :class:`coolmuscle.transports.service.Service`
 like every other transport and lives in its asyncio loop, so every model call
 happens in the thread that drives the kernel, at the wall-clock instant now
-(``Port.call``).  It owns only sockets and timers:
+(``Port.call``).  It joins the CM1 module (:mod:`.cm1`: the module over the device
+API, its objects and description) to the CIP machinery (:mod:`.cip`) and owns only
+sockets and timers:
 
-* TCP: one :class:`~.encapsulation.Connection` per client; a frame longer than the
-  encapsulation limit is answered 0x0065 and the connection closed;
+* TCP: one :class:`~.cip.encapsulation.Connection` per client; a frame longer than the
+  encapsulation limit is answered 0x0065 and the connection closed; a connection that
+  brings no whole encapsulation packet for the TCP/IP object's encapsulation
+  inactivity timeout (attribute 13, 120 s unless set; 0: never) is closed, and its
+  session and class 3 connections end with it (CIP Vol 2 5-3);
 * UDP on the TCP port number: ListIdentity / ListServices / ListInterfaces;
 * UDP I/O port (2222): O->T packets in; T->O packets out, sent on time by the
-  :class:`~.producer.Producer` thread; a loop timer runs the watchdogs.  The
+  :class:`~.cip.producer.Producer` thread; a loop timer runs the watchdogs.  The
   connection table is shared under one lock.
 
 ``port=0`` / ``io_port=0`` pick free ports (tests); the UDP list port then takes the
@@ -23,18 +28,26 @@ import logging
 import socket
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from ...errors import TransportError
 from ..transports.base import Port
 from ..transports.stream_server import StreamServer
-from .adapter import Cm1Module
-from .encapsulation import Connection, FrameReader, FramingError, Sessions, answer_datagram
-from .encapsulation import INVALID_LENGTH, Frame
-from .io import DEFAULT_IO_PORT, ConnectionTable
-from .objects import ObjectModel
-from .producer import Producer
-from .router import Router
+from .cip.encapsulation import (
+    INVALID_LENGTH,
+    Connection,
+    Frame,
+    FrameReader,
+    FramingError,
+    Sessions,
+    answer_datagram,
+)
+from .cip.io import DEFAULT_IO_PORT, ConnectionTable
+from .cip.producer import Producer
+from .cip.router import Router
+from .cm1.adapter import Cm1Module
+from .cm1.objects import DESCRIPTION, ObjectModel
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +63,7 @@ MAX_TCP_CLIENTS = 64
 
 
 class _Datagrams(asyncio.DatagramProtocol):
-    def __init__(self, handler: Any) -> None:
+    def __init__(self, handler: Callable[[bytes, tuple[str, int]], None]) -> None:
         self.handler = handler
 
     def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
@@ -87,6 +100,10 @@ class EnipTransport(StreamServer):
         self.lock = threading.Lock()
         self.producer: Producer | None = None
         self._io_sock: socket.socket | None = None
+        self.objects: ObjectModel | None = None
+        #: When each TCP connection last brought a whole encapsulation packet (monotonic s).
+        self._last_packet: dict[asyncio.StreamWriter, float] = {}
+        self.idle_closed = 0
 
     # -- life cycle -------------------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -95,10 +112,11 @@ class EnipTransport(StreamServer):
         if device is None:
             raise TransportError("enip: no device behind this port")
         self.module = Cm1Module(device, self.motor)
-        self.table = ConnectionTable(self.module, self.host, 0, port.call)
+        self.table = ConnectionTable(self.module, DESCRIPTION, self.host, 0, port.call)
         objects = ObjectModel(self.module, host=self.host,
                               output_owned=lambda: self.table is not None
                               and self.table.owner is not None, reset=self._reset)
+        self.objects = objects
         try:
             await self._listen()
         except OSError as exc:
@@ -204,6 +222,7 @@ class EnipTransport(StreamServer):
         conn = Connection(self.router, self.sessions, (remote[0], remote[1]),
                           (local[0], local[1]))
         frames = FrameReader()
+        self._last_packet[writer] = time.monotonic()
         try:
             while not conn.closing:
                 data = await reader.read(READ_SIZE)
@@ -214,6 +233,7 @@ class EnipTransport(StreamServer):
                     break
                 await writer.drain()
         finally:
+            self._last_packet.pop(writer, None)
             with self.lock:
                 conn.close()
 
@@ -229,6 +249,7 @@ class EnipTransport(StreamServer):
                 return False
             if frame is None:
                 return True
+            self._last_packet[writer] = time.monotonic()
             assert self.table is not None
             with self.lock:
                 before = len(self.table.by_triad)
@@ -264,9 +285,27 @@ class EnipTransport(StreamServer):
                 gone = self.table.expire(time.monotonic_ns())
             if gone and self.producer is not None:
                 self.producer.wake()
+            self._close_idle(time.monotonic())
         except Exception:  # the watchdogs must go on whatever one connection did
             log.exception("enip: I/O watchdog failed")
         self._schedule()
+
+    def _close_idle(self, now: float) -> None:
+        """Close the TCP connections silent for the encapsulation inactivity timeout
+        (checked every tick, at most :data:`IDLE_TICK` late)."""
+        timeout = self.objects.inactivity.seconds if self.objects is not None else 0
+        if not timeout:
+            return
+        idle = [w for w, last in self._last_packet.items() if now - last >= timeout]
+        for writer in idle:
+            del self._last_packet[writer]
+            self.idle_closed += 1
+            log.debug("enip: closed a TCP connection with no encapsulation packet for %d s",
+                      timeout)
+            if writer.transport.get_write_buffer_size():
+                writer.transport.abort()          # a client that does not read either
+            else:
+                writer.transport.close()
 
     def _schedule(self) -> None:
         assert self.table is not None
@@ -301,7 +340,7 @@ class EnipTransport(StreamServer):
             log.exception("enip: reading the input image failed")
 
     @staticmethod
-    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Any) -> None:
+    def _threadsafe(loop: asyncio.AbstractEventLoop, fn: Callable[[], None]) -> None:
         try:
             loop.call_soon_threadsafe(fn)
         except RuntimeError:     # the loop is closing

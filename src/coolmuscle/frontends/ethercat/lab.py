@@ -14,8 +14,8 @@ import contextlib
 import logging
 import shutil
 import subprocess
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Iterator
 
 log = logging.getLogger(__name__)
 

@@ -23,11 +23,15 @@ import sys
 import threading
 import time
 from collections import deque
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...errors import TransportError
 from ..transports.base import Port, Transport
-from .esc import ETHERTYPE_ECAT
+from .engine.esc import ETHERTYPE_ECAT, Esc
+
+if TYPE_CHECKING:
+    from ...sim.realtime import RealtimeClock
+    from .bridge.app import BridgeApp
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +90,7 @@ def _kernel_time(ancdata: list[tuple[int, int, bytes]]) -> int:
 class FrameThread:
     """Receive, process and send back EtherCAT frames for one ESC, in a thread."""
 
-    def __init__(self, esc: Any, iface: str, *, keep: int = 100_000,
+    def __init__(self, esc: Esc, iface: str, *, keep: int = 100_000,
                  priority: int = FRAME_PRIORITY) -> None:
         self.esc = esc
         self.priority = priority
@@ -126,7 +130,7 @@ class FrameThread:
         while not self._stop.is_set():
             try:
                 n, ancdata, _flags, addr = sock.recvmsg_into([buf], anc)
-            except socket.timeout:
+            except TimeoutError:
                 esc.tick(clock())
                 continue
             except OSError:
@@ -167,7 +171,7 @@ class CycleLateness:
     instant of its virtual instant (the paced kernel fell behind, or the event loop
     woke late)."""
 
-    def __init__(self, clock: Any, cycle_s: float) -> None:
+    def __init__(self, clock: RealtimeClock, cycle_s: float) -> None:
         self.clock = clock
         self.cycle_s = cycle_s
         self.cycles = 0
@@ -194,15 +198,17 @@ class EthercatTransport(Transport):
         self.iface = where
         self.bridge = bridge
         self.cycle_s = cycle_s
-        self.app: Any = None
+        self.app: BridgeApp | None = None
         self.frames: FrameThread | None = None
         self.lateness: CycleLateness | None = None
         self.realtime_model = True
         self._old_policy: tuple[int, os.sched_param] | None = None
 
     async def start(self, port: Port) -> None:
-        from .app import BridgeApp
+        from .bridge.app import BridgeApp
         self.port = port
+        if port.device is None:
+            raise TransportError("ethercat: no device behind this port")
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)
         gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
@@ -221,7 +227,7 @@ class EthercatTransport(Transport):
                   self._cycle_starts)
 
     def _cycle_starts(self) -> None:
-        if self.lateness is not None and self.app is not None:
+        if self.lateness is not None and self.app is not None and self.app.device is not None:
             self.lateness.note(self.app.device.kernel.now)
 
     @property

@@ -32,7 +32,6 @@ BUILTIN: dict[str, str] = {
     "modbus-rtu": "coolmuscle.frontends.transports.serial_line:ModbusRtuTransport",
     "serial-device": "coolmuscle.frontends.transports.serial_line:SerialTransport",
     "com1": "coolmuscle.frontends.transports.serial_line:Com1Transport",
-    "web": "coolmuscle.tools.web.dashboard:WebDashboard",
     "ethercat": "coolmuscle.frontends.ethercat.transport:EthercatTransport",
     "enip": "coolmuscle.frontends.enip.server:EnipTransport",
 }

@@ -28,8 +28,10 @@ import re
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
 
+from ...device.api import Device
 from ...device.hostline import HostLine
 from ...sim.realtime import RealtimeDriver
 
@@ -51,6 +53,8 @@ WIRE_AHEAD_NS = 20_000_000
 
 ByteListener = Callable[[bytes], None]
 
+T = TypeVar("T")
+
 LINE_ENDS = (0x0D, 0x0A)
 _PIECE = re.compile(rb"[^\r\n]*[\r\n]|[^\r\n]+\Z")
 
@@ -60,15 +64,15 @@ class Port:
 
     With a ``driver`` every delivery first runs the kernel up to the wall clock,
     and wakes the driver afterwards (the line may have scheduled events).
-    ``device`` is the chain behind the line, for front ends that speak another
-    protocol through the device API (Modbus TCP, COM1).
+    ``device`` is the chain behind the line (its ``host_line`` is the port's line),
+    for front ends that speak another protocol through the device API (Modbus TCP,
+    COM1, EtherCAT, EtherNet/IP, the web page).
     """
 
-    def __init__(self, host_line: HostLine, driver: RealtimeDriver | None = None,
-                 device: Any = None) -> None:
-        self.host_line = host_line
-        self.driver = driver
+    def __init__(self, device: Device, driver: RealtimeDriver | None = None) -> None:
         self.device = device
+        self.host_line: HostLine = device.host_line
+        self.driver = driver
         self.errors = 0
         self._ready: deque[Lane] = deque()
         self._draining = False
@@ -76,13 +80,13 @@ class Port:
         self._default: Lane | None = None
         self.wakeups = 0      # drains that stopped at the budget (for tests, reports)
 
-    def call(self, fn: Callable[..., Any], *args: Any) -> Any:
+    def call(self, fn: Callable[..., T], *args: Any) -> T:
         """Run ``fn(*args)`` at the wall-clock instant now (caught up), then wake the driver."""
         if self.driver is None:
             return fn(*args)
         return self.driver.call(fn, *args)
 
-    def open_lane(self, name: str = "host") -> "Lane":
+    def open_lane(self, name: str = "host") -> Lane:
         """A new host's input, assembled into lines apart from every other host's."""
         return Lane(self, name)
 
@@ -92,7 +96,7 @@ class Port:
             self._default = Lane(self, "default", source=None)
         self._default.feed(data)
 
-    def _enqueue(self, lane: "Lane") -> None:
+    def _enqueue(self, lane: Lane) -> None:
         if lane not in self._ready:
             self._ready.append(lane)
         self._drain()
@@ -148,8 +152,7 @@ class Port:
             self.driver.wake()
 
     def _wire_ahead(self) -> int:
-        ahead = getattr(self.host_line, "rx_backlog_ns", None)
-        return ahead() if ahead is not None else 0
+        return self.host_line.rx_backlog_ns()
 
     def _schedule_resume(self, after_ns: int = 0) -> None:
         if self._resume_scheduled:
@@ -163,37 +166,44 @@ class Port:
         if after_ns <= 0:
             loop.call_soon(resume)
             return
-        scale = getattr(getattr(self.driver, "clock", None), "scale", 1.0) or 1.0
+        scale = (self.driver.clock.scale if self.driver is not None else 1.0) or 1.0
         loop.call_later(after_ns / 1e9 / scale, resume)
 
     def _open_source(self, source: object) -> None:
         """A host joined the line: the host line sends whole-line echoes while it is
         not alone (``HostLine.open_source``)."""
-        opened = getattr(self.host_line, "open_source", None)
-        if opened is not None:
-            opened(source)
+        self.host_line.open_source(source)
 
-    def _close_lane(self, lane: "Lane") -> None:
+    def _close_lane(self, lane: Lane) -> None:
         if lane in self._ready:
             self._ready.remove(lane)
         try:
-            end = getattr(self.host_line, "end_source", None)
-            if end is not None and lane.source is not None:
-                end(lane.source)
+            if lane.source is not None:
+                self.host_line.end_source(lane.source)
         except Exception:
             log.exception("host line failed to end a host's lane")
 
-    def add_listener(self, listener: ByteListener) -> Callable[[], None]:
-        """Receive every byte the motor sends; returns an unsubscribe function."""
-        return self.host_line.add_listener(listener)
+    def add_listener(self, listener: ByteListener,
+                     lane: Lane | None = None) -> Callable[[], None]:
+        """Receive every byte the motor sends; returns an unsubscribe function.
+
+        ``lane``: the host this listener reads for (its port's rate, :meth:`set_host_baud`)."""
+        if lane is None:
+            return self.host_line.add_listener(listener)
+        return self.host_line.add_listener(listener, lane.source)
+
+    def set_host_baud(self, lane: Lane, baud: Callable[[], int | None]) -> None:
+        """How to read the baud rate ``lane``'s host set on its port (the pty: the
+        client's termios speed); with wire pacing the host line garbles the bytes both
+        ways while it differs from K20 (``HostLine.set_host_baud``)."""
+        setter = getattr(self.host_line, "set_host_baud", None)
+        if setter is not None:
+            setter(lane.source, baud)
 
     def discard_partial(self) -> bool:
-        """Forget a partly received line, if the host line supports it (see report)."""
-        discard = getattr(self.host_line, "discard_partial", None)
-        if discard is None:
-            return False
+        """Forget a partly received line of the default host (see report)."""
         try:
-            discard()
+            self.host_line.discard_partial()
         except Exception:
             log.exception("host line failed to discard a partial line")
             return False
@@ -242,7 +252,7 @@ class Lane:
         if not self._pieces:
             return None
         piece = self._pieces.popleft()
-        mode = getattr(self.port.host_line, "mode", None)
+        mode = self.port.host_line.mode
         if mode is not None and mode.active():
             # COM0 speaks Modbus RTU (5.6): no lines; a frame's bytes go in together
             piece = b"".join((piece, *self._pieces))

@@ -1,9 +1,9 @@
 """Modbus TCP front end: the motor's Modbus map behind MBAP framing (docs/modbus.md).
 
 The motor itself speaks Modbus RTU (cml-users-guide.txt 5.6.1); PLCs, HMIs and
-scripts also expect Modbus TCP, so this server serves the same slave
-(:class:`coolmuscle.chain.modbus.slave.ModbusSlave`) with the same addresses, map,
-exceptions and broadcast rule.  It owns only the framing and the sockets:
+scripts also expect Modbus TCP, so this server serves the same slave (the device API's
+``modbus_request``: :class:`coolmuscle.chain.firmware_modbus.slave.ModbusSlave`) with the same
+addresses, map, exceptions and broadcast rule.  It owns only the framing and the sockets:
 
 * an ADU is the 7-byte MBAP header (transaction id, protocol id 0, length, unit id)
   and the PDU; the reply carries the request's transaction id and unit id;
@@ -29,8 +29,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from typing import Any
 
+from ...device.api import Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port
 from .stream_server import DEFAULT_MAX_CLIENTS, StreamServer
@@ -57,21 +57,19 @@ class ModbusTcpTransport(StreamServer):
                  max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
         super().__init__(host, port, max_clients=max_clients)
         self.max_buffer = max_buffer
-        self._slave: Any = None
+        self._device: Device | None = None
         self.requests = 0
         self.closed_connections = 0
 
     async def start(self, port: Port) -> None:
-        from ...chain.modbus.slave import ModbusSlave, firmware_name, supports_modbus
+        from ...chain.firmware_modbus.slave import firmware_name, supports_modbus
 
         self.port = port
         device = port.device
-        if device is None:
-            raise TransportError("modbus-tcp: no device behind this port")
         if not supports_modbus(device):
             raise TransportError(f"modbus-tcp: firmware {firmware_name(device)} has no "
                                  "Modbus (K78-K85 are other parameters there)")
-        self._slave = getattr(device, "modbus", None) or ModbusSlave(device)
+        self._device = device
         await self.listen()
 
     async def close(self) -> None:
@@ -139,5 +137,5 @@ class ModbusTcpTransport(StreamServer):
             return None
 
     def _handle(self, unit: int, pdu: bytes) -> bytes | None:
-        answer: bytes | None = self._slave.handle(unit, pdu, tcp=True)
-        return answer
+        assert self._device is not None
+        return self._device.modbus_request(unit, pdu, tcp=True)

@@ -7,8 +7,12 @@ a serial port: ``serial.Serial("/dev/pts/N")``, minicom, screen, cutecom.  An
 optional ``link`` gives it a stable path (a symlink replaced on start, removed on
 close; an existing non-symlink file is never overwritten).
 
-The baud rate a client sets on the pty has no effect (a pty has no wire); use the
-simulator's ``--pace`` option for wire timing at the K20 rate.
+A pty has no wire, but it keeps the baud rate the client set (its termios speed, read
+here on our side of the pair).  With the simulator's ``--pace`` option (wire timing at
+the K20 rate) the host line is told that rate: while it differs from K20 the motor
+reads garbage and the client reads garbage, as a real motor and host at different
+rates do (ch. 3 K20; :mod:`coolmuscle.device.uart`, docs/fidelity.md "Baud rate of
+the host").  Without ``--pace`` the rate has no effect.
 
 Output the client does not read piles up in the pty's kernel buffer and then in a
 bounded buffer here; beyond ``max_buffer`` bytes new output is discarded, like
@@ -21,19 +25,52 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import fcntl
 import logging
 import os
+import struct
+import sys
 import termios
 import tty
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport
+from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport
 
 log = logging.getLogger(__name__)
 
 READ_SIZE = 4096
+
+#: termios speed constant -> bits per second (the rates a client can set by name).
+_SPEEDS = {getattr(termios, f"B{rate}"): rate for rate in (
+    50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400,
+    57600, 115200, 230400, 460800, 500000, 576000, 921600, 1000000)
+    if hasattr(termios, f"B{rate}")}
+#: Linux: a rate set by number (``BOTHER`` in c_cflag's speed), read with ``TCGETS2``
+#: (asm-generic/termbits.h, ioctls.h; struct termios2: 4 flags, line, 19 cc, 2 speeds).
+_BOTHER = 0o010000
+_TCGETS2 = 0x802C542A
+_TERMIOS2 = struct.Struct("4IB19s2I")
+
+
+def client_baud(fd: int) -> int | None:
+    """The baud rate the program on the other side of the pty set (its output speed),
+    or ``None`` when it cannot be read."""
+    try:
+        speed = termios.tcgetattr(fd)[5]
+    except (termios.error, OSError):
+        return None
+    if speed in _SPEEDS:
+        return _SPEEDS[speed]
+    if speed == _BOTHER and sys.platform.startswith("linux"):
+        try:
+            raw = fcntl.ioctl(fd, _TCGETS2, bytes(_TERMIOS2.size))
+        except OSError:
+            return None
+        return int(_TERMIOS2.unpack(raw)[-1]) or None
+    return None
 
 
 class SymLink:
@@ -95,9 +132,9 @@ class PtyTransport(Transport):
         self._pending = bytearray()
         self._writer_armed = False
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._unsubscribe: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
         self._symlink = SymLink(self.link) if self.link is not None else None
-        self._lane: Any = None
+        self._lane: Lane | None = None
         self.bytes_discarded = 0
 
     # -- life cycle -----------------------------------------------------
@@ -122,8 +159,13 @@ class PtyTransport(Transport):
             raise TransportError(f"pty: cannot set up the pseudo-terminal: {exc}") from exc
         self._lane = port.open_lane("pty")
         self._lane.set_flow(self._pause_reading, self._resume_reading)
+        port.set_host_baud(self._lane, self._client_baud)
         self._loop.add_reader(master, self._on_readable)
-        self._unsubscribe = port.add_listener(self._send)
+        self._unsubscribe = port.add_listener(self._send, self._lane)
+
+    def _client_baud(self) -> int | None:
+        """The rate the client set on the pty now (read as bytes cross, with pacing)."""
+        return client_baud(self._slave) if self._slave is not None else None
 
     def _pause_reading(self) -> None:
         if self._loop is not None and self._master is not None:

@@ -10,8 +10,8 @@ Three front ends share one non-blocking file-descriptor pump (:class:`_FdPump`):
   mode: when ID1's K81 is 0 it is set to 1 (station address 1), as a user would
   before switching the host to Modbus (ch. 3 K81; it persists like any K write);
 * :class:`Com1Transport` (``com1``, ``coolmuscle sim --com1``): COM1 of the final
-  motor (the chain's :class:`~coolmuscle.chain.modbus.master.Com1Port`) on a device or a new
-  pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
+  motor (the chain's :class:`~coolmuscle.chain.firmware_modbus.master.Com1Port`) on a
+  device or a new pseudo-terminal, at the final motor's K65 baud rate and K82 parity.
 
 Bytes received are delivered at the wall-clock instant they arrive (the real-time
 driver catches the kernel up first), so the 5.6.2 silent interval is measured in
@@ -26,13 +26,12 @@ import asyncio
 import errno
 import logging
 import os
-import termios
-import tty
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
+from ...device.api import Com1Line, Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port, Transport
-from .pty import PtyTransport
 
 log = logging.getLogger(__name__)
 
@@ -152,6 +151,9 @@ class _Device:
 
 
 def _new_pty() -> tuple[int, int, str]:
+    import termios  # POSIX only, as pseudo-terminals are (coolmuscle.needs)
+    import tty
+
     master, slave = os.openpty()
     tty.setraw(slave, termios.TCSANOW)
     os.set_blocking(master, False)
@@ -167,7 +169,7 @@ class _PumpedLine(Transport):
         self.path = path
         self._dev: _Device | None = None
         self._pump: _FdPump | None = None
-        self._unsubscribe: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
 
     def _send(self, data: bytes) -> None:
         if self._pump is not None:
@@ -203,15 +205,13 @@ class SerialTransport(_PumpedLine):
         self.path: str = path
 
     def _settings(self) -> tuple[int, str]:
-        from ...chain.modbus.rtu import byte_baud
-        assert self.port is not None and self.port.device is not None
+        from ...chain.firmware_modbus.rtu import byte_baud
+        assert self.port is not None
         device = self.port.device
         return byte_baud(device.get_param(1, 20)), "NEO"[device.get_param(1, 82) % 3]
 
     async def start(self, port: Port) -> None:
         self.port = port
-        if port.device is None:
-            raise TransportError(f"{self.name}: no device behind this port")
         self._dev = _Device(self.path, self._settings)
         self._pump = _FdPump(self._dev.fd, self._received, f"serial {self.path}")
         self._unsubscribe = port.add_listener(self._send)
@@ -225,9 +225,9 @@ class SerialTransport(_PumpedLine):
         return f"serial: {self.path}"
 
 
-def ensure_modbus_mode(device: Any) -> int:
+def ensure_modbus_mode(device: Device) -> int:
     """Put COM0 in Modbus mode (K81.1=1 when it is 0); return the station address."""
-    k81: int = device.get_param(1, 81)
+    k81 = device.get_param(1, 81)
     if k81 == 0:
         device.set_param(1, 81, 1)
         k81 = 1
@@ -242,16 +242,19 @@ class ModbusRtuTransport(Transport):
     def __init__(self, where: str = "pty", *, link: str | os.PathLike[str] | None = None) -> None:
         super().__init__()
         self.where = where
-        self.inner: Transport = (PtyTransport(link) if where == "pty"
-                                 else SerialTransport(where))
+        if where == "pty":
+            from .pty import PtyTransport  # POSIX only (coolmuscle.needs)
+            self.inner: Transport = PtyTransport(link)
+        else:
+            self.inner = SerialTransport(where)
         self.station = 0
 
     async def start(self, port: Port) -> None:
-        from ...chain.modbus.slave import firmware_name, supports_modbus
+        from ...chain.firmware_modbus.slave import firmware_name, supports_modbus
         self.port = port
-        if port.device is None or not supports_modbus(port.device):
-            name = firmware_name(port.device) if port.device is not None else "?"
-            raise TransportError(f"modbus-rtu: firmware {name} has no Modbus")
+        if not supports_modbus(port.device):
+            raise TransportError(f"modbus-rtu: firmware {firmware_name(port.device)} has no "
+                                 "Modbus")
         self.station = port.call(ensure_modbus_mode, port.device)
         await self.inner.start(port)
 
@@ -276,16 +279,15 @@ class Com1Transport(_PumpedLine):
         super().__init__(None)
         self.where = where
         self._fds: tuple[int, int] | None = None
-        self._com1: Any = None
+        self._com1: Com1Line | None = None
 
     def _settings(self) -> tuple[int, str]:
+        assert self._com1 is not None
         return self._com1.baud(), self._com1.parity()
 
     async def start(self, port: Port) -> None:
         self.port = port
-        self._com1 = getattr(port.device, "com1", None)
-        if self._com1 is None:
-            raise TransportError("com1: this chain has no COM1 port")
+        com1 = self._com1 = port.device.com1
         if self.where == "pty":
             try:
                 master, slave, self.path = _new_pty()
@@ -297,10 +299,10 @@ class Com1Transport(_PumpedLine):
             self._dev = _Device(self.where, self._settings)
             self.path, fd = self.where, self._dev.fd
         self._pump = _FdPump(fd, self._received, f"com1 {self.path}")
-        self._unsubscribe = self._com1.add_listener(self._send)
+        self._unsubscribe = com1.add_listener(self._send)
 
     def _received(self, data: bytes) -> None:
-        assert self.port is not None
+        assert self.port is not None and self._com1 is not None
         if self._dev is not None:
             self._dev.follow_settings()
         self.port.call(self._com1.feed, data)

@@ -15,8 +15,10 @@ import asyncio
 import concurrent.futures
 import logging
 import threading
-from typing import Any, Callable, Sequence, TypeVar
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
+from ...device.api import Device
 from ...sim.realtime import BehindCallback, RealtimeDriver
 from .base import Port, Transport
 
@@ -28,12 +30,12 @@ T = TypeVar("T")
 class Service:
     """A chain served over transports, paced to the wall clock."""
 
-    def __init__(self, chain: Any, transports: Sequence[Transport], *, scale: float = 1.0,
+    def __init__(self, chain: Device, transports: Sequence[Transport], *, scale: float = 1.0,
                  on_behind: BehindCallback | None = None) -> None:
         self.chain = chain
         self.transports = list(transports)
         self.driver = RealtimeDriver(chain.kernel, scale=scale, on_behind=on_behind)
-        self.port = Port(chain.host_line, self.driver, chain)
+        self.port = Port(chain, self.driver)
         self._driver_task: asyncio.Task[None] | None = None
         self._started: list[Transport] = []
 
@@ -96,7 +98,7 @@ class ServiceThread:
             port = st.transports[0].info()["port"]
     """
 
-    def __init__(self, chain_factory: Callable[[], Any],
+    def __init__(self, chain_factory: Callable[[], Device],
                  transports_factory: Callable[[], Sequence[Transport]], *,
                  scale: float = 1.0, close_chain: bool = True) -> None:
         self._chain_factory = chain_factory
@@ -111,7 +113,7 @@ class ServiceThread:
         self.service: Service | None = None
 
     @property
-    def chain(self) -> Any:
+    def chain(self) -> Device:
         assert self.service is not None, "service not started"
         return self.service.chain
 
@@ -137,7 +139,7 @@ class ServiceThread:
     async def _amain(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
-        chain = None
+        chain: Device | None = None
         try:
             chain = self._chain_factory()
             self.service = Service(chain, self._transports_factory(), scale=self._scale)

@@ -21,10 +21,11 @@ import termios
 import threading
 import time
 import tty
+from collections.abc import Callable
 from typing import Any
 
 from ...errors import TransportError
-from .base import DEFAULT_MAX_BUFFER, Port, Transport
+from .base import DEFAULT_MAX_BUFFER, Lane, Port, Transport
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +54,8 @@ class StdioTransport(Transport):
         self._out_cond = threading.Condition()
         self._writer_thread: threading.Thread | None = None
         self._closing = False
-        self._unsubscribe: Any = None
-        self._lane: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
+        self._lane: Lane | None = None
 
     # -- life cycle -----------------------------------------------------
     async def start(self, port: Port) -> None:

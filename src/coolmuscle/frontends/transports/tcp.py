@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any
+from collections.abc import Callable
 
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Lane, Port
@@ -84,7 +84,7 @@ class TcpTransport(StreamServer):
         super().__init__(host, port, max_clients=max_clients)
         self.max_buffer = max_buffer
         self._clients: list[_Client] = []
-        self._unsubscribe: Any = None
+        self._unsubscribe: Callable[[], None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.dropped_clients = 0
 

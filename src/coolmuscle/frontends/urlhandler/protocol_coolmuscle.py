@@ -17,9 +17,11 @@ options:
 - ``scale=X``                    realtime only: virtual seconds per wall second (default 1)
 - ``logging=debug|info|warning|error``  log handler activity
 
-Registered by ``import coolmuscle`` (``serial.protocol_handler_packages``)::
+Registered with pyserial by :func:`coolmuscle.register_url_handler`
+(``serial.protocol_handler_packages``; :mod:`coolmuscle.frontends.urlhandler`)::
 
     import coolmuscle, serial
+    coolmuscle.register_url_handler()
     port = serial.serial_for_url("coolmuscle://?motors=2&mode=fast", timeout=1)
     port.write(b"?96.1\\r")
 
@@ -35,14 +37,20 @@ import math
 import threading
 import time
 import urllib.parse
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException
-from serial.serialutil import to_bytes  # type: ignore[attr-defined]  # not in its stubs
+from serial.serialutil import (  # type: ignore[attr-defined]  # to_bytes: not in its stubs
+    PortNotOpenError,
+    SerialBase,
+    SerialException,
+    to_bytes,
+)
 
+from ...device.api import Device
 from ...errors import CoolMuscleError
-from ...sim.kernel import NS_PER_S, seconds
+from ...sim.kernel import NS_PER_S, Kernel, seconds
 from ...sim.realtime import FastClock, RealtimeClock
 from ..transports.base import split_after_line_ends
 
@@ -63,14 +71,15 @@ _BOOL = {"on": True, "1": True, "true": True, "yes": True,
          "off": False, "0": False, "false": False, "no": False}
 
 
-def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
+def _default_chain_factory(kernel: Kernel | None, motors: int, *, firmware: str,
+                           state_dir: Path | None, pacing: bool) -> Device:
     from ...chain.daisy import Chain
-    return Chain(*args, **kwargs)
+    return Chain(kernel, motors, firmware=firmware, state_dir=state_dir, pacing=pacing)
 
 
 #: Builds the chain behind each port: ``factory(kernel, motors, firmware=..., state_dir=...,
 #: pacing=...)``.  Tests and embedders may replace it.
-chain_factory: Callable[..., Any] = _default_chain_factory
+chain_factory: Callable[..., Device] = _default_chain_factory
 
 
 def parse_url(url: str) -> dict[str, Any]:
@@ -129,6 +138,16 @@ def parse_url(url: str) -> dict[str, Any]:
     return options
 
 
+def on_chain(chain: Any, *, mode: str = "fast", timeout: float | None = 1.0) -> Serial:
+    """An open port whose far end is ``chain``, a chain the caller built and keeps:
+    closing the port leaves the chain open (the test plug-in's ``cm_chain.port()``)."""
+    port = Serial(timeout=timeout)
+    port._given_chain = chain
+    port.port = f"coolmuscle://?mode={mode}"
+    port.open()
+    return port
+
+
 class Serial(SerialBase):
     """A pyserial port whose far end is a virtual Cool Muscle chain."""
 
@@ -139,13 +158,14 @@ class Serial(SerialBase):
     _timeout: float | None
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self.chain: Any = None
+        self.chain: Device | None = None
         self.options: dict[str, Any] = {}
         self._clock: RealtimeClock | FastClock | None = None
         self._cond = threading.Condition(threading.RLock())
         self._rx = bytearray()
         self._unsubscribe: Callable[[], None] | None = None
         self._cancel = False
+        self._given_chain: Any = None        # on_chain(): the caller's chain, kept open
         super().__init__(*args, **kwargs)
 
     # -- open / close ---------------------------------------------------
@@ -164,8 +184,9 @@ class Serial(SerialBase):
             except OSError as exc:
                 raise SerialException(f"coolmuscle: cannot use state directory: {exc}") from exc
         try:
-            chain = chain_factory(None, options["motors"], firmware=options["firmware"],
-                                  state_dir=options["state"], pacing=options["pacing"])
+            chain = self._given_chain or chain_factory(
+                None, options["motors"], firmware=options["firmware"],
+                state_dir=options["state"], pacing=options["pacing"])
         except (CoolMuscleError, OSError, ValueError) as exc:
             raise SerialException(f"coolmuscle: cannot start the virtual chain: {exc}") from exc
         with self._cond:
@@ -189,7 +210,7 @@ class Serial(SerialBase):
             chain, self.chain = self.chain, None
             self.is_open = False
             self._cond.notify_all()
-        if chain is not None:
+        if chain is not None and chain is not self._given_chain:
             try:
                 chain.close()
             except Exception:
@@ -201,7 +222,7 @@ class Serial(SerialBase):
             raise ValueError(f"invalid baudrate: {self._baudrate!r}")
 
     @property
-    def kernel(self) -> Any:
+    def kernel(self) -> Kernel | None:
         """The chain's kernel (``kernel.now`` is the virtual time in ns)."""
         return self.chain.kernel if self.chain is not None else None
 
@@ -279,9 +300,12 @@ class Serial(SerialBase):
         payload: bytes = to_bytes(data)
         with self._cond:
             self._catch_up()
+            chain = self.chain
             for piece in split_after_line_ends(payload):  # a failing line costs only itself
+                if chain is None:             # closed by another thread meanwhile
+                    break
                 try:
-                    self.chain.host_line.feed(piece)
+                    chain.host_line.feed(piece)
                 except Exception:  # front-end entry point: the model's failure is logged
                     log.exception("virtual chain failed on input %r", piece[:64])
             self._cond.notify_all()  # a reader may need to re-plan (pacing scheduled events)

@@ -20,8 +20,9 @@ target, on the command's final approach: possibly before the command has ended
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Callable, Protocol, Sequence
+from typing import Protocol
 
 from ...sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
@@ -35,10 +36,10 @@ log = logging.getLogger(__name__)
 class Watcher(Protocol):
     """Something that wants a kernel event when the motion reaches a condition."""
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never)."""
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         """The instant has come (it may change the command or the drive)."""
 
 
@@ -138,9 +139,6 @@ class Axis:
     def command_velocity(self) -> float:
         return self.sign * self.profile.velocity_at(self.kernel.now)
 
-    def command_acceleration(self) -> float:
-        return self.sign * self.profile.acceleration_at(self.kernel.now)
-
     def mode(self) -> str:
         """The dynamics mode now (``track``, ``sat``, ``contact``, ...)."""
         return self.motion.mode_at(self.kernel.now)
@@ -213,7 +211,7 @@ class Axis:
             # the planner runs the command on to its end, then starts from rest.  The
             # shaft follows the old command as solved until that end, and the new move
             # is solved from there, from rest (the same numbers for each repeat of a
-            # cycle: docs/performance.md "Why every chain move was solved afresh").
+            # cycle: docs/performance.md "Where the time goes").
             rest = planner.plan_moves(self._command_state(end), raw, end, self.memos.plans)
             self.profile = profile
             self._rest = (profile, rest)

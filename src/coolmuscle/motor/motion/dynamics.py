@@ -35,11 +35,12 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Callable, Final, Sequence
+from typing import Final
 
-from ...sim.memo import Key, Memo
 from ...sim.kernel import NS_PER_S
+from ...sim.memo import Key, Memo
 from . import expoly as xp
 from .expoly import AnyF, F
 from .profile import Profile, Segment
@@ -162,7 +163,7 @@ class Piece:
     def duration(self) -> float:
         return self.end - self.start
 
-    def placed(self, p0: float, cmd: F) -> "Piece":
+    def placed(self, p0: float, cmd: F) -> Piece:
         """This piece (solved relative to where its command started) where it is: the
         shaft from ``p0``, under the absolute command ``cmd``.  The error is computed
         afresh against the command, so Pe = command - position holds in absolute terms
@@ -174,7 +175,7 @@ class Piece:
         out.set_vel(self.vel())
         return out
 
-    def moved(self, shift: float, end: float) -> "Piece":
+    def moved(self, shift: float, end: float) -> Piece:
         """This piece seen from an origin ``shift`` seconds later, ending at ``end`` at
         the latest (the same functions of its own τ)."""
         last = self.end - shift
@@ -344,7 +345,7 @@ class Motion:
         self._starts = solution.starts
 
     @staticmethod
-    def continued(old: "Motion", origin_ns: int, profile: Profile) -> "Motion":
+    def continued(old: Motion, origin_ns: int, profile: Profile) -> Motion:
         """``old`` from ``origin_ns`` until ``profile`` begins (its command unchanged until
         then), then the motion under ``profile`` from ``old``'s state at that instant.
 

@@ -16,7 +16,8 @@ bracketed and refined (safeguarded Newton).  Nothing is sampled on a time grid
 from __future__ import annotations
 
 import math
-from typing import Final, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Final
 
 #: (c0, c1, c2, c3, d): c0 + c1 τ + c2 τ² + c3 τ³ + d·exp(-k τ), the function of every
 #: piece of motion.  Of fixed size, so that compiled code keeps it unboxed (five C

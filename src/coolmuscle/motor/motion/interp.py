@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 from .planner import Limits, Waypoint, plan_moves
 from .profile import Profile, Segment
@@ -210,7 +210,7 @@ class SpiralArc(Arc):
 class SubPath:
     """The rest of ``path`` from arc length ``s0`` on (a path resumed after a pause)."""
 
-    def __init__(self, path: "Line | Arc | SubPath", s0: float) -> None:
+    def __init__(self, path: Line | Arc | SubPath, s0: float) -> None:
         self.path, self.s0 = path, min(max(s0, 0.0), path.length)
         self.length: float = path.length - self.s0
 
@@ -222,10 +222,6 @@ class SubPath:
 
 
 Path = Line | Arc | SubPath
-
-
-def _angle(center: Point, p: Point, rx: float, ry: float) -> float:
-    return math.atan2((p[1] - center[1]) / ry, (p[0] - center[0]) / rx)
 
 
 def _sweep(theta0: float, theta1: float, cw: bool, full_if_equal: bool) -> float:

@@ -18,8 +18,8 @@ written down in docs/fidelity.md "Motion".
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 from ...sim.memo import Key, Memo
 from ..state import units

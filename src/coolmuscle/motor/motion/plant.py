@@ -15,8 +15,9 @@ conversion for the resolution in effect.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from .dynamics import Drive
 

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Iterator
+from typing import TYPE_CHECKING, Any
 
 from ...sim.kernel import NS_PER_MS, NS_PER_S
 from .profile import Profile
@@ -100,7 +101,7 @@ class Piece:
         return None
 
 
-def piece_of(axis: "Axis") -> Piece:
+def piece_of(axis: Axis) -> Piece:
     """The trajectory the axis follows now."""
     return Piece(axis.kernel.now, axis.profile, axis.tracking, axis.zero, axis.sign)
 
@@ -192,7 +193,7 @@ class Schmitt:
         elif x <= self.fall():
             self.state = math.ceil((x + self.down) / self.width) - 1
 
-    def copy(self) -> "Schmitt":
+    def copy(self) -> Schmitt:
         return Schmitt(self.width, self.up, self.down, self.state)
 
 
@@ -203,7 +204,7 @@ class Track:
     checkpoints while the timeline records so past states can be read back.
     """
 
-    def __init__(self, timeline: "Timeline", schmitt: Schmitt, *, scale: float = 1.0,
+    def __init__(self, timeline: Timeline, schmitt: Schmitt, *, scale: float = 1.0,
                  offset: float = 0.0, raw: bool = False) -> None:
         self.timeline = timeline
         self.schmitt = schmitt
@@ -346,7 +347,7 @@ def _horizon(piece: Piece, now: int) -> int:
 class Timeline:
     """The trajectories of one axis as :class:`Piece` objects, and the tracks on them."""
 
-    def __init__(self, axis: "Axis") -> None:
+    def __init__(self, axis: Axis) -> None:
         self.axis = axis
         self.piece = piece_of(axis)
         self.tracks: list[Track] = []

@@ -13,19 +13,20 @@ queries, execution commands, branch conditions) are dispatched here to
 
 from __future__ import annotations
 
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Generator, Union
+from typing import TYPE_CHECKING
 
 from ...cml import ast
+from ...cml.ast import inner_motor
 from ...errors import MotorError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
 from .banks import Bank, condition_only
-from ...cml.ast import inner_motor
 from .direct import MotorEval, route
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 #: RT3 3.4 "Typically steps take 250 µs to execute".
 STEP_NS = 250_000
@@ -46,9 +47,9 @@ class Sleep:
 class MotionWait:
     """Resume when every motor in ``motors`` has finished its motion (in position)."""
 
-    motors: tuple["MotorCore", ...]
+    motors: tuple[MotorCore, ...]
 
-    def __init__(self, motors: tuple["MotorCore", ...]) -> None:
+    def __init__(self, motors: tuple[MotorCore, ...]) -> None:
         # written out: built on the hot path (docs/architecture.md "Fast code")
         self.motors = motors
 
@@ -75,14 +76,14 @@ class Watch:
         self.timeout_ns = timeout_ns
 
 
-Request = Union[Sleep, MotionWait, Watch, Hold]
+Request = Sleep | MotionWait | Watch | Hold
 LineGen = Generator[Request, object, object]
 
 
 class Runner:
     """Drives one generator of wait requests with kernel events; can halt and re-arm."""
 
-    def __init__(self, motor: "MotorCore", on_done: Callable[[object], None]) -> None:
+    def __init__(self, motor: MotorCore, on_done: Callable[[object], None]) -> None:
         self.motor = motor
         self.kernel = motor.kernel
         self._on_done = on_done
@@ -232,7 +233,7 @@ class Runner:
 
 # ---------------------------------------------------------------- statements
 
-def target_motor(motor: "MotorCore", stmt: ast.Statement) -> "MotorCore | None":
+def target_motor(motor: MotorCore, stmt: ast.Statement) -> MotorCore | None:
     """The motor a statement addresses (its ``.n``), ``None`` when not on the chain."""
     motor_id = inner_motor(stmt)
     if motor_id is None or motor_id == motor.id:
@@ -240,13 +241,13 @@ def target_motor(motor: "MotorCore", stmt: ast.Statement) -> "MotorCore | None":
     return motor.bus.motor(motor_id)
 
 
-def run_plain(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+def run_plain(motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
     """A statement that means the same in direct mode and in banks (6.5), on its motor
     (an ID past the chain goes to the chain: the COM1 device, or nobody)."""
     route(motor, stmt, ctx)
 
 
-def holds(motor: "MotorCore", condition: ast.Expr) -> bool:
+def holds(motor: MotorCore, condition: ast.Expr) -> bool:
     """Truth of a branch condition on ``motor`` (V alone means V > 0, 6.3 "V")."""
     from .evaluate import condition as truth
     try:
@@ -255,7 +256,7 @@ def holds(motor: "MotorCore", condition: ast.Expr) -> bool:
         return False
 
 
-def timer_ns(motor: "MotorCore", reg: ast.Reg) -> int:
+def timer_ns(motor: MotorCore, reg: ast.Reg) -> int:
     """T# of the motor the register names, in ns (2.2.1 "T": msec, 0 = no action)."""
     target = (motor if reg.motor is None or reg.motor == motor.id
               else motor.bus.motor(reg.motor))
@@ -268,7 +269,7 @@ def timer_ns(motor: "MotorCore", reg: ast.Reg) -> int:
         return 0
 
 
-def wait_branch(motor: "MotorCore", branch: ast.Branch, wait: ast.Wait) -> Watch:
+def wait_branch(motor: MotorCore, branch: ast.Branch, wait: ast.Wait) -> Watch:
     """``cond, W#, else``: wait while ``cond`` holds, up to T# (W0 forever) (4.2.4)."""
     ns = timer_ns(motor, ast.Reg("T", wait.index, wait.motor))
     return Watch(lambda: holds(motor, branch.condition), ns or None)
@@ -283,6 +284,13 @@ class Unit:
     statements: tuple[ast.Statement, ...]
     quiet: bool      # ladder: the line ends with ";", results are not displayed
     first: int       # index of its first stored line
+    last: int        # index of its last stored line (lines joined to the first)
+
+
+#: Told when a unit of a bank starts: ``(bank, first, last)``, the indexes of the
+#: unit's first and last stored line.  Off (``None``) unless someone observes the
+#: bank lines run (the test plug-in's bank coverage, docs/testing-your-project.md).
+LineObserver = Callable[[int, int, int], None]
 
 
 def _merge_condition(cond: ast.Line, line: ast.Line) -> ast.Line:
@@ -298,20 +306,22 @@ def _flow(line: ast.Line) -> bool:
     return any(isinstance(s, (ast.Call, ast.Loop, ast.LoopEnd)) for s in line.statements)
 
 
-def merged_lines(bank: Bank) -> list[tuple[int, ast.Line]]:
-    """Stored lines with each condition-only line merged into the line after it."""
-    out: list[tuple[int, ast.Line]] = []
+def merged_lines(bank: Bank) -> list[tuple[int, int, ast.Line]]:
+    """Stored lines with each condition-only line merged into the line after it:
+    (index of the first stored line, of the last, the line)."""
+    out: list[tuple[int, int, ast.Line]] = []
     pending: tuple[int, ast.Line] | None = None
     for index, line in enumerate(bank):
         if pending is not None:
-            out.append((pending[0], _merge_condition(pending[1], line)))
+            out.append((pending[0], index, _merge_condition(pending[1], line)))
             pending = None
         elif condition_only(line):
             pending = (index, line)
         else:
-            out.append((index, line))
+            out.append((index, index, line))
     if pending is not None:
-        out.append((pending[0], ast.Line(pending[1].statements, False, pending[1].source)))
+        out.append((pending[0], pending[0],
+                    ast.Line(pending[1].statements, False, pending[1].source)))
     return out
 
 
@@ -320,20 +330,22 @@ def program_units(bank: Bank) -> list[Unit]:
     units: list[Unit] = []
     statements: list[ast.Statement] = []
     first = 0
-    for index, line in merged_lines(bank):
+    last = 0
+    for index, end, line in merged_lines(bank):
         if not statements:
             first = index
+        last = end
         statements.extend(line.statements)
         if not line.joined or _flow(line):
-            units.append(Unit(tuple(statements), False, first))
+            units.append(Unit(tuple(statements), False, first, last))
             statements = []
     if statements:
-        units.append(Unit(tuple(statements), False, first))
+        units.append(Unit(tuple(statements), False, first, last))
     return units
 
 
 def ladder_units(bank: Bank, displays: bool = True) -> list[Unit]:
     """Ladder bank: every line on its own; ``;`` only silences its results (RT3 1.1).
     ``displays=False`` (CM2): assignments never display (docs/fidelity.md)."""
-    return [Unit(line.statements, line.joined or not displays, index)
-            for index, line in merged_lines(bank)]
+    return [Unit(line.statements, line.joined or not displays, index, end)
+            for index, end, line in merged_lines(bank)]

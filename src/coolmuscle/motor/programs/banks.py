@@ -18,21 +18,22 @@ Banks are part of the ``$`` snapshot as canonical text (docs/fidelity.md).
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ...cml import ast
 from ...cml.formatter import format_line
 from ...cml.parser import parse
 from ...cml.scanner import scan
 from ...errors import CmlSyntaxError, MotorError, OutOfRangeError, TooManyStepsError
-from .bankcheck import bank_header_cost, check_line, fill_motor, line_cost, memory_limit
 from ..state.firmware import Firmware
 from ..status import Report
+from .bankcheck import bank_header_cost, check_line, fill_motor, line_cost, memory_limit
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +145,7 @@ class BankStore:
 class _Session:
     """One bank definition in progress (on one origin: host line, API ...)."""
 
-    motor: "MotorCore | None"
+    motor: MotorCore | None
     ladder: bool
     number: int
     failed: bool = False
@@ -160,7 +161,7 @@ class BankUploads:
     (:meth:`abandon`).
     """
 
-    def __init__(self, motors: Mapping[int, "MotorCore"]) -> None:
+    def __init__(self, motors: Mapping[int, MotorCore]) -> None:
         self.motors = motors
         self._sessions: dict[tuple[str, object], _Session] = {}
 
@@ -174,7 +175,7 @@ class BankUploads:
             log.info("bank upload of a departed %s sender ended", origin)
         return found is not None
 
-    def begins(self, lines: list[ast.Line], ctx: "Context") -> bool:
+    def begins(self, lines: list[ast.Line], ctx: Context) -> bool:
         """Start a definition if ``lines`` hold ``B#.n`` / ``L#.n``; True when they do."""
         heads = [s for line in lines for s in line.statements if isinstance(s, ast.BankBegin)]
         if not heads:
@@ -191,7 +192,7 @@ class BankUploads:
             self._open(session, ctx)
         return True
 
-    def _open(self, session: _Session, ctx: "Context") -> None:
+    def _open(self, session: _Session, ctx: Context) -> None:
         motor = session.motor
         assert motor is not None
         try:
@@ -202,7 +203,7 @@ class BankUploads:
             session.failed = True
             motor.report_error(ctx, error)
 
-    def consume(self, text: str, ctx: "Context") -> bool:
+    def consume(self, text: str, ctx: Context) -> bool:
         """Feed a line to the definition in progress; False when there is none."""
         session = self._sessions.get((ctx.origin, ctx.session))
         if session is None:
@@ -222,7 +223,7 @@ class BankUploads:
             self._store(session, ctx, text, lines)
         return True
 
-    def _end_line(self, lines: list[ast.Line], session: _Session, ctx: "Context",
+    def _end_line(self, lines: list[ast.Line], session: _Session, ctx: Context,
                   text: str) -> None:
         if len(lines) == 1 and len(lines[0].statements) == 1:
             self._finish(ctx)
@@ -230,7 +231,7 @@ class BankUploads:
         self._fail(session, ctx, CmlSyntaxError("END stands alone on its line", text=text))
         self._finish(ctx)
 
-    def _store(self, session: _Session, ctx: "Context", text: str,
+    def _store(self, session: _Session, ctx: Context, text: str,
                lines: list[ast.Line]) -> None:
         motor = session.motor
         assert motor is not None
@@ -249,13 +250,13 @@ class BankUploads:
         except MotorError as error:
             self._fail(session, ctx, error)
 
-    def _fail(self, session: _Session, ctx: "Context", error: MotorError) -> None:
+    def _fail(self, session: _Session, ctx: Context, error: MotorError) -> None:
         if session.failed or session.motor is None:
             return
         session.failed = True
         session.motor.report_error(ctx, error)
 
-    def _finish(self, ctx: "Context") -> None:
+    def _finish(self, ctx: Context) -> None:
         session = self._sessions.pop((ctx.origin, ctx.session))
         motor = session.motor
         if motor is None or session.failed:

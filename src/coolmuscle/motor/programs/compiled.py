@@ -18,21 +18,21 @@ A compiled statement adds its RT3 3.4 steps to the scanner's clock and returns
 from __future__ import annotations
 
 import operator
-from typing import TYPE_CHECKING, Callable, Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 from ...cml import ast
 from ...errors import MotorError, OutOfRangeError
+from ..state.memory import LIMIT_1E9, WRITABLE_STATES, VNumber, VState
 from .bankcheck import expr_steps, statement_steps
 from .bankexec import STEP_NS, Sleep, run_plain
 from .direct import MotorEval
 from .evaluate import call_function, pack_string, wrap32
-from ..state.memory import LIMIT_1E9, VNumber, VState
-from ..state.memory import WRITABLE_STATES
 from .queries import display_reply
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 Reader = Callable[[], int]
 Compiled = Callable[[], object]
@@ -57,7 +57,7 @@ def _divide(a: int, b: int) -> int:
     return wrap32(q if (a >= 0) == (b >= 0) else -q)
 
 
-def _register(reg: ast.Reg, motor: "MotorCore") -> Reader:
+def _register(reg: ast.Reg, motor: MotorCore) -> Reader:
     if reg.motor not in (None, motor.id):
         host = MotorEval(motor)
         return lambda: host.register_value(reg)
@@ -93,7 +93,7 @@ def _register(reg: ast.Reg, motor: "MotorCore") -> Reader:
     return read
 
 
-def compile_expr(expr: ast.Expr, motor: "MotorCore") -> Reader:
+def compile_expr(expr: ast.Expr, motor: MotorCore) -> Reader:
     """A closure computing ``evaluate(expr)`` on ``motor`` (6.7-6.9)."""
     if isinstance(expr, ast.Num):
         value = wrap32(expr.value)
@@ -125,7 +125,7 @@ def compile_expr(expr: ast.Expr, motor: "MotorCore") -> Reader:
     raise TypeError(f"not an expression: {expr!r}")
 
 
-def _arithmetic(expr: ast.BinOp, motor: "MotorCore") -> Reader:
+def _arithmetic(expr: ast.BinOp, motor: MotorCore) -> Reader:
     """``+ - *`` inline (wrapped to 32 bits only when they leave it), ``/`` as 6.7."""
     left, right = compile_expr(expr.left, motor), compile_expr(expr.right, motor)
     if expr.op == "/":
@@ -144,12 +144,12 @@ def _arithmetic(expr: ast.BinOp, motor: "MotorCore") -> Reader:
 
 
 def _binary(op: Callable[[int, int], int], expr: ast.BinOp | ast.Compare,
-            motor: "MotorCore") -> Reader:
+            motor: MotorCore) -> Reader:
     left, right = compile_expr(expr.left, motor), compile_expr(expr.right, motor)
     return lambda: op(left(), right())
 
 
-def compile_condition(expr: ast.Expr, motor: "MotorCore") -> Callable[[], bool]:
+def compile_condition(expr: ast.Expr, motor: MotorCore) -> Callable[[], bool]:
     """Truth of a branch condition: a value alone means "> 0" (6.3 "V")."""
     reader = compile_expr(expr, motor)
     if isinstance(expr, (ast.Reg, ast.Num, ast.BinOp, ast.Func)):
@@ -159,8 +159,8 @@ def compile_condition(expr: ast.Expr, motor: "MotorCore") -> Callable[[], bool]:
 
 # ---------------------------------------------------------------- statements
 
-def _assign(stmt: ast.Assign, motor: "MotorCore", ctx: "Context", quiet: bool, clock: Clock,
-            display: Callable[["MotorCore", ast.Reg, int], str]) -> Compiled | None:
+def _assign(stmt: ast.Assign, motor: MotorCore, ctx: Context, quiet: bool, clock: Clock,
+            display: Callable[[MotorCore, ast.Reg, int], str]) -> Compiled | None:
     """An assignment as one closure: steps, value, store, display, errors."""
     reg = stmt.target
     if reg.motor not in (None, motor.id) or reg.kind not in _PLAIN_KINDS | {"V", "K"}:
@@ -200,8 +200,8 @@ def _assign(stmt: ast.Assign, motor: "MotorCore", ctx: "Context", quiet: bool, c
     return run
 
 
-def compile_statement(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
-                      clock: Clock, display: Callable[["MotorCore", ast.Reg, int], str],
+def compile_statement(stmt: ast.Statement, motor: MotorCore, ctx: Context, quiet: bool,
+                      clock: Clock, display: Callable[[MotorCore, ast.Reg, int], str],
                       last: bool = True) -> Compiled | None:
     """A closure for a ladder statement, or ``None`` to leave it to the interpreter."""
     if isinstance(stmt, ast.Branch):
@@ -225,8 +225,8 @@ def compile_statement(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", q
     return run
 
 
-def _body(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
-          display: Callable[["MotorCore", ast.Reg, int], str], last: bool) -> Compiled | None:
+def _body(stmt: ast.Statement, motor: MotorCore, ctx: Context, quiet: bool,
+          display: Callable[[MotorCore, ast.Reg, int], str], last: bool) -> Compiled | None:
     if isinstance(stmt, ast.Ref):
         return _ref(stmt, motor, ctx, last)
     if isinstance(stmt, ast.Call):
@@ -237,7 +237,7 @@ def _body(stmt: ast.Statement, motor: "MotorCore", ctx: "Context", quiet: bool,
     return lambda: run_plain(motor, stmt, ctx)
 
 
-def _ref(stmt: ast.Ref, motor: "MotorCore", ctx: "Context", last: bool) -> Compiled | None:
+def _ref(stmt: ast.Ref, motor: MotorCore, ctx: Context, last: bool) -> Compiled | None:
     reg = stmt.reg
     if reg.motor not in (None, motor.id):
         return None
@@ -253,8 +253,8 @@ def _ref(stmt: ast.Ref, motor: "MotorCore", ctx: "Context", last: bool) -> Compi
     return lambda: motor.say(ctx, display_reply(motor, reg))
 
 
-def _actions(stmts: tuple[ast.Statement, ...], motor: "MotorCore", ctx: "Context", quiet: bool,
-             clock: Clock, display: Callable[["MotorCore", ast.Reg, int], str]
+def _actions(stmts: tuple[ast.Statement, ...], motor: MotorCore, ctx: Context, quiet: bool,
+             clock: Clock, display: Callable[[MotorCore, ast.Reg, int], str]
              ) -> Callable[[], object] | None:
     fns = [compile_statement(s, motor, ctx, quiet, clock, display, i == len(stmts) - 1)
            for i, s in enumerate(stmts)]
@@ -271,8 +271,8 @@ def _actions(stmts: tuple[ast.Statement, ...], motor: "MotorCore", ctx: "Context
     return run
 
 
-def _branch(stmt: ast.Branch, motor: "MotorCore", ctx: "Context", quiet: bool, clock: Clock,
-            display: Callable[["MotorCore", ast.Reg, int], str]) -> Compiled | None:
+def _branch(stmt: ast.Branch, motor: MotorCore, ctx: Context, quiet: bool, clock: Clock,
+            display: Callable[[MotorCore, ast.Reg, int], str]) -> Compiled | None:
     if any(isinstance(s, ast.Wait) for s in stmt.then):
         return None
     then = _actions(stmt.then, motor, ctx, quiet, clock, display)

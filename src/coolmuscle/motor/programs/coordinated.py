@@ -21,20 +21,30 @@ in docs/fidelity.md "Daisy chain".
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ...cml.formatter import format_statement
 from ...errors import MotorError, OutOfRangeError
-from ..motion.interp import Leg, PathError, Point, SubPath, arc_from_center, arc_from_radius
-from ..motion.interp import follow_path, leg_starts, plan_path
+from ..motion.interp import (
+    Leg,
+    PathError,
+    Point,
+    SubPath,
+    arc_from_center,
+    arc_from_radius,
+    follow_path,
+    leg_starts,
+    plan_path,
+)
 from ..motion.planner import Limits, plan_stop
 from ..motion.profile import Profile
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 #: Arc length (pulses) below which the rest of a path counts as travelled.
 _DONE = 1e-6
@@ -54,7 +64,7 @@ class Selection:
     n_index: int = 0
     modifier: str | None = None
 
-    def select(self, kind: str, index: int, modifier: str | None) -> "Selection":
+    def select(self, kind: str, index: int, modifier: str | None) -> Selection:
         """The selection after ``R#`` / ``N#`` (with its modifier) is named."""
         if kind == "N":
             return replace(self, kind="N", n_index=index)
@@ -68,7 +78,7 @@ class Selection:
 class Request:
     """One ``@#.n`` with what its motor contributes to the pair."""
 
-    motor: "MotorCore"
+    motor: MotorCore
     end_index: int            # P memory of the end point
     direction: str | None     # "+" CW, "-" CCW
     selection: Selection
@@ -76,7 +86,7 @@ class Request:
     delay_ns: int = 0         # when the command reaches the motor (K65 chain timing)
 
 
-def request(motor: "MotorCore", stmt: ast.Interp, selection: Selection, limits: Limits | None,
+def request(motor: MotorCore, stmt: ast.Interp, selection: Selection, limits: Limits | None,
             delay_ns: int = 0) -> Request:
     """A request for ``motor``; error00 (:class:`OutOfRangeError`) on a type without
     interpolation (2.1.2 "Only Interpolation type can be used") or a P memory that
@@ -154,7 +164,7 @@ def _shifted(profile: Profile, delay_ns: int) -> Profile:
 class PairMotion:
     """The path a pair of motors follows: legs merged one after the other."""
 
-    def __init__(self, x: "MotorCore", y: "MotorCore", delays: tuple[int, int] = (0, 0)) -> None:
+    def __init__(self, x: MotorCore, y: MotorCore, delays: tuple[int, int] = (0, 0)) -> None:
         self.x, self.y = x, y
         self.delays = delays
         self.start: Point = (x.axis.command_position(), y.axis.command_position())
@@ -165,7 +175,7 @@ class PairMotion:
         self._stopped_at: int | None = None
 
     @property
-    def motors(self) -> tuple["MotorCore", "MotorCore"]:
+    def motors(self) -> tuple[MotorCore, MotorCore]:
         return self.x, self.y
 
     def end_point(self) -> Point:
@@ -175,7 +185,7 @@ class PairMotion:
         path = self.legs[-1].path
         return path.point(path.length)
 
-    def owns(self, motor: "MotorCore") -> bool:
+    def owns(self, motor: MotorCore) -> bool:
         """Whether ``motor`` still follows this path (nothing else took it over)."""
         return motor.path is self and motor.axis.profile is self._raw.get(motor.id)
 
@@ -206,7 +216,7 @@ class PairMotion:
         end = self.end_point()
         return all([motor.path_end_allowed(target) for motor, target in zip(self.motors, end)])
 
-    def _follow(self, s_profile: Profile, motors: Sequence["MotorCore"]) -> None:
+    def _follow(self, s_profile: Profile, motors: Sequence[MotorCore]) -> None:
         self.s_profile = s_profile
         self._stopped_at = None
         x_profile, y_profile = follow_path(self.legs, s_profile)
@@ -311,7 +321,7 @@ class LinePaths:
         path.add(build_leg(x, y, start), now)
         return path
 
-    def busy_before(self, x: Request, y: Request, now: int) -> tuple["MotorCore", ...]:
+    def busy_before(self, x: Request, y: Request, now: int) -> tuple[MotorCore, ...]:
         """The pair's motors still running another motion: a bank line lets it complete
         first (4.3.2), unless the pair continues a path of this line."""
         if self.joining(x, y, now) is not None:
@@ -319,7 +329,7 @@ class LinePaths:
         return tuple(r.motor for r in (x, y) if not r.motor.motion_done())
 
     def start_or_report(self, x: Request, y: Request, now: int,
-                        ctx: "Context | None") -> PairMotion | None:
+                        ctx: Context | None) -> PairMotion | None:
         """:meth:`start`; a path that cannot be drawn is error00 of the X motor."""
         try:
             return self.start(x, y, now)
@@ -327,13 +337,13 @@ class LinePaths:
             x.motor.report_error(ctx, OutOfRangeError())
             return None
 
-    def busy(self, motor: "MotorCore") -> bool:
+    def busy(self, motor: MotorCore) -> bool:
         """``motor`` runs a path of this line."""
         path = self.paths.get(motor.id)
         return path is not None and path.owns(motor) and motor.axis.moving
 
 
-def report_leftovers(pairing: Pairing, ctx: "Context | None") -> None:
+def report_leftovers(pairing: Pairing, ctx: Context | None) -> None:
     """An ``@`` without an adjacent partner on its line moves nothing: error00 of its
     motor (docs/fidelity.md "Daisy chain")."""
     for req in pairing.leftovers():
@@ -342,12 +352,12 @@ def report_leftovers(pairing: Pairing, ctx: "Context | None") -> None:
 
 # ---------------------------------------------------------------- direct mode
 
-def direct_selection(motor: "MotorCore") -> Selection:
+def direct_selection(motor: MotorCore) -> Selection:
     """Direct mode and ladder banks use R0 or N0, whichever was written last."""
     return Selection(kind=motor.direct_interp_kind)
 
 
-def direct_limits(motor: "MotorCore") -> Limits | None:
+def direct_limits(motor: MotorCore) -> Limits | None:
     """S0 and A0 of the motor (as ``^``, 2.1.2)."""
     try:
         return motor.limits(int(motor.memory.get("S", 0)), int(motor.memory.get("A", 0)))
@@ -398,7 +408,7 @@ def pair_line(line: Sequence[tuple[ast.Statement, int]], on_chain: Callable[[int
     return pairs
 
 
-def direct_interp(motor: "MotorCore", stmt: ast.Interp, ctx: "Context") -> None:
+def direct_interp(motor: MotorCore, stmt: ast.Interp, ctx: Context) -> None:
     """``@#.n`` in direct mode (2.1.2 "@.1+, @.2+"): the pair starts when the X motor's
     ``@`` runs; with chain pacing the Y motor starts when the line reaches it.
 
@@ -435,7 +445,7 @@ def direct_interp(motor: "MotorCore", stmt: ast.Interp, ctx: "Context") -> None:
         _direct_start(line, *pair, ctx)
 
 
-def _direct_request(motor: "MotorCore", stmt: ast.Interp, ctx: "Context",
+def _direct_request(motor: MotorCore, stmt: ast.Interp, ctx: Context,
                     delay_ns: int = 0) -> Request | None:
     try:
         return request(motor, stmt, direct_selection(motor), direct_limits(motor), delay_ns)
@@ -444,7 +454,7 @@ def _direct_request(motor: "MotorCore", stmt: ast.Interp, ctx: "Context",
         return None
 
 
-def _direct_start(line: LinePaths, x: Request, y: Request, ctx: "Context") -> None:
+def _direct_start(line: LinePaths, x: Request, y: Request, ctx: Context) -> None:
     if not any(m.axis.moving or not m.can_move() for m in (x.motor, y.motor)):
         line.start_or_report(x, y, x.motor.kernel.now, ctx)
 
@@ -457,7 +467,7 @@ def message_bytes(statements: Sequence[ast.Statement], motor_id: int, default: i
                if (inner_motor(stmt) or default) == motor_id)
 
 
-def end_of_line(ctx: "Context") -> None:
+def end_of_line(ctx: Context) -> None:
     """Report the ``@`` of a direct-mode line left without a partner."""
     line = ctx.extra.pop("@", None)
     if isinstance(line, LinePaths):

@@ -14,16 +14,15 @@ from typing import TYPE_CHECKING
 from ...cml import ast
 from ...cml.ast import inner_motor
 from ...errors import MotorError, OutOfRangeError, StoreError
+from ..state.memory import WRITABLE_STATES, VState
+from ..status import Report
 from .coordinated import direct_interp
 from .evaluate import EvalHost, condition, evaluate
-from ..state.memory import VState
-from ..state.memory import WRITABLE_STATES
 from .queries import query_lines, register_reply
-from ..status import Report
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 log = logging.getLogger(__name__)
 
@@ -31,10 +30,10 @@ log = logging.getLogger(__name__)
 class MotorEval(EvalHost):
     """Evaluation of expressions for one motor (reads other motors through its chain)."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
 
-    def _target(self, motor_id: int | None) -> "MotorCore | None":
+    def _target(self, motor_id: int | None) -> MotorCore | None:
         if motor_id is None or motor_id == self.motor.id:
             return self.motor
         return self.motor.bus.motor(motor_id)
@@ -63,7 +62,7 @@ class MotorEval(EvalHost):
         return self.motor.firmware.cosine(x)
 
 
-def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | str | None:
+def assign_value(motor: MotorCore, stmt: ast.Assign, ctx: Context) -> int | str | None:
     """Compute and store an assignment; returns the stored value (for ladder display)."""
     reg = stmt.target
     host = MotorEval(motor)
@@ -93,7 +92,7 @@ def assign_value(motor: "MotorCore", stmt: ast.Assign, ctx: "Context") -> int | 
     return value
 
 
-def run_statement(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+def run_statement(motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
     """Execute one statement in direct mode on ``motor``."""
     try:
         _dispatch(motor, stmt, ctx)
@@ -103,7 +102,7 @@ def run_statement(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> No
         motor.report_error(ctx, OutOfRangeError())
 
 
-def _dispatch(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+def _dispatch(motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
     if isinstance(stmt, ast.Assign):
         assign_value(motor, stmt, ctx)
     elif isinstance(stmt, ast.Ref):
@@ -132,7 +131,7 @@ def _dispatch(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.bank_command(motor, stmt, ctx)
 
 
-def route(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
+def route(motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
     """Run ``stmt`` on the motor it names (``motor`` when it names none); a statement
     for an ID not on the chain goes to the chain (the COM1 device, or nobody)."""
     motor_id = inner_motor(stmt) or motor.id
@@ -143,7 +142,7 @@ def route(motor: "MotorCore", stmt: ast.Statement, ctx: "Context") -> None:
         motor.bus.beyond_chain(motor_id, stmt, ctx)
 
 
-def _query(motor: "MotorCore", q: ast.Query, ctx: "Context") -> None:
+def _query(motor: MotorCore, q: ast.Query, ctx: Context) -> None:
     lines = query_lines(motor, q)
     if lines is None:
         lines = motor.bus.bank_query(motor, q)
@@ -151,7 +150,7 @@ def _query(motor: "MotorCore", q: ast.Query, ctx: "Context") -> None:
         motor.say(ctx, line)
 
 
-def _exec(motor: "MotorCore", stmt: ast.Exec, ctx: "Context") -> None:
+def _exec(motor: MotorCore, stmt: ast.Exec, ctx: Context) -> None:
     op = stmt.op
     if op == "go":
         motor.go()

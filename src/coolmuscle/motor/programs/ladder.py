@@ -21,23 +21,39 @@ bound to "Dx" (target position) or "St" (target speed).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Generator
+from collections.abc import Generator
+from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
-from ...sim.memo import Key, Memo
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
-from .bankcheck import expr_steps, statement_steps
-from .compiled import Compiled, compile_statement
-from .bankexec import (HOLD, STEP_NS, LineGen, Request, Runner, Sleep, Watch, holds,
-                       ladder_units, run_plain, target_motor, timer_ns, wait_branch)
-from .direct import assign_value
+from ...sim.memo import Key, Memo
 from ..state.memory import VState
+from .bankcheck import expr_steps, statement_steps
+from .bankexec import (
+    HOLD,
+    STEP_NS,
+    LineGen,
+    LineObserver,
+    Request,
+    Runner,
+    Sleep,
+    Unit,
+    Watch,
+    holds,
+    ladder_units,
+    run_plain,
+    target_motor,
+    timer_ns,
+    wait_branch,
+)
+from .compiled import Compiled, compile_statement
+from .direct import assign_value
 from .queries import display_reply, format_value, register_name
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 IDLE, RUNNING, PAUSED = "idle", "running", "paused"
 MAX_CALL_DEPTH = 10   # 2.2.3 "CL": "The maximum layer (nesting) should be under 10"
@@ -54,7 +70,7 @@ CODES = 64
 class LadderRunner:
     """Scans one ladder bank: the ladder (``motion=False``) or the logic motion bank."""
 
-    def __init__(self, motor: "MotorCore", *, motion: bool = False) -> None:
+    def __init__(self, motor: MotorCore, *, motion: bool = False) -> None:
         from ..context import Context
         self.motor = motor
         self.kernel = motor.kernel
@@ -72,6 +88,7 @@ class LadderRunner:
         self._running_id = 0
         #: The compiled statements of each bank, by (number, version of the banks).
         self._codes: Memo[Key, tuple[_Code, ...]] = Memo(CODES)
+        self._line_observer: LineObserver | None = None
         self._period = self.period_ns()
         if not motion:
             motor.params.on_change(self._param_changed)
@@ -87,7 +104,7 @@ class LadderRunner:
     def _refresh_period(self) -> None:
         self._period = self.period_ns()
 
-    def start(self, number: int, ctx: "Context | None" = None) -> None:
+    def start(self, number: int, ctx: Context | None = None) -> None:
         """``[L#`` / ``[LM#``: scan bank ``number`` from now (error06 if it does not exist)."""
         if self.motor.banks.get(True, number) is None:
             self.motor.report_error(ctx, NoLadderBankError())
@@ -133,6 +150,20 @@ class LadderRunner:
         number = self.motor.k(self.motor.firmware.ladder_bank_k)
         if number > 0 and self.motor.banks.get(True, number) is not None:
             self.start(number)
+
+    @property
+    def line_observer(self) -> LineObserver | None:
+        """Told of every line a scan reaches (bank coverage); ``None``: nobody asks.
+
+        Setting it recompiles the banks: observed, each line's statements are preceded
+        by one that reports the line (:func:`_reporting`); unobserved, the compiled
+        statements are as they were, so the scans cost nothing more."""
+        return self._line_observer
+
+    @line_observer.setter
+    def line_observer(self, observer: LineObserver | None) -> None:
+        self._line_observer = observer
+        self._codes.clear()
 
     # -- scheduling -----------------------------------------------------------------
     def _cancel(self) -> None:
@@ -237,11 +268,14 @@ class LadderRunner:
             bank = self.motor.banks.get(True, number)
             if bank is None:
                 return None
+            observer = self._line_observer
             code = self._codes.put(key, tuple([
-                (stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
-                                         _assigned), unit.quiet)
-                for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
-                for stmt in unit.statements]))
+                entry for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
+                for entry in ([] if observer is None or not unit.statements
+                               else [_reporting(observer, number, unit)])
+                + [(stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
+                                            _assigned), unit.quiet)
+                   for stmt in unit.statements]]))
         return code
 
     def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,
@@ -382,7 +416,17 @@ class LadderRunner:
             runner.start(stmt.index, self.ctx)
 
 
-def _assigned(target: "MotorCore", reg: ast.Reg, value: int | str | None) -> str:
+def _reporting(observer: LineObserver, bank: int, unit: Unit) -> _Code:
+    """A statement that only tells ``observer`` the line is reached: it takes no step
+    and returns no flow, so the scan goes on exactly as without it."""
+    first, last = unit.first, unit.last
+
+    def report() -> None:
+        observer(bank, first, last)
+    return unit.statements[0], report, unit.quiet
+
+
+def _assigned(target: MotorCore, reg: ast.Reg, value: int | str | None) -> str:
     """The display of an assignment: the register as written, ``=`` and what it holds."""
     name = register_name(reg.kind, reg.index, target.id)
     if reg.kind == "K":

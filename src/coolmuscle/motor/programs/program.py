@@ -18,23 +18,37 @@ bank can loop in zero time.  The motion model is in :mod:`.motor` / :mod:`.plann
 
 from __future__ import annotations
 
+from collections.abc import Generator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Generator
+from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ...errors import MotorError, NoProgramBankError, OutOfRangeError
 from ...sim.kernel import PRIO_LOGIC, Timer
-from ..state import units as units_mod
-from .bankcheck import expr_steps, statement_steps
-from .bankexec import (HOLD, STEP_NS, LineGen, MotionWait, Request, Runner, Sleep, Unit,
-                       holds, program_units, run_plain, target_motor, timer_ns,
-                       wait_branch)
-from .coordinated import (LinePaths, PairMotion, Selection, message_bytes,
-                          report_leftovers, request)
+from ..core import MotorCore  # imported at run time: the compiled dataclasses need it
 from ..motion.planner import Limits
 from ..motion.profile import Profile
+from ..state import units as units_mod
+from .bankcheck import expr_steps, statement_steps
+from .bankexec import (
+    HOLD,
+    STEP_NS,
+    LineGen,
+    LineObserver,
+    MotionWait,
+    Request,
+    Runner,
+    Sleep,
+    Unit,
+    holds,
+    program_units,
+    run_plain,
+    target_motor,
+    timer_ns,
+    wait_branch,
+)
+from .coordinated import LinePaths, PairMotion, Selection, message_bytes, report_leftovers, request
 from .queries import display_reply
-from ..core import MotorCore      # imported at run time: the compiled dataclasses need it
 
 if TYPE_CHECKING:
     from ..context import Context
@@ -63,7 +77,7 @@ class Frame:
 class _Motion:
     """The motion a line gives one motor: waypoints (merge), push, whether the line waits."""
 
-    motor: "MotorCore"
+    motor: MotorCore
     waypoints: list[tuple[float, Limits | None]]
     issued_at: int
     push: bool
@@ -74,7 +88,7 @@ class _Motion:
     path: PairMotion | None                     # an interpolation (4.4)
     delay: int               # ns until the command reaches the motor (K65 chain timing)
 
-    def __init__(self, motor: "MotorCore",
+    def __init__(self, motor: MotorCore,
                  waypoints: list[tuple[float, Limits | None]] | None = None,
                  issued_at: int = -1, push: bool = False, wait: bool = True,
                  continuous: tuple[int, Limits | None] | None = None,
@@ -128,7 +142,7 @@ class _Run:
 class ProgramExecutor:
     """Runs the program banks of one motor."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.kernel = motor.kernel
         self.state = IDLE
@@ -147,13 +161,15 @@ class ProgramExecutor:
         #: (2.1.2 "*": "Program Bank operates from the beginning with command [").
         self.restart_bank: int | None = None
         self.ctx = _bank_context(motor)
+        #: Told of every line that starts (bank coverage); ``None``: nobody asks.
+        self.line_observer: LineObserver | None = None
 
     @property
     def active(self) -> bool:
         return self.state != IDLE
 
     # -- host control -----------------------------------------------------------
-    def start(self, number: int, ctx: "Context | None" = None) -> None:
+    def start(self, number: int, ctx: Context | None = None) -> None:
         """``[#``: run bank ``number`` from its first line (error05 if it does not exist)."""
         bank = self.motor.banks.get(False, number)
         if bank is None:
@@ -227,7 +243,7 @@ class ProgramExecutor:
             self.state = RUNNING
             self._next()
 
-    def next_line(self, ctx: "Context | None" = None) -> None:
+    def next_line(self, ctx: Context | None = None) -> None:
         """``>``: run one line of a paused bank, then pause again (2.1.2 ">")."""
         if self.state == IDLE:
             bank = self.motor.banks.get(False, 1)
@@ -247,7 +263,7 @@ class ProgramExecutor:
         else:
             self._next()
 
-    def prev_line(self, ctx: "Context | None" = None) -> None:
+    def prev_line(self, ctx: Context | None = None) -> None:
         """``<``: run the line before the last one run, then pause (``Can't back!``)."""
         frame = self.stack[-1] if self.stack else None
         target = None if frame is None or frame.last is None else frame.last - 1
@@ -349,6 +365,9 @@ class ProgramExecutor:
     def _start_unit(self, frame: Frame) -> None:
         run = _Run(frame, frame.pc, frame.units[frame.pc], self.kernel.now)
         self._current = run
+        observer = self.line_observer
+        if observer is not None:
+            observer(frame.bank, run.unit.first, run.unit.last)
         self.runner.run(self._unit(run))
 
     def _unit_done(self, flow: object) -> None:
@@ -475,7 +494,7 @@ class ProgramExecutor:
         elif reg.kind in ("V", "K", "H"):
             _guard(target, lambda: target.say(self.ctx, display_reply(target, reg)))
 
-    def _accel(self, target: "MotorCore", index: int, run: _Run) -> None:
+    def _accel(self, target: MotorCore, index: int, run: _Run) -> None:
         """First A of a line: acceleration; a second A: the deceleration (4.1.3)."""
         seen = run.accel_seen.get(target.id, 0)
         run.accel_seen[target.id] = seen + 1
@@ -535,7 +554,7 @@ class ProgramExecutor:
                     run.motions[r.motor.id] = _Motion(r.motor, issued_at=self.kernel.now,
                                                       path=path)
 
-    def _delay(self, run: _Run, target: "MotorCore") -> int:
+    def _delay(self, run: _Run, target: MotorCore) -> int:
         """ns until this line's statements for ``target`` reach it down (or up) the chain
         as one message (ch. 3 K65; 0 without pacing)."""
         if target is self.motor:
@@ -546,12 +565,12 @@ class ProgramExecutor:
         return max(run.arrivals[target.id] - self.kernel.now, 0)
 
 
-def _bank_context(motor: "MotorCore") -> "Context":
+def _bank_context(motor: MotorCore) -> Context:
     from ..context import Context
     return Context(origin="bank", default_motor=motor.id, program=True)
 
 
-def _guard(motor: "MotorCore", action: object) -> None:
+def _guard(motor: MotorCore, action: object) -> None:
     try:
         action()  # type: ignore[operator]
     except (MotorError, LookupError, ValueError):
@@ -563,7 +582,7 @@ def _has_flow(unit: Unit) -> bool:
                for s in unit.statements)
 
 
-def _limits(target: "MotorCore", run: _Run) -> Limits | None:
+def _limits(target: MotorCore, run: _Run) -> Limits | None:
     prog = target.program
     s_value = target.memory.number("S", prog.sel_s)
     a_value = target.memory.number("A", prog.sel_a)
@@ -572,7 +591,7 @@ def _limits(target: "MotorCore", run: _Run) -> Limits | None:
     return target.limits(s_value, a_value, decel_a)
 
 
-def _add_motion(target: "MotorCore", run: _Run, kind: str, index: int, modifier: str | None,
+def _add_motion(target: MotorCore, run: _Run, kind: str, index: int, modifier: str | None,
                 now: int, delay: int = 0) -> None:
     if modifier is not None and not target.resolution.incremental_allowed:
         raise OutOfRangeError()   # ch. 3 K37: "40-70, the incremental motion cannot be executed"
@@ -595,7 +614,7 @@ def _add_motion(target: "MotorCore", run: _Run, kind: str, index: int, modifier:
     _issue(motion, motion.waypoints)
 
 
-def _base(target: "MotorCore") -> float:
+def _base(target: MotorCore) -> float:
     """Where a relative ``P#+`` starts: the motor's target, or where it is (2.2.2 "P")."""
     aim = target.axis.target()
     return aim if abs(aim) != float("inf") else float(target.position())

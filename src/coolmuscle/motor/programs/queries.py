@@ -6,7 +6,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ...cml import ast
 from ..state.memory import VNumber, VState, VString
@@ -36,7 +37,7 @@ def format_value(value: object) -> str:
     return str(value)
 
 
-def register_reply(motor: "MotorCore", reg: ast.Reg) -> str:
+def register_reply(motor: MotorCore, reg: ast.Reg) -> str:
     """Reply to a register named alone in direct mode (6.6 "P1~200", "S1~15", ...)."""
     if reg.kind == "K":
         value: object = motor.k(reg.number)
@@ -45,7 +46,7 @@ def register_reply(motor: "MotorCore", reg: ast.Reg) -> str:
     return f"{register_name(reg.kind, reg.index, motor.id)}={format_value(value)}"
 
 
-def display_reply(motor: "MotorCore", reg: ast.Reg) -> str:
+def display_reply(motor: MotorCore, reg: ast.Reg) -> str:
     """A register named alone on a bank line (2.2.1, 2.2.2 "V": "When this command is
     used alone, it displays the specified variable data"): a V holding a state shows
     the state's value now (``V4.1=10000`` for ``V4.1="Px"``), as ``V5.1=V4.1`` reads
@@ -62,7 +63,7 @@ def group_lines(items: list[str], per_line: int = PER_LINE) -> list[str]:
     return [", ".join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
 
 
-def data_listing(motor: "MotorCore", kind: str) -> list[str]:
+def data_listing(motor: MotorCore, kind: str) -> list[str]:
     """?A, ?S, ?M, ?T, ?V, ?P, ?N, ?R: memory numbers 1..N of one kind."""
     items = []
     for index, value in motor.memory.items(kind):
@@ -72,7 +73,7 @@ def data_listing(motor: "MotorCore", kind: str) -> list[str]:
     return group_lines(items)
 
 
-def direct_data(motor: "MotorCore") -> list[str]:
+def direct_data(motor: MotorCore) -> list[str]:
     """``?.n``: the direct-mode data, in the 2.1 operation example's form."""
     m = motor.id
     get = motor.memory.get
@@ -80,7 +81,7 @@ def direct_data(motor: "MotorCore") -> list[str]:
             f"A.{m}={format_value(get('A', 0))}, M.{m}={format_value(get('M', 0))}"]
 
 
-def _live(motor: "MotorCore") -> dict[int, Callable[[], str]]:
+def _live(motor: MotorCore) -> dict[int, Callable[[], str]]:
     m = motor.id
     return {
         50: lambda: f"OUT.{m}={io_word_hex(motor.io.output_word(), motor.io.output_count)}",
@@ -98,7 +99,7 @@ def _live(motor: "MotorCore") -> dict[int, Callable[[], str]]:
     }
 
 
-def query_lines(motor: "MotorCore", query: ast.Query) -> list[str] | None:
+def query_lines(motor: MotorCore, query: ast.Query) -> list[str] | None:
     """Reply lines for ``query``; ``None`` when the motor does not know it (silence)."""
     m = motor.id
     if query.letter is None and query.number is None:

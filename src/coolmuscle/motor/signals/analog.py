@@ -18,9 +18,10 @@ from __future__ import annotations
 import csv
 import math
 from bisect import bisect_right
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from ...sim.kernel import NS_PER_S
 
@@ -66,7 +67,7 @@ class AnalogSource:
     def next_change(self, t: int) -> int | None:
         return None
 
-    def bind(self, motor: "MotorCore") -> None:
+    def bind(self, motor: MotorCore) -> None:
         """Attach to the motor whose input it drives (sensors read the motor)."""
 
     def load_torque(self, t: int | None = None) -> float:
@@ -206,7 +207,7 @@ class TorqueSensor(AnalogSource):
         self.direction = 1 if direction >= 0 else -1
         self._position: Callable[[int | None], float] = lambda t: 0.0
 
-    def bind(self, motor: "MotorCore") -> None:
+    def bind(self, motor: MotorCore) -> None:
         def raw(t: int | None) -> float:
             if t is None or t >= motor.kernel.now:
                 return motor.axis.raw_actual()

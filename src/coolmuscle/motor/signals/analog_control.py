@@ -23,10 +23,10 @@ from typing import TYPE_CHECKING
 
 from ...errors import MotorError
 from ...sim.kernel import PRIO_MOTION, Timer
-from ..state import units
-from .analog import AnalogInput, counts_to_volts, volts_to_counts
 from ..motion.planner import Limits
 from ..motion.profile import Profile, Segment
+from ..state import units
+from .analog import AnalogInput, counts_to_volts, volts_to_counts
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -64,7 +64,7 @@ def bipolar(y: float) -> float:
     return 0.0
 
 
-def effective_mode(motor: "MotorCore") -> int:
+def effective_mode(motor: MotorCore) -> int:
     """The CM2 control type the parameters select (CM1 maps K64/K38 onto it)."""
     if motor.firmware.name == "cm1":
         k64 = motor.k(64)
@@ -84,12 +84,12 @@ def friction_nm(plant: object, speed_pps: float, ppr: int) -> float:
     return coulomb + getattr(plant, "viscous_friction", 0.0) * omega
 
 
-def k40_pps(motor: "MotorCore") -> float:
+def k40_pps(motor: MotorCore) -> float:
     """K40 (min⁻¹) in pulses/s of the current resolution."""
     return units.rpm_to_pps(motor.k(40), motor.k(37))
 
 
-def k40_s_value(motor: "MotorCore", fraction: float) -> int:
+def k40_s_value(motor: MotorCore, fraction: float) -> int:
     """S = speed[min⁻¹] x resolution[ppr] / speed unit / 60, truncated (ch. 3 K40)."""
     res = motor.resolution
     return int(motor.k(40) * fraction * res.pulses_per_rev / res.speed_unit_pps / 60)
@@ -109,7 +109,7 @@ class _Feedback:
 class AnalogControl:
     """K38 analog control of one motor."""
 
-    def __init__(self, motor: "MotorCore", analog_input: AnalogInput) -> None:
+    def __init__(self, motor: MotorCore, analog_input: AnalogInput) -> None:
         self.motor = motor
         self.input = analog_input
         self.kernel = motor.kernel

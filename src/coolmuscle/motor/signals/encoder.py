@@ -19,8 +19,9 @@ instant.  Choices: docs/fidelity.md "External encoder".
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ...sim.kernel import NS_PER_S, PRIO_MOTION, Timer
 from ..motion.planner import Limits
@@ -134,7 +135,7 @@ class _Clock:
 class ExternalEncoder:
     """K71/K72 external encoder of one motor."""
 
-    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
+    def __init__(self, motor: MotorCore, timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.gearing = Gearing()
@@ -233,11 +234,6 @@ class ExternalEncoder:
         """The external encoder count now (or at an earlier ``t``, for traces)."""
         state = self._state(t) if self.type else None
         return self.offset if state is None else self._count_of(state)
-
-    def reset_count(self, value: int = 0) -> None:
-        """Set the count (e.g. an input function that resets counters)."""
-        self.offset = 0
-        self.offset = value - self.count()
 
     def frequency(self) -> float:
         """Encoder pulses per second now (RT3 ``Fx``)."""

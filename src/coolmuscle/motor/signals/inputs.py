@@ -36,8 +36,8 @@ from ...sim.kernel import NS_PER_MS, PRIO_IO, Timer
 from .io import digit
 
 if TYPE_CHECKING:
-    from ..core import MotorCore
     from ..context import Context
+    from ..core import MotorCore
 
 # K27/K30 level functions (ch. 3 K27)
 LV_GENERAL, LV_ORIGIN, LV_FEED_CW, LV_FEED_CCW, LV_STOP_LADDER = 1, 2, 3, 4, 5
@@ -52,17 +52,17 @@ QUICK_LEVEL, QUICK_RISE, QUICK_FALL, SLOW_LEVEL, SLOW_RISE, SLOW_FALL = 27, 28, 
 class InputFunctions:
     """Quick and slow signals of every input and the functions they run."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         count = motor.io.input_count
         self.quick = [False] * (count + 1)
         self.slow = [False] * (count + 1)
         self._timers: list[Timer | None] = [None] * (count + 1)
-        self._ctx: "Context | None" = None
+        self._ctx: Context | None = None
         self._p_profile: object = None      # the command the last P type pulse gave
 
     @property
-    def ctx(self) -> "Context":
+    def ctx(self) -> Context:
         if self._ctx is None:
             from ..context import Context
             self._ctx = Context(origin="motor", default_motor=self.motor.id)

@@ -8,36 +8,24 @@ active; CM1: 0 = normally open).  ?70 and ?50 report the input signals and the o
 ports as hex words.
 
 A K34 digit names an output *function* through the firmware's table
-(:data:`CML_OUTPUT_FUNCTIONS`, :data:`CM1_OUTPUT_FUNCTIONS`): the same digit is not
-the same function on CM1 (cm1-ethernetip-interface-manual.txt Appendix A K34).
+(:mod:`coolmuscle.motor.state.output_functions`): the same digit is not the same
+function on CM1 (cm1-ethernetip-interface-manual.txt Appendix A K34).
 The input functions (K27–K32) and the output functions other than the commanded
 ones are evaluated by the motor, which passes a ``function_signal`` callback.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
-#: Output functions; CM2's K34 digit of each is its number (ch. 3 K34).
-OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE = 0, 1, 2, 3, 4
-OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH = 6, 7, 8, 9
-#: Functions of CM1 only (Appendix A K34): "3:CML O1/F1", "4:CML O2/F2" (whichever
-#: output it is), "5:Analog Output", "9: Torque Limit reached - Push Mode Only".
-OUT_FOLLOWS_O1, OUT_FOLLOWS_O2, OUT_ANALOG, OUT_PUSH_AT_LEVEL = 11, 12, 15, 19
-
-#: K34 digit -> output function, cml-users-guide.txt ch. 3 K34 (5 is "—").
-CML_OUTPUT_FUNCTIONS: tuple[int, ...] = (
-    OUT_NONE, OUT_IN_POSITION, OUT_ALARM, OUT_GENERAL, OUT_ORIGIN_DONE, OUT_NONE,
-    OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH)
-#: K34 digit -> output function, cm1-ethernetip-interface-manual.txt Appendix A K34:
-#: "0:Command 1:Inposition 2:Alarm 3:CML O1/F1 4:CML O2/F2 5:Analog Output 6:merge
-#: motion 7:Quadrature phase output 8: Motor Free 9: Torque Limit reached - Push Mode
-#: Only".  "Command" is read as: the output follows the commands O#/F# of its own
-#: number (docs/fidelity.md "CM1 profile").
-CM1_OUTPUT_FUNCTIONS: tuple[int, ...] = (
-    OUT_GENERAL, OUT_IN_POSITION, OUT_ALARM, OUT_FOLLOWS_O1, OUT_FOLLOWS_O2, OUT_ANALOG,
-    OUT_MERGE_PULSE, OUT_ROTATION_PULSE, OUT_MOTOR_FREE, OUT_PUSH_AT_LEVEL)
-
+from ..state.output_functions import (
+    CML_OUTPUT_FUNCTIONS,
+    OUT_ANALOG,
+    OUT_FOLLOWS_O1,
+    OUT_FOLLOWS_O2,
+    OUT_GENERAL,
+    OUT_NONE,
+)
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call).
 _POWERS: tuple[int, ...] = tuple(10 ** n for n in range(12))
@@ -155,8 +143,3 @@ class DigitalIO:
             if self.output_port(n):
                 word |= 1 << (n - 1)
         return word
-
-    def general_word(self) -> int:
-        """Ports of the general-use outputs only (the K23 function 4 report)."""
-        return sum(1 << (n - 1) for n in range(1, self.output_count + 1)
-                   if self.command_of(n) is not None and self.output_port(n))

@@ -37,7 +37,7 @@ JOG_ACCEL = 100_000.0
 class ManualMotion:
     """Jog and feed state of one motor."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.feed_profile: Profile | None = None
         self.feed_direction = 0

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .io import OUT_ROTATION_PULSE
 from ..motion.trajectory import Schmitt, Timeline, Track
+from ..state.output_functions import OUT_ROTATION_PULSE
 
 if TYPE_CHECKING:
     from ..core import MotorCore
@@ -41,7 +41,7 @@ def _phase_b(quarter: int) -> bool:
 class RotationPulses:
     """The K34=7 outputs of one motor."""
 
-    def __init__(self, motor: "MotorCore", timeline: Timeline) -> None:
+    def __init__(self, motor: MotorCore, timeline: Timeline) -> None:
         self.motor = motor
         self.timeline = timeline
         self.track: Track | None = None

@@ -18,10 +18,11 @@ The choices made where the manuals are silent are listed in docs/fidelity.md.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal, Mapping
+from typing import Any, Literal
 
-from ..signals.io import CM1_OUTPUT_FUNCTIONS, CML_OUTPUT_FUNCTIONS
+from .output_functions import CM1_OUTPUT_FUNCTIONS, CML_OUTPUT_FUNCTIONS
 from .params import ParamSpec, chosen, digitwise, per_channel, ranged, reserved
 from .units import RESOLUTIONS
 

@@ -18,8 +18,9 @@ as 0 or 1.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Mapping, Union, overload
+from typing import Any, Literal, overload
 
 from ...cml.ast import Frozen
 from ...errors import OutOfRangeError
@@ -80,7 +81,7 @@ class VState(Frozen):
         return self.name == "Dx"
 
 
-VValue = Union[VNumber, VString, VState]
+VValue = VNumber | VString | VState
 #: The registers that hold numbers (every kind but V), as the type checker names them.
 NumericKind = Literal["P", "S", "A", "M", "T", "N", "R", "H"]
 

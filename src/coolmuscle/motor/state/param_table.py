@@ -9,7 +9,8 @@ the motor's job, through :meth:`ParamTable.on_change`.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
 
 from .firmware import CM2, Firmware
 from .params import FIRST_K, LAST_K, PER_LINE, ChangeListener, NoSuchParameterError, ParamSpec

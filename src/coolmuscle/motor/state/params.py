@@ -13,8 +13,9 @@ the motor's job, through :meth:`ParamTable.on_change`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Literal
 
 from ...errors import OutOfRangeError
 

@@ -31,18 +31,19 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ...errors import StoreError
 
 if TYPE_CHECKING:
-    import sqlite3        # imported where a store is opened: a run without one never needs it
+    import sqlite3  # imported where a store is opened: a run without one never needs it
 
 try:
     import fcntl
-except ImportError:       # not POSIX: no writer lock (the project runs on Linux)
+except ImportError:       # Windows: the writer lock is SQLite's own (_sqlite_lock)
     fcntl = None  # type: ignore[assignment]
 
 #: ``PRAGMA application_id`` of a coolmuscle store ("CMST").
@@ -89,7 +90,7 @@ class Store:
             except RuntimeError as exc:  # no home directory
                 raise StoreError(f"no state directory: {exc}") from exc
         self._path = str(path)
-        self._lock: int | None = _writer_lock(self._path) if writer else None
+        self._lock: Callable[[], None] | None = _writer_lock(self._path) if writer else None
         try:
             self._conn: sqlite3.Connection | None = _open(self._path)
         except BaseException:
@@ -194,7 +195,7 @@ class Store:
 
     def _unlock(self) -> None:
         if self._lock is not None:
-            os.close(self._lock)           # the flock goes with its file description
+            self._lock()                   # the lock goes with its file or connection
             self._lock = None
 
     def __enter__(self) -> Store:
@@ -245,11 +246,17 @@ def bad_state_message(path: str, motor_id: int, problem: str) -> str:
             f"(mv {path} {path}.bad) to start with defaults, or start with --no-state")
 
 
-def _writer_lock(path: str) -> int | None:
-    """An exclusive ``flock`` on ``PATH.lock`` for this writer (held until closed, or
-    until the process ends however it ends), or :class:`StoreError` naming the holder.
-    Two chains saving into one store would each overwrite the other's snapshots."""
-    if fcntl is None or path == ":memory:":
+def _writer_lock(path: str) -> Callable[[], None] | None:
+    """The lock of this writer on ``PATH`` (held until the function returned is called,
+    or until the process ends however it ends), or :class:`StoreError` naming the
+    holder.  Two chains saving into one store would each overwrite the other's
+    snapshots.  ``PATH.lock`` holds the writer's process ID.
+
+    Where there is ``flock`` (POSIX) ``PATH.lock`` is the locked file; elsewhere
+    (Windows) the lock is an exclusive transaction of SQLite on ``PATH.writer``, held
+    open (:func:`_sqlite_lock`: SQLite takes the system's own file locks, which the
+    system releases when the process ends)."""
+    if path == ":memory:":
         return None
     lock_path = path + ".lock"
     try:
@@ -257,9 +264,24 @@ def _writer_lock(path: str) -> int | None:
         fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise StoreError(f"cannot lock {path}: {exc.strerror or exc}") from exc
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
+    release: Callable[[], None] | None
+    if fcntl is not None:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            release = None
+        else:
+            def release() -> None:
+                os.close(fd)                   # the flock goes with its file description
+    else:
+        release = _sqlite_lock(path + ".writer")
+        if release is not None:
+            held = release
+
+            def release() -> None:
+                os.close(fd)
+                held()
+    if release is None:
         try:
             holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
         except OSError:
@@ -273,7 +295,27 @@ def _writer_lock(path: str) -> int | None:
         os.write(fd, f"{os.getpid()}\n".encode())
     except OSError:
         pass                       # the lock holds; only the pid shown to others is lost
-    return fd
+    return release
+
+
+def _sqlite_lock(path: str) -> Callable[[], None] | None:
+    """An exclusive transaction on the SQLite database ``path`` (an empty one serves),
+    held until the function returned is called; ``None`` when another connection holds
+    it.  The portable lock where ``flock`` is missing."""
+    import sqlite3
+    try:
+        conn = sqlite3.connect(path, timeout=0, isolation_level=None, check_same_thread=False)
+    except sqlite3.Error as exc:
+        raise StoreError(f"cannot lock {path}: {exc}") from exc
+    try:
+        conn.execute("BEGIN EXCLUSIVE")
+    except sqlite3.OperationalError:         # "database is locked": another writer
+        conn.close()
+        return None
+    except sqlite3.Error as exc:
+        conn.close()
+        raise StoreError(f"cannot lock {path}: {exc}; remove it (it holds nothing)") from exc
+    return conn.close
 
 
 def _open(path: str) -> sqlite3.Connection:

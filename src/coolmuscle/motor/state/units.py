@@ -70,16 +70,6 @@ def valid_k37(k37: int) -> bool:
     return k37 in RESOLUTIONS
 
 
-def speed_to_pps(s_value: int, k37: int) -> float:
-    """S value (speed units) to pulses per second."""
-    return float(s_value * resolution(k37).speed_unit_pps)
-
-
-def pps_to_speed(pps: float, k37: int) -> int:
-    """Pulses per second to S value (speed units), truncated toward zero."""
-    return int(pps / resolution(k37).speed_unit_pps)
-
-
 def accel_to_pps2(a_value: int) -> float:
     """A value (kpps²) to pulses per second squared."""
     return float(a_value) * 1000.0

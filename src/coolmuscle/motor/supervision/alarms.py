@@ -19,7 +19,8 @@ and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, ClassVar
 
 from mypy_extensions import mypyc_attr
 
@@ -28,15 +29,15 @@ from ..motion.dynamics import Piece
 from ..status import Ux
 
 if TYPE_CHECKING:
+    from ..core import MotorCore
     from ..motion.axis import Axis, Watcher
     from ..motion.dynamics import Conditions
-    from ..core import MotorCore
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
 OVER_SPEED_FACTOR = 1.2
 
 
-def _beyond(f: Callable[[Piece], xp.F], limit: float) -> "tuple[Conditions, Conditions]":
+def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple[Conditions, Conditions]:
     """Alternatives for ``|f| > limit``."""
     return (lambda p: [xp.plus(f(p), -limit)],
             lambda p: [xp.plus(xp.scale(f(p), -1.0), -limit)])
@@ -55,13 +56,13 @@ class _AlarmWatch:
     bit: ClassVar[Ux] = Ux(0)
     mask: ClassVar[int] = int(Ux(0))
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
 
-    def active(self, axis: "Axis") -> bool:
+    def active(self, axis: Axis) -> bool:
         return axis.enabled and not self.motor.alarm & self.mask   # int & int: no enum
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         del axis
         self.motor.raise_alarm(int(self.bit))
 
@@ -76,7 +77,7 @@ class PositionErrorWatch(_AlarmWatch):
         unit = 1000 if self.motor.firmware.name == "cm1" else 100
         return float(self.motor.k(56) * unit)
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis) or self.motor.position_error_exempt():
             return None
         limit, motion = self.limit(), axis.motion
@@ -92,7 +93,7 @@ class OverSpeedWatch(_AlarmWatch):
     bit: ClassVar[Ux] = Ux.OVER_SPEED
     mask: ClassVar[int] = int(Ux.OVER_SPEED)
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             return None
         ppr = self.motor.resolution.pulses_per_rev
@@ -119,13 +120,13 @@ class OverloadWatch(_AlarmWatch):
     bit: ClassVar[Ux] = Ux.OVERLOAD
     mask: ClassVar[int] = int(Ux.OVERLOAD)
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         super().__init__(motor)
         self.since: int | None = None
         #: [enter, back or None] of each stretch beyond rated found on the motion.
         self._walk: list[list[int | None]] = []
 
-    def _rated(self, axis: "Axis") -> float:
+    def _rated(self, axis: Axis) -> float:
         per = axis.motion.drive.percent_per_accel
         return 100.0 / per if per > 0.0 else float("inf")
 
@@ -136,7 +137,7 @@ class OverloadWatch(_AlarmWatch):
                 return enter
         return None
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             self.since, self._walk = None, []
             return None
@@ -168,7 +169,7 @@ class OverloadWatch(_AlarmWatch):
             walk[-1][1] = back
             since, t = None, back + 1
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         self.since, self._walk = None, []
         super().fire(axis)
 
@@ -179,17 +180,17 @@ class TemperatureWatch(_AlarmWatch):
     bit: ClassVar[Ux] = Ux.TEMPERATURE
     mask: ClassVar[int] = int(Ux.TEMPERATURE)
 
-    def active(self, axis: "Axis") -> bool:
+    def active(self, axis: Axis) -> bool:
         return not self.motor.alarm & self.mask
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             return None
         thermal = self.motor.thermal
         return thermal.first_above(axis.motion, after_ns, thermal.alarm)
 
 
-def alarm_watchers(motor: "MotorCore") -> "list[Watcher]":
+def alarm_watchers(motor: MotorCore) -> list[Watcher]:
     """The alarm watchers of one motor, in the order they are checked."""
     return [PositionErrorWatch(motor), OverSpeedWatch(motor), OverloadWatch(motor),
             TemperatureWatch(motor)]

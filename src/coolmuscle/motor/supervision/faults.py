@@ -32,7 +32,8 @@ broken_cable        ``io``: every input reads off electrically;      cable ("io"
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..status import Ux
 
@@ -51,7 +52,7 @@ TEMPERATURE_C = (-40.0, 200.0)
 class Faults:
     """The lasting faults of one motor and the injection entry point."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.extra_load_percent = 0.0
         self.stuck: dict[int, bool] = {}

@@ -35,7 +35,7 @@ AT_REST_PPS = 1.0   # below 1 pulse/s the shaft counts as standing (no pulse in 
 class TravelLimits:
     """Software limits and limit-sensor state of one motor."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.on = {1: False, -1: False}
         self._range: tuple[float, float] = (-math.inf, math.inf)

@@ -32,8 +32,8 @@ from ..signals.io import digit
 from ..status import Report
 
 if TYPE_CHECKING:
-    from ..motion.axis import Axis
     from ..core import MotorCore
+    from ..motion.axis import Axis
 
 STOPPER, SENSOR, ZPHASE, SENSOR_Z = "stopper", "sensor", "z", "sensor+z"
 
@@ -59,7 +59,7 @@ def auto_start(k46: int) -> bool:
 class OriginSearch:
     """The origin search of one motor (a watcher on its axis)."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.phase: str | None = None
         self.direction = 1
@@ -198,7 +198,7 @@ class OriginSearch:
         elif self.phase == "offset":
             self._finish()
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if self.phase == "stopper":
             return self._stopper_time(axis, after_ns)
         if self.phase in ("seek", "leave", "reverse") and self.source in (ZPHASE, SENSOR_Z):
@@ -208,7 +208,7 @@ class OriginSearch:
                                      lambda p: [xp.plus(xp.scale(p.pos, -1.0), down)])
         return None
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         if self.phase == "stopper":
             self.point = axis.raw_actual()
             axis.hold_here()
@@ -217,7 +217,7 @@ class OriginSearch:
         self._z_cross(axis.raw_actual())
         self._signal_changed()
 
-    def _stopper_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def _stopper_time(self, axis: Axis, after_ns: int) -> int | None:
         per = axis.motion.drive.percent_per_accel
         if per <= 0:
             return None

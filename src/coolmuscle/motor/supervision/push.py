@@ -15,7 +15,8 @@ The push state is also what a program bank waits on: :meth:`Motor.motion_done`.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ...sim.kernel import PRIO_MOTION, Timer
 from ..motion import expoly as xp
@@ -23,8 +24,8 @@ from ..motion.planner import Limits
 from ..status import Ux
 
 if TYPE_CHECKING:
-    from ..motion.axis import Axis
     from ..core import MotorCore
+    from ..motion.axis import Axis
 
 APPROACH, PUSHING, COMPLETE, ERROR = "approach", "pushing", "complete", "error"
 
@@ -39,7 +40,7 @@ _AT_LEVEL = 1.0 - 1e-6
 class Push:
     """The push motion of one motor (a watcher on its axis)."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         self.state: str | None = None
         self.since: int | None = None
@@ -105,7 +106,7 @@ class Push:
             self._begin_timer = None
 
     # -- watcher --------------------------------------------------------------
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if self.state != PUSHING or not axis.enabled:
             return None
         per = axis.motion.drive.percent_per_accel
@@ -129,7 +130,7 @@ class Push:
         self._action = "complete"
         return max(deadline, after_ns)
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         del axis
         now = self.motor.kernel.now
         if self._action == "touch":

@@ -20,8 +20,8 @@ from ..motion import expoly as xp
 EDGE_MARGIN = 1e-6
 
 if TYPE_CHECKING:
-    from ..motion.axis import Axis
     from ..core import MotorCore
+    from ..motion.axis import Axis
 
 
 @dataclass
@@ -34,10 +34,10 @@ class PositionSensor:
     hi: float
     ppr: int = 1000
     normally_closed: bool = False
-    motor: "MotorCore | None" = field(default=None, repr=False)
+    motor: MotorCore | None = field(default=None, repr=False)
     inside: bool = False
 
-    def _range(self, motor: "MotorCore") -> tuple[float, float]:
+    def _range(self, motor: MotorCore) -> tuple[float, float]:
         scale = motor.resolution.pulses_per_rev / self.ppr
         return self.lo * scale, self.hi * scale
 
@@ -45,7 +45,7 @@ class PositionSensor:
         """The electrical level it drives (a normally closed switch opens inside)."""
         return self.inside != self.normally_closed
 
-    def attach(self, motor: "MotorCore") -> None:
+    def attach(self, motor: MotorCore) -> None:
         """Start driving ``motor``'s input from the shaft position."""
         self.motor = motor
         lo, hi = self._range(motor)
@@ -53,7 +53,7 @@ class PositionSensor:
         motor.set_input_level(self.input, self.level())
         motor.axis.add_watcher(self)
 
-    def next_time(self, axis: "Axis", after_ns: int) -> int | None:
+    def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if self.motor is None:
             return None
         lo, hi = self._range(self.motor)
@@ -79,7 +79,7 @@ class PositionSensor:
             return conds
         return motion.first(after_ns, enter, skip=far)
 
-    def fire(self, axis: "Axis") -> None:
+    def fire(self, axis: Axis) -> None:
         del axis
         self.inside = not self.inside
         if self.motor is not None:

@@ -18,18 +18,19 @@ them and the motor, and what the motor's actions hand over to it:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from ...sim.memo import Key, Memo
-from .alarms import alarm_watchers
 from ..motion.dynamics import Drive
+from ..motion.planner import Limits
+from ..status import ALARM_BITS, Ux
+from .alarms import alarm_watchers
 from .faults import Faults
 from .limits import TravelLimits
 from .origin import OriginSearch, auto_start
-from ..motion.planner import Limits
 from .push import Push
 from .sensors import Geometry
-from ..status import ALARM_BITS, Ux
 from .thermal import Thermal
 
 if TYPE_CHECKING:
@@ -47,7 +48,7 @@ CM2_TEMPERATURE_ALARM = 85.0
 class Supervisor:
     """Everything around the motion of one motor (built before its axis exists)."""
 
-    def __init__(self, motor: "MotorCore") -> None:
+    def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
         #: ``M`` (2.1.1): the torque limit, % of the maximum torque
         self.torque_limit = 100

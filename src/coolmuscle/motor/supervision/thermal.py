@@ -12,8 +12,8 @@ not polled (docs/fidelity.md "Servo, load and alarms").
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 from ...sim.kernel import NS_PER_S
 from ..motion import expoly as xp

@@ -9,16 +9,18 @@ Usage::
 The package build compiles them (``pip install .``, ``pip install -e .``, a wheel:
 ``setup.py`` and :mod:`.compiler`).  ``build`` does the same in place, without pip: after
 a hot module was edited in an editable install (the sources run until then), it
-compiles :data:`coolmuscle._accel.MODULES` into ``coolmuscle/_compiled/`` with the mypy
-of this environment (``pip install -e ".[accel]"``; a C compiler and the Python headers
-are needed).  It does nothing when the build is current.  ``status`` says whether the
-compiled modules are in use, and why not.  Exit status: 0 compiled or current, 1 not
-compiled (the sources run), 2 bad usage.
+compiles :data:`coolmuscle._accel.MODULES` beside their sources with the mypy of this
+environment (``pip install -e ".[accel]"``; a C compiler and the Python headers are
+needed) and writes the build stamp.  It does nothing when the build is current (and
+records the times again when sources were only touched).  ``status`` says whether the
+compiled modules are current and in use, and why not.  ``clean`` removes them.  Exit
+status: 0 compiled or current, 1 not compiled (the sources run), 2 bad usage.
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from ... import _accel
 from . import compiler
@@ -29,9 +31,10 @@ def build(force: bool = False, quiet: bool = False) -> int:
     def log(line: str) -> None:
         print(line, file=sys.stderr)
 
+    package = Path(_accel.PACKAGE_DIR)
     try:
-        outcome = compiler.build(_accel, _accel.BUILD_DIR, force=force,
-                                 lock=_accel.PACKAGE_DIR / ".accel-build.lock", log=log)
+        outcome = compiler.build(_accel, package, in_place=True, force=force,
+                                 lock=package / ".accel-build.lock", log=log)
     except compiler.CompileError as exc:
         print(f"compiling the hot modules failed: {exc}", file=sys.stderr)
         return 1
@@ -41,11 +44,20 @@ def build(force: bool = False, quiet: bool = False) -> int:
 
 
 def status() -> int:
-    """One line: in use or not, and why; 0 when the build is current."""
-    files, reason = _accel.read_manifest()
-    used = "in use" if _accel.active() else "not in use"
-    print(f"compiled modules: {used}; {reason}")
-    return 0 if files is not None else 1
+    """One line: current or not and why, in use or not; 0 when the build is current."""
+    try:
+        values = _accel.read_stamp(_accel.PACKAGE_DIR)
+    except ValueError as exc:
+        print(f"compiled modules: not in use; {exc}")
+        return 1
+    why = _accel.refusal(values)
+    if why is not None:
+        print(f"compiled modules: not in use; {why}")
+        return 1
+    assert values is not None
+    used = "in use" if _accel.active() else f"not in use ({_accel.state['reason']})"
+    print(f"compiled modules: {used}; {_accel.built(values)}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         if command == "build":
             return build(force="--force" in flags, quiet="--quiet" in flags)
         if command == "clean":
-            compiler.clean(_accel.BUILD_DIR)
+            compiler.clean(_accel, Path(_accel.PACKAGE_DIR))
             return 0
         return status()
     except OSError as exc:            # a read-only install, a full disk

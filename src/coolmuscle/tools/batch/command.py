@@ -16,21 +16,20 @@ import logging
 import math
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, List, Optional, Sequence
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, \
-    TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from .job import FIRMWARES, Job, JobError, Outcome, make_job
-from .report import ReportError, check_output, write_junit, write_results
+from ..cli.usage import UsageError
 from .engine import Engine, EngineError, open_engine
 from .figures import ns_to_seconds
-from ..cli.usage import UsageError
+from .job import FIRMWARES, Job, JobError, Outcome, make_job
+from .report import ReportError, check_output, write_junit, write_results
 
 log = logging.getLogger(__name__)
 
@@ -255,23 +254,23 @@ def write_outputs(run: BatchRun, junit: Path | None, results: Path | None,
 
 
 def batch(
-    scripts: List[Path] = typer.Argument(..., metavar="SCRIPTS...",
+    scripts: list[Path] = typer.Argument(..., metavar="SCRIPTS...",
                                          help="Scripts / golden transcripts, or "
                                               "directories of *.cml."),
-    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", metavar="N", help=JOBS_HELP),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="tcp://HOST:8786",
+    jobs: int | None = typer.Option(None, "--jobs", "-j", metavar="N", help=JOBS_HELP),
+    scheduler: str | None = typer.Option(None, "--scheduler", metavar="tcp://HOST:8786",
                                             help=SCHEDULER_HELP),
-    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml",
+    junit: Path | None = typer.Option(None, "--junit", metavar="FILE.xml",
                                          help="Write JUnit XML: one testcase per script."),
-    results: Optional[Path] = typer.Option(
+    results: Path | None = typer.Option(
         None, "--results", metavar="FILE.csv",
         help="Write one row per script with the run's figures: CSV, or Parquet for "
              "FILE.parquet (needs pyarrow)."),
     motors: int = typer.Option(1, "--motors", help=MOTORS_HELP),
     firmware: str = typer.Option("cm2", "--firmware", help=FIRMWARE_HELP),
-    until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
+    until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help=UNTIL_HELP),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help="Machine file for every script without "
                                                 "a '# chain: machine=' header."),
 ) -> None:

@@ -16,17 +16,17 @@ import concurrent.futures as cf
 import contextlib
 import logging
 import multiprocessing
-import multiprocessing.forkserver
-import multiprocessing.resource_tracker
 import os
 import re
 import signal
 import socket
 import threading
 import time
-from typing import Any, Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 from ...errors import CoolMuscleError
+from ...needs import needs_extra
 from .job import Job, Outcome, execute, execute_many
 
 log = logging.getLogger(__name__)
@@ -81,17 +81,24 @@ class PoolEngine(Engine):
         self.jobs = jobs
         self.description = f"{jobs} local processes"
         # forkserver: workers fork from a clean server that has imported the runner, not
-        # from this process (whose progress-bar thread a fork would copy mid-lock)
-        context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(["coolmuscle.tools.batch.job", "coolmuscle.chain"])
-        # the server (and so every worker forked from it) starts with Ctrl-C blocked: a
-        # terminal's Ctrl-C reaches the whole process group, and the server's first
-        # second (its own start-up, the preload) has Python's default handler: a
-        # KeyboardInterrupt traceback on the user's terminal
-        # (the resource tracker first: starting it unblocks SIGINT again)
-        multiprocessing.resource_tracker.ensure_running()
-        with sigint_held(block=True):
-            multiprocessing.forkserver.ensure_running()
+        # from this process (whose progress-bar thread a fork would copy mid-lock).
+        # Windows has no fork: there each worker is a new interpreter (spawn)
+        try:
+            context: Any = multiprocessing.get_context("forkserver")
+        except ValueError:
+            context = multiprocessing.get_context("spawn")
+        else:
+            context.set_forkserver_preload(["coolmuscle.tools.batch.job", "coolmuscle.chain"])
+            # the server (and so every worker forked from it) starts with Ctrl-C blocked:
+            # a terminal's Ctrl-C reaches the whole process group, and the server's first
+            # second (its own start-up, the preload) has Python's default handler: a
+            # KeyboardInterrupt traceback on the user's terminal
+            # (the resource tracker first: starting it unblocks SIGINT again)
+            from multiprocessing import forkserver, resource_tracker
+
+            resource_tracker.ensure_running()
+            with sigint_held(block=True):
+                forkserver.ensure_running()
         self.pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=context,
                                            initializer=_ignore_sigint)
 
@@ -144,7 +151,9 @@ def sigint_held(block: bool = False) -> Iterator[None]:
         return
     came: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda signum, _frame: came.append(signum))
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if block else None
+    # (Windows has no signal masks: nothing is blocked there, nor forked)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) \
+        if block and hasattr(signal, "pthread_sigmask") else None
     try:
         yield
     finally:
@@ -160,11 +169,8 @@ class DaskEngine(Engine):
 
     def __init__(self, address: str) -> None:
         probe_scheduler(address)
-        try:
+        with needs_extra("dask", "--scheduler (Dask)"):
             from distributed import Client
-        except ImportError:
-            raise EngineError("--scheduler needs dask.distributed: pip install "
-                              "'coolmuscle[dask]'") from None
         self.address = address
         try:
             self.client: Any = Client(address, timeout=CONNECT_TIMEOUT,

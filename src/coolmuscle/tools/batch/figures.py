@@ -17,11 +17,12 @@ time and memory.  The temperature is read through the device API
 from __future__ import annotations
 
 import logging
-from typing import Any
 
+from ...device.api import Device
 from ...motor.status import ALARM_BITS, Ux
 from ...sim.kernel import NS_PER_S
-from ..trace.recorder import FIELDS as TRACE_FIELDS, record
+from ..trace.recorder import FIELDS as TRACE_FIELDS
+from ..trace.recorder import record
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +54,7 @@ def alarm_names(bits: int) -> str:
 class FigureProbe:
     """Attached to a chain before a run; :meth:`figures` after it."""
 
-    def __init__(self, chain: Any) -> None:
+    def __init__(self, chain: Device) -> None:
         self.chain = chain
         self.recorder = record(chain)
         self.ids: tuple[int, ...] = tuple(chain.motor_ids)

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from ...errors import CoolMuscleError
 from ...chain.machine import MachineFileError, parse_machine
+from ...errors import CoolMuscleError
 from ..script.runner import ScriptError, parse_script, run_script
 from .figures import FigureProbe
 

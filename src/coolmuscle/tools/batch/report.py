@@ -20,14 +20,13 @@ from __future__ import annotations
 import csv
 import logging
 import math
-import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 from ...errors import CoolMuscleError
 from ..trace.recorder import parquet_available
-from .job import Job, Outcome
 from .figures import ns_to_seconds
+from .job import Job, Outcome
 
 log = logging.getLogger(__name__)
 
@@ -134,32 +133,19 @@ def _write_parquet(path: Path, header: list[str], rows: list[list[object]]) -> P
 def write_junit(path: Path, jobs: Sequence[Job], outcomes: Sequence[Outcome | None],
                 suite: str = "coolmuscle.batch") -> Path:
     """JUnit XML: one testcase per script, failure text = the first difference."""
-    done = [o for o in outcomes if o is not None]
-    root = ET.Element("testsuites")
-    element = ET.SubElement(root, "testsuite", {
-        "name": suite,
-        "tests": str(len(jobs)),
-        "failures": str(sum(o.status == "fail" for o in done)),
-        "errors": str(sum(o.status == "error" for o in done)),
-        "skipped": str(len(jobs) - len(done)),
-        "time": f"{sum(o.wall_s for o in done):.3f}",
-    })
+    from ..ci.junit import Case, Suite
+    from ..ci.junit import write_junit as write
+
+    cases = []
     for job, outcome in zip(jobs, outcomes):
-        case = ET.SubElement(element, "testcase", {
-            "classname": suite, "name": job.name,
-            "time": f"{outcome.wall_s:.3f}" if outcome is not None else "0"})
         if outcome is None:
-            ET.SubElement(case, "skipped", {"message": "not run: the batch was interrupted"})
+            cases.append(Case(job.name, suite, None, "skipped",
+                              "not run: the batch was interrupted"))
         elif outcome.status in ("fail", "error"):
-            tag = "failure" if outcome.status == "fail" else "error"
-            node = ET.SubElement(case, tag, {"message": outcome.message,
-                                             "type": outcome.kind or outcome.status})
-            node.text = outcome.message
-    root.set("tests", element.get("tests", "0"))
-    root.set("failures", element.get("failures", "0"))
-    root.set("errors", element.get("errors", "0"))
-    tree = ET.ElementTree(root)
-    ET.indent(tree)
-    path = path.expanduser()
-    tree.write(path, encoding="utf-8", xml_declaration=True)
-    return path
+            cases.append(Case(job.name, suite, outcome.wall_s,
+                              "failure" if outcome.status == "fail" else "error",
+                              outcome.message, outcome.kind or outcome.status))
+        else:
+            cases.append(Case(job.name, suite, outcome.wall_s))
+    done = [o for o in outcomes if o is not None]
+    return write(path, [Suite(suite, cases, sum(o.wall_s for o in done))])

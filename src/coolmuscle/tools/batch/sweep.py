@@ -16,15 +16,28 @@ import math
 import re
 import sys
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
-from .command import (FIRMWARE_HELP, JOBS_HELP, MOTORS_HELP, SCHEDULER_HELP, UNTIL_HELP,
-                    check_options, check_outputs, prepare, print_summary, read_text,
-                    run_all, script_paths, start_engine, usage_error, write_outputs)
-from .job import Job, make_job
+from .command import (
+    FIRMWARE_HELP,
+    JOBS_HELP,
+    MOTORS_HELP,
+    SCHEDULER_HELP,
+    UNTIL_HELP,
+    check_options,
+    check_outputs,
+    prepare,
+    print_summary,
+    read_text,
+    run_all,
+    script_paths,
+    start_engine,
+    usage_error,
+    write_outputs,
+)
 from .figures import FIGURES
+from .job import Job, make_job
 
 log = logging.getLogger(__name__)
 
@@ -117,17 +130,17 @@ def build_jobs(script: Path, text: str, machine: tuple[str, str] | None,
 def sweep(
     script: Path = typer.Argument(..., metavar="SCRIPT", help="Script with {NAME} "
                                   "placeholders."),
-    vary: List[str] = typer.Option(..., "--vary", metavar="NAME=V1,V2,...",
+    vary: list[str] = typer.Option(..., "--vary", metavar="NAME=V1,V2,...",
                                    help="Values of {NAME}; repeat for a grid."),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help="Machine file ({NAME} replaced too)."),
-    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", metavar="N", help=JOBS_HELP),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler", metavar="tcp://HOST:8786",
+    jobs: int | None = typer.Option(None, "--jobs", "-j", metavar="N", help=JOBS_HELP),
+    scheduler: str | None = typer.Option(None, "--scheduler", metavar="tcp://HOST:8786",
                                             help=SCHEDULER_HELP),
-    results: Optional[Path] = typer.Option(
+    results: Path | None = typer.Option(
         None, "--results", metavar="FILE.csv",
         help="One row per run: CSV, or Parquet for FILE.parquet (needs pyarrow)."),
-    plot: Optional[Path] = typer.Option(None, "--plot", metavar="FILE.png",
+    plot: Path | None = typer.Option(None, "--plot", metavar="FILE.png",
                                         help="Draw --figure against the varied values."),
     figure: str = typer.Option("peak_speed", "--figure", metavar="NAME",
                                help="Figure for --plot: final_position, peak_speed, "
@@ -135,9 +148,9 @@ def sweep(
                                     "(m2.peak_speed for motor 2)."),
     motors: int = typer.Option(1, "--motors", help=MOTORS_HELP),
     firmware: str = typer.Option("cm2", "--firmware", help=FIRMWARE_HELP),
-    until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
+    until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help=UNTIL_HELP),
-    junit: Optional[Path] = typer.Option(None, "--junit", metavar="FILE.xml",
+    junit: Path | None = typer.Option(None, "--junit", metavar="FILE.xml",
                                          help="Write JUnit XML: one testcase per run."),
 ) -> None:
     """Run one script for every combination of --vary values; one results row per run."""
@@ -154,6 +167,9 @@ def sweep(
     check_outputs(junit=junit, results=results, plot=plot)
     if plot is not None and plot.suffix.lower() not in PLOT_SUFFIXES:
         raise usage_error(f"--plot {plot}: PNG, SVG or PDF by extension")
+    if plot is not None:
+        from ...needs import require_extra
+        require_extra("plot", "sweep --plot")       # before the runs, not after them
     engine = start_engine(jobs, scheduler, len(built))
     run = run_all(engine, built, "sweep")
     write_outputs(run, junit, results, "coolmuscle.sweep")

@@ -9,11 +9,11 @@ PNG, SVG or PDF by the file's extension (matplotlib, as ``coolmuscle run --plot`
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
-from .job import Job, Outcome
 from .figures import ns_to_seconds
+from .job import Job, Outcome
 
 log = logging.getLogger(__name__)
 
@@ -36,9 +36,11 @@ def figure_value(outcome: Outcome, column: str) -> float | None:
 def plot_sweep(path: Path, jobs: Sequence[Job], outcomes: Sequence[Outcome | None],
                column: str, title: str = "") -> Path:
     """Draw ``column`` against the first varied value, one line per other combination."""
-    import matplotlib  # noqa: PLC0415
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
+    from ...needs import needs_extra
+    with needs_extra("plot", "sweep --plot"):
+        import matplotlib  # noqa: PLC0415
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415
 
     names = [n for n, _ in jobs[0].values]
     first = names[0]

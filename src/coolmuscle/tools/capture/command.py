@@ -15,7 +15,7 @@ import sys
 from dataclasses import replace
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -106,30 +106,30 @@ def capture(
                                     "rfc2217://, coolmuscle://).")],
     out: Annotated[Path, typer.Option(
         "--out", metavar="SESSION.cml", help="The capture file (written as it goes).")],
-    listen: Annotated[Optional[str], typer.Option(
+    listen: Annotated[str | None, typer.Option(
         "--listen", metavar="[HOST:]PORT",
         help="The host program connects here over TCP (socket://; host 127.0.0.1 unless "
              "given; port 0 picks a free one).")] = None,
-    pty: Annotated[Optional[Path], typer.Option(
+    pty: Annotated[Path | None, typer.Option(
         "--pty", metavar="LINK",
         help="The host program opens a pseudo-terminal at LINK (a symlink, removed on "
              "exit).")] = None,
-    baud: Annotated[Optional[int], typer.Option(
+    baud: Annotated[int | None, typer.Option(
         "--baud", metavar="BPS",
         help="Baud rate of the motor's port (K20: 9600 ... 230400; default: found, else "
              "38400).")] = None,
-    parity: Annotated[Optional[Parity], typer.Option(
+    parity: Annotated[Parity | None, typer.Option(
         "--parity", help="Parity (K82; default: found, else none).")] = None,
-    echo: Annotated[Optional[OnOff], typer.Option(
+    echo: Annotated[OnOff | None, typer.Option(
         "--echo", help="The motor echoes (K23 without 8); default: asked.")] = None,
     probing: Annotated[bool, typer.Option(
         "--probe/--no-probe", help="Ask the motor (?85, K20, K23) before the host program "
                                    "connects; not recorded.")] = True,
-    motors: Annotated[Optional[int], typer.Option(
+    motors: Annotated[int | None, typer.Option(
         "--motors", min=1, max=15, help="Motors on the chain (for the header).")] = None,
-    firmware: Annotated[Optional[FirmwareChoice], typer.Option(
+    firmware: Annotated[FirmwareChoice | None, typer.Option(
         "--firmware", help="Firmware profile (for the header; default: from ?85).")] = None,
-    machine: Annotated[Optional[Path], typer.Option(
+    machine: Annotated[Path | None, typer.Option(
         "--machine", metavar="M.toml",
         help="The machine file that describes this machine (named in the header).")] = None,
     once: Annotated[bool, typer.Option(
@@ -148,6 +148,8 @@ def capture(
     _check_out(out)
     machine_word = _machine_word(machine, out) if machine is not None else None
     if pty is not None:
+        from ...needs import needs_posix
+        needs_posix("--pty", "--listen [HOST:]PORT and a virtual COM port tool")
         from ...frontends.transports.pty import SymLink
         try:
             SymLink(pty.expanduser()).check()

@@ -7,25 +7,26 @@
 * :class:`TcpHostSide`: ``--listen [HOST:]PORT`` (127.0.0.1 by default), one host
   program at a time, as a serial port has one;
 * :class:`PtyHostSide`: ``--pty LINK``, a pseudo-terminal in raw mode (no tty echo or
-  line-end translation: the motor does its own) with a symlink at LINK, removed on exit.
+  line-end translation: the motor does its own) with a symlink at LINK, removed on exit
+  (POSIX only: its modules are imported when it is made).
+
+On Windows a serial port (``COM3``) has no file descriptor: the motor's side is read by
+pyserial's ``read``, and a ``socket://`` link through its socket (``os.read`` there
+takes no socket).
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
 import re
 import select
 import socket
 import sys
-import termios
-import tty
 from pathlib import Path
 from typing import Any
 
 from ...client.sync import open_port
 from ...errors import CoolMuscleError, TransportError
-from ...frontends.transports.pty import SymLink
 from ...frontends.transports.tcp import parse_address
 from .settings import PARITIES
 
@@ -48,6 +49,8 @@ def _why(exc: TransportError, url: str) -> str:
 
 
 def _fileno(port: Any) -> int | None:
+    if os.name != "posix":         # a socket's number is no file descriptor there
+        return None
     try:
         fd = port.fileno()
     except (AttributeError, OSError, ValueError):     # io.UnsupportedOperation is an OSError
@@ -155,6 +158,11 @@ class PtyHostSide:
     """``--pty LINK``: a pseudo-terminal the host program opens as a serial port."""
 
     def __init__(self, link: str | os.PathLike[str]) -> None:
+        import termios
+        import tty
+
+        from ...frontends.transports.pty import SymLink
+
         self.link = SymLink(Path(link).expanduser())
         self.link.check()
         master, slave = os.openpty()
@@ -178,6 +186,9 @@ class PtyHostSide:
     def unread(self) -> int:
         """Bytes written to the host program that it has not read yet (closing the
         pseudo-terminal would throw them away)."""
+        import fcntl
+        import termios
+
         try:
             count = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
         except OSError:

@@ -21,9 +21,9 @@ import os
 import threading
 import time
 from collections import deque
-from datetime import datetime, timezone
+from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Callable
 
 from ..script.transcript import Direction, LineFile, SessionWriter
 from .settings import LineSettings
@@ -46,7 +46,7 @@ def header_lines(url: str, settings: LineSettings, started: datetime, *,
     """Line 1 and, when the chain is known, the ``# chain:`` line."""
     words = [f"port={_word(url)}", f"baud={settings.baud}", f"parity={settings.parity}",
              f"echo={settings.echo_word()}",
-             "started=" + started.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")]
+             "started=" + started.astimezone(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")]
     if settings.k20 is not None:
         words.append(f"k20={settings.k20}")
     if settings.k23 is not None:
@@ -79,7 +79,7 @@ class CaptureFile:
         self.on_error = on_error
         self.file = LineFile(self.path, on_error)
         self.start_ns = time.monotonic_ns()             # t=0 of the stamps ...
-        started = datetime.now(timezone.utc)            # ... and started= of the header
+        started = datetime.now(UTC)            # ... and started= of the header
         self.file.write("".join(line + "\n" for line in header(started)))
         self.writer = SessionWriter(self.file.write, stamps=True)
         self._failed = False

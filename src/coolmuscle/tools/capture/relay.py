@@ -12,6 +12,10 @@ take at once waits in a buffer (``MAX_PENDING``; beyond it, bytes from the motor
 still recorded but no longer passed on, said once).  The host program's bytes are
 written to the motor as they come; a motor that does not read holds the host program
 up (back pressure), as a wire with flow control would.
+
+Sockets are read and written as sockets, and the threads are woken through a socket
+pair, not a pipe: on Windows a socket is no file descriptor and ``select`` takes
+sockets only.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ import selectors
 import socket
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from ..script.transcript import Direction
 from .ends import READ_SIZE, LinkBroken, MotorPort, PtyHostSide, TcpHostSide
@@ -62,9 +66,9 @@ class Relay:
         self._client: socket.socket | None = None
         self._pending = bytearray()
         self._warned_pending = False
-        self._wake_r, self._wake_w = os.pipe()
-        os.set_blocking(self._wake_r, False)
-        os.set_blocking(self._wake_w, False)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
         self._threads = [threading.Thread(target=self._from_motor, name="capture-motor",
                                           daemon=True),
                          threading.Thread(target=self._host_loop, name="capture-host",
@@ -102,17 +106,14 @@ class Relay:
                 thread.join(timeout=2)
         self._flush_before_close()
         self._detach()
-        for fd in (self._wake_r, self._wake_w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        for wake in (self._wake_r, self._wake_w):
+            wake.close()
         self.host.close()
         self.motor.close()
 
     def _wake(self) -> None:
         try:
-            os.write(self._wake_w, b"!")
+            self._wake_w.send(b"!")
         except OSError:        # full (a wake is pending anyway) or closed (stopping)
             pass
 
@@ -137,7 +138,7 @@ class Relay:
                 return
             if not self._pending:
                 try:
-                    data = data[os.write(fd, data):]
+                    data = data[self._write_host(fd, data):]
                 except BlockingIOError:
                     pass
                 except OSError:
@@ -159,7 +160,7 @@ class Relay:
             if self._host_fd is None or not self._pending:
                 return
             try:
-                del self._pending[:os.write(self._host_fd, self._pending)]
+                del self._pending[:self._write_host(self._host_fd, self._pending)]
             except BlockingIOError:
                 pass
             except OSError:
@@ -226,9 +227,14 @@ class Relay:
             selector.register(wanted[1], wanted[2], "host")
         return wanted
 
+    def _write_host(self, fd: int, data: bytes | bytearray) -> int:
+        """Write to the host program (the lock held): its socket, or the pty's fd."""
+        client = self._client
+        return client.send(data) if client is not None else os.write(fd, data)
+
     def _drain_wake(self) -> None:
         try:
-            while os.read(self._wake_r, 4096):
+            while self._wake_r.recv(4096):
                 pass
         except OSError:
             pass
@@ -254,11 +260,11 @@ class Relay:
         self.say(f"host program connected from {peer}")
 
     def _from_host(self) -> None:
-        fd = self._host_fd
+        fd, client = self._host_fd, self._client
         if fd is None:
             return
         try:
-            data = os.read(fd, READ_SIZE)
+            data = client.recv(READ_SIZE) if client is not None else os.read(fd, READ_SIZE)
         except BlockingIOError:
             return
         except OSError:

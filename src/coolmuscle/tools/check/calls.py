@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ...cml import ast
 from ...client.program import BankBlock, ProgramFile, SourceLine
+from ...cml import ast
 
 if TYPE_CHECKING:
     from .report import CheckReport
@@ -32,8 +32,9 @@ MAX_DEPTH = 10
 
 
 def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
-           report: "CheckReport", rt3: bool) -> list[Edge]:
-    from .tree import column as _column, flat as _flat
+           report: CheckReport, rt3: bool) -> list[Edge]:
+    from .tree import column as _column
+    from .tree import flat as _flat
     edges: list[Edge] = []
     for line in block.body:
         for statement in line.statements:
@@ -67,7 +68,7 @@ def _edges(block: BankBlock, defined: dict[BankKey, BankBlock],
 
 
 def check_calls(program: ProgramFile, defined: dict[BankKey, BankBlock],
-                report: "CheckReport", rt3: bool = False) -> None:
+                report: CheckReport, rt3: bool = False) -> None:
     """Add the call/jump diagnostics of ``program`` to ``report`` (``rt3``: the RT3 and
     CM1 bank rules, where a logic bank calls with ``C#`` and ``J#`` as well)."""
     graph: dict[BankKey, list[Edge]] = {}
@@ -79,7 +80,7 @@ def check_calls(program: ProgramFile, defined: dict[BankKey, BankBlock],
     _depth(graph, report)
 
 
-def _recursion(graph: dict[BankKey, list[Edge]], report: "CheckReport") -> None:
+def _recursion(graph: dict[BankKey, list[Edge]], report: CheckReport) -> None:
     """A call edge that closes a cycle of calls and jumps containing a call."""
     reported: set[int] = set()
     for start in graph:
@@ -102,7 +103,7 @@ def _recursion(graph: dict[BankKey, list[Edge]], report: "CheckReport") -> None:
                     stack.append(state)
 
 
-def _depth(graph: dict[BankKey, list[Edge]], report: "CheckReport") -> None:
+def _depth(graph: dict[BankKey, list[Edge]], report: CheckReport) -> None:
     """Longest chain of calls (banks deep); cycles are left to ``recursion``."""
     memo: dict[BankKey, int] = {}
 

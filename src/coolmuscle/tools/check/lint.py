@@ -50,12 +50,12 @@ from __future__ import annotations
 
 from typing import Final
 
+from ...client.program import BankBlock, ProgramFile, SourceLine
 from ...cml import ast
 from ...cml.scanner import scan
 from ...errors import CmlSyntaxError, OutOfRangeError
 from ...motor.state.firmware import Firmware, get_firmware
 from ...motor.state.memory import Memory
-from ...client.program import BankBlock, ProgramFile, SourceLine
 from . import tree
 from .report import RULES, BankSummary, CheckReport, Diagnostic, Severity
 from .tree import RegKey

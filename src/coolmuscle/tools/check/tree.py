@@ -3,7 +3,7 @@ CM2 commands, where a token is on its line).  See :mod:`coolmuscle.tools.check.l
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 from ...cml import ast
 

@@ -24,21 +24,32 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any
 
 import typer
 from rich.console import Console
 
-from .version import version_text
+from ...device.api import ChainFactory, Device
 from ...errors import TransportError
-from .usage import UsageError
-from .stopsignals import (STOP_SIGNALS, SignalStop, check_stop, ignore_stop_signals,
-                          clear_stop, install_startup_handlers, run_served, stop_line)
+from ...frontends.transports.base import Transport
+from ...needs import needs_posix
+from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
-from ..script.runner import load_script
-from ...frontends.transports.base import Transport
+from .stopsignals import (
+    STOP_SIGNALS,
+    SignalStop,
+    check_stop,
+    clear_stop,
+    ignore_stop_signals,
+    install_startup_handlers,
+    run_served,
+    stop_line,
+)
+from .usage import UsageError
+from .version import version_text
 
 log = logging.getLogger("coolmuscle")
 
@@ -72,23 +83,26 @@ class Firmware(str, enum.Enum):
     cm1 = "cm1"
 
 
-def _default_chain_factory(*args: Any, **kwargs: Any) -> Any:
+def _default_chain_factory(*args: Any, **kwargs: Any) -> Device:
     from ...chain.daisy import Chain
     return Chain(*args, **kwargs)
 
 
 #: Builds the chain for ``sim`` and ``run`` (same signature as ``Chain``); replaceable in tests.
-chain_factory: Callable[..., Any] = _default_chain_factory
+chain_factory: ChainFactory = _default_chain_factory
 
 
 def default_state_dir() -> Path:
-    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``).
+    """``$XDG_DATA_HOME/coolmuscle/state`` (``~/.local/share/coolmuscle/state``; on
+    Windows ``%LOCALAPPDATA%\\coolmuscle\\state``).
 
     A relative ``XDG_DATA_HOME`` is ignored, as the XDG base directory spec says
     ("If an implementation encounters a relative path ... it should consider the
     path invalid and ignore it")."""
     xdg = os.environ.get("XDG_DATA_HOME", "")
-    base = xdg if xdg and os.path.isabs(xdg) else os.path.expanduser("~/.local/share")
+    local = os.environ.get("LOCALAPPDATA", "") if os.name == "nt" else ""
+    base = (xdg if xdg and os.path.isabs(xdg) else local if local
+            else os.path.expanduser("~/.local/share"))
     return Path(base) / "coolmuscle" / "state"
 
 
@@ -101,7 +115,7 @@ def _show_path(path: Path) -> str:
 
 
 def _make_chain(motors: int, firmware: Firmware, state: Path | None, pace: bool,
-                machine: Path | None = None, per_motor: str | None = None) -> Any:
+                machine: Path | None = None, per_motor: str | None = None) -> Device:
     return make_chain(chain_factory, motors, per_motor or firmware.value, state, pace, machine)
 
 
@@ -138,8 +152,10 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
             raise UsageError(f"--tcp: {exc}") from None
         chosen.append(transports.create("tcp", host=host, port=port))
     if pty or pty_link is not None:
+        needs_posix("--pty-link" if pty_link is not None and not pty else "--pty")
         chosen.append(transports.create("pty", link=pty_link))
     if stdio:
+        needs_posix("--stdio", "--tcp")
         chosen.append(transports.create("stdio"))
     chosen += _modbus_transports(modbus_rtu, modbus_tcp, com1)
     return chosen
@@ -150,14 +166,14 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
                          modbus: tuple[str | None, str | None, str | None],
                          ) -> tuple[list[Transport], int, str]:
     """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
-    from ...frontends.ethercat.cli import EthercatUsageError, chain_firmware, sim_transport
+    from .ethercat import EthercatUsageError, chain_firmware, sim_transport
     if motors not in (1, 4):
         raise UsageError("--ethercat serves the bridge's four motors ID1-ID4 (manual 1.4)")
     try:
         fw = chain_firmware(bridge)
     except EthercatUsageError as exc:
         raise UsageError(f"--bridge: {exc}") from None
-    chosen: list[Transport] = [sim_transport(iface, bridge)]  # type: ignore[list-item]
+    chosen: list[Transport] = [sim_transport(iface, bridge)]
     if tcp or pty or pty_link or stdio or any(modbus):
         chosen += _transports(tcp, pty, pty_link, stdio, modbus)
     return chosen, 4, fw
@@ -170,6 +186,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
 
     chosen: list[Transport] = []
     if rtu is not None:
+        needs_posix("--modbus-rtu", "--modbus-tcp")
         chosen.append(transports.create("modbus-rtu", where=rtu))
     if tcp is not None:
         try:
@@ -178,6 +195,7 @@ def _modbus_transports(rtu: str | None, tcp: str | None, com1: str | None) -> li
             raise UsageError(f"--modbus-tcp: {exc}") from None
         chosen.append(transports.create("modbus-tcp", host=host, port=port))
     if com1 is not None:
+        needs_posix("--com1", "--modbus-tcp for the Modbus side")
         chosen.append(transports.create("com1", where=com1))
     return chosen
 
@@ -187,7 +205,7 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
     """``--enip`` (docs/enip.md)."""
     if value is None:
         return []
-    from ...frontends.enip.cli import transports as enip_transports
+    from .enip import transports as enip_transports
     try:
         return enip_transports(value, io_port, firmware.value, priority)
     except TransportError as exc:
@@ -199,7 +217,7 @@ def _enip_transports(value: str | None, io_port: int, firmware: Firmware,
 MAX_TIME_SCALE = 1e6
 
 
-async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Firmware,
+async def _serve(chain: Device, chosen: list[Transport], motors: int, firmware: Firmware,
                  state: Path | None, scale: float, stop: asyncio.Event,
                  label: str | None = None) -> None:
     """Start the transports, print the banner, serve until ``stop`` (run by
@@ -215,7 +233,7 @@ async def _serve(chain: Any, chosen: list[Transport], motors: int, firmware: Fir
         where = "   ".join(t.describe() for t in chosen)
         shown = _show_path(state) if state is not None else "none, not saved"
         err.print(f"{where}   (state: {shown})", markup=False)
-        station = _modbus_station(chain)
+        station = chain.modbus_station()
         if station:
             asked = any(t.name == "modbus-rtu" for t in chosen)
             err.print(_modbus_notice(station, state, asked), markup=False)
@@ -257,33 +275,28 @@ def _reset_state(state: Path | None) -> None:
               markup=False)
 
 
-def _modbus_station(chain: Any) -> int:
-    line = getattr(chain, "modbus_line", None)
-    return line.station() if line is not None and line.active() else 0
-
-
 @app.command()
 def sim(
-    tcp: Optional[str] = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
+    tcp: str | None = typer.Option(None, "--tcp", metavar="[HOST:]PORT",
                                       help="Serve TCP (default when no transport is chosen: "
                                            "127.0.0.1:5150; port 0 picks a free one)."),
     pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
-    pty_link: Optional[Path] = typer.Option(None, "--pty-link", metavar="PATH",
+    pty_link: Path | None = typer.Option(None, "--pty-link", metavar="PATH",
                                             help="Stable symlink to the pty (implies --pty)."),
     stdio: bool = typer.Option(False, "--stdio",
                                help="Serve stdin/stdout (ends at end of input)."),
-    modbus_rtu: Optional[str] = typer.Option(
+    modbus_rtu: str | None = typer.Option(
         None, "--modbus-rtu", metavar="pty|DEVICE",
         help="COM0 as a Modbus RTU slave on a new pty or a serial device (sets K81.1=1 "
              "when it is 0)."),
-    modbus_tcp: Optional[str] = typer.Option(
+    modbus_tcp: str | None = typer.Option(
         None, "--modbus-tcp", metavar="[HOST:]PORT",
         help="Serve the Modbus map over Modbus TCP (e.g. 1502; host 127.0.0.1)."),
-    com1: Optional[str] = typer.Option(
+    com1: str | None = typer.Option(
         None, "--com1", metavar="pty|DEVICE",
         help="COM1 of the final motor (Modbus host when its K84=1) on a new pty or a "
              "serial device."),
-    state: Optional[Path] = typer.Option(
+    state: Path | None = typer.Option(
         None, "--state", metavar="DIR",
         help="State directory (default: ~/.local/share/coolmuscle/state)."),
     no_state: bool = typer.Option(False, "--no-state", help="Do not load or save any state."),
@@ -297,23 +310,23 @@ def sim(
     time_scale: float = typer.Option(1.0, "--time-scale", metavar="X",
                                      help="Virtual seconds per wall second."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Log connections."),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
-    web: Optional[str] = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
+    web: str | None = typer.Option(None, "--web", metavar="[[HOST:]PORT]",
                                       help=_WEB_HELP),
-    ethercat: Optional[str] = typer.Option(
+    ethercat: str | None = typer.Option(
         None, "--ethercat", metavar="IFACE",
         help="Serve the EtherCAT Cool Muscle Bridge as a slave on raw interface IFACE "
              "(4 motors; root or CAP_NET_RAW; docs/ethercat.md)."),
     bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
                                help="Bridge variant for --ethercat (firmware of ID1-ID4)."),
-    enip: Optional[str] = typer.Option(
+    enip: str | None = typer.Option(
         None, "--enip", metavar="[HOST[:PORT]]",
         help="CM1 EtherNet/IP module: TCP/UDP 44818 and Class 1 I/O (default "
              "127.0.0.1; needs --firmware cm1; docs/enip.md)."),
     enip_io_port: int = typer.Option(2222, "--enip-io-port", metavar="PORT", min=0,
                                      max=65535, help="UDP port of Class 1 I/O."),
-    enip_priority: Optional[int] = typer.Option(
+    enip_priority: int | None = typer.Option(
         None, "--enip-rt-priority", metavar="N", min=1, max=99,
         help="Send Class 1 packets from a SCHED_FIFO thread of priority N (needs root)."),
 ) -> None:
@@ -363,42 +376,45 @@ def sim(
 @app.command()
 def run(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="Script / golden transcript."),
-    until: Optional[float] = typer.Option(None, "--until", metavar="SECONDS",
+    until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help="After the script, run on to this virtual time."),
-    trace: Optional[Path] = typer.Option(
+    trace: Path | None = typer.Option(
         None, "--trace", metavar="OUT.csv",
         help="Write a trace: CSV, or Parquet for OUT.parquet (needs pyarrow); streamed "
              "as the run goes."),
     trace_step: float = typer.Option(
         0.001, "--trace-step", metavar="SECONDS",
         help="Trace grid step (default 0.001); changes are recorded at their instant."),
-    plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
-    xy: Optional[str] = typer.Option(
+    plot: Path | None = typer.Option(None, "--plot", metavar="OUT.png", help="Plot the trace."),
+    xy: str | None = typer.Option(
         None, "--xy", metavar="X,Y",
         help="With --plot: draw the XY path of motors X and Y (default: pairs that "
              "interpolated; 'none' for no XY panel)."),
-    motors: Optional[int] = typer.Option(
+    motors: int | None = typer.Option(
         None, "--motors", min=1, max=15,
         help="Motors on the chain (default: the script's '# coolmuscle: motors=N', else 1)."),
-    firmware: Optional[Firmware] = typer.Option(
+    firmware: Firmware | None = typer.Option(
         None, "--firmware",
         help="Firmware profile (default: the script's 'firmware=', else cm2)."),
-    state: Optional[Path] = typer.Option(
+    state: Path | None = typer.Option(
         None, "--state", metavar="DIR",
         help="Start from (and save to) this state (default: a fresh chain)."),
     check: bool = typer.Option(False, "--check",
                                help="Print only the verdict; fail without expectations."),
     pace: bool = typer.Option(False, "--pace",
                               help="Bytes take their wire time at the K20 baud rate."),
-    record: Optional[Path] = typer.Option(
+    record: Path | None = typer.Option(
         None, "--record", metavar="OUT.cml",
         help="Write the script with the received bytes as expectations."),
-    machine: Optional[Path] = typer.Option(None, "--machine", metavar="AXIS.toml",
+    machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
                                            help=_MACHINE_HELP),
-    web: Optional[str] = typer.Option(
+    web: str | None = typer.Option(
         None, "--web", metavar="[[HOST:]PORT]",
         help="Play the script in real time and show it on the web dashboard "
              "(docs/web.md); starts when a page connects."),
+    junit: Path | None = typer.Option(
+        None, "--junit", metavar="FILE.xml",
+        help="Also write the verdict as JUnit XML (the failing line of the script)."),
 ) -> None:
     """Run a script in fast virtual time, print every line, check expectations."""
     if web is not None:
@@ -406,20 +422,20 @@ def run(
         script = load_script(file)
         motors, fw, machine = header_defaults(file, motors, firmware.value if firmware else None,
                                               machine)
-        _run_web(script, web, until, (check, record, trace, plot),
+        _run_web(script, web, until, (check, record, trace, plot, junit),
                  lambda: _make_chain(motors, Firmware(fw), state.expanduser() if state else None,
                                      pace, machine))
         return
     code = run_command(file, until=until, trace=trace, trace_step=trace_step, plot=plot, xy=xy,
                        motors=motors, firmware=firmware.value if firmware else None,
                        state=state, check=check, pace=pace, record=record, machine=machine,
-                       chain_factory=chain_factory)
+                       chain_factory=chain_factory, junit=junit)
     if code:
         raise typer.Exit(code)
 
 
 def _web_transport(address: str) -> Transport:
-    """``--web [HOST:]PORT`` (coolmuscle.frontends.web)."""
+    """``--web [HOST:]PORT`` (coolmuscle.tools.web)."""
     from ..web.run import web_transport
     try:
         return web_transport(address)
@@ -427,15 +443,16 @@ def _web_transport(address: str) -> Transport:
         raise UsageError(f"--web: {exc}") from None
 
 
-def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, ...],
-             make_chain: Callable[[], Any]) -> None:
+def _run_web(script: Script, address: str, until: float | None, others: tuple[object, ...],
+             make_chain: Callable[[], Device]) -> None:
     """``run FILE --web``: the script in real time on the dashboard (docs/web.md)."""
-    from .run import check_run_times
     from ..web.run import run_script_web
+    from .run import check_run_times
     check_run_times(until)
     if any(o not in (None, False) for o in others):
-        raise UsageError("--web shows the run live: --check, --record, --trace and --plot "
-                         "are for fast runs (the page downloads the trace and the plot)")
+        raise UsageError("--web shows the run live: --check, --record, --trace, --plot "
+                         "and --junit are for fast runs (the page downloads the trace "
+                         "and the plot)")
     _web_transport(address)                       # a bad address is a usage error
     chain = make_chain()
     try:
@@ -446,7 +463,7 @@ def _run_web(script: Any, address: str, until: float | None, others: tuple[Any, 
 
 
 def _register_tools() -> None:
-    from ...frontends.enip.cli import register as register_enip
+    from .enip import register as register_enip
     from .host_commands import register
     register(app)
     register_enip(app)   # coolmuscle enip eds
@@ -479,6 +496,22 @@ def _register_capture() -> None:
 _register_capture()  # capture (coolmuscle.tools.capture, docs/user-guide.md)
 
 
+def _register_desk() -> None:
+    from ..desk.commands import register
+    register(app)
+
+
+_register_desk()  # scan, backup, restore, params diff (coolmuscle.tools.desk, docs/real-motor.md)
+
+
+def _register_web() -> None:
+    from ..web.command import register
+    register(app)
+
+
+_register_web()  # web: the page of a real motor (coolmuscle.tools.web, docs/real-motor.md)
+
+
 @app.command()
 def version() -> None:
     """Print the version, and whether the hot modules run compiled or as sources."""
@@ -500,7 +533,7 @@ def _main_options(
 
 
 def _register_subapps() -> None:
-    from ...frontends.ethercat.cli import app as ethercat_app
+    from .ethercat import app as ethercat_app
     app.add_typer(ethercat_app)
 
 
@@ -537,10 +570,11 @@ def _main(argv: list[str] | None) -> None:
         if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
             # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
             signal.signal(signal.SIGINT, signal.default_int_handler)
-    from ...frontends.enip.cli import optional_value_argv
-    from ...frontends.web.access import expand_web_flag   # a bare --web: 127.0.0.1:8080
+    from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
+    from ..web.command import expand_twin_flag  # a bare --twin: the default load
+    from .enip import optional_value_argv
 
     def call() -> None:
-        args = expand_web_flag(sys.argv[1:] if argv is None else argv)
+        args = expand_twin_flag(expand_web_flag(sys.argv[1:] if argv is None else argv))
         app(args=optional_value_argv(args), prog_name="coolmuscle")
     guarded(call)

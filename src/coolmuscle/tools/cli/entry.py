@@ -1,5 +1,10 @@
 """The ``coolmuscle`` command's first code: stop signals first, then a quick start.
 
+What the command needs for its start is done here, by the program, never by importing
+coolmuscle: the stop-signal handlers (the first statement of :func:`main`) and the cache
+of the methods :mod:`dataclasses` writes (:mod:`coolmuscle._dataclass_code`, before the
+model's modules load).
+
 ``python -m coolmuscle`` and the ``coolmuscle`` script start here, so that a SIGINT,
 SIGTERM or SIGHUP at any moment of start-up (while the model is imported, the store
 opened, the transports started) ends the program with one line and the normal
@@ -23,7 +28,8 @@ Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad s
 from __future__ import annotations
 
 import sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .exits import guarded
 from .stopsignals import check_stop, install_startup_handlers
@@ -39,6 +45,8 @@ def main(argv: list[str] | None = None) -> None:
             sys.stdout.write(version_text())
         guarded(version)
         return
+    from ..._dataclass_code import install as keep_dataclass_code
+    keep_dataclass_code()     # this process's classes: their methods not compiled again
     kwargs: dict[str, Any] | None = None
     full_main: Callable[[list[str] | None], None] | None = None
 

@@ -1,7 +1,8 @@
 """One-line errors and exit codes of the ``coolmuscle`` command (both its paths:
 :mod:`.entry` and the typer application of :mod:`.cli`).
 
-Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad script;
+Exit codes: 0 success; 1 a failed run or a runtime error; 2 bad usage or a bad script,
+an extra that is not installed or a part this system cannot run (:mod:`coolmuscle.needs`);
 70 an internal error (a bug: please report it); 128 + N after stop signal N (130: Ctrl-C).
 No traceback reaches the user unless ``COOLMUSCLE_DEBUG=1``.
 """
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 from .stopsignals import Guard, SignalStop, ignore_stop_signals, stop_line, stop_requested
 
@@ -47,9 +48,11 @@ def guarded(call: Callable[[], object]) -> None:
             raise SystemExit(code) from None
         from ...chain.machine import MachineFileError
         from ...errors import CoolMuscleError
+        from ...needs import MissingExtraError, NotOnThisSystemError
         from ..script.runner import ScriptError
         from .usage import UsageError
-        if isinstance(exc, (UsageError, ScriptError, MachineFileError)):
+        if isinstance(exc, (UsageError, ScriptError, MachineFileError, MissingExtraError,
+                            NotOnThisSystemError)):
             _report(exc, EXIT_USAGE)
         elif isinstance(exc, (CoolMuscleError, OSError)):
             _report(exc, EXIT_FAILED)

@@ -11,7 +11,7 @@ import json
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Any, List, Optional
+from typing import Any
 
 import typer
 
@@ -23,6 +23,8 @@ __all__ = ["register"]
 class Format(str, Enum):
     human = "human"
     json = "json"
+    sarif = "sarif"
+    github = "github"
 
 
 class FirmwareChoice(str, Enum):
@@ -32,13 +34,17 @@ class FirmwareChoice(str, Enum):
 
 
 def check(
-    files: List[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
-    output: Format = typer.Option(Format.human, "--format", help="human or json (schema: "
-                                  "docs/check-schema.json)."),
-    firmware: Optional[FirmwareChoice] = typer.Option(
+    files: list[Path] = typer.Argument(..., metavar="FILE.cml...", help="CML files to check."),
+    output: Format = typer.Option(Format.human, "--format", help="human, json (schema: "
+                                  "docs/check-schema.json), sarif (SARIF 2.1.0) or github "
+                                  "(GitHub Actions annotations)."),
+    junit: Path | None = typer.Option(None, "--junit", metavar="FILE.xml",
+                                         help="Also write JUnit XML (a case per finding, "
+                                              "with its file and line)."),
+    firmware: FirmwareChoice | None = typer.Option(
         None, "--firmware", help="Firmware the file is for (default: its '# coolmuscle: "
         "firmware=' comment, else cm2)."),
-    motors: Optional[int] = typer.Option(None, "--motors", min=1, max=15,
+    motors: int | None = typer.Option(None, "--motors", min=1, max=15,
                                          help="Motors on the chain (warn beyond)."),
     strict: bool = typer.Option(False, "--strict", help="Warnings fail too."),
 ) -> None:
@@ -47,6 +53,7 @@ def check(
     from ..check.lint import check_program
     from ..check.output import format_human, to_json
 
+    _junit_path(junit)
     reports = []
     for path in files:
         if path.is_char_device() or path.is_block_device():  # /dev/zero fills the memory
@@ -64,16 +71,33 @@ def check(
                              "cm2, rt3 or cm1") from None
         _check_script_lines(path, report)
         reports.append(report)
+    ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
     if output is Format.json:
-        document = to_json(reports, strict=strict)
-        sys.stdout.write(json.dumps(document, indent=2) + "\n")
-        ok = document["ok"]
+        sys.stdout.write(json.dumps(to_json(reports, strict=strict), indent=2) + "\n")
+    elif output is Format.sarif:
+        from ..check.ci import to_sarif
+        sys.stdout.write(json.dumps(to_sarif(reports, strict=strict), indent=2) + "\n")
+    elif output is Format.github:
+        from ..check.ci import github_lines
+        lines = github_lines(reports, strict=strict) + [format_human(r)[-1] for r in reports]
+        sys.stdout.write("".join(line + "\n" for line in lines))
     else:
         for report in reports:
             sys.stdout.write("\n".join(format_human(report)) + "\n")
-        ok = all(r.errors == 0 and not (strict and r.warnings) for r in reports)
+    if junit is not None:
+        from ..check.ci import junit_suites
+        from ..ci.junit import write_junit
+        write_junit(junit, junit_suites(reports, strict=strict))
     if not ok:
         raise typer.Exit(1)
+
+
+def _junit_path(path: Path | None) -> None:
+    """``--junit`` that cannot be written is bad usage, found before anything runs."""
+    from ..ci.junit import path_problem
+    problem = None if path is None else path_problem(path)
+    if problem is not None:
+        raise UsageError(f"cannot write --junit {path}: {problem}")
 
 
 def _check_script_lines(path: Path, report: Any) -> None:
@@ -107,7 +131,7 @@ def upload(
                                 help="Read the banks back and compare."),
     baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for each reply."),
-    firmware: Optional[FirmwareChoice] = typer.Option(None, "--firmware",
+    firmware: FirmwareChoice | None = typer.Option(None, "--firmware",
                                                       help="Skip reading ?85."),
 ) -> None:
     """Send a .cml file to a real or virtual motor and verify it by readback."""
@@ -129,9 +153,9 @@ def term(
     baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
     motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
-    history: Optional[Path] = typer.Option(None, "--history", metavar="FILE",
+    history: Path | None = typer.Option(None, "--history", metavar="FILE",
                                            help="History file."),
-    log: Optional[Path] = typer.Option(None, "--log", metavar="FILE.cml",
+    log: Path | None = typer.Option(None, "--log", metavar="FILE.cml",
                                        help="Record the session as a golden transcript."),
 ) -> None:
     """Interactive terminal: line editing, history, colour, :send, :save, :log."""

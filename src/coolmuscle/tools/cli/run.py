@@ -13,9 +13,11 @@ from __future__ import annotations
 import logging
 import re
 import sys
+import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
+from ...device.api import ChainFactory, Device
 from ..script.record import LineWriter
 from ..script.runner import ScriptError, load_script, run_script
 from .usage import UsageError
@@ -27,7 +29,7 @@ FIRMWARES = ("cm2", "rt3", "cm1")
 _VALUED = {"--until": "until", "--trace": "trace", "--trace-step": "trace_step",
            "--plot": "plot", "--xy": "xy",
            "--motors": "motors", "--firmware": "firmware", "--state": "state",
-           "--record": "record", "--machine": "machine"}
+           "--record": "record", "--machine": "machine", "--junit": "junit"}
 _FLAGS = {"--check": "check", "--pace": "pace"}
 _PLAIN_NUMBER = re.compile(r"[0-9]+(\.[0-9]+)?\Z")
 _PLAIN_INT = re.compile(r"[0-9]{1,2}\Z")
@@ -83,7 +85,7 @@ def parse_run_args(argv: list[str]) -> dict[str, Any] | None:
         out["motors"] = int(out["motors"])
     if out.get("firmware", "cm2") not in FIRMWARES:
         return None
-    for key in ("trace", "plot", "state", "record", "machine"):
+    for key in ("trace", "plot", "state", "record", "machine", "junit"):
         if key in out:
             out[key] = Path(out[key])
     out["file"] = Path(files[0])
@@ -117,8 +119,8 @@ def xy_pairs(text: str | None, motors: int) -> list[tuple[int, int]] | None:
     return [(x, y)]
 
 
-def make_chain(factory: Callable[..., Any], motors: int, firmware: str, state: Path | None,
-               pace: bool, machine: Path | None = None) -> Any:
+def make_chain(factory: ChainFactory, motors: int, firmware: str, state: Path | None,
+               pace: bool, machine: Path | None = None) -> Device:
     """The chain of a run or a served simulation (``--state`` made when missing)."""
     from ...errors import TransportError
     if state is not None:
@@ -134,7 +136,7 @@ def make_chain(factory: Callable[..., Any], motors: int, firmware: str, state: P
     return factory(None, motors, firmware=firmware, state_dir=state, pacing=pace, **extra)
 
 
-def default_chain(*args: Any, **kwargs: Any) -> Any:
+def default_chain(*args: Any, **kwargs: Any) -> Device:
     from ...chain.daisy import Chain
     return Chain(*args, **kwargs)
 
@@ -199,12 +201,20 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                 motors: int | None = None, firmware: str | None = None,
                 state: Path | None = None, check: bool = False, pace: bool = False,
                 record: Path | None = None, machine: Path | None = None,
-                chain_factory: Callable[..., Any] = default_chain) -> int:
+                chain_factory: ChainFactory = default_chain,
+                junit: Path | None = None) -> int:
     """Run a script in fast virtual time, print every line, check expectations.
 
     Returns the exit status (0, or :data:`EXIT_FAILED` for a failed run); bad usage
-    and bad scripts raise (:class:`UsageError`, :class:`ScriptError`)."""
+    and bad scripts raise (:class:`UsageError`, :class:`ScriptError`).  ``junit``:
+    also write the verdict as JUnit XML (:func:`write_run_junit`)."""
     setup_logging(False)
+    if junit is not None:
+        from ..ci.junit import path_problem
+        problem = path_problem(junit)
+        if problem is not None:
+            raise UsageError(f"cannot write --junit {junit}: {problem}")
+    started = time.perf_counter()
     script = load_script(file)
     motors, firmware, machine = header_defaults(file, motors, firmware, machine)
     if check and not script.expectations:
@@ -227,7 +237,8 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                        pace, machine)
     try:
         if plot is not None:
-            from ..trace.recorder import NoTraceRecorderError, record as record_trace
+            from ..trace.recorder import NoTraceRecorderError
+            from ..trace.recorder import record as record_trace
             try:
                 record_trace(chain)
             except NoTraceRecorderError as exc:
@@ -257,6 +268,8 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
             record.write_text(result.to_script(), encoding="utf-8")
         except OSError as exc:
             raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
+    if junit is not None:
+        write_run_junit(junit, file, result, time.perf_counter() - started)
     if not result.ok:
         stderr_line(f"coolmuscle: {result.summary()}")
         return EXIT_FAILED
@@ -265,3 +278,22 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
     elif script.expectations:
         stderr_line(f"coolmuscle: {result.summary()}")
     return 0
+
+
+def write_run_junit(path: Path, file: Path, result: Any, wall_s: float) -> Path:
+    """``run --junit``: one case for the script; a failed expectation, extra output or an
+    ``@until`` timeout is a ``<failure>``, a model error an ``<error>``, each naming the
+    script and the line of the expectation (docs/scripts.md)."""
+    from ..ci.junit import Case, Suite, write_junit
+    failure = result.failure
+    if failure is None:
+        case = Case(file.name, "coolmuscle.run", wall_s, file=str(file),
+                    output=result.summary())
+    else:
+        message = re.sub(r"^line \d+: ", "", failure.message)
+        where = f"{file}:{failure.line_no}" if failure.line_no else str(file)
+        case = Case(file.name, "coolmuscle.run", wall_s,
+                    "error" if failure.kind == "error" else "failure",
+                    f"{where}: {message}", failure.kind, file=str(file),
+                    line=failure.line_no)
+    return write_junit(path, [Suite("coolmuscle.run", [case])])

@@ -1,7 +1,8 @@
 """Stop signals (SIGINT, SIGTERM, SIGHUP) of the ``coolmuscle`` command: one clean line.
 
 From the instant :func:`install_startup_handlers` runs (the first code of the command:
-``coolmuscle/__init__.py`` when started as the command) every stop signal ends the
+:func:`coolmuscle.tools.cli.entry.main`, and ``python -m coolmuscle`` before it loads
+the entry module) every stop signal ends the
 program with one line and ``128 + N`` (130 for Ctrl-C), whatever is running:
 
 * inside :func:`.exits.guarded` (a :class:`Guard`), where the command's work and
@@ -28,16 +29,20 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from collections.abc import Callable, Coroutine
 from types import FrameType, TracebackType
-from typing import TYPE_CHECKING, Any, Callable, Coroutine, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
     import asyncio
 
 T = TypeVar("T")
 
-#: The signals that stop the program.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: The signals that stop the program: those of them this system has (Windows has no
+#: SIGHUP; its Ctrl-Break is SIGBREAK).
+STOP_SIGNALS = tuple(getattr(signal, name)
+                     for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
+                     if hasattr(signal, name))
 
 
 class SignalStop(BaseException):
@@ -158,7 +163,7 @@ def serve_until_signal(loop: Any, stop: Any) -> None:
         signal.signal(sig, handler)
 
 
-def run_served(main: Callable[["asyncio.Event"], Coroutine[Any, Any, T]]) -> T:
+def run_served(main: Callable[[asyncio.Event], Coroutine[Any, Any, T]]) -> T:
     """Run ``main(stop)`` in a new event loop whose stop signals set ``stop``.
 
     The handlers of :func:`serve_until_signal` are in place before the loop runs its

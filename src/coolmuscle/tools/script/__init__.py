@@ -10,8 +10,17 @@ The names most callers need are here: ``from coolmuscle.tools.script import run_
 
 from __future__ import annotations
 
-from .runner import (DEFAULT_UNTIL_TIMEOUT, RunResult, Script, ScriptError, TranscriptEntry,
-                     load_script, parse_line, parse_script, run_script)
+from .runner import (
+                     DEFAULT_UNTIL_TIMEOUT,
+                     RunResult,
+                     Script,
+                     ScriptError,
+                     TranscriptEntry,
+                     load_script,
+                     parse_line,
+                     parse_script,
+                     run_script,
+)
 
 __all__ = ["DEFAULT_UNTIL_TIMEOUT", "RunResult", "Script", "ScriptError", "TranscriptEntry",
            "load_script", "parse_line", "parse_script", "run_script"]

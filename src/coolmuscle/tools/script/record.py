@@ -11,8 +11,9 @@ run (docs/performance.md).  Plain typed Python, the same as sources.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, Final, Literal
+from typing import Any, Final, Literal
 
 from ...sim.kernel import to_seconds
 

@@ -15,8 +15,9 @@ This module owns:
 The transcript's entries, their text and the recorder of the bytes received are
 :mod:`.record` (compiled: every line a motor sends goes through it).
 
-The runner talks to the chain through ``chain.kernel`` and ``chain.host_line``, and
-through the device API's ``set_input`` / ``set_analog`` for the input directives.
+The runner talks to the chain only through the device API
+(:class:`coolmuscle.device.api.Device`): ``kernel`` and ``host_line``, ``set_input`` /
+``set_analog`` for the input directives, and its trace feed for ``--trace``.
 """
 
 from __future__ import annotations
@@ -26,14 +27,21 @@ import os
 import re
 import string
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Literal
+from typing import TYPE_CHECKING, Literal
 
+from ...device.api import Device
 from ...errors import CoolMuscleError
 from ...sim.kernel import seconds, to_seconds
-from .record import Direction as Direction, Recorder
-from .record import TranscriptEntry as TranscriptEntry, escape as escape
+from .record import Direction as Direction
+from .record import Recorder
+from .record import TranscriptEntry as TranscriptEntry
+from .record import escape as escape
+
+if TYPE_CHECKING:
+    from ..trace.recorder import TraceFile
 
 #: Default timeout of ``@until`` (virtual seconds).
 DEFAULT_UNTIL_TIMEOUT = 10.0
@@ -336,9 +344,11 @@ class _Checker:
                        f'"{escape(extra[:80])}"{"..." if len(extra) > 80 else ""}', None, now)
 
 
-def _start_trace(chain: Any, trace: str | os.PathLike[str], step: float,
-                 warn_bytes: int | None, on_warning: Callable[[str], None] | None) -> Any:
-    from ..trace.recorder import TraceFormatError, trace as start_trace
+def _start_trace(chain: Device, trace: str | os.PathLike[str], step: float,
+                 warn_bytes: int | None, on_warning: Callable[[str], None] | None
+                 ) -> TraceFile:
+    from ..trace.recorder import TraceFormatError
+    from ..trace.recorder import trace as start_trace
     try:
         return start_trace(chain, Path(trace), step, warn_bytes=warn_bytes,
                            on_warning=on_warning)
@@ -349,7 +359,7 @@ def _start_trace(chain: Any, trace: str | os.PathLike[str], step: float,
         raise ScriptError(f"cannot write trace {os.fspath(trace)}: {exc}") from None
 
 
-def run_script(source: str | os.PathLike[str] | Script, chain: Any, *,
+def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                until: float | None = None, trace: str | os.PathLike[str] | None = None,
                on_entry: Callable[[TranscriptEntry], None] | None = None,
                trace_step: float = 0.001, trace_warn_bytes: int | None = None,

@@ -8,8 +8,12 @@ motor says appears as it arrives, also between lines you type, in colour:
   (``error01.1: syntax error!!``, no answer, a lost connection) red, unreadable bytes
   magenta.  The echo is not shown twice: you see what you typed at the prompt.
 
-Line editing and history come from prompt_toolkit (history kept in
-``$XDG_STATE_HOME/coolmuscle/term_history``).  Commands start with ``:``:
+Line editing and history come from prompt_toolkit (the ``term`` extra; history kept in
+``$XDG_STATE_HOME/coolmuscle/term_history``).  When the input is not a terminal (a
+file or a pipe: ``coolmuscle term URL < lines.txt``, on any system) each line is sent
+as it is read, what the motor says is printed plainly, and at the end of the input the
+terminal waits until the motor has said nothing for ``--timeout`` seconds; this needs
+no prompt_toolkit.  Commands start with ``:``:
 
 ``:send FILE.cml``   upload a file with a progress bar and verify its banks (``upload``)
 ``:save [ID]``       ``$`` and wait for ``saved.n`` (default: the terminal's motor)
@@ -24,21 +28,21 @@ from __future__ import annotations
 import asyncio
 import os
 import shlex
+import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
-
-from prompt_toolkit import PromptSession, print_formatted_text
-from prompt_toolkit.formatted_text import FormattedText
-from prompt_toolkit.history import FileHistory, History, InMemoryHistory
-from prompt_toolkit.patch_stdout import patch_stdout
-from prompt_toolkit.shortcuts import ProgressBar
+from typing import TYPE_CHECKING, Any
 
 from ...client import AsyncCoolMuscle, connect_async
 from ...client.program import load_program
 from ...client.protocol import MotorEvent
 from ...errors import CoolMuscleError
 from ...motor.status import Ux
+from ...needs import needs_extra
 from ..script.transcript import TranscriptRecorder
+
+if TYPE_CHECKING:
+    from prompt_toolkit.history import History
 
 __all__ = ["run_term", "STYLES", "HELP"]
 
@@ -52,19 +56,28 @@ HELP = """commands: :send FILE.cml   :save [ID]   :log FILE | :log off   :motor 
 
 
 def default_history() -> Path:
-    """``$XDG_STATE_HOME/coolmuscle/term_history`` (``~/.local/state/...``)."""
-    base = os.environ.get("XDG_STATE_HOME") or os.path.expanduser("~/.local/state")
+    """``$XDG_STATE_HOME/coolmuscle/term_history`` (``~/.local/state/...``; on Windows
+    in ``%LOCALAPPDATA%``)."""
+    local = os.environ.get("LOCALAPPDATA") if os.name == "nt" else None
+    base = os.environ.get("XDG_STATE_HOME") or local or os.path.expanduser("~/.local/state")
     return Path(base) / "coolmuscle" / "term_history"
 
 
+#: How a line is shown: ``show(text, style)`` (a key of :data:`STYLES`).
+Show = Callable[[str, str], None]
+
+
 def show(text: str, style: str) -> None:
-    """Print one line in colour above the prompt."""
+    """Print one line in colour above the prompt (prompt_toolkit)."""
+    from prompt_toolkit import print_formatted_text
+    from prompt_toolkit.formatted_text import FormattedText
+
     print_formatted_text(FormattedText([(STYLES.get(style, ""), text)]))
 
 
-def _log_failed(text: str) -> None:
-    """The log's file failed (a full disk): said once; the session goes on."""
-    show(f"log: {text}; the session goes on", "error")
+def show_plain(text: str, _style: str) -> None:
+    """Print one line as it is (input from a file or a pipe)."""
+    print(text, flush=True)
 
 
 def describe(event: MotorEvent) -> tuple[str, str]:
@@ -83,21 +96,36 @@ def describe(event: MotorEvent) -> tuple[str, str]:
 class Terminal:
     """One terminal session on one connection."""
 
-    def __init__(self, client: AsyncCoolMuscle, url: str) -> None:
+    def __init__(self, client: AsyncCoolMuscle, url: str, show: Show = show) -> None:
         self.client = client
         self.url = url
         self.motor = client.id
+        self.show = show
         self.recorder: TranscriptRecorder | None = None
         self._untap: Callable[[], None] | None = None
+        #: The loop time of the last line the motor said or the terminal sent.
+        self.last_activity = 0.0
+
+    def _touch(self) -> None:
+        try:
+            self.last_activity = asyncio.get_running_loop().time()
+        except RuntimeError:          # an event outside the loop (a test's direct call)
+            pass
 
     def on_event(self, event: MotorEvent) -> None:
+        self._touch()
         text, style = describe(event)
-        show(text, style)
+        self.show(text, style)
+
+    def log_failed(self, text: str) -> None:
+        """The log's file failed (a full disk): said once; the session goes on."""
+        self.show(f"log: {text}; the session goes on", "error")
 
     async def handle(self, line: str) -> bool:
         """One input line; ``False`` ends the session."""
         if line.startswith(":"):
             return await self.command(line[1:].strip())
+        self._touch()
         self.client.write_line(line)
         return True
 
@@ -112,28 +140,28 @@ class Terminal:
             elif name == "save" and len(args) <= 1:
                 motor = int(args[0]) if args else self.motor
                 await self.client.motor(motor).save()
-                show(f"saved.{motor}", "message")
+                self.show(f"saved.{motor}", "message")
             elif name == "log" and len(args) == 1:
                 self.log(args[0])
             elif name == "motor" and len(args) == 1 and args[0].isdigit():
                 self.motor = self.client.motor(int(args[0])).id    # 1..15 (1.1)
-                show(f"motor ID{self.motor}", "info")
+                self.show(f"motor ID{self.motor}", "info")
             else:
-                show(HELP, "info")
+                self.show(HELP, "info")
         except (CoolMuscleError, OSError, ValueError) as exc:
-            show(f"{name}: {exc}", "error")
+            self.show(f"{name}: {exc}", "error")
         return True
 
     def log(self, target: str) -> None:
         if self.recorder is not None and self._untap is not None:
             self._untap()
             self.recorder.close()
-            show(f"log written: {self.recorder.path}", "info")
+            self.show(f"log written: {self.recorder.path}", "info")
             self.recorder = None
         if target.lower() != "off":
-            self.recorder = TranscriptRecorder(target, self.url, on_error=_log_failed)
+            self.recorder = TranscriptRecorder(target, self.url, on_error=self.log_failed)
             self._untap = self.client.add_tap(self.recorder.tap)
-            show(f"logging to {target} (:log off to stop)", "info")
+            self.show(f"logging to {target} (:log off to stop)", "info")
 
     async def send_file(self, path: Path) -> None:
         program = load_program(path)
@@ -142,19 +170,27 @@ class Terminal:
             raise CoolMuscleError(f"{path}: {len(bad)} syntax error(s) (coolmuscle check "
                                   f"{path}); nothing sent")
         total = program.send_count()
-        with ProgressBar(title=f"sending {path.name}") as bar:
-            counter = bar(range(total), total=total, label="lines")
+        upload = self.client.motor(self.motor).upload
+        if self.show is show:          # on the screen: prompt_toolkit's progress bar
+            from prompt_toolkit.shortcuts import ProgressBar
 
-            def progress(done: int, _total: int) -> None:
-                while counter.items_completed < done:
-                    counter.item_completed()
-            result = await self.client.motor(self.motor).upload(program, check=False,
-                                                                progress=progress)
+            with ProgressBar(title=f"sending {path.name}") as bar:
+                counter = bar(range(total), total=total, label="lines")
+
+                def progress(done: int, _total: int) -> None:
+                    while counter.items_completed < done:
+                        counter.item_completed()
+                result = await upload(program, check=False, progress=progress)
+        else:
+            self.show(f"sending {path.name}: {total} line(s)", "info")
+            result = await upload(program, check=False)
+        self._touch()
         for line in result.report():
-            show(line, "error")
+            self.show(line, "error")
         verdict = "verified" if result.ok else "FAILED"
-        show(f"sent {result.sent} line(s) of {path.name}; banks {', '.join(result.banks) or '-'}"
-             f" {verdict}", "message" if result.ok else "error")
+        self.show(f"sent {result.sent} line(s) of {path.name}; banks "
+                  f"{', '.join(result.banks) or '-'} {verdict}",
+                  "message" if result.ok else "error")
 
     def close(self) -> None:
         if self.recorder is not None:
@@ -162,6 +198,10 @@ class Terminal:
 
 
 async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
+    """On a terminal: prompt_toolkit's prompt, history and colours."""
+    from prompt_toolkit import PromptSession
+    from prompt_toolkit.patch_stdout import patch_stdout
+
     term = Terminal(client, url)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
@@ -181,26 +221,61 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
         term.close()
 
 
-async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
-                   timeout: float = 1.0, history: Path | None = None,
-                   log: Path | None = None, **serial_options: Any) -> None:
-    """Run the terminal on ``url`` until ``:quit`` or end of input."""
-    path = history or default_history()
-    store: History
+async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> None:
+    """Input from a file or a pipe: each line sent as it is read; at the end of the input
+    (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds."""
+    term = Terminal(client, url, show=show_plain)
+    client.subscribe(term.on_event)
+    loop = asyncio.get_running_loop()
+    term.last_activity = loop.time()
+    try:
+        while True:
+            line = await asyncio.to_thread(sys.stdin.readline)
+            if not line or not await term.handle(line.rstrip("\r\n")):
+                break
+        while (left := term.last_activity + quiet - loop.time()) > 0:
+            await asyncio.sleep(min(left, 0.05))
+    finally:
+        term.close()
+
+
+def _history(path: Path) -> History:
+    from prompt_toolkit.history import FileHistory, InMemoryHistory
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        store = FileHistory(str(path))
+        return FileHistory(str(path))
     except OSError:
-        store = InMemoryHistory()
+        return InMemoryHistory()
+
+
+async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
+                   timeout: float = 1.0, history: Path | None = None,
+                   log: Path | None = None, interactive: bool | None = None,
+                   **serial_options: Any) -> None:
+    """Run the terminal on ``url`` until ``:quit`` or end of input.  ``interactive``
+    (default: standard input is a terminal) chooses the prompt_toolkit session (the
+    ``term`` extra) or the plain one."""
+    if interactive is None:
+        interactive = sys.stdin is not None and sys.stdin.isatty()
+    store: History | None = None
+    if interactive:
+        with needs_extra("term", "the interactive terminal (line editing, history)"):
+            store = _history(history or default_history())
     client = await connect_async(url, baudrate=baudrate, motor=motor, timeout=timeout,
                                  **serial_options)
     try:
-        recorder = (TranscriptRecorder(log, url, on_error=_log_failed) if log is not None
-                    else None)
-        if recorder is not None:
+        recorder: TranscriptRecorder | None = None
+        if log is not None:
+            said = show if store is not None else show_plain
+            recorder = TranscriptRecorder(log, url, on_error=lambda text: said(
+                f"log: {text}; the session goes on", "error"))
             client.add_tap(recorder.tap)
         try:
-            await _session(client, url, store)
+            if store is not None:
+                await _session(client, url, store)
+            else:
+                await _plain_session(client, url, timeout)
         finally:
             if recorder is not None:
                 recorder.close()

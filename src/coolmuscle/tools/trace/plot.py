@@ -17,26 +17,29 @@ matplotlib runs headless (Agg).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
+from ...device.api import Device
+from ...motor.state import output_functions as out
+from ...motor.status import ALARM_BITS, Ux
+from ...needs import needs_extra
+from ...sim.kernel import NS_PER_S
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+with needs_extra("plot", "plotting (--plot)"):
+    import matplotlib
 
-from ...motor.signals import io  # noqa: E402
-from ...motor.status import ALARM_BITS, Ux  # noqa: E402
-from ...sim.kernel import NS_PER_S  # noqa: E402
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
     from matplotlib.typing import ColorType
 
-    from ...chain import Chain
     from .recorder import Sample, TraceRecorder
 
 #: Status classes of the timeline bar, in priority order (6.6 ?99).
@@ -88,20 +91,15 @@ def _changes(values: Sequence[float]) -> bool:
 
 
 #: Output functions (ch. 3 K34; CM1 Appendix A K34) as the timeline labels them.
-OUTPUT_FUNCTIONS = {io.OUT_NONE: "no function", io.OUT_IN_POSITION: "in-position",
-                    io.OUT_ALARM: "alarm", io.OUT_GENERAL: "general",
-                    io.OUT_ORIGIN_DONE: "origin done", io.OUT_MERGE_PULSE: "merge pulse",
-                    io.OUT_ROTATION_PULSE: "rotation pulse", io.OUT_MOTOR_FREE: "motor free",
-                    io.OUT_PUSH: "push", io.OUT_FOLLOWS_O1: "O1/F1", io.OUT_FOLLOWS_O2: "O2/F2",
-                    io.OUT_ANALOG: "analog", io.OUT_PUSH_AT_LEVEL: "push torque reached"}
+OUTPUT_FUNCTIONS = {out.OUT_NONE: "no function", out.OUT_IN_POSITION: "in-position",
+                    out.OUT_ALARM: "alarm", out.OUT_GENERAL: "general",
+                    out.OUT_ORIGIN_DONE: "origin done", out.OUT_MERGE_PULSE: "merge pulse",
+                    out.OUT_ROTATION_PULSE: "rotation pulse", out.OUT_MOTOR_FREE: "motor free",
+                    out.OUT_PUSH: "push", out.OUT_FOLLOWS_O1: "O1/F1", out.OUT_FOLLOWS_O2: "O2/F2",
+                    out.OUT_ANALOG: "analog", out.OUT_PUSH_AT_LEVEL: "push torque reached"}
 
 
-def _output_functions(motor: Any) -> list[int]:
-    """The function of each output of ``motor`` now (its K34 through its firmware)."""
-    return [motor.io.output_function(n) for n in range(1, motor.io.output_count + 1)]
-
-
-def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
+def _bit_rows(samples: list[Sample], motor: int, count: int, multi: bool,
               functions: Sequence[int] = ()) -> list[tuple[str, list[bool]]]:
     """Inputs and outputs that are ever on (or change), as (label, bits); an output is
     labelled with its K34 function, ``functions[n - 1]`` (``OUT1 in-position``)."""
@@ -118,7 +116,7 @@ def _bit_rows(samples: list["Sample"], motor: int, count: int, multi: bool,
     return rows
 
 
-def _status_spans(t: list[float], samples: list["Sample"], end: float
+def _status_spans(t: list[float], samples: list[Sample], end: float
                   ) -> dict[str, list[tuple[float, float]]]:
     spans: dict[str, list[tuple[float, float]]] = {}
     start, current = t[0], status_class(samples[0].status)
@@ -143,7 +141,7 @@ def _palette(n: int) -> list[ColorType]:
     return [colours[i % len(colours)] for i in range(n)]
 
 
-def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
+def _speed_axis(ax: Axes, ppr: set[int]) -> None:
     """min⁻¹ on the right when every motor has the same resolution (K37)."""
     if len(ppr) != 1:
         return
@@ -157,24 +155,19 @@ def _speed_axis(ax: "Axes", ppr: set[int]) -> None:
     right.set_ylabel("min⁻¹")
 
 
-def interpolated_pairs(recorder: "TraceRecorder") -> list[tuple[int, int]]:
+def interpolated_pairs(recorder: TraceRecorder) -> list[tuple[int, int]]:
     """(X, Y) IDs of every pair of motors that followed an interpolation path (4.4)."""
-    pairs: list[tuple[int, int]] = []
-    for motor in recorder.chain.motors.values():
-        path = getattr(motor, "path", None)
-        if path is not None and (path.x.id, path.y.id) not in pairs:
-            pairs.append((path.x.id, path.y.id))
-    return sorted(pairs)
+    return recorder.feed.interpolated_pairs()
 
 
-def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | None = None,
+def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None = None,
                title: str = "", xy: Sequence[tuple[int, int]] | None = None) -> Path:
     """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension).
 
     ``xy``: pairs of motor IDs whose XY path is drawn beside the time panels (default:
     the pairs that interpolated; ``[]`` for none).
     """
-    end_ns = recorder.chain.kernel.now
+    end_ns = recorder.feed.now
     span = max((end_ns - recorder.start) / NS_PER_S, 1e-3)
     times = recorder.times(step or span / MAX_POINTS, end_ns)
     t = [x / NS_PER_S for x in times]
@@ -182,13 +175,13 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     multi = len(motors) > 1
     data = {mid: [recorder.sample(mid, x) for x in times] for mid in motors}
     colors = dict(zip(motors, _palette(len(motors))))
-    inputs = {mid: recorder.chain.motors[mid].io.input_count for mid in motors}
-    bit_rows = {mid: _bit_rows(data[mid], mid, inputs[mid], multi,
-                               _output_functions(recorder.chain.motors[mid]))
+    traces = recorder.traces
+    bit_rows = {mid: _bit_rows(data[mid], mid, traces[mid].input_count, multi,
+                               traces[mid].output_functions())
                 for mid in motors}
     occurring = {status_class(s.status) for d in data.values() for s in d}
     show_analog = any(_changes([s.analog_in for s in data[m]])
-                      or recorder.chain.motors[m].k(35) != 0 for m in motors)
+                      or recorder.chain.get_param(m, 35) != 0 for m in motors)
     show_encoder = any(_changes([s.encoder for s in d]) for d in data.values())
     timeline_rows = len(motors) + sum(len(r) for r in bit_rows.values())
 
@@ -217,12 +210,11 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
-        _draw_stoppers(ax["position"], recorder.chain.motors[mid], colors[mid], multi)
+        _draw_stoppers(ax["position"], mid, traces[mid].stoppers(), colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
-    _speed_axis(ax["speed"], {recorder.chain.motors[m].resolution.pulses_per_rev
-                              for m in motors})
+    _speed_axis(ax["speed"], {traces[m].pulses_per_rev for m in motors})
     if show_analog:
         ax["analog"].set_ylabel("analog [V]")
         ax["analog"].set_ylim(-0.1, 5.1)
@@ -243,7 +235,7 @@ def plot_trace(recorder: "TraceRecorder", path: str | Path, *, step: float | Non
     return path
 
 
-def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], motor: int,
+def _draw_motor(ax: dict[str, Axes], t: list[float], samples: list[Sample], motor: int,
                 color: object) -> None:
     label = f"ID{motor}"
     ax["position"].plot(t, [s.position for s in samples], color=color, linewidth=1.3,
@@ -261,7 +253,7 @@ def _draw_motor(ax: dict[str, "Axes"], t: list[float], samples: list["Sample"], 
                            linewidth=1.0)
 
 
-def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple[int, int]],
+def _xy_panel(ax: Axes, data: dict[int, list[Sample]], pairs: Sequence[tuple[int, int]],
               colors: dict[int, ColorType]) -> None:
     """Each pair's path: the X motor's position across, the Y motor's up (4.4 figures);
     the command dashed, the start a circle, the end a square."""
@@ -283,7 +275,7 @@ def _xy_panel(ax: "Axes", data: dict[int, list["Sample"]], pairs: Sequence[tuple
     ax.legend(loc="best", fontsize="small")
 
 
-def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
+def _draw_timeline(ax: Axes, t: list[float], data: dict[int, list[Sample]],
                    bit_rows: dict[int, list[tuple[str, list[bool]]]],
                    colors: dict[int, ColorType], end: float) -> None:
     """Per motor: a status bar, then one logic-analyser row per active input/output."""
@@ -309,25 +301,19 @@ def _draw_timeline(ax: "Axes", t: list[float], data: dict[int, list["Sample"]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: "Axes", motor: object, color: object, multi: bool) -> None:
+def _draw_stoppers(ax: Axes, motor: int, stoppers: Sequence[float], color: object,
+                   multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
     motor's user coordinates."""
-    geometry = getattr(motor, "geometry", None)
-    axis = getattr(motor, "axis", None)
-    if geometry is None or axis is None:
-        return
-    ppr = motor.resolution.pulses_per_rev  # type: ignore[attr-defined]
-    for raw in geometry.walls(ppr):
-        if math.isfinite(raw):
-            where = axis.to_user(raw)
-            ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
-            name = f"ID{motor.id} stopper" if multi else "stopper"  # type: ignore[attr-defined]
-            ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
-                        xycoords=("axes fraction", "data"), fontsize="x-small",
-                        va="bottom", color=color)
+    for where in stoppers:
+        ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
+        name = f"ID{motor} stopper" if multi else "stopper"
+        ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+                    xycoords=("axes fraction", "data"), fontsize="x-small",
+                    va="bottom", color=color)
 
 
-def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
+def _legends(fig: Figure, ax: dict[str, Axes], motors: Sequence[int],
              colors: dict[int, ColorType], outside: bool, analog: bool,
              occurring: set[str] | None = None) -> None:
     status = [Patch(color=c, label=name) for name, c in STATUS_COLORS.items()
@@ -348,7 +334,7 @@ def _legends(fig: "Figure", ax: dict[str, "Axes"], motors: Sequence[int],
         ax["position"].legend(loc="upper right", fontsize="small")
 
 
-def plot(chain: "Chain", path: str | Path, title: str = "",
+def plot(chain: Device, path: str | Path, title: str = "",
          xy: Sequence[tuple[int, int]] | None = None) -> Path:
     """Plot what ``chain``'s trace recorder holds (position, speed, torque, status and
     I/O), and the XY path of ``xy`` pairs (default: the pairs that interpolated, 4.4)."""

@@ -1,9 +1,11 @@
 """The trace recorder: time, target, position, speed, torque, status and I/O of every motor.
 
-Motion is closed form, so the recorder does not tick: it keeps each axis's trajectory
-history (every profile the axis followed, with its tracking solution) and the discrete
-state (Ux, inputs, outputs) each time a kernel event changes it.  On export it samples
-the history at any resolution, exactly, plus every discrete change.
+Motion is closed form, so the recorder does not tick: it reads the device API's trace
+feed (:meth:`coolmuscle.device.api.Device.trace_feed`, :mod:`coolmuscle.device.trace`),
+which keeps each axis's trajectory history (every profile the axis followed, with its
+tracking solution) and the discrete state (Ux, inputs, outputs) each time it may have
+changed, and samples them exactly at any instant.  On export the recorder samples at
+any resolution, plus every change; it reads nothing of the motors but the feed.
 
 Columns (per motor ``m<ID>.``): ``target``, ``command``, ``position`` (pulses),
 ``speed`` (actual, pulses/s), ``torque`` (% rated), ``status`` (Ux), ``inputs``,
@@ -23,22 +25,16 @@ import csv
 import importlib.util
 import math
 import weakref
-from bisect import bisect_right
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable
+from typing import Any
 
-from ...motor.signals.analog_output import output_volts
-from ...motor.signals.io import OUT_ROTATION_PULSE
-from ...motor.status import ALARM_BITS, Ux
+from ...device.api import Device
+from ...device.trace import MotorTrace, TraceFeed, TraceSample
 from ...sim.kernel import NS_PER_S
 
-if TYPE_CHECKING:
-    from ...chain.daisy import Chain
-    from ...motor.motor import Motor
-
-#: Ux bits during which the motor makes no torque: motor free and the alarms.
-_NO_TORQUE = int(Ux.MOTOR_FREE | ALARM_BITS)
+#: One motor's values at one instant (:class:`coolmuscle.device.trace.TraceSample`).
+Sample = TraceSample
 
 FIELDS = ("target", "command", "position", "speed", "torque", "status", "inputs", "outputs",
           "analog_in", "analog_out", "encoder")
@@ -66,150 +62,46 @@ def check_trace_path(path: str | Path) -> None:
                                "(pip install pyarrow); a .csv path needs nothing")
 
 
-@dataclass(frozen=True, slots=True)
-class Sample:
-    """One motor's values at one instant."""
-
-    time: int
-    target: float
-    command: float
-    position: float
-    speed: float
-    torque: float
-    status: int
-    inputs: int
-    outputs: int
-    analog_in: int = 0
-    analog_out: float = 2.5
-    encoder: int = 0
-
-    def row(self) -> tuple[float, ...]:
-        return (self.target, self.command, self.position, self.speed, self.torque,
-                self.status, self.inputs, self.outputs, self.analog_in, self.analog_out,
-                self.encoder)
-
-
-class _MotorLog:
-    """Discrete-state changes of one motor: (time, status, inputs, outputs)."""
-
-    def __init__(self, motor: "Motor") -> None:
-        self.motor = motor
-        self.times: list[int] = []
-        self.states: list[tuple[int, int, int]] = []
-        #: (time, (K33, K34, K35)) at each change: a sample uses the values of its time
-        self.k_times: list[int] = []
-        self.k_values: list[tuple[int, int, int]] = []
-        self._starts: list[int] = []
-        self.capture()
-
-    def capture(self) -> None:
-        m = self.motor
-        ks = (m.k(33), m.k(34), m.k(35))
-        if not self.k_values or self.k_values[-1] != ks:
-            _append(self.k_times, self.k_values, m.kernel.now, ks)
-        state = (m.status, m.io.input_word(), m.io.output_word())
-        if not self.states or self.states[-1] != state:
-            now = m.kernel.now
-            if self.times and self.times[-1] == now:
-                self.states[-1] = state
-            else:
-                self.times.append(now)
-                self.states.append(state)
-
-    def state_at(self, t: int) -> tuple[int, int, int]:
-        i = bisect_right(self.times, t) - 1
-        return self.states[max(i, 0)]
-
-    def k_at(self, t: int) -> tuple[int, int, int]:
-        """(K33, K34, K35) in force at ``t``."""
-        return self.k_values[max(bisect_right(self.k_times, t) - 1, 0)]
-
-    def starts(self, history: list[Any]) -> list[int]:
-        """Start times of the axis history (cached; the history only grows)."""
-        if len(self._starts) != len(history):
-            self._starts = [h[0] for h in history]
-        return self._starts
-
-
 class TraceRecorder:
-    """Records a chain from the moment it is attached; export with :meth:`samples`."""
+    """Records a chain from the moment it is attached (through the device API's trace
+    feed, :meth:`coolmuscle.device.api.Device.trace_feed`); export with :meth:`samples`."""
 
-    def __init__(self, chain: "Chain") -> None:
+    def __init__(self, chain: Device) -> None:
         self.chain = chain
-        self.start = chain.kernel.now
-        self._logs = {mid: _MotorLog(m) for mid, m in chain.motors.items()}
-        for motor in chain.motors.values():
-            motor.axis.record_history(True)
-            _record_signals(motor)
-            # a motion started from outside a kernel event (Python API) changes Ux too
-            listeners = getattr(motor.axis, "trajectory_listeners", None)
-            if listeners is not None:
-                listeners.append(self.capture)
-        self._remove = chain.kernel.add_observer(self.capture)
-        self._unobserve = chain.observe(self.capture)
+        self.feed: TraceFeed = chain.trace_feed()
+        self.start = self.feed.start
+        #: Each motor's recording, by ID (the feed's).
+        self.traces: dict[int, MotorTrace] = self.feed.traces
 
     def capture(self) -> None:
-        """Note the discrete state of every motor now (called after each event)."""
-        for log in self._logs.values():
-            log.capture()
+        """Note the discrete state of every motor now (the feed does it after each event)."""
+        self.feed.capture()
 
     def stop(self) -> None:
         """Stop recording discrete changes (the history is kept for export)."""
-        self._remove()
-        for log in self._logs.values():
-            listeners = getattr(log.motor.axis, "trajectory_listeners", [])
-            if self.capture in listeners:
-                listeners.remove(self.capture)
+        self.feed.stop()
 
     @property
     def motor_ids(self) -> tuple[int, ...]:
-        return tuple(self._logs)
+        return tuple(self.traces)
 
     def change_times(self, end: int | None = None) -> list[int]:
         """Every instant a discrete state, a trajectory or a pulse output changed."""
-        end = self.chain.kernel.now if end is None else end
+        end = self.feed.now if end is None else end
         times: set[int] = set()
-        for log in self._logs.values():
-            times.update(log.times)
-            times.update(t for t, *_ in log.motor.axis.history or ())
-            pulses = getattr(log.motor, "pulses", None)
-            if pulses is not None:
-                times.update(pulses.edge_times(self.start, end)[:MAX_EDGE_SAMPLES])
+        for trace in self.traces.values():
+            times.update(trace.state_times())
+            times.update(trace.piece_starts())
+            times.update(trace.pulse_edges(self.start, end)[:MAX_EDGE_SAMPLES])
         return sorted(times)
 
     def sample(self, motor_id: int, t: int) -> Sample:
         """The values of ``motor_id`` at kernel time ``t`` (exact)."""
-        log = self._logs[motor_id]
-        motor = log.motor
-        history = motor.axis.history or []
-        starts = log.starts(history)
-        i = max(bisect_right(starts, t) - 1, 0)
-        _, profile, motion, zero, sign = history[i]
-        command_raw = motion.command_at(t)
-        actual_raw = motion.position_at(t)
-        final = profile.final_position
-        target = sign * (final - zero) if math.isfinite(final) else math.copysign(math.inf, final)
-        speed = sign * motion.velocity_at(t)
-        status, inputs, outputs = log.state_at(t)
-        ppr = motor.resolution.pulses_per_rev
-        torque = sign * motion.torque_percent_at(t)
-        if not status & _NO_TORQUE:
-            torque += _load(motor, t)
-        command = sign * (command_raw - zero)
-        position = sign * (actual_raw - zero)
-        error = command_raw - actual_raw
-        k33, k34, k35 = log.k_at(t)          # the K values of that instant, not of now
-        analog_out = output_volts(k35, target=target if math.isfinite(target)
-                                  else command, position=position, error=sign * error,
-                                  speed_pps=speed, torque=torque, pulses_per_rev=ppr)
-        return Sample(t, target, command, position, speed, torque, status, inputs,
-                      _pulse_ports(motor, t, outputs, k33, k34),
-                      _signal(motor, "analog_input", t), analog_out,
-                      _signal(motor, "encoder", t))
+        return self.traces[motor_id].sample(t)
 
     def times(self, step: float, end: int | None = None) -> list[int]:
         """A grid of ``step`` seconds from the start to ``end`` (default now), plus changes."""
-        end = self.chain.kernel.now if end is None else end
+        end = self.feed.now if end is None else end
         step_ns = max(int(step * NS_PER_S), 1)
         grid = set(range(self.start, end + 1, step_ns))
         grid.update(t for t in self.change_times(end) if self.start <= t <= end)
@@ -220,12 +112,12 @@ class TraceRecorder:
         """Rows of ``time_s`` then FIELDS for each motor."""
         for t in self.times(step, end):
             row: list[float] = [t / NS_PER_S]
-            for mid in self._logs:
-                row.extend(self.sample(mid, t).row())
+            for trace in self.traces.values():
+                row.extend(trace.sample(t).row())
             yield row
 
     def header(self) -> list[str]:
-        return ["time_s"] + [f"m{mid}.{f}" for mid in self._logs for f in FIELDS]
+        return ["time_s"] + [f"m{mid}.{f}" for mid in self.traces for f in FIELDS]
 
     def write(self, path: str | Path, step: float = 0.001) -> Path:
         """Write the trace: Parquet for a ``.parquet`` path (pyarrow), else CSV."""
@@ -264,16 +156,16 @@ class TraceRecorder:
         return path
 
 
-_RECORDERS: "weakref.WeakKeyDictionary[Chain, TraceRecorder]" = weakref.WeakKeyDictionary()
+_RECORDERS: weakref.WeakKeyDictionary[Device, TraceRecorder] = weakref.WeakKeyDictionary()
 
 
 class NoTraceRecorderError(TraceFormatError):
-    """A chain that cannot be recorded (not a :class:`~coolmuscle.chain.Chain`)."""
+    """A chain that cannot be recorded (no trace feed: not a :class:`~coolmuscle.device.Device`)."""
 
 
-def record(chain: "Chain") -> TraceRecorder:
+def record(chain: Device) -> TraceRecorder:
     """Start (or return) the trace recorder of ``chain``; it records from now on."""
-    if not callable(getattr(chain, "observe", None)):
+    if not callable(getattr(chain, "trace_feed", None)):
         raise NoTraceRecorderError(f"this chain ({type(chain).__name__}) has no trace recorder")
     recorder = _RECORDERS.get(chain)
     if recorder is None:
@@ -288,7 +180,7 @@ class TraceFile:
 
     def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
                  prune: bool = True, warn_bytes: int | None = None,
-                 on_warning: "Callable[[str], None] | None" = None) -> None:
+                 on_warning: Callable[[str], None] | None = None) -> None:
         self.recorder = recorder
         self.path = path
         self.step = step
@@ -304,9 +196,9 @@ class TraceFile:
         return self.path
 
 
-def trace(chain: "Chain", path: str | Path, step: float = 0.001, *,
+def trace(chain: Device, path: str | Path, step: float = 0.001, *,
           warn_bytes: int | None = None,
-          on_warning: "Callable[[str], None] | None" = None) -> TraceFile:
+          on_warning: Callable[[str], None] | None = None) -> TraceFile:
     """Record ``chain`` from now on into ``path`` (CSV, or Parquet for ``.parquet``:
     ``TraceFormatError`` at once when pyarrow is missing), streamed as the run goes;
     ``close()`` on the handle finishes it.  ``warn_bytes``: call ``on_warning`` once
@@ -346,7 +238,7 @@ class TraceStream:
 
     def __init__(self, recorder: TraceRecorder, path: Path, step: float, *,
                  prune: bool = True, warn_bytes: int | None = None,
-                 on_warning: "Callable[[str], None] | None" = None) -> None:
+                 on_warning: Callable[[str], None] | None = None) -> None:
         self.recorder = recorder
         self.path = Path(path)
         self.step_ns = max(int(round(step * NS_PER_S)), 1)
@@ -373,7 +265,7 @@ class TraceStream:
             self._fh = self.path.open("w", newline="")
             self._csv = csv.writer(self._fh)
             self._csv.writerow(header)
-        kernel = recorder.chain.kernel
+        kernel = self._kernel = recorder.chain.kernel
         self._remove = kernel.add_observer(self._on_event)
         self._unobserve = recorder.chain.observe(self._on_event)
 
@@ -381,7 +273,7 @@ class TraceStream:
     def _on_event(self) -> None:
         if self._busy or self._closed:
             return
-        now = self.recorder.chain.kernel.now
+        now = self._kernel.now
         if now - self.next_t >= FLUSH_NS:
             self._busy = True
             try:
@@ -396,7 +288,7 @@ class TraceStream:
             return
         try:
             self.recorder.capture()
-            self._write_until(self.recorder.chain.kernel.now, inclusive=True)
+            self._write_until(self._kernel.now, inclusive=True)
         finally:
             self._finish()
 
@@ -464,28 +356,16 @@ class TraceStream:
     def _at_rest(self, t0: int, t1: int) -> bool:
         if t1 <= t0:
             return False
-        rec = self.recorder
-        for mid, log in rec._logs.items():
-            a, b = rec.sample(mid, t0).row(), rec.sample(mid, t1).row()
-            if a != b or (self._last is not None and self._last_of(mid) != a):
+        for i, trace in enumerate(self.recorder.traces.values()):
+            a, b = trace.sample(t0).row(), trace.sample(t1).row()
+            if a != b or (self._last is not None and self._last[i] != a):
                 return False
-            history = log.motor.axis.history or []
-            if history:
-                starts = log.starts(history)
-                entry = history[max(bisect_right(starts, t0) - 1, 0)]
-                piece = _piece(entry)
-                if piece is not None and piece.turns(t0, t1):
-                    return False
+            if trace.turns(t0, t1):
+                return False
         return True
 
-    def _last_of(self, motor_id: int) -> tuple[float, ...] | None:
-        if self._last is None:
-            return None
-        return self._last[list(self.recorder._logs).index(motor_id)]
-
     def _row(self, t: int) -> None:
-        rec = self.recorder
-        samples = [rec.sample(mid, t).row() for mid in rec._logs]
+        samples = [trace.sample(t).row() for trace in self.recorder.traces.values()]
         self._last = samples
         self._last_t = t
         row: list[float] = [t / NS_PER_S]
@@ -514,35 +394,19 @@ class TraceStream:
 
     def _changes(self, a: int, end: int) -> set[int]:
         times: set[int] = set()
-        for log in self.recorder._logs.values():
-            times.update(t for t in log.times if t >= a)
-            times.update(t for t, *_ in log.motor.axis.history or () if t >= a)
-            pulses = getattr(log.motor, "pulses", None)
-            if pulses is not None and end > a:
-                times.update(pulses.edge_times(a, end)[:MAX_EDGE_SAMPLES])
-            analog = getattr(log.motor, "analog_input", None)
-            if analog is not None:
-                times.update(t for t in analog.since if t >= a)
+        for trace in self.recorder.traces.values():
+            times.update(t for t in trace.state_times() if t >= a)
+            times.update(t for t in trace.piece_starts() if t >= a)
+            if end > a:
+                times.update(trace.pulse_edges(a, end)[:MAX_EDGE_SAMPLES])
+            times.update(t for t in trace.analog_times() if t >= a)
         return times
 
     # -- bounded memory ---------------------------------------------------------------
     def _prune(self, upto: int) -> None:
         """Forget what only rows before ``upto`` needed (keep what covers ``upto``)."""
-        for log in self.recorder._logs.values():
-            _trim_pairs(log.times, log.states, upto)
-            history = log.motor.axis.history
-            if history:
-                starts = [h[0] for h in history]
-                i = bisect_right(starts, upto) - 1
-                if i > 0:
-                    del history[:i]
-                    log._starts = []
-            analog = getattr(log.motor, "analog_input", None)
-            if analog is not None and analog.recording:
-                _trim_pairs(analog.since, analog.sources, upto)
-            timeline = getattr(log.motor, "timeline", None)
-            for track in getattr(timeline, "tracks", ()):
-                _trim_pairs(track._times, track.checkpoints, upto)
+        for trace in self.recorder.traces.values():
+            trace.forget_before(upto)
 
     def _flush_parquet(self, final: bool = False) -> None:
         if not final and len(self._columns[0]) < PARQUET_ROWS:
@@ -569,70 +433,6 @@ class TraceStream:
         self._columns = [[] for _ in header]
         if final:
             self._pq_writer.close()
-
-
-def _trim_pairs(times: list[int], values: list[Any], upto: int) -> None:
-    """Drop the entries of two parallel lists before the last one at or before ``upto``."""
-    i = bisect_right(times, upto) - 1
-    if i > 0:
-        del times[:i]
-        del values[:i]
-
-
-def _piece(entry: tuple[Any, ...]) -> Any:
-    from ...motor.motion.trajectory import Piece  # noqa: PLC0415  (sampling helper)
-    try:
-        return Piece(*entry)
-    except TypeError:
-        return None
-
-
-def _record_signals(motor: "Motor") -> None:
-    """Keep the history of the position-derived signals and the analog input."""
-    timeline = getattr(motor, "timeline", None)
-    if timeline is not None:
-        timeline.record(True)
-    analog = getattr(motor, "analog_input", None)
-    if analog is not None:
-        analog.recording = True
-
-
-def _append(times: list[int], values: list[Any], now: int, value: object) -> None:
-    """Append a change at ``now`` (a second change at the same instant replaces it)."""
-    if times and times[-1] == now:
-        values[-1] = value
-    else:
-        times.append(now)
-        values.append(value)
-
-
-def _pulse_ports(motor: "Motor", t: int, outputs: int, k33: int, k34: int) -> int:
-    """The output word at ``t`` with the rotation pulse ports (K34=7, K33 of that
-    instant) filled in."""
-    pulses = getattr(motor, "pulses", None)
-    if pulses is None:
-        return outputs
-    for number, signal in pulses.signals_at(t).items():
-        if motor.io.output_function(number, k34) != OUT_ROTATION_PULSE:   # at that instant
-            continue
-        port = motor.io.port_of(number, signal, k33)
-        bit = 1 << (number - 1)
-        outputs = (outputs | bit) if port else (outputs & ~bit)
-    return outputs
-
-
-def _load(motor: "Motor", t: int) -> float:
-    """Torque (%) a sensed load (analog torque-sensor source, 5.5) takes at ``t``."""
-    control = getattr(motor, "analog_control", None)
-    return control.load_percent(t) if control is not None else 0.0
-
-
-def _signal(motor: "Motor", name: str, t: int) -> int:
-    """Analog input counts or encoder count at ``t`` (0 for a motor without them)."""
-    source = getattr(motor, name, None)
-    if source is None:
-        return 0
-    return int(source.counts(t) if name == "analog_input" else source.count(t))
 
 
 def _fmt(value: float) -> str:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -40,13 +39,13 @@ def _positive(value: float, option: str, lo: float = 0.0) -> None:
 def compare(
     session: Path = typer.Argument(..., metavar="SESSION.cml",
                                    help="A capture (coolmuscle capture)."),
-    machine: Optional[Path] = typer.Option(
+    machine: Path | None = typer.Option(
         None, "--machine", metavar="M.toml",
         help="Machine file of the virtual motor (default: the capture's '# chain: "
              "machine=', else the default load)."),
-    report: Optional[Path] = typer.Option(None, "--report", metavar="OUT.md|OUT.html",
+    report: Path | None = typer.Option(None, "--report", metavar="OUT.md|OUT.html",
                                           help="Write the report (Markdown or HTML)."),
-    plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png",
+    plot: Path | None = typer.Option(None, "--plot", metavar="OUT.png",
                                         help="Plot real and virtual polled values "
                                              "(PNG, SVG or PDF)."),
     time_tolerance: float = typer.Option(0.02, "--time-tolerance", metavar="SECONDS",
@@ -57,6 +56,9 @@ def compare(
     noise: float = typer.Option(1.0, "--noise", metavar="UNITS",
                                 help="Noise of a polled value beyond its rounding "
                                      "(default 1 unit)."),
+    junit: Path | None = typer.Option(
+        None, "--junit", metavar="FILE.xml",
+        help="Also write JUnit XML: a case per line received, with its capture line."),
 ) -> None:
     """Replay a captured session on the virtual motor and report every difference."""
     from .compare import Tolerance, compare_session
@@ -65,6 +67,8 @@ def compare(
         _positive(value, option)
     if report is not None:
         check_output(report, "--report", REPORT_SUFFIXES)
+    if junit is not None:
+        check_output(junit, "--junit", (".xml",))
     _plot_check(plot)
     tolerance = Tolerance(time_abs=time_tolerance, time_rel=time_relative, noise=noise)
     result = compare_session(session, machine, tolerance)
@@ -95,6 +99,11 @@ def compare(
             text = result.to_html()
         write_atomic(report, text.encode("utf-8"))
         write(f"wrote {report}\n")
+    if junit is not None:
+        from ..ci.junit import write_junit
+        from .compare import junit_suite
+        write_junit(junit, [junit_suite(result, session)])
+        write(f"wrote {junit}\n")
     write(f"coolmuscle: {result.verdict_line()}\n")
     if not result.ok:
         raise typer.Exit(1)
@@ -105,16 +114,16 @@ def fit(
                                    help="A capture (coolmuscle capture)."),
     machine_out: Path = typer.Option(..., "--machine-out", metavar="M.toml",
                                      help="Write the fitted machine file here."),
-    machine: Optional[Path] = typer.Option(
+    machine: Path | None = typer.Option(
         None, "--machine", metavar="BASE.toml",
         help="Start from this machine file (its other keys are kept; default: the "
              "capture's '# chain: machine=', else the default load)."),
-    params: Optional[str] = typer.Option(
+    params: str | None = typer.Option(
         None, "--params", metavar="NAME,...",
         help="Parameters to fit: inertia, friction, torque, kp (gain), rotor_inertia, "
              "rated_torque, peak_torque, max_speed, cw, ccw; NAME.ID for one motor "
              "(default: inertia,friction,kp)."),
-    plot: Optional[Path] = typer.Option(None, "--plot", metavar="OUT.png",
+    plot: Path | None = typer.Option(None, "--plot", metavar="OUT.png",
                                         help="Plot measured, start and fitted values."),
     max_replays: int = typer.Option(300, "--max-replays", metavar="N", min=2,
                                     help="Give up after this many replays (default 300)."),

@@ -38,16 +38,20 @@ import base64
 import html
 import math
 from bisect import bisect_left, bisect_right
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Literal
+from typing import TYPE_CHECKING, Literal
 
 from ...chain.machine import Machine
 from .plot import Panel, Series, figure_png
 from .replay import Replay, replay
 from .session import POLLED, Line, Session, parse_poll
 
-__all__ = ["Tolerance", "Verdict", "Report", "compare", "compare_session"]
+if TYPE_CHECKING:
+    from ..ci.junit import Suite
+
+__all__ = ["Tolerance", "Verdict", "Report", "compare", "compare_session", "junit_suite"]
 
 Kind = Literal["equal", "close", "bytes", "timing", "missing", "extra"]
 KIND_NAMES: dict[str, str] = {"equal": "equal", "close": "within tolerance",
@@ -483,3 +487,30 @@ def load_machine_arg(machine: str | Path | Machine | None,
     if path is None:
         return None, "the default machine"
     return load_machine(path), str(path)
+
+
+def junit_suite(report: Report, path: str | Path) -> Suite:
+    """``compare --junit``: a case per line the real motor said (named by its line in
+    the capture, ``file`` and ``line`` set), a ``<failure>`` when it differs beyond the
+    tolerance; an extra line of the virtual motor is a failing case of its own, and a
+    replay the model stopped an ``<error>``."""
+    from ..ci.junit import Case, Suite
+    where = str(path)
+    cases = []
+    for verdict in report.verdicts:
+        real = verdict.real
+        name = (f"line {real.line_no}: {_show(real)}" if real is not None else
+                f"extra at {verdict.virtual.time:.3f} s: {_show(verdict.virtual)}"
+                if verdict.virtual is not None else "extra")
+        if verdict.differs:
+            cases.append(Case(name, where, None, "failure", verdict.describe(),
+                              KIND_NAMES[verdict.kind], file=where,
+                              line=real.line_no if real is not None else None))
+        else:
+            cases.append(Case(name, where, None, file=where,
+                              line=real.line_no if real is not None else None))
+    if report.replay.failure is not None:
+        cases.append(Case("replay", where, None, "error",
+                          f"the virtual motor stopped: {report.replay.failure}", "replay",
+                          file=where))
+    return Suite(f"coolmuscle compare {Path(where).name}", cases)

@@ -23,25 +23,27 @@ written), as is a fit that did not converge within ``max_replays`` replays.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-import numpy as np
-import numpy.typing as npt
-
-from ...chain.machine import DRIVE_KEYS, LOAD_KEYS, Machine, parse_machine
+from ...chain.machine import Machine, parse_machine
+from ...needs import needs_extra
 from .compare import load_machine_arg
 from .params import FitError, Param, parse_params, with_values
 from .plot import Panel, Series
 from .replay import Replay, replay
 from .session import POLLED, Poll, Session, parse_poll, read_session
 
-__all__ = ["FitResult", "fit", "fit_session", "INSTALL_HINT"]
+with needs_extra("twin", "coolmuscle fit"):
+    import numpy as np
+    import numpy.typing as npt
+
+__all__ = ["FitResult", "fit", "fit_session"]
 
 Array = npt.NDArray[np.float64]
 
-INSTALL_HINT = "pip install 'coolmuscle[twin]'"
 #: Replays a fit may take (each Jacobian costs one per parameter).
 MAX_REPLAYS = 300
 #: Relative step of the finite-difference Jacobian (of value / scale).
@@ -55,10 +57,8 @@ MIN_SINGULAR = 0.01
 
 
 def _scipy() -> Any:
-    try:
+    with needs_extra("twin", "coolmuscle fit"):
         from scipy import optimize  # type: ignore[import-untyped]
-    except ImportError:
-        raise FitError(f"coolmuscle fit needs scipy: {INSTALL_HINT}") from None
     return optimize
 
 
@@ -232,11 +232,7 @@ def _start_values(session: Session, base: Machine | None, params: list[Param]) -
         out = []
         specs = {a.motor: a for a in (base.axes if base is not None else [])}
         for p in params:
-            motor = chain.motor(p.motor)
-            assert motor is not None
-            key = p.kind.key
-            attr = LOAD_KEYS.get(key) or DRIVE_KEYS.get(key)
-            plant_value = float(getattr(motor.plant, attr)) if attr else 0.0
+            plant_value = chain.machine_data(p.motor).get(p.kind.key, 0.0)
             value = p.value(specs.get(p.motor), plant_value)
             if value is None:
                 value = _stopper_guess(session, p)
@@ -326,11 +322,8 @@ def _panels(polls: list[Poll], start: Array, fitted: Array) -> list[Panel]:
 
 # -- the machine file -----------------------------------------------------------------
 def _machine_text(result: FitResult) -> str:
-    try:
+    with needs_extra("twin", "coolmuscle fit (writing machine files)"):
         import tomlkit
-    except ImportError:
-        raise FitError(f"coolmuscle fit needs tomlkit to write machine files: {INSTALL_HINT}") \
-            from None
     path = result.base_path
     doc = tomlkit.parse(path.read_text(encoding="utf-8")) if path is not None \
         else tomlkit.document()

@@ -13,8 +13,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from ...chain.machine import (BOUNDS, DRIVE_KEYS, LOAD_KEYS, MAX_POSITION, AxisSpec,
-                              Machine)
+from ...chain.machine import BOUNDS, DRIVE_KEYS, LOAD_KEYS, MAX_POSITION, AxisSpec, Machine
 from ..cli.usage import UsageError
 
 __all__ = ["FitError", "Param", "PARAMS", "DEFAULT_PARAMS", "parse_params", "with_values"]

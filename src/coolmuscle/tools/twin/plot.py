@@ -11,18 +11,20 @@ from __future__ import annotations
 
 import io
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
-import matplotlib
+from ...needs import needs_extra
+from .output import write_atomic
+from .session import POLLED
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+with needs_extra("twin", "the twin's plots (compare, fit)"):
+    import matplotlib
 
-from .output import write_atomic  # noqa: E402
-from .session import POLLED  # noqa: E402
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
 __all__ = ["PLOT_SUFFIXES", "Panel", "Series", "figure_png", "write_figure"]
 

@@ -16,15 +16,16 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ...chain.machine import AxisSpec, Machine
+from ...device.api import ChainFactory, Device
+from ...motor.state.units import resolution
 from ...sim.kernel import NS_PER_S
 from ..script.runner import Script, Step, TranscriptEntry, run_script
 from .session import Line, Session, parse_poll
 
 if TYPE_CHECKING:
-    from ...motor.motor import Motor
     from ..trace.recorder import TraceRecorder
 
 __all__ = ["Replay", "exact_value", "replay", "with_header_params"]
@@ -33,17 +34,23 @@ __all__ = ["Replay", "exact_value", "replay", "with_header_params"]
 TAIL_S = 1.0
 
 
-def exact_value(motor: "Motor", quantity: str) -> float:
+def exact_value(device: Device, motor: int, quantity: str) -> float:
     """What ``?95``/``?96``/``?97``/``?98`` of ``motor`` read now, before rounding."""
+    if quantity not in ("Px", "Pe", "Sx", "Ix"):
+        raise ValueError(f"not a polled quantity: {quantity!r}")
+    snap = device.snapshot(motor)
     if quantity == "Px":
-        return motor.axis.position()
+        return snap.position_exact
     if quantity == "Pe":
-        return motor.axis.position_error()
+        return snap.position_error_exact
     if quantity == "Sx":
-        return motor.axis.velocity() / motor.resolution.speed_unit_pps
-    if quantity == "Ix":
-        return motor.torque_exact()
-    raise ValueError(f"not a polled quantity: {quantity!r}")
+        return snap.speed_pps / speed_unit_pps(device, motor)
+    return snap.torque_exact
+
+
+def speed_unit_pps(device: Device, motor: int) -> int:
+    """Pulses per second of one ``?97`` speed unit of ``motor`` (its K37, ch. 3)."""
+    return resolution(device.get_param(motor, 37)).speed_unit_pps
 
 
 @dataclass
@@ -55,7 +62,7 @@ class Replay:
     exact: dict[int, float]             # line index -> exact polled value
     origin_ns: int                      # kernel time of the capture's t=0
     failure: str | None = None          # the model raised (the replay stopped there)
-    recorder: "TraceRecorder | None" = None
+    recorder: TraceRecorder | None = None
     speed_units: dict[int, int] = field(default_factory=dict)   # motor -> pps per Sx unit
 
     def kernel_ns(self, seconds: float) -> int:
@@ -97,13 +104,14 @@ def _steps(session: Session) -> Script:
 
 
 def replay(session: Session, machine: Machine | None = None, *, record: bool = False,
-           chain_factory: Any = None) -> Replay:
+           chain_factory: ChainFactory | None = None) -> Replay:
     """Replay ``session`` on a fresh chain with ``machine`` (None: the default load).
 
     ``record``: keep a trace recorder on the chain (exact values at any instant, for
     the compare's tolerance bands).  A bad machine file raises MachineFileError."""
     if chain_factory is None:
-        from ...chain.daisy import Chain as chain_factory
+        from ...chain.daisy import Chain
+        chain_factory = Chain
     chain = chain_factory(None, session.motors, firmware=session.firmware,
                           machine=with_header_params(machine, session))
     try:
@@ -124,15 +132,13 @@ def replay(session: Session, machine: Machine | None = None, *, record: bool = F
             seconds = (entry.time - origin) / NS_PER_S
             line = Line(seconds, "<", entry.data, 0)
             found = parse_poll(line.text)
-            if found is not None:
-                motor = chain.motor(found[1])
-                if motor is not None:
-                    exact[len(lines)] = exact_value(motor, found[0])
+            if found is not None and found[1] in chain.motor_ids:
+                exact[len(lines)] = exact_value(chain, found[1], found[0])
             lines.append(line)
             after.append(sent[0])
 
         result = run_script(_steps(session), chain, on_entry=on_entry)
-        units = {mid: m.resolution.speed_unit_pps for mid, m in chain.motors.items()}
+        units = {mid: speed_unit_pps(chain, mid) for mid in chain.motor_ids}
         failure = result.failure.message if result.failure is not None else None
         return Replay(lines, after, exact, origin, failure, recorder, units)
     finally:

@@ -1,6 +1,7 @@
 """``--web`` on the command line: the option's value and a script played for the page.
 
-* :func:`web_transport` builds the :class:`~.server.WebTransport` for ``[HOST:]PORT``;
+* :func:`web_transport` builds the :class:`~.server.WebTransport` for ``[HOST:]PORT``
+  (``coolmuscle sim --web``);
 * :func:`run_script_web` is ``coolmuscle run script.cml --web``: the script is played in
   real time (each ``@wait`` takes its seconds on the wall clock, docs/scripts.md) on a
   chain served to the dashboard, so a person watches the run; it starts when the
@@ -15,28 +16,31 @@ import asyncio
 import logging
 import re
 import sys
-from typing import Any, Callable, TextIO
+from collections.abc import Callable
+from typing import TextIO
 
+from ...device import Device
+from ...frontends.transports.base import Port
 from ...frontends.transports.service import Service
-from ...frontends.web.access import parse_web_address
-from ...frontends.web.server import WebTransport
-from ...sim.kernel import seconds
-from ..script.runner import Script, Step, TranscriptEntry
+from ...sim.kernel import Kernel, seconds
 from ..cli.stopsignals import ignore_stop_signals, run_served
-from .dashboard import WebDashboard
+from ..script.runner import Script, Step, TranscriptEntry
+from .access import parse_web_address
+from .server import WebTransport
 
 log = logging.getLogger(__name__)
+
 
 def web_transport(address: str, *, title: str = "", record: bool = False) -> WebTransport:
     """The dashboard transport for ``[HOST:]PORT`` (``TransportError`` when malformed)."""
     host, port = parse_web_address(address)
-    return WebDashboard(host=host, port=port, title=title, record=record)
+    return WebTransport(host=host, port=port, title=title, record=record)
 
 
 class _Lines:
     """Host-line bytes cut into lines, printed with their virtual time as they come."""
 
-    def __init__(self, kernel: Any, show: Callable[[TranscriptEntry], None]) -> None:
+    def __init__(self, kernel: Kernel, show: Callable[[TranscriptEntry], None]) -> None:
         self.kernel = kernel
         self.show = show
         self.lines: list[str] = []
@@ -70,7 +74,7 @@ async def play(script: Script, service: Service,
     return None
 
 
-async def _step(step: Step, chain: Any, port: Any, lines: _Lines,
+async def _step(step: Step, chain: Device, port: Port, lines: _Lines,
                 show: Callable[[TranscriptEntry], None], scale: float) -> str | None:
     if step.kind in ("send", "raw"):
         port.call(_now)                   # the kernel caught up: the line's own instant
@@ -108,7 +112,7 @@ async def _until(pattern: re.Pattern[str], lines: _Lines, timeout: float) -> boo
         await asyncio.sleep(0.01)
 
 
-def run_script_web(script: Script, chain: Any, address: str, *, until: float | None = None,
+def run_script_web(script: Script, chain: Device, address: str, *, until: float | None = None,
                    title: str = "", out: TextIO | None = None,
                    err: Callable[[str], None] | None = None) -> None:
     """``coolmuscle run FILE --web``: serve the dashboard, play the script in real time."""
@@ -123,7 +127,7 @@ def run_script_web(script: Script, chain: Any, address: str, *, until: float | N
     run_served(lambda stop: _serve_run(script, chain, web, until, show, say, stop))
 
 
-async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float | None,
+async def _serve_run(script: Script, chain: Device, web: WebTransport, until: float | None,
                      show: Callable[[TranscriptEntry], None], say: Callable[[str], None],
                      stop: asyncio.Event) -> None:
     service = Service(chain, [web])
@@ -149,5 +153,5 @@ async def _serve_run(script: Script, chain: Any, web: WebTransport, until: float
 async def _sleep_or_stop(delay: float, stop: asyncio.Event) -> None:
     try:
         await asyncio.wait_for(stop.wait(), delay)
-    except asyncio.TimeoutError:
+    except TimeoutError:
         pass

@@ -6,7 +6,7 @@ the requests the SDO hooks queued (K writes, outputs), reads the motor through t
 device API's ``cyclic_state``, applies a pending mode switch (6.2.2: at rest, 5 ms
 apart), runs the mode's controlword logic and publishes 6041h, 6061h, 6064h.
 
-* csp / hm / CPIO (CiA402): part 1's table :func:`..cia402.next_state`; into
+* csp / hm / CPIO (CiA402): the table :func:`.cia402.next_state`; into
   state B or C from A send ``(`` (motor enable, which also clears a latched alarm),
   into state A from B or C send ``)`` (motor free); a fault reset leaves the alarm
   latched until the next Switched on enables the motor (6.1.1 State C note 1).
@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from typing import Any, Callable
+from collections.abc import Callable
 
+from ....device import CyclicState, Device
 from ....motor.status import ALARM_BITS, Ux
-from .. import cia402
-from ..cia402 import State
-from . import cpio, csp, homing, modes
+from ..engine.dictionary import Dictionary
+from . import cia402, cpio, csp, homing, modes
+from .cia402 import State
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +62,7 @@ TRANSITIONS = {
 class AxisDrive:
     """The drive of motor ``motor`` (1..4) behind the bridge."""
 
-    def __init__(self, motor: int, firmware: str, device: Any, od: Any) -> None:
+    def __init__(self, motor: int, firmware: str, device: Device, od: Dictionary) -> None:
         self.motor = motor
         self.firmware = firmware
         self.device = device
@@ -122,7 +123,7 @@ class AxisDrive:
         self._prev_cw = cw
         self._publish(snap)
 
-    def _observe(self, snap: Any) -> None:
+    def _observe(self, snap: CyclicState) -> None:
         self.ux = snap.status
         self.enabled = snap.enabled
         self.inputs = snap.inputs
@@ -134,7 +135,7 @@ class AxisDrive:
                            or (snap.enabled and not snap.status & _STILL_MASK)
                            or (not snap.enabled and abs(snap.speed_pps) > 1.0))
 
-    def _publish(self, snap: Any) -> None:
+    def _publish(self, snap: CyclicState) -> None:
         od = self.od
         od.set(self.idx(0x6041), 0, self.statusword())
         od.set(self.idx(0x6064), 0, max(INT32_MIN, min(INT32_MAX, int(snap.position))))
@@ -219,7 +220,7 @@ class AxisDrive:
                 self.set_k(number, value)
         self.origin.start(now)
 
-    def _watch_origin(self, snap: Any, now: int) -> None:
+    def _watch_origin(self, snap: CyclicState, now: int) -> None:
         phase = self.origin.update(snap, now)
         if self.mode == modes.CMD and self.cmd_ack == 0xF3:
             if phase == homing.ATTAINED:

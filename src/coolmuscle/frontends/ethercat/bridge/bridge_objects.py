@@ -1,9 +1,9 @@
 """The drive's behaviour on the object dictionary: the SDO hooks of 6000h-7FFFh and
 F5xxh (ethercat-bridge-users-guide.txt 6.2-6.5, 7.2-7.5, Appendix 6).
 
-The entries themselves (index, type, access, availability) are part 1's table
-(:mod:`..objects`); this module only attaches behaviour with
-:meth:`~..dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
+The entries themselves (index, type, access, availability) are the Appendix 6 table
+(:mod:`.table`); this module only attaches behaviour with
+:meth:`~..engine.dictionary.Dictionary.on_read` / ``on_write``.  Hooks run in the frame
 thread: they check a value against the manual (abort codes of 5.4.1), answer from
 what the model thread last published, and queue the model calls on the axis'
 ``requests`` for its next cycle.
@@ -15,20 +15,39 @@ behaviour): a K write the motor would refuse is refused with 06090031h (too high
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
 
 from ....motor.state.firmware import get_firmware
 from ....motor.state.memory import H_RANGE
-from ..dictionary import (DEVICE_STATE, VALUE_HIGH, VALUE_LOW, VALUE_RANGE, Dictionary,
-                          SdoAbort)
+from ..engine.dictionary import (
+    DEVICE_STATE,
+    VALUE_HIGH,
+    VALUE_LOW,
+    VALUE_RANGE,
+    Dictionary,
+    SdoAbort,
+)
 from . import cpio, homing, modes
-from ..cia402 import State
+from .cia402 import State
 from .link import BAUD_CODE, CYCLE_CODE
 
 if TYPE_CHECKING:
     from .axis import AxisDrive
+    from .cml_mailbox import CmlMailbox
 
 K_FIRST = 21                 # 60F6h subindex 1h = K21 (7.5)
+
+
+class Drive(Protocol):
+    """What the hooks reach of the drive (:class:`~.drive.BridgeDrive`, which registers
+    them: it imports this module, so this module sees it through this protocol)."""
+
+    od: Dictionary
+    firmware: tuple[str, ...]
+    axes: dict[int, AxisDrive]
+    mailboxes: dict[int, CmlMailbox]
+
+    def system_info(self, sub: int) -> int: ...
 
 
 def signed32(value: int) -> int:
@@ -49,7 +68,7 @@ def check_k(firmware: str, k: int, value: int) -> None:
     raise SdoAbort(VALUE_RANGE, f"K{k}={value}")
 
 
-def register(drive: Any) -> None:
+def register(drive: Drive) -> None:
     """Attach every hook of ``drive`` (a :class:`~.drive.BridgeDrive`) to the dictionary."""
     od = drive.od
     for axis in drive.axes.values():
@@ -62,7 +81,7 @@ def register(drive: Any) -> None:
         od.set(0xF510 + n, 3, CYCLE_CODE)                   # "1: 1 msec"
 
 
-def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
+def _axis_hooks(od: Dictionary, axis: AxisDrive, drive: Drive) -> None:
     i = axis.idx
     od.on_write(i(0x6060), lambda sub, v: _mode(axis, int(v)))
     od.on_write(i(0x6098), lambda sub, v: _method(int(v)))
@@ -81,7 +100,7 @@ def _axis_hooks(od: Dictionary, axis: "AxisDrive", drive: Any) -> None:
     od.on_read(0xF590 + axis.motor, lambda sub: mailbox.read())
 
 
-def _mode(axis: "AxisDrive", value: int) -> int:
+def _mode(axis: AxisDrive, value: int) -> int:
     """6060h: the mode requested; the value kept is the mode it selects (6.2.2 note 3)."""
     try:
         axis.request_mode(value)
@@ -96,27 +115,27 @@ def _method(value: int) -> None:
                        f"homing method {value}")
 
 
-def _k_object(od: Dictionary, index: int, axis: "AxisDrive", k: int) -> None:
+def _k_object(od: Dictionary, index: int, axis: AxisDrive, k: int) -> None:
     """609Ah (K43), 607Ch (K48): the object is the motor's K parameter (6.4.1), a U32
     that carries a signed K as 60F6h does (K48 = -5 reads FFFFFFFBh)."""
     od.on_read(index, lambda sub: axis.k.get(k, 0) & 0xFFFFFFFF)   # a U32 carrying K
     od.on_write(index, lambda sub, v: _k_write(axis, k, signed32(int(v))))
 
 
-def _k_read(axis: "AxisDrive", sub: int) -> int:
+def _k_read(axis: AxisDrive, sub: int) -> int:
     if sub == 0:
         return 0x4F
     return axis.k.get(K_FIRST - 1 + sub, 0) & 0xFFFFFFFF
 
 
-def _k_write(axis: "AxisDrive", k: int, value: int) -> None:
+def _k_write(axis: AxisDrive, k: int, value: int) -> None:
     """7.5: the K value goes to the motor, which keeps it (its writes persist)."""
     check_k(axis.firmware, k, value)
     axis.k[k] = value
     axis.requests.append(lambda: axis.set_k(k, value))
 
 
-def _stiffness(axis: "AxisDrive", value: int) -> None:
+def _stiffness(axis: AxisDrive, value: int) -> None:
     """60FBh.1: the CM2 servo stiffness H0 (cml-users-guide.txt K78+670)."""
     if not H_RANGE[0] <= value <= H_RANGE[1]:
         raise SdoAbort(VALUE_HIGH if value > H_RANGE[1] else VALUE_LOW, f"H0={value}")
@@ -124,7 +143,7 @@ def _stiffness(axis: "AxisDrive", value: int) -> None:
     axis.requests.append(lambda: axis.device.set_register(axis.motor, "H", 0, value))
 
 
-def _io_available(axis: "AxisDrive") -> None:
+def _io_available(axis: AxisDrive) -> None:
     """6.5: "available when operation mode is csp mode and Cool Muscle is motor enable
     (state B or C)"."""
     if axis.mode != modes.CSP or axis.state not in (State.SWITCHED_ON,
@@ -132,19 +151,19 @@ def _io_available(axis: "AxisDrive") -> None:
         raise SdoAbort(DEVICE_STATE, "digital I/O needs csp in state B or C (6.5)")
 
 
-def _inputs(axis: "AxisDrive") -> int:
+def _inputs(axis: AxisDrive) -> int:
     _io_available(axis)
     return axis.inputs & cpio.input_mask(axis.firmware)
 
 
-def _outputs(od: Dictionary, axis: "AxisDrive", sub: int, value: int) -> None:
+def _outputs(od: Dictionary, axis: AxisDrive, sub: int, value: int) -> None:
     _io_available(axis)
     physical = value if sub == 1 else int(od.get(axis.idx(0x60FE), 1))
     mask = value if sub == 2 else int(od.get(axis.idx(0x60FE), 2))
     axis.requests.append(lambda: axis.set_outputs(physical & mask))
 
 
-def _cml(axis: "AxisDrive", mailbox: Any, text: str) -> None:
+def _cml(axis: AxisDrive, mailbox: CmlMailbox, text: str) -> None:
     """F58xh: a CML string, in CML mode (7.1.1)."""
     if axis.mode != modes.CML:
         raise SdoAbort(DEVICE_STATE, "CML strings need CML mode (6060h = 101)")

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from typing import Any
+from functools import partial
 
-from ....device.api import Event
+from ....device import Device, Event
 from ....sim.kernel import PRIO_IO
 from .link import CmLink
 
@@ -60,17 +60,17 @@ class CmlMailbox:
             return NULL
 
     # -- model thread --------------------------------------------------------------
-    def pump(self, device: Any, now: int) -> None:
+    def pump(self, device: Device, now: int) -> None:
         """One bridge cycle: send what the master wrote, publish what has arrived."""
         while self._outbox:
             text = self._outbox.popleft()
             at = self.link.send(len(text) + 2, now)
-            device.kernel.schedule_at(at, lambda t=text: self._deliver(device, t),
+            device.kernel.schedule_at(at, partial(self._deliver, device, text),
                                       priority=PRIO_IO, name=f"ethercat-cml-{self.axis}")
         while self._arriving and self._arriving[0][0] <= now:
             self._publish(self._arriving.popleft()[1])
 
-    def _deliver(self, device: Any, text: str) -> None:
+    def _deliver(self, device: Device, text: str) -> None:
         self.sent.append(text)
         if not text:
             return

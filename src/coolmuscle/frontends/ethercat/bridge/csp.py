@@ -8,8 +8,7 @@ that maximum; the motor's own software limits (K58/K59) apply inside the model.
 
 from __future__ import annotations
 
-from typing import Any
-
+from ....device import Device, TargetStream
 from ....motor.state.units import RESOLUTIONS
 
 
@@ -28,10 +27,10 @@ def clamp(target: int, k37: int) -> int:
 class Follower:
     """The csp target stream of one axis: opened on Operation enabled, closed on leaving."""
 
-    def __init__(self, device: Any, motor: int) -> None:
+    def __init__(self, device: Device, motor: int) -> None:
         self.device = device
         self.motor = motor
-        self._stream: Any = None
+        self._stream: TargetStream | None = None
         self._last: int | None = None
         self.pushed = 0
 

@@ -1,7 +1,7 @@
 """The drive behind the bridge: four :class:`~.axis.AxisDrive`, their CM ports and
 mailboxes (ethercat-bridge-users-guide.txt chapters 6 and 7).
 
-:class:`BridgeDrive` is what :class:`~..app.BridgeApp` runs each bridge cycle (in
+:class:`BridgeDrive` is what :class:`~.app.BridgeApp` runs each bridge cycle (in
 the model's thread): for every axis the cyclic CM-port exchange (counted on its
 :class:`~.link.CmLink`), the CML mailbox, then the axis.  It is a client of the
 motor model through the device API only.  ``outputs_received`` and
@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable
+from collections.abc import Callable
 
-from ....device.api import Event
+from ....device import Device, Event
+from ..engine.dictionary import Dictionary
+from ..engine.od import Entry
 from . import bridge_objects
 from .axis import AxisDrive
 from .cml_mailbox import CmlMailbox
@@ -31,10 +33,17 @@ K_REFRESH_PER_CYCLE = 1
 LATE_NS = 1_500_000
 
 
+def _k_entries(od: Dictionary, motor: int) -> tuple[Entry, ...]:
+    """The entries of 60F6h (K21-K99, Appendix 6) of axis ``motor``."""
+    obj = od.table.get(0x60F6 + 0x800 * (motor - 1))
+    assert obj is not None                 # every axis has it (table.py)
+    return obj.entries
+
+
 class BridgeDrive:
     """CiA402 and the Cool Muscle modes for the motors of one bridge."""
 
-    def __init__(self, device: Any, od: Any, firmware: tuple[str, ...], axes: list[int],
+    def __init__(self, device: Device, od: Dictionary, firmware: tuple[str, ...], axes: list[int],
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.device = device
         self.od = od
@@ -48,8 +57,7 @@ class BridgeDrive:
         self.late_cycles = 0               # cycles that came more than 1.5 ms after the last
         self.max_gap_ns = 0                # the longest interval between two cycles
         self._last_cycle: int | None = None
-        self._k_order = [(n, e.sub + 20) for n in axes
-                         for e in od.table.get(0x60F6 + 0x800 * (n - 1)).entries
+        self._k_order = [(n, e.sub + 20) for n in axes for e in _k_entries(od, n)
                          if e.sub and e.available] + [(n, 37) for n in axes]
         self._k_next = 0
         for n in axes:

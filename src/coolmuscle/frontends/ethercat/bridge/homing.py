@@ -12,8 +12,7 @@ error (an alarm, the search stopped without its origin, or :data:`TIMEOUT_NS`).
 
 from __future__ import annotations
 
-from typing import Any
-
+from ....device import CyclicState, Device
 from ....motor.status import ALARM_BITS
 
 STOPPER_CW, STOPPER_CCW, SWITCH_CW, SWITCH_CCW = 1, 2, 3, 4
@@ -50,7 +49,7 @@ def homing_params(method: int, k45: int, k46: int, switch_speed: int,
 class OriginWatch:
     """One origin search of one motor, from ``|`` to its end."""
 
-    def __init__(self, device: Any, motor: int) -> None:
+    def __init__(self, device: Device, motor: int) -> None:
         self.device = device
         self.motor = motor
         self.phase = IDLE
@@ -71,7 +70,7 @@ class OriginWatch:
             self.device.execute(f"]1.{self.motor}", origin="api")
             self.phase = phase
 
-    def update(self, snap: Any, now: int) -> str:
+    def update(self, snap: CyclicState, now: int) -> str:
         """Follow the search on this cycle's cyclic state; the phase after it."""
         if self.phase != RUNNING or now == self._started:   # ``snap`` is from before ``|``
             return self.phase

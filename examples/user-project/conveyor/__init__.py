@@ -1,0 +1,1 @@
+"""conveyor-demo: a pick-and-place station on a Cool Muscle (see README.md)."""

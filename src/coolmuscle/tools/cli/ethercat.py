@@ -1,0 +1,117 @@
+"""``coolmuscle ethercat ...`` (lab up/down, esi) and the ``sim --ethercat`` helpers.
+
+Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typer``.
+The bridge is :mod:`coolmuscle.frontends.ethercat` (docs/ethercat.md): the ESI file
+comes from its description, the lab and the transport are its I/O.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import TYPE_CHECKING, Literal, NoReturn, overload
+
+import typer
+
+from ...errors import CoolMuscleError
+from ...frontends.ethercat.bridge import identity as ident
+
+if TYPE_CHECKING:
+    from ...frontends.ethercat.lab import Lab
+    from ...frontends.ethercat.transport import EthercatTransport
+
+app = typer.Typer(name="ethercat", no_args_is_help=True,
+                  help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
+lab_app = typer.Typer(name="lab", no_args_is_help=True,
+                      help="A veth pair with one end in a network namespace, for trying "
+                           "the bridge without hardware (root).")
+app.add_typer(lab_app)
+
+
+class EthercatUsageError(CoolMuscleError, ValueError):
+    """Bad --ethercat / --bridge options (exit status 2)."""
+
+
+def chain_firmware(bridge: str) -> str:
+    """The Chain firmware string of a bridge variant ("cm1,cm1,cm2,cm2" for EB12)."""
+    try:
+        v = ident.variant(bridge)
+    except ValueError as exc:
+        raise EthercatUsageError(str(exc)) from None
+    return ",".join(v.firmware)
+
+
+def sim_transport(iface: str, bridge: str) -> EthercatTransport:
+    """The transport of ``sim --ethercat IFACE --bridge B`` (checks the interface)."""
+    from ...frontends.ethercat.transport import EthercatTransport
+    from ...needs import needs_af_packet
+    needs_af_packet("--ethercat")
+    chain_firmware(bridge)
+    return EthercatTransport(iface, ident.variant(bridge).code)
+
+
+#: The lab's options, shared by ``up`` and ``down`` (the same names remove what up made).
+_NAMESPACE = typer.Option("coolmuscle-lab", "--namespace", help="Network namespace.")
+_MASTER_IF = typer.Option("cmlab-master", "--master-if", help="The master's end.")
+_SLAVE_IF = typer.Option("cmlab-slave", "--slave-if",
+                         help="The slave's end (inside the namespace).")
+
+
+def _fail(text: str, code: int) -> NoReturn:
+    typer.echo(f"coolmuscle: {text}", err=True)
+    raise typer.Exit(code)
+
+
+@overload
+def _lab(step: Literal["up"], namespace: str, master_if: str, slave_if: str) -> Lab: ...
+
+
+@overload
+def _lab(step: Literal["down"], namespace: str, master_if: str, slave_if: str) -> list[str]: ...
+
+
+def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list[str]:
+    """``lab.up`` or ``lab.down`` with the lab's options (loaded only now: it needs
+    root's tools); a ``LabError`` is one line and exit status 1."""
+    from ...frontends.ethercat import lab
+    from ...needs import needs_af_packet
+    needs_af_packet("coolmuscle ethercat lab")
+    run = lab.up if step == "up" else lab.down
+    try:
+        return run(namespace, master_if, slave_if)
+    except lab.LabError as exc:
+        _fail(str(exc), 1)
+
+
+@lab_app.command("up")
+def lab_up(
+    namespace: str = _NAMESPACE,
+    master_if: str = _MASTER_IF,
+    slave_if: str = _SLAVE_IF,
+) -> None:
+    """Make the veth pair and print which end to give the master."""
+    typer.echo(_lab("up", namespace, master_if, slave_if).instructions())
+
+
+@lab_app.command("down")
+def lab_down(
+    namespace: str = _NAMESPACE,
+    master_if: str = _MASTER_IF,
+    slave_if: str = _SLAVE_IF,
+) -> None:
+    """Remove the pair and the namespace that ``up`` made (nothing else)."""
+    removed = _lab("down", namespace, master_if, slave_if)
+    typer.echo("removed: " + ", ".join(removed) if removed else "nothing to remove")
+
+
+@app.command("esi")
+def esi(
+    bridge: list[str] = typer.Option(list(ident.VARIANTS), "--bridge",
+                                     help="Variants to describe (default: all)."),
+) -> None:
+    """Write the ESI file (ETG.2000 XML) to stdout: ``> CoolMuscleBridge.xml``."""
+    from ...frontends.ethercat.bridge.esi import esi_text
+    try:
+        codes = tuple(ident.variant(b).code for b in bridge)
+    except ValueError as exc:
+        _fail(str(exc), 2)
+    sys.stdout.write(esi_text(codes))
