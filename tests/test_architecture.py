@@ -60,6 +60,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
         ("cli.run", "term"),             # what run does; the terminal and its upload
         ("script",),                     # scripts, transcripts
         ("check", "trace", "accel"),     # the linter, traces and plots, compiled modules
+        ("cli.ports",),                  # PORT as every command takes it
         ("cli.usage", "cli.stopsignals", "cli.version",    # what every command shares,
          "ci"),                                             # and the CI formats they write
     ),

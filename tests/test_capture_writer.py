@@ -58,6 +58,10 @@ def _record(events: list[tuple[str, list[bytes], float, bool]]) -> tuple[str, by
 @example([("<", [b"\r"], 0.0, False), (">", [b"\x00"], 0.0, False), ("<", [b"\n"], 1.0, False)])
 def test_any_bytes_both_ways_make_a_script_that_says_them_exactly(events: list[
         tuple[str, list[bytes], float, bool]]) -> None:
+    _says_them_exactly(events)
+
+
+def _says_them_exactly(events: list[tuple[str, list[bytes], float, bool]]) -> None:
     text, sent, received = _record(events)
     assert text.isascii()
     script = parse_script(text)                           # never a ScriptError
@@ -91,6 +95,42 @@ def test_any_bytes_both_ways_make_a_script_that_says_them_exactly(events: list[
         elif step.kind in ("send", "raw"):
             assert stamp is not None
             assert abs(replay - stamp) <= 1e-6 + 1e-9, (replay, stamp, step.source)  # 2 roundings
+
+
+@settings(max_examples=300, deadline=None)
+@given(_EVENTS)
+def test_long_lines_go_out_in_pieces_that_still_say_the_bytes_exactly(events: list[
+        tuple[str, list[bytes], float, bool]]) -> None:
+    """The same, with pieces of at most 5 bytes instead of 64 KiB: a line longer than
+    that goes out in pieces as it comes, and the file still says exactly every byte
+    each way, stamps and waits as above."""
+    from unittest import mock
+
+    import coolmuscle.tools.script.transcript as transcript
+    with mock.patch.object(transcript, "MAX_PIECE", 5):
+        _says_them_exactly(events)
+
+
+def test_a_64_kib_piece_at_most_whatever_the_line_length() -> None:
+    """A 1 MiB line each way without a line end: 16 pieces each, none longer than
+    64 KiB of bytes, and the ends of the lines after them as usual."""
+    lines: list[str] = []
+    writer = SessionWriter(lines.append)
+    for n in range(16):
+        writer.feed(n * 0.01, ">", b"\x01" * (1 << 16))
+        writer.feed(n * 0.01, "<", b"A" * (1 << 16))
+    writer.feed(1.0, ">", b"\r")
+    writer.feed(1.0, "<", b"\r\n")
+    writer.finish()
+    text = "".join(lines)
+    sends = [line for line in text.splitlines() if line.startswith("@send ")]
+    expects = [line for line in text.splitlines() if line.startswith("<< ")]
+    assert len(sends) == 17 and sends[-1] == "@send \\r"
+    assert len(expects) == 17 and expects[-1] == "<< \\r\\n"
+    assert max(len(line) for line in sends + expects) <= 4 * (1 << 16) + 8
+    assert "@until" not in text
+    steps = parse_script(text).lines
+    assert b"".join(s.data for s in steps if s.kind == "expect") == b"A" * (1 << 20) + b"\r\n"
 
 
 def test_a_session_reads_as_the_format_says() -> None:

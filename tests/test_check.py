@@ -112,6 +112,21 @@ def test_step_counts_follow_rt3_3_4() -> None:
     assert steps("L1\nV1=V1+V2\nV3=U2(V1)\nEND\n") == [6]
 
 
+def test_each_statement_is_reported_at_its_own_column() -> None:
+    """Three statements naming motor 2 on a one-motor chain: three warnings, each at
+    its own ``.2`` (not all at the first); a branch's actions too, and a range error
+    in the second of two alike statements points at the second."""
+    def found(text: str) -> list[tuple[str, int, int]]:
+        report = check_program(parse_program(text), motors=1)
+        return [(d.rule, d.line, d.column) for d in report.diagnostics]
+    assert found("S.2=100, A.2=100, P.2=5\n") == \
+        [("motor-id", 1, 3), ("motor-id", 1, 12), ("motor-id", 1, 21)]
+    assert found("P1.2=P2.2, S.2=100\n") == [("motor-id", 1, 4), ("motor-id", 1, 14)]
+    assert found("P1.1>5, S.2=1:A.3=5, P.2=3\n") == \
+        [("motor-id", 1, 11), ("motor-id", 1, 17), ("motor-id", 1, 24)]
+    assert found("S.1=5, S.1=40000\n") == [("range", 1, 8)]
+
+
 def test_loops_nested_deeper_than_10_and_x_in_a_ladder_bank() -> None:
     deep = "B1.1\n" + "X2.1\n" * 11 + "T0.1\n" + "X.1-\n" * 11 + "END\n"
     report = check_program(parse_program(deep))

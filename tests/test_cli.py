@@ -290,6 +290,35 @@ def test_5_6_9_k81_kept_in_the_state_is_said_and_sim_reset_brings_the_text_back(
     assert sim.stop() == 0
 
 
+def test_sim_reset_recovers_a_damaged_store_keeping_it_aside(
+        tmp_path: Path, served_sim: SimFactory) -> None:
+    """A store file damaged beyond reading: without --reset the error says exactly what
+    to do; ``sim --reset`` keeps the damaged file aside (nothing saved is deleted),
+    says so, and serves factory settings, which it saves from then on."""
+    damaged = tmp_path / "coolmuscle.sqlite3"
+    junk = bytes(range(256)) * 20
+    damaged.write_bytes(junk)
+    failed = run_coolmuscle("run", str(ROOT / "examples" / "2.1-operation.cml"),
+                            "--state", str(tmp_path))
+    assert failed.returncode == 1
+    assert failed.stderr == (
+        f"coolmuscle: error: {damaged} is not a usable coolmuscle store: file is not a "
+        f"database; move it aside (mv {damaged} {damaged}.bad) to start with defaults, or "
+        "start coolmuscle sim with --reset (it keeps the file aside)\n")
+    sim = served_sim("--reset", state=tmp_path)
+    assert b"Px.1=0" in _ask(sim.port, b"?96.1\r")
+    assert (f"coolmuscle: state reset: {damaged} is not a usable coolmuscle store: file is "
+            f"not a database: kept it as {damaged}.bad; {tmp_path} holds factory settings"
+            ) in sim.text
+    assert sim.stop() == 0
+    assert (tmp_path / "coolmuscle.sqlite3.bad").read_bytes() == junk
+    damaged.write_bytes(junk)                             # damaged again: a second copy
+    sim = served_sim("--reset", state=tmp_path)
+    assert f"kept it as {damaged}.bad.1;" in sim.text
+    assert sim.stop() == 0
+    assert (tmp_path / "coolmuscle.sqlite3.bad.1").read_bytes() == junk
+
+
 def test_the_demo_serves_from_its_own_state_directory() -> None:
     demo = (ROOT / "scripts" / "demo").read_text()
     assert 'sim --state "$ROOT/out/demo-state"' in demo

@@ -204,3 +204,34 @@ def test_a_stop_signal_that_python_wraps_is_still_one_stop_line(capsys) -> None:
         clear_stop()
     assert stopped.value.code == 128 + signal.SIGTERM
     assert capsys.readouterr().err == "coolmuscle: stopped (SIGTERM)\n"
+
+
+@pytest.mark.parametrize("command", ["upload", "fit"])
+def test_ctrl_c_in_a_tool_is_one_line_and_130(command: str, tmp_path: Path) -> None:
+    """Ctrl-C while ``upload`` waits for a motor that never answers, or while ``fit``
+    runs its trials: ``coolmuscle: interrupted`` and 130, as every command (typer turned
+    the KeyboardInterrupt into a silent 130)."""
+    from fixtures import ROOT
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen(1)
+    args = {"upload": ["upload", str(ROOT / "examples" / "2.1-operation.cml"), "--port",
+                       f"127.0.0.1:{silent.getsockname()[1]}", "--timeout", "60"],
+            "fit": ["fit", str(ROOT / "examples" / "twin" / "session.cml"), "--params",
+                    "inertia,friction,kp,cw", "--machine-out", str(tmp_path / "fit.toml")]
+            }[command]
+    with Program(args, tmp_path / "tool.log", env=ENV) as tool:
+        try:
+            if command == "upload":
+                silent.settimeout(30)
+                conn, _ = silent.accept()           # it waits for the motor's reply now
+                time.sleep(0.3)
+            else:
+                tool.wait_for(r"coolmuscle fit: session\.cml")
+            code = tool.signal(signal.SIGINT)
+        finally:
+            silent.close()
+        assert (code, tool.text.splitlines()[-1]) == (130, "coolmuscle: interrupted"), \
+            tool.text
+        assert "Traceback" not in tool.text
+    assert not (tmp_path / "fit.toml").exists()

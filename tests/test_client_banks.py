@@ -5,6 +5,7 @@ verify that it is loaded correctly")."""
 from __future__ import annotations
 
 import asyncio
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -171,6 +172,63 @@ def test_upload_command_as_a_subprocess_over_tcp(tmp_path: Path) -> None:
         target.close()
 
 
+def test_upload_to_a_chain_without_the_motor_says_which_id_does_not_answer(
+        capsys: Any, tmp_path: Path) -> None:
+    """A file for ID1 and ID2 sent to a one-motor chain: "ID2 does not answer", before
+    anything is sent (ID1 keeps its banks), not a timeout of an internal query."""
+    path = tmp_path / "two.cml"
+    path.write_text("B1.1\nS1.1, A1.1, P1.1\nEND.1\nB1.2\nS1.2, A1.2, P1.2\nEND.2\n")
+    code, out, err = upload_cli(capsys, str(path), "--port", "coolmuscle://?mode=fast")
+    assert (code, out) == (1, "")
+    assert err == ("coolmuscle: error: ID2 does not answer (no reply to ?99.2 within 1 s): "
+                   "the chain at coolmuscle://?mode=fast has no motor ID2, or it is off or "
+                   "not wired; nothing was sent\n")
+
+
+@pytest.mark.parametrize("command", ["upload", "term", "scan"])
+def test_every_command_takes_host_port_where_a_port_is_expected(command: str,
+                                                                tmp_path: Path) -> None:
+    """``127.0.0.1:PORT``, as ``coolmuscle sim`` prints its address, is ``socket://`` for
+    every command that talks to a motor (one parser: coolmuscle.tools.cli.ports)."""
+    data = tmp_path / "data.cml"
+    data.write_text("S1.1=250\n")
+    target = Tcp()
+    address = target.url.removeprefix("socket://")
+    args = {"upload": ["upload", str(data), "--port", address],
+            "term": ["term", address],
+            "scan": ["scan", address, "--baud", "38400"]}[command]
+    try:
+        done = subprocess.run([sys.executable, "-m", "coolmuscle", *args], capture_output=True,
+                              text=True, timeout=60, input="?96.1\n" if command == "term" else "",
+                              env={"PYTHONPATH": str(ROOT / "src"), "PATH": "/usr/bin:/bin"})
+    finally:
+        target.close()
+    said = done.stdout + done.stderr
+    assert "No such file or directory" not in said and "could not open port" not in said
+    if command == "upload":
+        assert done.returncode == 0 and "sent 1 line(s)" in done.stdout
+    elif command == "scan":
+        assert "ID1" in said, said
+
+
+def test_capture_takes_host_port_for_the_motor(tmp_path: Path) -> None:
+    target = Tcp()
+    address = target.url.removeprefix("socket://")
+    capture = subprocess.Popen(
+        [sys.executable, "-m", "coolmuscle", "capture", address, "--out",
+         str(tmp_path / "c.cml"), "--listen", "0"], stderr=subprocess.PIPE, text=True,
+        env={"PYTHONPATH": str(ROOT / "src"), "PATH": "/usr/bin:/bin"})
+    try:
+        assert capture.stderr is not None
+        line = capture.stderr.readline()
+        assert line.startswith("coolmuscle: capture ready: ") and \
+            f"motor socket://{address} (38400 bit/s" in line, line
+    finally:
+        capture.send_signal(signal.SIGINT)
+        capture.communicate(timeout=30)
+        target.close()
+
+
 def test_a_1000_listing_splits_into_banks() -> None:
     """The form the bank model prints (RT3 2.3: the listing also counts steps)."""
     from coolmuscle.client.banks import parse_bank_listing
@@ -185,3 +243,18 @@ def test_upload_of_an_rt3_file_to_a_cm2_hints_at_the_firmware() -> None:
                           "coolmuscle://?mode=fast")
     assert done.returncode == 1
     assert "hint: the file is written for rt3" in done.stdout and "motor is cm2" in done.stdout
+
+
+def test_the_baud_rate_option_has_one_name_everywhere(capsys: Any) -> None:
+    """``--baud BPS`` as in capture and the desk commands; ``--baudrate`` still works
+    (an alias the help does not show)."""
+    for command in (["upload", "--help"], ["term", "--help"], ["capture", "--help"],
+                    ["scan", "--help"]):
+        with pytest.raises(SystemExit):
+            cli.main(command)
+        out = capsys.readouterr().out
+        assert "--baud " in out and "--baudrate" not in out, command
+    for option in ("--baud", "--baudrate"):
+        code, out, _ = upload_cli(capsys, str(EXAMPLES / "2.1-operation.cml"), "--port", URL,
+                                  option, "38400")
+        assert code == 0, out

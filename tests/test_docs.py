@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +22,12 @@ def test_mkdocs_builds_strict_with_the_api_reference(tmp_path: Path) -> None:
     api = (site / "api" / "index.html").read_text(encoding="utf-8")
     for name in ("wait_in_position", "connect_async", "CoolMuscleTimeout", "check_program"):
         assert name in api
+    # the docstrings' Sphinx roles are code, not literal ":class:`...`" text
+    # (scripts/griffe_sphinx_roles.py)
+    for page in site.rglob("*.html"):
+        text = page.read_text(encoding="utf-8")
+        assert not re.search(r":(class|mod|func|meth|attr|exc|data):`", text), page
+    assert "<code>coolmuscle.client.sync</code>" in api
     guide = (site / "user-guide" / "index.html").read_text(encoding="utf-8")
     assert "coolmuscle check" in guide
 

@@ -16,6 +16,12 @@ text tells the user to have running:
     address), then it is stopped;
 ``<!-- docs-example: continues -->``
     a Python block that goes on from the previous Python block of the same page;
+``<!-- docs-example: output -->``
+    a ``text`` block that is what the shell block before it prints (stdout, then
+    stderr), line for line; a line ``...`` stands for any number of lines;
+``<!-- docs-example: synopsis ARGS -->``
+    a ``text`` block that names every option ``coolmuscle ARGS --help`` shows, and
+    no other;
 ``<!-- docs-example: hardware -->`` / ``interactive`` / ``setup`` / ``project``
     not run here: a real motor on /dev/ttyUSB0 or a raw network interface, a terminal
     or a second shell a person works in (the EtherCAT lab; its tests run the same
@@ -92,7 +98,10 @@ def test_every_block_names_its_language_and_notes_are_known() -> None:
     assert len(BLOCKS) > 30
     for block in BLOCKS:
         assert block.lang in ("sh", "python", "toml", "text", "yaml"), block.id
-        assert block.kind in ("", "sim", "servers", "continues") + NOT_RUN, block.id
+        assert block.kind in ("", "sim", "servers", "continues", "output",
+                              "synopsis") + NOT_RUN, block.id
+        if block.kind in ("output", "synopsis"):
+            assert block.lang == "text", block.id
         if block.kind == "hardware":         # a serial device or a raw network interface
             assert "/dev/tty" in block.body or "--ethercat" in block.body, \
                 f"{block.id}: 'hardware' without a device"
@@ -101,8 +110,65 @@ def test_every_block_names_its_language_and_notes_are_known() -> None:
     # itself (the two newest, docs/twin.md's capture from /dev/ttyUSB0 and docs/wireshark.md's
     # three-shell EtherCAT capture, are run without hardware by tests/test_twin_loop.py and
     # tests/test_wireshark.py), and the two commands of docs/testing-your-project.md that
-    # run in the reader's own project (tests/test_testing_plugin.py runs the sample project)
-    assert len(not_run) <= 18, [b.id for b in not_run]
+    # run in the reader's own project (tests/test_testing_plugin.py runs the sample project);
+    # docs/real-motor.md's page on hardware (`coolmuscle web /dev/ttyUSB0`, with and
+    # without --twin) is run on a paced pty stand-in by tests/test_web_real.py and
+    # tests/test_web_twin.py
+    assert len(not_run) <= 20, [b.id for b in not_run]
+
+
+def _printed(block: Block) -> Block | None:
+    """The ``output`` block that follows ``block`` on its page (``None``: none)."""
+    page = [b for b in BLOCKS if b.page == block.page]
+    after = page[page.index(block) + 1:page.index(block) + 2]
+    return after[0] if after and after[0].kind == "output" else None
+
+
+def _lines_match(expected: list[str], printed: list[str]) -> str:
+    """Why ``printed`` is not ``expected`` (``...`` lines skip any lines); "" when it is."""
+    at, skipping = 0, False
+    for line in expected:
+        if line.strip() == "...":
+            skipping = True
+            continue
+        while skipping and at < len(printed) and printed[at] != line:
+            at += 1
+        if at >= len(printed) or printed[at] != line:
+            shown = printed[at] if at < len(printed) else "(the end)"
+            return f"expected {line!r}, printed {shown!r}"
+        at, skipping = at + 1, False
+    if not skipping and at != len(printed):
+        return f"printed more: {printed[at]!r}"
+    return ""
+
+
+def test_output_blocks_follow_a_command_and_sudo_names_the_checkouts_command() -> None:
+    """Each output block follows the shell block whose output it is; a ``sudo`` line
+    names the checkout's command (sudo does not keep an activated environment: plain
+    ``sudo coolmuscle`` runs another installation, or none)."""
+    for block in BLOCKS:
+        if block.kind == "output":
+            page = [b for b in BLOCKS if b.page == block.page]
+            before = page[page.index(block) - 1]
+            assert before.lang == "sh" and before.kind not in NOT_RUN, block.id
+        if block.lang == "sh":
+            for line in _commands(block.body):
+                for word in re.findall(r"\bsudo\s+(?:ip netns exec \S+\s+)?(\S+)", line):
+                    assert word not in ("coolmuscle", "python"), f"{block.id}: {line}"
+
+
+@pytest.mark.parametrize("block", [b for b in BLOCKS if b.kind == "synopsis"],
+                         ids=lambda b: b.id)
+def test_synopsis_blocks_name_every_option(block: Block) -> None:
+    args = block.note.split()[1:]
+    done = subprocess.run([sys.executable, "-m", "coolmuscle", *args, "--help"],
+                          capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(ROOT / "src"), "COLUMNS": "200"})
+    assert done.returncode == 0, done.stderr
+    shown = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", done.stdout)) - {"--help"}
+    named = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", block.body))
+    assert shown - named == set(), f"{block.id}: missing {sorted(shown - named)}"
+    assert named - shown == set(), f"{block.id}: no such option {sorted(named - shown)}"
 
 
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.lang == "yaml"], ids=lambda b: b.id)
@@ -261,3 +327,20 @@ def test_docs_example_runs_as_written(block: Block, env: Env) -> None:
     output = done.stdout + done.stderr
     assert done.returncode == 0, f"{block.id}: {what} failed ({done.returncode}):\n{output}"
     assert "Traceback" not in output and "internal error" not in output, output
+    shown = _printed(block)
+    if shown is not None:
+        why = _lines_match(shown.body.splitlines(), output.splitlines())
+        assert not why, f"{shown.id} is not what {block.id} prints: {why}\n{output}"
+
+
+def test_readme_version_sample_is_what_a_build_in_place_prints() -> None:
+    """README's ``coolmuscle --version`` sample: the hot modules as many as
+    ``_accel.MODULES`` and the mypyc pinned in pyproject.toml, in the words of
+    ``_accel.describe`` for a build in place (what the scripts' editable install does)."""
+    from coolmuscle import __version__, _accel
+    pinned = re.search(r'"mypy==([0-9.]+)"', (ROOT / "pyproject.toml").read_text()).group(1)
+    said = _accel.built({"SOURCES": {"x": [0, 0]}, "MYPYC": pinned})
+    sample = next(b for b in BLOCKS if b.page.name == "README.md" and b.lang == "text"
+                  and b.body.startswith("coolmuscle "))
+    assert sample.body == (f"coolmuscle {__version__}\n"
+                           f"hot modules: compiled ({len(_accel.MODULES)} modules {said})\n")

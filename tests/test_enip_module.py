@@ -130,6 +130,70 @@ def test_3_1_2_alarm_code_and_enable_recovers(rig):
     assert inputs(module)[1] == 8
 
 
+def _running(kernel, chain, module):
+    module.write_output(out(p0=100000, control=1))
+    run(kernel, 0.5)
+
+
+def _in_position(kernel, chain, module):
+    module.write_output(out(p0=2000, control=1))
+    run(kernel, 3)
+
+
+def _position_error_overflow(kernel, chain, module):
+    # a stopper 500 pulses out: the stepper loses its steps there and the command runs
+    # on until Pe passes K56 = 1 kpulse (CM1 Appendix A K56 "Kpulses")
+    chain.motors[1].geometry.stopper_cw = 500.0
+    chain.set_param(1, 56, 1)
+    module.write_output(out(p0=100000, s0=50, control=1))
+    run(kernel, 2)
+
+
+def _over_speed(kernel, chain, module):
+    chain.inject_fault(1, "regeneration")        # CM1 K72 regeneration voltage
+
+
+def _over_current_by_overload(kernel, chain, module):
+    # a jam of 150 % of rated held for more than K57 ms (CM1 Appendix A K57)
+    chain.set_param(1, 57, 200)
+    chain.inject_fault(1, "overload", torque=150)
+    run(kernel, 0.5)
+
+
+def _over_current(kernel, chain, module):
+    chain.inject_fault(1, "over_current")
+
+
+def _windings_disabled(kernel, chain, module):
+    module.write_output(out(control=4))
+    run(kernel, 0.1)
+
+
+def _over_temperature(kernel, chain, module):
+    chain.inject_fault(1, "over_temperature")    # beyond K71
+
+
+def _emergency_stop(kernel, chain, module):
+    _running(kernel, chain, module)
+    chain.execute("*.1")
+    run(kernel, 0.5)
+
+
+@pytest.mark.parametrize("cause, code", [
+    (_running, 0), (_position_error_overflow, 1), (_over_speed, 2),
+    (_over_current_by_overload, 4), (_over_current, 4), (_in_position, 8),
+    (_windings_disabled, 16), (_over_temperature, 128), (_emergency_stop, 512)])
+def test_3_1_2_each_motor_status_code_of_the_table(rig, cause, code):
+    """3.1.2 "Motor Status Code": 0 running, 1 position error overflow, 2 over speed,
+    4 over current, 8 in position, 16 windings disabled, 128 over temperature, 512
+    emergency stop: the code the module sends for each condition (bytes 2-3 of 0x65)
+    is the table's; it has no 64 (CML 6.6's "power module over current")."""
+    kernel, chain, module = rig
+    cause(kernel, chain, module)
+    assert inputs(module)[1] == code
+    assert chain.execute("?99.1") == [f"Ux.1={code}"]   # what the module reads of the motor
+
+
 def test_3_2_4_k52_byte_sets_communication_mode(rig):
     _, chain, module = rig
     module.write_output(out(k52=0))

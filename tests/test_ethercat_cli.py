@@ -92,6 +92,11 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
     banner = ""
     try:
         assert "cmecatclim" in up.stdout and "ip netns exec cmecatclins" in up.stdout
+        again = coolmuscle("ethercat", "lab", "up", *LAB)          # a second up: one line
+        assert again.returncode == 1 and again.stderr == (
+            "coolmuscle: the EtherCAT lab is up already: veth cmecatclim <-> cmecatclis (in "
+            "network namespace cmecatclins); 'sudo coolmuscle ethercat lab down' removes "
+            "it\n")
         sim = subprocess.Popen(["ip", "netns", "exec", "cmecatclins", sys.executable, "-m",
                                 "coolmuscle", "sim", "--ethercat", "cmecatclis", "--bridge",
                                 "EB12", "--no-state"], env=ENV, stderr=subprocess.PIPE,

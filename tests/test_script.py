@@ -328,7 +328,38 @@ def test_a_wait_beyond_the_kernels_clock_is_a_script_error(line: str) -> None:
         parse_script(line + "\n")
 
 
+@pytest.mark.parametrize("firmware, motors, text, message", [
+    ("cm2", 1, "?96.1\n@input 9 on\n", "line 2: @input 9: the motor has inputs 1..6 (cm2)"),
+    ("rt3", 1, "@input 5 on\n", "line 1: @input 5: the motor has inputs 1..4 (rt3)"),
+    ("cm2", 1, "@input 0 on\n", "line 1: @input 0: inputs are numbered from 1"),
+    ("cm2", 2, "@input 3.1 on\n", "line 1: @input: no motor ID3 on this chain (IDs 1..2; "
+     "--motors sets how many)"),
+    ("cm2", 1, "@input 16.1 on\n", "line 1: @input: motor ID 16 is not 1..15"),
+    ("cm2", 1, "@analog 1 1024\n", "line 1: @analog 1024: the analog input is 0..1023"),
+])
+def test_an_input_or_analog_line_out_of_range_is_a_script_error(
+        firmware: str, motors: int, text: str, message: str,
+        make_chain: ChainFactory) -> None:
+    """A bad ``@input``/``@analog`` line is a bad script (exit 2) naming the line and
+    the allowed range, before anything runs; not the model's IndexError mid-run."""
+    chain = make_chain(motors=motors, firmware=firmware)
+    with pytest.raises(ScriptError) as caught:
+        run_script(text, chain)
+    assert str(caught.value).startswith(message)
+    assert chain.kernel.now == 0
+
+
 def test_run_script_refuses_a_path_that_names_no_file(make_chain: ChainFactory) -> None:
     with pytest.raises(ScriptError, match="no such script file"):
         run_script("tests/transcripts/example.cml", make_chain())
     assert run_script(str(ROOT / "examples" / "2.1-operation.cml"), make_chain()).ok
+
+
+def test_run_says_which_input_line_is_wrong_and_exits_2(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cli_support import cli
+    script = tmp_path / "inputs.cml"
+    script.write_text("?96.1\n@input 9 on\n")
+    code, out, err = cli(capsys, "run", str(script))
+    assert (code, out) == (2, "")
+    assert err == "coolmuscle: error: line 2: @input 9: the motor has inputs 1..6 (cm2)\n"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from coolmuscle.errors import StoreError
+from coolmuscle.errors import DamagedStoreError, StoreError
 from coolmuscle.motor.state.firmware import CM2
 from coolmuscle.motor.state.memory import Memory
 from coolmuscle.motor.state.param_table import ParamTable
@@ -20,6 +20,7 @@ from coolmuscle.motor.state.store import (
     SCHEMA_VERSION,
     Store,
     default_state_dir,
+    set_aside,
 )
 
 
@@ -156,6 +157,31 @@ def test_text_file_is_not_a_store(tmp_path: Path) -> None:
     bad.write_text("this is not a database\n" * 100)
     with pytest.raises(StoreError, match="not a usable coolmuscle store"):
         Store(bad)
+
+
+def test_a_damaged_store_is_set_aside_whole_but_never_under_a_writer(tmp_path: Path) -> None:
+    """What ``sim --reset`` does with a file nothing can be read from: it moves it (and
+    its -wal / -shm) aside under a free name, only when no running chain holds it."""
+    bad = tmp_path / "coolmuscle.sqlite3"
+    for content in (b"junk" * 300, b""):
+        bad.write_bytes(content)
+        (tmp_path / "coolmuscle.sqlite3-wal").write_bytes(b"wal")
+        with pytest.raises(DamagedStoreError) as caught:
+            Store(bad)
+        assert caught.value.problem in ("is not a usable coolmuscle store: file is not a "
+                                        "database", "is empty (0 bytes), not a coolmuscle "
+                                        "store")
+        assert f"mv {bad} {bad}.bad" in str(caught.value)
+    assert set_aside(bad) == f"{bad}.bad"
+    assert (tmp_path / "coolmuscle.sqlite3.bad-wal").read_bytes() == b"wal"
+    assert not bad.exists() and not (tmp_path / "coolmuscle.sqlite3-wal").exists()
+    Store(bad).close()                                    # a new store starts there
+    bad.write_bytes(b"junk" * 300)
+    assert set_aside(bad) == f"{bad}.bad.1"
+    with Store(tmp_path / "held.sqlite3", writer=True):
+        with pytest.raises(StoreError, match="in use"):
+            set_aside(tmp_path / "held.sqlite3")
+    assert (tmp_path / "held.sqlite3").exists()
 
 
 def test_foreign_sqlite_file_is_refused(tmp_path: Path) -> None:

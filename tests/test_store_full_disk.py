@@ -16,7 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from fixtures import ChainFactory
+from coolmuscle.chain.daisy import Chain
+from coolmuscle.errors import StoreError
+from fixtures import ChainFactory, coolmuscle_env, run_coolmuscle
 
 
 @pytest.fixture
@@ -75,3 +77,39 @@ def test_full_disk_is_told_and_loses_nothing_saved(
         assert again.get_param(1, 23) == 16
     finally:
         again.close()
+
+
+def test_full_disk_at_start_with_a_healthy_store_says_the_disk_is_full(
+        small_disk: Path, make_chain: ChainFactory) -> None:
+    """A healthy store on a disk that filled up while the simulator was stopped:
+    start-up says the disk is full, not "not a usable coolmuscle store: disk I/O
+    error" (which invites moving a good store aside); once there is room again the
+    store opens with what was saved."""
+    chain = make_chain(state_dir=small_disk)
+    assert chain.execute("P1.1=111") == [] and chain.execute("$.1") == ["saved.1"]
+    chain.close()
+    for leftover in ("coolmuscle.sqlite3-wal", "coolmuscle.sqlite3-shm"):
+        assert not (small_disk / leftover).exists()
+    fill(small_disk)
+    with pytest.raises(StoreError) as refused:
+        make_chain(state_dir=small_disk)
+    message = str(refused.value)
+    assert "the disk is full" in message and "not a usable" not in message, message
+    assert "\n" not in message
+    os.unlink(small_disk / "filler")
+    again = make_chain(state_dir=small_disk)
+    assert again.get_register(1, "P", 1) == 111
+    again.close()
+
+
+def test_full_disk_at_start_stops_the_sim_in_one_line(small_disk: Path) -> None:
+    chain = Chain(state_dir=small_disk / "state")
+    chain.execute("$.1")
+    chain.close()
+    fill(small_disk)
+    done = run_coolmuscle("sim", "--tcp", "0", "--state", str(small_disk / "state"),
+                          timeout=60, env=coolmuscle_env(COLUMNS="300"))
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "the disk is full" in lines[0], lines
+    assert "Traceback" not in done.stderr

@@ -166,3 +166,53 @@ def test_a_snapshot_nested_deeper_than_json_decodes_is_one_line_and_kept(
     with pytest.raises(StoreError, match=r"unreadable \(nested too deeply\); move the file"):
         make_chain(state_dir=tmp_path)
     assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize("target_kind", ["file", "dangling"])
+def test_a_symlink_at_the_lock_file_is_refused_and_its_target_untouched(
+        tmp_path: Path, make_chain: ChainFactory, target_kind: str) -> None:
+    """``DIR/coolmuscle.sqlite3.lock`` as a symbolic link: start-up truncated its
+    target and wrote a PID there.  Now it is refused in one line that names the link,
+    the target keeps its bytes (or stays absent) and the store is not opened."""
+    state = tmp_path / "state"
+    state.mkdir()
+    target = tmp_path / "precious.txt"
+    if target_kind == "file":
+        target.write_bytes(b"keep me\n")
+    (state / "coolmuscle.sqlite3.lock").symlink_to(target)
+    with pytest.raises(StoreError) as refused:
+        make_chain(state_dir=state)
+    message = str(refused.value)
+    assert "coolmuscle.sqlite3.lock is a symbolic link" in message and "\n" not in message
+    if target_kind == "file":
+        assert target.read_bytes() == b"keep me\n"
+    else:
+        assert not target.exists()
+    assert not (state / "coolmuscle.sqlite3").exists()
+
+
+def test_a_lock_file_that_is_not_a_regular_file_is_refused(tmp_path: Path) -> None:
+    """A FIFO or a directory at the lock file's name: one line, nothing written."""
+    fifo_dir, dir_dir = tmp_path / "fifo", tmp_path / "dir"
+    fifo_dir.mkdir()
+    dir_dir.mkdir()
+    os.mkfifo(fifo_dir / "store.sqlite3.lock")
+    (dir_dir / "store.sqlite3.lock").mkdir()
+    with pytest.raises(StoreError, match=r"store.sqlite3.lock is a FIFO, not the store's lock"):
+        Store(fifo_dir / "store.sqlite3", writer=True)
+    with pytest.raises(StoreError, match=r"store.sqlite3.lock is a directory, not the store"):
+        Store(dir_dir / "store.sqlite3", writer=True)
+    assert not (fifo_dir / "store.sqlite3").exists()
+
+
+def test_a_symlinked_lock_file_stops_the_sim_in_one_line(tmp_path: Path) -> None:
+    state = tmp_path / "state"
+    state.mkdir()
+    target = tmp_path / "precious.txt"
+    target.write_bytes(b"keep me\n")
+    (state / "coolmuscle.sqlite3.lock").symlink_to(target)
+    done = start_sim(state)
+    assert done.returncode == 1, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "is a symbolic link, not the store's lock file" in lines[0]
+    assert target.read_bytes() == b"keep me\n"

@@ -119,6 +119,10 @@ def test_local_processes_and_this_process_give_the_same_bytes(
     (["--vary", "SPEED=100,,200", "--vary", "ACCEL=1"], "--vary SPEED: empty value"),
     (["--vary", "SPEED", "--vary", "ACCEL=1"], "write NAME=V1,V2,..."),
     (["--vary", "SPEED=1", "--vary", "SPEED=2", "--vary", "ACCEL=1"], "given twice"),
+    # a value that makes a line no CML: the motor would refuse it in silence, "1 passed"
+    (["--vary", "SPEED=100,abc", "--vary", "ACCEL=1"],
+     f"--vary SPEED=abc: line 3 of {SCRIPT} becomes 'S.1=abc', not CML (unknown operand "
+     "'abc')"),
 ])
 def test_bad_vary_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str],
                                          tmp_path: Path, vary: list[str],
@@ -143,3 +147,17 @@ def test_a_substituted_value_that_breaks_the_machine_file_is_exit_2(
     code, _, err = cli(capsys, "sweep", str(SCRIPT), "--vary", "SPEED=1", "--vary",
                        "ACCEL=1", "--machine", str(MACHINE), "--vary", "INERTIA=heavy")
     assert code == 2 and err.count("\n") == 1 and "load.toml" in err
+
+
+@pytest.mark.parametrize("command", ["batch", "sweep"])
+def test_help_shows_the_choices_of_firmware_and_motors(
+        command: str, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "160")
+    code, out, _ = cli(capsys, command, "--help")
+    assert code == 0
+    motors = next(line for line in out.splitlines() if "--motors" in line)
+    firmware = next(line for line in out.splitlines() if "--firmware" in line)
+    assert "[1<=x<=15]" in motors and "<cm2|rt3|cm1>" in firmware
+    code, _, err = cli(capsys, command, str(SCRIPT), "--firmware", "cm3")
+    assert code == 2 and "cm3" in err

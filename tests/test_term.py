@@ -204,3 +204,27 @@ def test_a_port_that_cannot_be_opened_is_one_line(tmp_path: Path, closed_port: i
                          capture_output=True, text=True, timeout=60, env=term_env(tmp_path))
     assert out.returncode == 1
     assert out.stderr.startswith(f"coolmuscle: error: cannot open {url}")
+
+
+def test_a_closed_connection_ends_the_terminal_at_once(tmp_path: Path) -> None:
+    """The motor's side closes the connection while the person sits at the prompt: the
+    terminal says so in red straight away and ends (exit status 1), before anything
+    typed could be lost."""
+    import socket
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    pane = Pane([sys.executable, "-m", "coolmuscle", "term",
+                 f"socket://127.0.0.1:{server.getsockname()[1]}"], term_env(tmp_path))
+    try:
+        server.settimeout(10)
+        conn, _ = server.accept()
+        pane.prompt()
+        conn.close()
+        screen = pane.wait(r"connection lost: .*socket disconnected; the terminal ends",
+                           colours=True)
+        assert RED in line_with(screen, "connection lost")
+        assert pane.exit_status() == 1
+    finally:
+        pane.close()
+        server.close()

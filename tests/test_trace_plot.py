@@ -222,6 +222,35 @@ def test_plot_title_legend_outputs_and_stopper(tmp_path: Path, figures: list[Any
     assert any("stopper 11000" in t for t in stoppers)        # the pushed object
 
 
+def test_plot_draws_the_stoppers_in_the_coordinates_of_each_instant(
+        tmp_path: Path, figures: list[Any]) -> None:
+    """An origin set (2.1.2 "|2") moves where positions count from, not the stoppers: the
+    dotted stopper lines step there, and the position never crosses them (drawn in the
+    end-of-run coordinates they stood at -3500 / 500 all along, crossed by the move to
+    2500 before the origin set)."""
+    machine = tmp_path / "slide.toml"
+    machine.write_text("[[axis]]\n[axis.stoppers]\nccw = -1000\ncw = 3000\n")
+    script = tmp_path / "origin.cml"
+    script.write_text("S.1=100\nA.1=100\nP.1=2500\n^.1\n@until ^Ux\\.1=8$ 5\n@wait 0.5\n"
+                      "|2.1\nP.1=-3000\n^.1\n@until ^Ux\\.1=8$ 5\n@wait 0.5\n")
+    with pytest.raises(SystemExit) as info:
+        cli.main(["run", str(script), "--machine", str(machine), "--plot",
+                  str(tmp_path / "o.png")])
+    assert info.value.code in (0, None)
+    position = figures[-1].axes[0]
+    shaft = next(line for line in position.get_lines() if line.get_label() == "ID1")
+    walls = [line for line in position.get_lines() if line.get_linestyle() == ":"]
+    assert len(walls) == 2
+    lo, hi = sorted(walls, key=lambda line: line.get_ydata()[0])
+    assert (lo.get_ydata()[0], hi.get_ydata()[0]) == (-1000, 3000)
+    assert (lo.get_ydata()[-1], hi.get_ydata()[-1]) == (-3500, 500)
+    assert list(shaft.get_xdata()) == list(lo.get_xdata())
+    for p, a, b in zip(shaft.get_ydata(), lo.get_ydata(), hi.get_ydata()):
+        assert a <= p <= b
+    texts = [t.get_text() for t in position.texts]
+    assert "stopper -1000 -> -3500 (machine file)" in texts
+
+
 def test_plot_output_rows_name_their_k34_function(tmp_path: Path, figures: list[Any]) -> None:
     script = tmp_path / "out.cml"
     script.write_text("K34.1=31\nO2.1\nS.1=100\nA.1=100\nP.1=1000\n^.1\n@wait 1\n")

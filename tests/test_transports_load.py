@@ -61,7 +61,10 @@ def test_connections_beyond_the_limit_are_refused_with_one_line() -> None:
     with ServiceThread(lambda: Chain(), lambda: [TcpTransport(port=0, max_clients=3)]) as st_:
         port = st_.transports[0].info()["port"]
         kept = [connect(port) for _ in range(3)]
-        assert wait_until(lambda: st_.transports[0].clients >= 3, 5, 0.01)
+        for sock in kept:              # in use: the idle policy closes none of them
+            sock.sendall(b"?96.1\r")
+        assert wait_until(lambda: st_.transports[0].connections == 3
+                          and st_.transports[0].silent_connections == 0, 5, 0.01)
         extra = connect(port)
         data = b""
         while chunk := extra.recv(4096):
@@ -77,7 +80,9 @@ def test_modbus_connections_beyond_the_limit_are_closed() -> None:
                        lambda: [ModbusTcpTransport(port=0, max_clients=2)]) as st_:
         port = st_.transports[0].info()["port"]
         kept = [connect(port) for _ in range(2)]
-        time.sleep(0.1)
+        for n, sock in enumerate(kept):     # in use: the idle policy closes none of them
+            sock.sendall(struct.pack(">HHHBBHH", n, 0, 6, 1, 3, 200, 2))
+            assert len(sock.recv(64)) == 13
         extra = connect(port)
         extra.settimeout(5)
         assert extra.recv(4096) == b""

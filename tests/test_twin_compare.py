@@ -46,7 +46,7 @@ def test_against_the_default_machine_the_differences_are_found_and_named(folder:
     # cruising at 10 000 pps: the hidden loop (kp 220) lags 45 pulses, the default (300) 33
     cruise = next(v for v in diffs if v.real is not None and v.real.text.startswith("Pe")
                   and 1.0 < v.real.time < 1.5)
-    assert cruise.kind == "bytes" and cruise.band is not None
+    assert cruise.kind == "value" and cruise.band is not None
     real = int(cruise.real.text.split("=")[1])
     virtual = int(cruise.virtual.text.split("=")[1]) if cruise.virtual else 0
     assert 43 <= real <= 47 and virtual == 33
@@ -132,7 +132,7 @@ def test_polled_values_allow_the_lag_the_echo_shows_ch3_k23_echo(folder: Path,
     prompt.write_text(_stamp_earlier(text, "^.1", 0.004, echo=True))
     report = compare_session(prompt, folder / "hidden.toml")
     late = [v for v in report.differences if v.real is not None and v.band is not None]
-    assert len(late) > 20 and {v.kind for v in report.differences} == {"bytes"}
+    assert len(late) > 20 and {v.kind for v in report.differences} == {"value"}
     # 4 ms at up to 30 000 pps is up to 120 pulses behind the band
     assert all(v.real is not None and v.band is not None and v.real.text.startswith(
         ("Px", "Pe", "Ix")) and v.off > 0 for v in late)
@@ -181,6 +181,11 @@ def test_report_and_plot_files_hold_the_differences(folder: Path, tmp_path: Path
     extras = [v for v in report.differences if v.real is None]
     assert len(rows) == n - len(extras)
     assert ("| different bytes | " in text) and re.search(r"\| equal \| \d+ \|", text)
+    # the rows and the counts name a verdict with the same words
+    counted = dict(re.findall(r"^\| ([a-z ]+) \| (\d+) \|$", text, re.M))
+    for name in {name for _, name in rows}:
+        assert int(counted[name]) == sum(1 for _, n in rows if n == name) + (
+            len(extras) if name == "extra" else 0), name
     # three panels (Pe, Px, Ix): 1000 x (100 + 3 x 200) pixels
     assert _png_size(png.read_bytes()) == (1000, 700)
 

@@ -174,7 +174,8 @@ def test_bank_uploaded_from_the_page_reads_back_with_query_1(page, host):
     page.page.select_option("#bank-motor", "3")
     page.by("bank-text").fill("S1.3=50\nA1.3=100\nP1.3=2000\nB1.3\nS1.3, A1.3, P1.3\nEND")
     page.by("bank-upload").click()
-    expect(page.by("bank-result")).to_contain_text("read back identical", timeout=5000)
+    expect(page.by("bank-verdict")).to_contain_text("read back identical", timeout=5000)
+    expect(page.by("bank-findings").locator("li")).to_have_count(0)
     assert host.query("?1.3", r"S1\.3.*") == "S1.3, A1.3, P1.3"
     assert host.query("?P1.3", r"P1\.3=.*").startswith("P1.3=2000,")  # the data line ran too
     page.by("bank-start").click()                                      # [1.3 (6.5)
@@ -188,7 +189,10 @@ def test_checker_errors_are_shown_on_their_line_and_nothing_is_sent(page, host):
     page.by("bank-text").fill("B4.3\nS1.3\nP1.3=(((\nEND")
     page.by("bank-upload").click()
     expect(page.by("bank-result")).to_contain_text("line 3", timeout=5000)
-    expect(page.by("bank-result")).to_contain_text("not uploaded")
+    expect(page.by("bank-verdict")).to_have_text("not uploaded")
+    # the findings are numbered; the outcome is not one of them
+    findings = page.by("bank-findings").locator("li").all_inner_texts()
+    assert findings and all(re.match(r"line \d+:\d+ (error|warning): ", f) for f in findings)
     page.by("bank-result").get_by_role("button", name=re.compile(r"line 3:.*error")).click()
     selected = page.page.evaluate(
         "() => { const t = document.getElementById('bank-text');"
@@ -425,3 +429,46 @@ def test_run_script_web_plays_the_script_live(browser, tmp_path: Path):
         _stop(run)
     out = run.stdout.read()
     assert "< Px.1=3000" in out and "> ^.1" in out
+
+
+def test_another_sites_img_of_the_plot_is_refused(browser, served):
+    """A page of another site (``localhost`` is another site than ``127.0.0.1``; another
+    port of the same host is ``same-site``) showing ``<img src=".../api/plot.png">``:
+    Chromium's request is refused (403, nothing drawn) while the page's own download
+    link works."""
+    import http.server
+    import threading
+
+    web = served.transports[1]
+    served.call(web.start_recording)
+    target = web.url + "api/plot.png"
+    html = f'<img id="a" src="{target}"><img id="b" src="{target}?x=1">'.encode()
+
+    class Evil(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):                                       # noqa: N802
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.end_headers()
+            self.wfile.write(html)
+
+        def log_message(self, *args):
+            pass
+    evil = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Evil)
+    threading.Thread(target=evil.serve_forever, daemon=True).start()
+    context = browser.new_context()
+    try:
+        tab = context.new_page()
+        for host in ("localhost", "127.0.0.1"):            # cross-site, then same-site
+            tab.goto(f"http://{host}:{evil.server_address[1]}/")
+            tab.wait_for_load_state("load")
+            widths = tab.evaluate("[...document.images].map((i) => i.naturalWidth)")
+            assert widths == [0, 0], (host, widths)
+        assert web.cross_site_refused >= 4
+        tab.goto(web.url)                                  # the page's own: served
+        width = tab.evaluate("""(src) => new Promise((done) => {
+            const img = new Image(); img.onload = () => done(img.naturalWidth);
+            img.onerror = () => done(-1); img.src = src; })""", target)
+        assert width > 0
+    finally:
+        context.close()
+        evil.shutdown()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import logging
 import multiprocessing
 import os
 import socket
@@ -568,3 +569,56 @@ def test_the_plot_import_beside_the_loop_is_waited_for_at_exit(monkeypatch) -> N
     assert [t.name for t in started] == ["coolmuscle-web-plot-import"]
     assert not started[0].daemon
     started[0].join(30)
+
+
+@pytest.mark.parametrize("params, name", [
+    ({"motor": 2}, "overload"), ({"fault": "encoder"}, "overload"),
+    ({"self": 1}, "overload"), ({"Torque": 5}, "overload"), ({"torque value": 5}, "overload"),
+    ({}, ["overload"]), ({}, {"name": "overload"}), ({}, 7), ({}, None),
+])
+def test_fault_requests_with_odd_names_are_bad_requests_without_a_traceback(
+        served, caplog, params, name):
+    """Parameters named as ``inject_fault``'s own arguments (``motor``, ``fault``,
+    ``self``) or a fault name that is not text: a clear refusal, no "internal error"
+    and no traceback in the log (an attack found 362 KB of log for 500 such requests)."""
+    async def body(ws, hello):
+        return await ask(ws, {"t": "fault", "motor": 1, "fault": name, "params": params})
+    with caplog.at_level(logging.DEBUG):
+        result = _run(_with_ws(_url(served), body))
+    assert result["ok"] is False and "internal error" not in result["error"]
+    assert ("unknown fault" in result["error"] if not isinstance(name, str)
+            else "takes no parameter" in result["error"]), result
+    assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
+
+
+@pytest.mark.parametrize("headers", [
+    {"Origin": "http://evil.example"},
+    {"Sec-Fetch-Site": "cross-site"},
+    {"Sec-Fetch-Site": "same-site"},          # another port of the host: another site
+    {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Dest": "image", "Sec-Fetch-Mode": "no-cors"},
+])
+@pytest.mark.parametrize("path", ["api/plot.png", "api/trace.csv", "api/trace.parquet"])
+def test_downloads_asked_by_another_site_are_refused(path, headers):
+    """A cross-site ``<img src=".../api/plot.png">`` made the simulator draw a plot per
+    request in its loop (49 x 200 back to back, the host line's p99 at 1 s): a download
+    request from another site (``Origin``, ``Sec-Fetch-Site``) is refused with 403 before
+    anything is prepared; the page's own (``same-origin``), a typed-in address
+    (``none``) and a script (neither header) are served."""
+    st = serve(motors=1)
+    url = st.transports[1].url
+    web = st.transports[1]
+    st.call(web.start_recording)
+
+    async def fetch(extra):
+        async with aiohttp.ClientSession() as session:
+            async with session.get(url + path, headers=extra) as r:
+                return r.status
+    try:
+        assert _run(fetch(headers)) == 403
+        assert web.cross_site_refused == 1
+        own = {"Origin": url.rstrip("/"), "Sec-Fetch-Site": "same-origin"}
+        for allowed in (own, {"Sec-Fetch-Site": "none"}, {}):
+            assert _run(fetch(allowed)) in (200, 409), allowed    # 409: no pyarrow
+        assert web.cross_site_refused == 1
+    finally:
+        st.stop()

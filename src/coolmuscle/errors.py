@@ -120,6 +120,16 @@ class StoreError(CoolMuscleError, OSError):
     """The persistent store could not be read or written."""
 
 
+class DamagedStoreError(StoreError):
+    """The store file is damaged or not a coolmuscle store at all: nothing in it can be
+    read, so it can only be moved aside (``coolmuscle sim --reset`` does that).
+    ``problem`` says what is wrong with it, without the file's name."""
+
+    def __init__(self, message: str, *, problem: str = "") -> None:
+        super().__init__(message)
+        self.problem = problem
+
+
 class TransportError(CoolMuscleError, OSError):
     """A byte transport (TCP, pty, serial) failed or was misconfigured."""
 

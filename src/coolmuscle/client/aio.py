@@ -17,7 +17,6 @@ they arrive, also between calls.  Timeouts are wall-clock seconds (on
 from __future__ import annotations
 
 import asyncio
-import math
 import weakref
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -271,11 +270,9 @@ class EventStream:
     async def __anext__(self) -> MotorEvent:
         if self._ended and self._queue.empty():
             raise StopAsyncIteration
-        if self._queue.empty():
-            with self._driver.waiting(math.inf):    # a fast port's time moves meanwhile
-                item = await self._queue.get()
-        else:
-            item = self._queue.get_nowait()
+        if self._queue.empty():      # a fast port's time moves while the stream waits
+            await self._driver.advance_until(lambda: not self._queue.empty())
+        item = await self._queue.get()
         if item is None or isinstance(item, BaseException):
             self._ended = True
             if isinstance(item, BaseException):
@@ -351,6 +348,18 @@ class AsyncCoolMuscle(AsyncMotor):
         def remove() -> None:
             if entry in self._driver.listeners:
                 self._driver.listeners.remove(entry)
+        return remove
+
+    def add_failure_listener(self, listener: Callable[[BaseException], None]
+                             ) -> Callable[[], None]:
+        """Call ``listener(error)`` in the loop once the port fails (the peer closed the
+        connection, the cable was pulled): the :class:`~coolmuscle.errors.TransportError`
+        every later call raises.  Returns a function that removes it."""
+        self._driver.on_failure.append(listener)
+
+        def remove() -> None:
+            if listener in self._driver.on_failure:
+                self._driver.on_failure.remove(listener)
         return remove
 
     def add_tap(self, tap: Callable[[str, bytes], None]) -> Callable[[], None]:

@@ -4,13 +4,16 @@ The twin of :mod:`coolmuscle.client.driver`.  A helper thread does the blocking 
 (pyserial has no asyncio interface) and hands the bytes to the event loop, where they
 feed the shared :class:`~coolmuscle.client.protocol.Protocol`; events reach subscribers
 as they arrive.  Requests wait on a condition the reader notifies; every wait has its
-timeout (wall clock, the loop's time).
+timeout (wall clock, the loop's time).  On a fast in-process port
+(``coolmuscle://?mode=fast``) the waits themselves move virtual time, one read at a
+time, so that runs are deterministic (:class:`_ThreadedReader`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -19,7 +22,7 @@ import serial
 
 from ..errors import CoolMuscleError, CoolMuscleTimeout, TransportError
 from . import ops
-from .driver import Listener, _Deadline, port_clock
+from .driver import READ_SLICE, Listener, _Deadline, port_clock
 from .protocol import Exchange, MotorEvent
 
 log = logging.getLogger(__name__)
@@ -30,10 +33,13 @@ __all__ = ["AsyncDriver"]
 class _ThreadedReader:
     """Blocking reads in a thread; bytes are handed to ``on_data`` in the loop.
 
-    A port whose virtual time moves inside ``read`` (``coolmuscle://?mode=fast``) is
-    read without a timeout unless a request waits, and then only up to the latest
-    waiting request's end (``horizons``, virtual seconds): time moves while the
-    client waits, as far as it waits, as with the sync driver."""
+    A port whose virtual time moves inside ``read`` (``coolmuscle://?mode=fast``) has no
+    reading thread of its own: time moves only in :meth:`step`, one read at a time,
+    which the waits of the loop take in turn (:meth:`AsyncDriver._until`), each as far
+    as the nearest end of a waiting request (``horizons``, virtual seconds) and no
+    further than the first bytes.  So the loop sees every byte before time moves on,
+    and a run gives the same bytes at the same virtual instants every time, as the
+    sync driver does (docs/transports.md "mode=fast")."""
 
     def __init__(self, port: Any, loop: asyncio.AbstractEventLoop,
                  on_data: Callable[[bytes | BaseException], None]) -> None:
@@ -45,38 +51,60 @@ class _ThreadedReader:
         self.clock, self.fast = port_clock(port)    # virtual seconds on a fast port
         #: ends (virtual s) of the requests waiting now; fast ports only
         self.horizons: list[float] = []
+        #: a fast port: one read at a time moves its time (:meth:`step`)
+        self.steps = asyncio.Lock()
         self._thread = threading.Thread(target=self._main, name="coolmuscle-reader",
                                         daemon=True)
 
     def start(self) -> None:
+        if self.fast:
+            return
         self._port.timeout = 0.05
         self._thread.start()
 
-    def _fast_timeout(self) -> float:
-        """How far this read may move virtual time (0: not at all)."""
-        horizon = max(self.horizons, default=None)
+    def fast_timeout(self) -> float:
+        """How far the next read of a fast port may move virtual time: up to the
+        nearest end of a waiting request, at most a read slice."""
+        horizon = min(self.horizons, default=None)
         if horizon is None:
             return 0.0
-        return max(0.0, min(1.0, horizon - self.clock()))
+        return max(0.0, min(READ_SLICE, horizon - self.clock()))
+
+    async def step(self, timeout: float | None = None) -> None:
+        """One read of a fast port (in a worker thread: the loop stays free while the
+        chain runs), its bytes (or its failure) handed over before it returns.
+        ``timeout``: how far it may move virtual time (default :meth:`fast_timeout`)."""
+        wait = self.fast_timeout() if timeout is None else timeout
+        data = await self._loop.run_in_executor(None, self._read_fast, wait)
+        if not self._stop.is_set():
+            self._on_data(data)
+
+    async def drain(self) -> None:
+        """What a fast port holds now, with virtual time standing still (the replies
+        a write produced at once): delivered to subscribers without a wait."""
+        async with self.steps:
+            if not self._stop.is_set():
+                await self.step(0.0)
+
+    def _read_fast(self, timeout: float) -> bytes | BaseException:
+        try:
+            self._port.timeout = timeout
+            data: bytes = self._port.read(1)
+            if data:
+                self._port.timeout = 0
+                data += self._port.read(65536)
+            return data
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            return exc
 
     def _main(self) -> None:
         while not self._stop.is_set():
             try:
-                if self.fast:
-                    self._port.timeout = self._fast_timeout()
                 data = self._port.read(1)
-                if not data and self.fast:
-                    if self._port.timeout:          # virtual time moved: look again
-                        self._loop.call_soon_threadsafe(self._on_data, b"")
-                    self._stop.wait(0.001)
-                    continue
                 if data and self._socket:  # socket:// in_waiting only says 0 or 1
                     self._port.timeout = 0
                     data += self._port.read(65536)
                     self._port.timeout = 0.05
-                elif data and self.fast:
-                    self._port.timeout = 0
-                    data += self._port.read(65536)
                 elif data and self._port.in_waiting:
                     data += self._port.read(self._port.in_waiting)
             except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
@@ -115,6 +143,8 @@ class AsyncDriver:
         self._failure: BaseException | None = None
         self._loop = asyncio.get_running_loop()
         self._reader = _ThreadedReader(port, self._loop, self._received)
+        #: fast port: the reads of what a write produced at once (kept till done)
+        self._drains: set[asyncio.Task[None]] = set()
         #: called once when the port fails (the event streams end with the error)
         self.on_failure: list[Callable[[BaseException], None]] = []
 
@@ -137,6 +167,13 @@ class AsyncDriver:
         """While inside, a fast port's virtual time may move ``seconds`` on."""
         return _Waiting(self._reader, seconds)
 
+    async def advance_until(self, ready: Callable[[], bool]) -> None:
+        """On a fast port, move virtual time until ``ready()`` (an event stream waiting
+        for its next event), for as long as it takes; elsewhere time moves by itself
+        and this returns at once."""
+        if self._reader.fast:
+            await self._until_fast(ready, math.inf)
+
     def _received(self, data: bytes | BaseException) -> None:
         if isinstance(data, BaseException):
             first = self._failure is None
@@ -144,7 +181,7 @@ class AsyncDriver:
             if first:
                 for callback in list(self.on_failure):
                     callback(self._failure)
-        else:
+        elif data:
             self._tap("<", data)
             for event in self.session.protocol.receive(data):
                 self._deliver(event)
@@ -165,25 +202,41 @@ class AsyncDriver:
                     log.exception("event listener failed")
 
     async def _until(self, ready: Callable[[], bool], seconds: float) -> bool:
-        # the sync driver's deadline: the port's clock, on a fast port with the wall
-        # clock as a backstop (a port closed meanwhile stops its time for good)
-        deadline = _Deadline(self.now, self._reader.fast, seconds)
+        if self._reader.fast:
+            return await self._until_fast(ready, seconds)
+        deadline = _Deadline(self.now, False, seconds)
+        async with self._changed:
+            while not ready():
+                if self._failure is not None:
+                    raise self._failure
+                remaining = deadline.remaining()
+                if remaining <= 0:
+                    return False
+                try:
+                    await asyncio.wait_for(self._changed.wait(), remaining)
+                except TimeoutError:
+                    pass
+        return True
+
+    async def _until_fast(self, ready: Callable[[], bool], seconds: float) -> bool:
+        """A wait on a fast port: it moves virtual time itself, a read at a time, taking
+        turns with the other waits (each looks at what the last read brought before
+        the next moves time on).  The sync driver's deadline: virtual, with the wall
+        clock as a backstop (a port closed meanwhile stops its time for good)."""
+        deadline = _Deadline(self.now, True, seconds)
+        reader = self._reader
         with self.waiting(seconds):
-            async with self._changed:
-                while not ready():
+            while not ready():
+                async with reader.steps:
+                    if ready():
+                        break
                     if self._failure is not None:
                         raise self._failure
-                    remaining = deadline.remaining()
-                    if remaining <= 0:
+                    if deadline.remaining() <= 0:
                         return False
-                    if self._reader.fast:      # virtual: the reader says when it moved
-                        if getattr(self.port, "kernel", None) is None:
-                            raise TransportError("the port was closed during the wait")
-                        remaining = min(remaining, 0.05)
-                    try:
-                        await asyncio.wait_for(self._changed.wait(), remaining)
-                    except TimeoutError:
-                        pass
+                    if getattr(self.port, "kernel", None) is None:
+                        raise TransportError("the port was closed during the wait")
+                    await reader.step()
         return True
 
     async def run(self, op: ops.Op[ops.T]) -> ops.T:
@@ -237,11 +290,17 @@ class AsyncDriver:
     def write(self, data: bytes) -> None:
         if not data:
             return
+        if self._failure is not None:      # the port is gone: nothing written is lost silently
+            raise self._failure
         self._tap(">", data)
         try:
             self.port.write(data)
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"cannot write to the port: {exc}") from exc
+        if self._reader.fast:              # its replies at this instant, waited for or not
+            task = self._loop.create_task(self._reader.drain())
+            self._drains.add(task)
+            task.add_done_callback(self._drains.discard)
 
 
 class _Waiting:

@@ -30,6 +30,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from ..motor.motion.axis import wrap_user
 from ..motor.motion.trajectory import Piece
 from ..motor.signals.analog_output import output_volts
 from ..motor.state.output_functions import OUT_ROTATION_PULSE
@@ -189,8 +190,9 @@ class MotorTrace:
         torque = sign * motion.torque_percent_at(t)
         if not status & _NO_TORQUE:
             torque += motor.analog_control.load_percent(t)   # a sensed load (5.5)
-        command = sign * (command_raw - zero)
-        position = sign * (actual_raw - zero)
+        half = motor.axis.half_range                 # as the position counter shows them
+        command = wrap_user(sign * (command_raw - zero), half)
+        position = wrap_user(sign * (actual_raw - zero), half)
         error = command_raw - actual_raw
         k33, k34, k35 = self.k_at(t)          # the K values of that instant, not of now
         analog_out = output_volts(k35, target=target if math.isfinite(target)
@@ -238,11 +240,19 @@ class MotorTrace:
         """Pulses per revolution now (K37)."""
         return self._motor.resolution.pulses_per_rev
 
-    def stoppers(self) -> list[float]:
-        """The machine file's stoppers (a pushed object, 4.1.4), user pulses."""
+    def stoppers(self, t: int | None = None) -> list[float]:
+        """The machine file's stoppers (a pushed object, 4.1.4) in user pulses, in the
+        user coordinates in force at ``t`` (default: now): an origin set (``|2``, an
+        origin search) or K45 moves where they are counted from, not where they are."""
         motor = self._motor
         walls = motor.geometry.walls(motor.resolution.pulses_per_rev)
-        return [motor.axis.to_user(raw) for raw in walls if math.isfinite(raw)]
+        zero, sign = motor.axis.zero, motor.axis.sign
+        history = motor.axis.history
+        if t is not None and history:
+            entry = history[max(bisect_right(self._piece_starts(history), t) - 1, 0)]
+            zero, sign = entry[3], entry[4]
+        half = motor.axis.half_range
+        return [wrap_user(sign * (raw - zero), half) for raw in walls if math.isfinite(raw)]
 
 
 class TraceFeed:

@@ -103,6 +103,7 @@ class Motor:
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
                          on_passing_point=self._passing_point, memos=memos)
+        self.axis.half_range = units.counter_half_range(self._resolution.pulses_per_rev)
         sup.attach()
         self.estopped = False
         self.origin_done = False
@@ -154,6 +155,7 @@ class Motor:
         del old
         if k == 37:
             self.memory.set_k37(new)
+            self.axis.half_range = units.counter_half_range(self.resolution.pulses_per_rev)
         self.supervision.param_changed(k)
 
     def reports(self, flag: Report) -> bool:

@@ -255,10 +255,10 @@ class EnipTransport(StreamServer):
                 before = len(self.table.by_triad)
                 reply = conn.handle(frame)
                 changed = len(self.table.by_triad) != before
-            if reply is not None:
-                writer.write(reply)
             if changed:
                 self.wake()
+            if reply is not None and not self.send(writer, reply):
+                return False               # the peer reset: answer it no more
         return False
 
     # -- UDP -----------------------------------------------------------------------------------

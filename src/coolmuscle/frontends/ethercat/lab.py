@@ -47,14 +47,16 @@ class Lab:
     def outer(self) -> str:
         return self.master_if if self.inside == "slave" else self.slave_if
 
-    def instructions(self) -> str:
+    def instructions(self, program: str = "coolmuscle") -> str:
+        """What to run next; ``program`` is the command as it runs under sudo (sudo
+        does not keep an activated virtual environment: ``.venv/bin/coolmuscle``)."""
         return (f"EtherCAT lab up: veth {self.master_if} <-> {self.slave_if} "
                 f"(in network namespace {self.namespace})\n"
-                f"  slave:  sudo ip netns exec {self.namespace} coolmuscle sim --ethercat "
+                f"  slave:  sudo ip netns exec {self.namespace} {program} sim --ethercat "
                 f"{self.slave_if} [--bridge EB02]\n"
                 f"  master: give your EtherCAT master the interface {self.master_if} "
                 f"(e.g. pysoem: master.open('{self.master_if}'))\n"
-                f"  down:   sudo coolmuscle ethercat lab down")
+                f"  down:   sudo {program} ethercat lab down")
 
 
 def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -121,8 +123,32 @@ def destroy(lab: Lab, *, mark: str = MARK) -> list[str]:
 
 def up(namespace: str = DEFAULT_NAMESPACE, master_if: str = DEFAULT_MASTER_IF,
        slave_if: str = DEFAULT_SLAVE_IF) -> Lab:
-    """``coolmuscle ethercat lab up``."""
-    return create(Lab(namespace, master_if, slave_if))
+    """``coolmuscle ethercat lab up``; a lab that is up already, or a name taken by
+    something else, is one :class:`LabError` line saying so (not ip's "File exists")."""
+    lab = Lab(namespace, master_if, slave_if)
+    in_use = _in_use(lab)
+    if in_use:
+        raise LabError(in_use)
+    return create(lab)
+
+
+def _in_use(lab: Lab) -> str:
+    """Why ``lab`` cannot be made now ("": it can)."""
+    namespaces = ip("netns", "list", check=False).stdout.split()
+    ours = _marked(None, lab.outer, MARK)
+    if lab.namespace in namespaces and ours and _marked(lab.namespace, lab.inner, MARK):
+        return (f"the EtherCAT lab is up already: veth {lab.master_if} <-> {lab.slave_if} "
+                f"(in network namespace {lab.namespace}); 'sudo coolmuscle ethercat lab "
+                "down' removes it")
+    if lab.namespace in namespaces:
+        return (f"network namespace {lab.namespace} exists already"
+                + (" (a lab half made: 'sudo coolmuscle ethercat lab down' removes it)"
+                   if ours else ", not made by the lab: give another with --namespace"))
+    if ip("-o", "link", "show", lab.outer, check=False).returncode == 0:
+        return (f"interface {lab.outer} exists already"
+                + (" (a lab half made: 'sudo coolmuscle ethercat lab down' removes it)"
+                   if ours else ", not made by the lab: give another with --master-if"))
+    return ""
 
 
 def down(namespace: str = DEFAULT_NAMESPACE, master_if: str = DEFAULT_MASTER_IF,

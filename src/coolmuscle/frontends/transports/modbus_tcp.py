@@ -15,7 +15,12 @@ addresses, map, exceptions and broadcast rule.  It owns only the framing and the
   K81 is 0, unit 1 also reach ID1, so the door works with COM0 in text mode.
 
 Requests of one connection are answered in order; several clients may connect
-(at most ``max_clients``; more are closed at once).  Each request runs in the
+(at most ``max_clients``).  With every place taken, a new client is admitted by
+closing the connection idle longest among those that never sent a whole ADU or sent
+none for ``idle_timeout`` seconds (the Implementation Guide's rule, 4.2.1:
+:mod:`.stream_server`); when every connection is in use the newcomer is closed at
+once.  A connection that reset is answered no more (the ADUs it left queued are
+dropped, not run).  Each request runs in the
 loop's thread at the wall-clock instant it arrived (``Port.call``).  The work
 per wake-up is bounded (``MAX_ADUS_PER_WAKE`` requests or
 ``MAX_SECONDS_PER_WAKE``), so a client pipelining 64 KB of requests shares the
@@ -33,7 +38,8 @@ import time
 from ...device.api import Device
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Port
-from .stream_server import DEFAULT_MAX_CLIENTS, StreamServer
+from .lograte import LogLimiter
+from .stream_server import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CLIENTS, StreamServer
 
 log = logging.getLogger(__name__)
 
@@ -54,12 +60,14 @@ class ModbusTcpTransport(StreamServer):
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  max_buffer: int = DEFAULT_MAX_BUFFER,
-                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
-        super().__init__(host, port, max_clients=max_clients)
+                 max_clients: int = DEFAULT_MAX_CLIENTS,
+                 idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT) -> None:
+        super().__init__(host, port, max_clients=max_clients, idle_timeout=idle_timeout)
         self.max_buffer = max_buffer
         self._device: Device | None = None
         self.requests = 0
         self.closed_connections = 0
+        self._log_unframed = LogLimiter(log, logging.INFO, "unframed connections closed")
 
     async def start(self, port: Port) -> None:
         from ...chain.firmware_modbus.slave import firmware_name, supports_modbus
@@ -86,9 +94,15 @@ class ModbusTcpTransport(StreamServer):
                 break
             buf += data
             while True:
+                if writer.transport.is_closing():
+                    return                     # reset or closed: answer it no more
+                before = self.requests
                 out, ok, more = self._take_adus(buf)
+                if self.requests != before:
+                    self.request_seen(writer)
                 if out:
-                    writer.write(bytes(out))
+                    if not self.send(writer, bytes(out)):
+                        return
                     if writer.transport.get_write_buffer_size() > self.max_buffer:
                         await writer.drain()   # it does not read: read no more of it
                 if not ok or not more:
@@ -96,7 +110,8 @@ class ModbusTcpTransport(StreamServer):
                 await asyncio.sleep(0)         # the budget is spent: others' turn
             if not ok:
                 self.closed_connections += 1
-                log.info("modbus-tcp: %s sent a frame without valid length; closed", peer)
+                self._log_unframed("modbus-tcp: %s sent a frame without valid length; "
+                                   "closed", peer)
                 break
 
     def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool, bool]:

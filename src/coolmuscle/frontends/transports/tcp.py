@@ -14,8 +14,13 @@ Owns the asyncio TCP server (default bind 127.0.0.1:5150, docs/transports.md):
   is not blocked by a slow reader, and only a client that fails to read is
   dropped.  A client whose own output backs up stops being read (TCP back
   pressure to it alone);
-* **connection limit**: beyond ``max_clients`` a new client gets one line
-  ``coolmuscle: too many clients (N); connection refused`` and is closed;
+* **connection limit and idle policy**: with every one of the ``max_clients``
+  places taken, a new client is admitted by closing the connection idle longest
+  among those that never sent a whole line or sent none for ``idle_timeout``
+  seconds (it gets one line ``coolmuscle: connection closed: silent for N s while
+  all N places were taken``); when every connection is in use the new client gets
+  ``coolmuscle: too many clients (N); connection refused`` and is closed
+  (:mod:`.stream_server`, docs/reliability.md "Connections");
 * a client's disconnect, reset or garbage never affects the others; a bank
   upload it opened ends with it.
 """
@@ -28,7 +33,8 @@ from collections.abc import Callable
 
 from ...errors import TransportError
 from .base import DEFAULT_MAX_BUFFER, Lane, Port
-from .stream_server import DEFAULT_MAX_CLIENTS, StreamServer
+from .lograte import LogLimiter
+from .stream_server import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CLIENTS, StreamServer
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +42,8 @@ DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5150
 
 READ_SIZE = 4096
+#: Lines a client's connect and disconnect may log per window (``-v``) before a summary.
+CONNECTION_LINES = 20
 
 
 def parse_address(text: str, default_host: str = DEFAULT_HOST) -> tuple[str, int]:
@@ -66,6 +74,7 @@ class _Client:
         self.pending = bytearray()
         self.flush_scheduled = False
         self.dropped = False
+        self.spoke = False              # it sent a whole line (idle policy)
 
     def unread(self) -> int:
         """Bytes handed to the socket that it did not take (the client did not read)."""
@@ -80,13 +89,17 @@ class TcpTransport(StreamServer):
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  max_buffer: int = DEFAULT_MAX_BUFFER,
-                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
-        super().__init__(host, port, max_clients=max_clients)
+                 max_clients: int = DEFAULT_MAX_CLIENTS,
+                 idle_timeout: float | None = DEFAULT_IDLE_TIMEOUT) -> None:
+        super().__init__(host, port, max_clients=max_clients, idle_timeout=idle_timeout)
         self.max_buffer = max_buffer
         self._clients: list[_Client] = []
         self._unsubscribe: Callable[[], None] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.dropped_clients = 0
+        self._log_connection = LogLimiter(log, logging.INFO, "connects and disconnects",
+                                          burst=CONNECTION_LINES)
+        self._log_dropped = LogLimiter(log, logging.WARNING, "slow clients dropped")
 
     # -- life cycle -----------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -113,6 +126,18 @@ class TcpTransport(StreamServer):
                      % self.max_clients)
         writer.close()
 
+    def evict(self, writer: asyncio.StreamWriter, idle: float) -> None:
+        if writer.transport.get_write_buffer_size():
+            writer.transport.abort()            # it does not read: nothing more to say
+            return
+        writer.write(b"coolmuscle: connection closed: %s for %d s while all %d places "
+                     b"were taken\r\n" % (b"idle" if self._spoke(writer) else b"silent",
+                                           idle, self.max_clients))
+        writer.close()
+
+    def _spoke(self, writer: asyncio.StreamWriter) -> bool:
+        return any(client.writer is writer and client.spoke for client in self._clients)
+
     async def serve_connection(self, reader: asyncio.StreamReader,
                                writer: asyncio.StreamWriter, peer: str) -> None:
         assert self.port is not None
@@ -121,12 +146,15 @@ class TcpTransport(StreamServer):
         room.set()
         client.lane.set_flow(room.clear, room.set)
         self._clients.append(client)
-        log.info("tcp: client %s connected", client.peer)
+        self._log_connection("tcp: client %s connected", client.peer)
         try:
             while not client.dropped:
                 data = await reader.read(READ_SIZE)
                 if not data:
                     break
+                if b"\r" in data or b"\n" in data:   # a whole line: in use (idle policy)
+                    client.spoke = True
+                    self.request_seen(writer)
                 client.lane.feed(data)
                 await room.wait()           # its lines wait their turn: read no further
                 if client.unread() and not client.dropped:
@@ -134,7 +162,7 @@ class TcpTransport(StreamServer):
         finally:
             self._clients.remove(client)
             client.lane.close()         # its half line and its bank upload end with it
-            log.info("tcp: client %s disconnected", client.peer)
+            self._log_connection("tcp: client %s disconnected", client.peer)
 
     # -- output ---------------------------------------------------------
     def _broadcast(self, data: bytes) -> None:
@@ -154,9 +182,8 @@ class TcpTransport(StreamServer):
             return
         data = bytes(client.pending)
         client.pending.clear()
-        if client.writer.transport.is_closing():
+        if not self.send(client.writer, data):
             return
-        client.writer.write(data)
         if client.unread() > self.max_buffer:
             self._drop(client)
 
@@ -164,6 +191,6 @@ class TcpTransport(StreamServer):
         client.dropped = True
         client.pending.clear()
         self.dropped_clients += 1
-        log.warning("tcp: dropped client %s: more than %d bytes of output unread",
-                    client.peer, self.max_buffer)
+        self._log_dropped("tcp: dropped client %s: more than %d bytes of output unread",
+                          client.peer, self.max_buffer)
         client.writer.transport.abort()

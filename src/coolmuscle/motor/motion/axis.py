@@ -20,6 +20,7 @@ target, on the command's final approach: possibly before the command has ended
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Protocol
@@ -64,6 +65,9 @@ class Axis:
         self._on_passing_point = on_passing_point
         self.zero = 0.0
         self.sign = 1
+        #: Half the span of the position counter (user pulses): user positions wrap
+        #: round past it (:func:`wrap_user`; inf: never).
+        self.half_range = math.inf
         self._enabled = True
         self.profile: Profile = hold(0.0, kernel.now)
         #: (profile, rest): after a reversal restarted at rest (:meth:`move`), the plan
@@ -95,12 +99,21 @@ class Axis:
 
     # -- coordinates ------------------------------------------------------
     def to_raw(self, user: float) -> float:
-        """User pulses -> raw pulses."""
-        return self.zero + self.sign * user
+        """User pulses -> raw pulses.  The user value counts in the counter's current
+        turn, the one the shaft is in (after a wrap, P0 is the counter's 0 there)."""
+        return self.zero + self.sign * (user + self._turn())
+
+    def _turn(self) -> float:
+        """Where the counter's current turn starts, in unwrapped user pulses (0 until
+        the position first wraps round)."""
+        if self.half_range == math.inf:
+            return 0.0
+        here = self.sign * (self.raw_actual() - self.zero)
+        return here - wrap_user(here, self.half_range)
 
     def to_user(self, raw: float) -> float:
-        """Raw pulses -> user pulses."""
-        return self.sign * (raw - self.zero)
+        """Raw pulses -> user pulses, as the position counter shows them (wrapped)."""
+        return wrap_user(self.sign * (raw - self.zero), self.half_range)
 
     # -- live values (closed form at kernel.now) --------------------------
     def raw_command(self) -> float:
@@ -225,7 +238,7 @@ class Axis:
         interpolation, 4.4) with the same tracking, in-position and passing points as
         :meth:`move`.  Its origin may lie ahead (a command still on its way down the
         chain): the axis holds its position until then."""
-        raw = _to_raw(profile, self.zero, self.sign)
+        raw = _to_raw(profile, self.zero + self.sign * self._turn(), self.sign)
         self.target_raw = raw.final_position
         self._start(raw)
 
@@ -375,7 +388,10 @@ class Axis:
                             self._current_drive(), self.memos)
         self.motion = motion
         if len(self.motion.pieces) >= 2000:
-            log.warning("axis: motion solver hit its piece limit at %d ns", now)
+            # the solver's safety net (dynamics.MAX_PIECES): a model bug, said so
+            log.warning("the motion model gave up (piece limit) at virtual time %.6f s: "
+                        "the shaft holds still from there; please report the script or "
+                        "commands that led here", now / 1e9)
         self._remember()
         if self.moving:
             self._schedule_milestones()
@@ -434,6 +450,14 @@ class Axis:
     def _arrived(self) -> None:
         self.moving = False
         self._on_in_position()
+
+
+def wrap_user(user: float, half: float) -> float:
+    """``user`` as a counter of span 2·``half`` shows it: within [-half, half)."""
+    if -half <= user < half or not math.isfinite(user):
+        return user
+    span = 2.0 * half
+    return user - math.floor((user + half) / span) * span
 
 
 def _to_raw(profile: Profile, zero: float, sign: int) -> Profile:

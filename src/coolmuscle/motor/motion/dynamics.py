@@ -25,7 +25,9 @@ Modes (docs/fidelity.md "Servo, load and alarms"):
 * ``stall``: the torque limit cannot overcome the friction and load.
 * ``contact``: the shaft is held by a hard stopper; Pe grows, the torque is the limit.
 * ``free``: servo off (or a stepper that lost its steps, ``lost``): only friction and
-  load act, the shaft coasts to rest.
+  load act, the shaft coasts to rest.  A load that drives it spins it up to the speed
+  where the windings' back-EMF reaches the supply (``v_free``), where regeneration
+  holds it; against a stopper it rests there.
 
 Units: positions in pulses (raw axis coordinates), time in seconds from the motion's
 origin, torques as accelerations of the total inertia (pulses/s²).
@@ -91,10 +93,13 @@ class Drive:
     wall_lo: float = -math.inf      # hard stoppers, raw pulses
     wall_hi: float = math.inf
     percent_per_accel: float = 0.0  # Ix % per pulses/s² of torque
+    v_free: float = math.inf        # back-EMF speed: a driven free shaft goes no faster
 
-    def _key(self) -> tuple[float, float, float, float, float, bool, float, float, float]:
+    def _key(self) -> tuple[float, float, float, float, float, bool, float, float, float,
+                            float]:
         return (self.kp, self.a_limit, self.a_friction, self.a_load, self.v_max,
-                self.enabled, self.wall_lo, self.wall_hi, self.percent_per_accel)
+                self.enabled, self.wall_lo, self.wall_hi, self.percent_per_accel,
+                self.v_free)
 
     # Written out, not generated (docs/architecture.md "Fast code"): the solved motions
     # are remembered by the drive (_placed), so every move hashes one and a chain of
@@ -438,7 +443,10 @@ class Motion:
         return self.velocity_at(t_ns)
 
     def torque_at(self, t_ns: int) -> float:
-        """Motor torque as an acceleration (pulses/s², signed raw)."""
+        """Motor torque as an acceleration (pulses/s², signed raw); 0 with the servo
+        off (no current: ``?98`` reads 0 then, the thermal model does not heat)."""
+        if not self.drive.enabled:
+            return 0.0
         piece, tau = self._locate(t_ns)
         return xp.value(piece.torque, piece.k, tau)
 
@@ -798,6 +806,10 @@ class _Solver:
             return self._held(t, p, cmd, STALL, s)
         sgn = _sign(v) or _sign(drive_force)
         acc = drive_force - sgn * d.a_friction
+        side = _wall_side(p, d) if self._walled else 0
+        if side and side * v >= 0.0 and side * acc > 0.0:
+            # the load beats the limit and pins the shaft on a stopper: a stall there
+            return self._held(t, d.wall_hi if side > 0 else d.wall_lo, cmd, STALL, s)
         pos: F = (p, v, acc / 2.0, 0.0, 0.0)
         vel = xp.deriv(pos, 0.0)
         e = xp.sub(cmd, pos)
@@ -869,18 +881,35 @@ class _Solver:
 
     def _free(self, t: float, p: float, v: float, cmd: F, mode: str,
               s: int) -> tuple[Piece, Exits]:
-        """No motor torque: friction and load only (servo off, lost steps)."""
+        """No motor torque: friction and load only (servo off, lost steps).
+
+        A load that drives the shaft spins it up to ``v_free``, the speed at which the
+        windings' back-EMF reaches the supply: beyond it they feed current back through
+        the driver, and that braking holds the shaft there (above it at the start, say
+        freed by an over speed alarm, it is brought down to it at once).  Driven onto a
+        stopper the shaft rests against it (docs/fidelity.md "Servo, load and alarms")."""
         d = self.drive
         if v == 0.0 and abs(d.a_load) <= d.a_friction:
             acc, sgn = 0.0, 0
         else:
             sgn = _sign(v) or -_sign(d.a_load)
             acc = -d.a_load - sgn * d.a_friction
+        top = d.v_free
+        if sgn and abs(v) > top:
+            v = sgn * top                                   # regeneration brakes it
+        driven = sgn != 0 and acc * sgn > 0.0
+        if driven and abs(v) >= top * (1.0 - REL_TOL):
+            v, acc = sgn * top, 0.0                         # held at the back-EMF speed
+        side = _wall_side(p, d) if self._walled else 0
+        if side and side * v >= 0.0 and side * acc > 0.0:   # pressed onto a stopper
+            p, v, acc, sgn, driven = (d.wall_hi if side > 0 else d.wall_lo), 0.0, 0.0, 0, False
         pos: F = (p, v, acc / 2.0, 0.0, 0.0)
         vel = xp.deriv(pos, 0.0)
-        exits = self._walls(pos)
-        if sgn:
+        exits = self._walls(pos) if sgn else []
+        if sgn and not driven:
             exits.append(("vzero", [xp.scale(vel, -float(sgn))]))
+        if driven and acc != 0.0 and math.isfinite(top):
+            exits.append(("vfree", [xp.plus(xp.scale(vel, float(sgn)), -top)]))
         if mode == LOST:
             e = xp.sub(cmd, pos)
             exits.append(("relock", [xp.scale(e, -float(s))]))
@@ -959,5 +988,7 @@ def _beyond(name: str, f: F, dur: float, limit: float) -> Exits:
 
 
 def _rest_piece(t: float, p: float, cmd: F, d: Drive) -> Piece:
-    """Safety net after MAX_PIECES: hold still (logged by the axis)."""
-    return Piece(t, math.inf, STALL, xp.const(p), cmd, xp.const(d.a_load), 0.0)
+    """Safety net after MAX_PIECES: hold still (logged by the axis); a free motor
+    makes no torque."""
+    torque = xp.const(d.a_load) if d.enabled else xp.ZERO
+    return Piece(t, math.inf, STALL, xp.const(p), cmd, torque, 0.0)

@@ -64,7 +64,9 @@ class Plant:
         """The dynamics parameters for the resolution ``ppr`` (pulses per revolution).
 
         The loop never asks for more than the smaller of the motor's maximum speed
-        (scaled by the supply) and ``speed_limit`` (min⁻¹, K40).  A new (immutable)
+        (scaled by the supply) and ``speed_limit`` (min⁻¹, K40); a free shaft driven
+        by its load goes no faster than the maximum speed (the back-EMF reaches the
+        supply there, whatever K40 says).  A new (immutable)
         Drive at each call: the supervisor keeps the ones it made until a field of the
         plant changes (:meth:`~coolmuscle.motor.supervision.supervisor.Supervisor.drive`)."""
         per = self.nm_per_accel(ppr)
@@ -74,4 +76,5 @@ class Plant:
                      a_load=(self.load_torque + extra_load_nm) / per,
                      v_max=max(0.0, min(self.max_speed * speed_scale, speed_limit)) * ppr / 60.0,
                      enabled=enabled, wall_lo=walls[0], wall_hi=walls[1],
-                     percent_per_accel=100.0 * per / self.rated_torque)
+                     percent_per_accel=100.0 * per / self.rated_torque,
+                     v_free=max(0.0, self.max_speed * speed_scale) * ppr / 60.0)

@@ -85,6 +85,9 @@ class Firmware:
     #: The K33 value whose port is the inverse of its signal: ch. 3 K33 0 "Low Active";
     #: CM1 Appendix A K33 1 "Normally closed"
     inverting_logic: int = 0
+    #: The Ux code of a power module over current: 6.6 ?99 "64 power module over
+    #: current"; the CM1's status table (EIP 3.1.2) has no 64 and names 4 "Over Current"
+    over_current_ux: int = 64
     series: str = "CM2"
     version: str = "3.10"
     motor_type: MotorType = "R"
@@ -364,6 +367,7 @@ CM1 = Firmware(
     states=_RT3_STATES, max_bank_steps=200, ladder_displays=True,
     series="CM1", version="3.00", motor_type="C", serial="0000A00000",
     output_functions=CM1_OUTPUT_FUNCTIONS, one_logic=True, inverting_logic=1,
+    over_current_ux=4,
 )
 
 FIRMWARES: Mapping[str, Firmware] = {f.name: f for f in (CM2, RT3, CM1)}

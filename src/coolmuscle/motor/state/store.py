@@ -19,6 +19,9 @@ mixture; a committed ``$`` is durable before ``saved.`` is printed.
 
 Concurrency: one writer process (the simulator); callers serialise access from
 several threads themselves (the coolmuscle:// port holds a lock).  Other processes may read.
+The writer holds a ``flock`` on ``PATH.lock``, a regular file opened without following
+a symbolic link (:func:`open_lock_file`).  A store that cannot be opened because the
+disk is full says so (:func:`disk_full`), not that the store is unusable.
 
 Snapshot shape (the motor decides the content; the store only requires JSON
 data with string keys, except ``params`` whose keys may be ints)::
@@ -29,14 +32,16 @@ data with string keys, except ``params`` whose keys may be ints)::
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import stat
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ...errors import StoreError
+from ...errors import DamagedStoreError, StoreError
 
 if TYPE_CHECKING:
     import sqlite3  # imported where a store is opened: a run without one never needs it
@@ -261,9 +266,9 @@ def _writer_lock(path: str) -> Callable[[], None] | None:
     lock_path = path + ".lock"
     try:
         Path(lock_path).parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise StoreError(f"cannot lock {path}: {exc.strerror or exc}") from exc
+    fd = open_lock_file(lock_path)
     release: Callable[[], None] | None
     if fcntl is not None:
         try:
@@ -318,6 +323,52 @@ def _sqlite_lock(path: str) -> Callable[[], None] | None:
     return conn.close
 
 
+#: Opening the lock file never follows a symbolic link at its name (``O_NOFOLLOW``,
+#: where the system has it) and never waits on a FIFO or a device (``O_NONBLOCK``).
+_LOCK_FLAGS = (os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+               | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+
+
+def open_lock_file(lock_path: str) -> int:
+    """``lock_path`` opened for reading and writing (created if missing), only when it
+    is a regular file: a symbolic link (whose target start-up would otherwise truncate
+    and write a PID into), a directory, a FIFO or a device is refused with one line
+    (:class:`StoreError`) and left untouched.  Where ``O_NOFOLLOW`` is missing the name
+    is looked at first (``lstat``) as well."""
+    if not getattr(os, "O_NOFOLLOW", 0) and os.path.islink(lock_path):
+        raise StoreError(_not_a_lock_file(lock_path, "a symbolic link"))
+    try:
+        fd = os.open(lock_path, _LOCK_FLAGS, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP or os.path.islink(lock_path):
+            raise StoreError(_not_a_lock_file(lock_path, "a symbolic link")) from None
+        if exc.errno == errno.EISDIR:
+            raise StoreError(_not_a_lock_file(lock_path, "a directory")) from None
+        raise StoreError(f"cannot lock {lock_path}: {exc.strerror or exc}") from exc
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        raise StoreError(_not_a_lock_file(lock_path, _kind(mode)))
+    return fd
+
+
+def _not_a_lock_file(lock_path: str, kind: str) -> str:
+    return (f"{lock_path} is {kind}, not the store's lock file: left as it is; remove it "
+            f"(rm {lock_path}) and start again, or give another --state DIR")
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
 def _open(path: str) -> sqlite3.Connection:
     import sqlite3
     if path != ":memory:":
@@ -333,12 +384,13 @@ def _open(path: str) -> sqlite3.Connection:
             raise StoreError(f"cannot open store {path}: {exc.strerror or exc}") from exc
         else:
             if size == 0:    # never written by us (a new store appears whole): truncated
-                raise StoreError(f"{path} is empty (0 bytes), not a coolmuscle store; move "
-                                 f"it aside (mv {path} {path}.bad) to start with defaults")
+                raise _damaged(path, "is empty (0 bytes), not a coolmuscle store")
     try:
         conn = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None,
                                check_same_thread=False)
     except sqlite3.Error as exc:
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "open")) from exc
         raise StoreError(f"cannot open store {path}: {exc}") from exc
     try:
         _prepare(conn, path)
@@ -347,8 +399,76 @@ def _open(path: str) -> sqlite3.Connection:
         raise
     except sqlite3.Error as exc:
         conn.close()
-        raise StoreError(f"{path} is not a usable coolmuscle store: {exc}") from exc
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "open")) from exc
+        raise _damaged(path, f"is not a usable coolmuscle store: {exc}") from exc
     return conn
+
+
+#: Free bytes below which an I/O error of SQLite is read as a full disk: opening a
+#: store in WAL mode makes its 32 KiB shared-memory file and writes WAL pages.
+FULL_DISK_MARGIN = 1 << 20
+
+
+def disk_full(path: str, exc: Exception) -> bool:
+    """Whether ``exc`` (an SQLite or OS error on ``path``) comes from a full disk: SQLite
+    says so (``SQLITE_FULL``, ``ENOSPC``), or says only "disk I/O error" (it does when
+    it cannot size its shared-memory file) while the disk has almost no room left."""
+    if getattr(exc, "sqlite_errorname", "") == "SQLITE_FULL" or \
+            getattr(exc, "errno", None) == errno.ENOSPC:
+        return True
+    if not str(getattr(exc, "sqlite_errorname", "")).startswith("SQLITE_IOERR"):
+        return False
+    return free_bytes(os.path.dirname(os.path.abspath(path))) < FULL_DISK_MARGIN
+
+
+def free_bytes(directory: str) -> int:
+    """Bytes free for this user in ``directory``'s file system (huge when unknown)."""
+    import shutil
+    try:
+        return shutil.disk_usage(directory).free
+    except OSError:
+        return 1 << 62
+
+
+def full_disk_message(path: str, doing: str) -> str:
+    """One line for a store that cannot be opened or created because the disk is full."""
+    directory = os.path.dirname(os.path.abspath(path))
+    return (f"cannot {doing} store {path}: the disk is full ({free_bytes(directory)} bytes "
+            f"free in {directory}); the store was not changed: free some space and start "
+            "again, or start with --no-state")
+
+
+def _damaged(path: str, problem: str) -> DamagedStoreError:
+    """The error for a store file nothing can be read from, saying what to do."""
+    return DamagedStoreError(f"{path} {problem}; move it aside (mv {path} {path}.bad) to "
+                             "start with defaults, or start coolmuscle sim with --reset "
+                             "(it keeps the file aside)", problem=problem)
+
+
+def set_aside(path: str | os.PathLike[str]) -> str:
+    """Move a damaged store (with its ``-wal`` and ``-shm``) aside, as ``PATH.bad`` (or
+    ``PATH.bad.1``, ... when that is taken), under the writer lock: never a store a
+    running chain holds.  Returns where it went; the next open starts a new store."""
+    path = str(path)
+    lock = _writer_lock(path)
+    try:
+        kept = path + ".bad"
+        n = 0
+        while any(os.path.exists(kept + tail) for tail in ("", "-wal", "-shm")):
+            n += 1
+            kept = f"{path}.bad.{n}"
+        try:
+            os.replace(path, kept)
+            for tail in ("-wal", "-shm"):
+                if os.path.exists(path + tail):
+                    os.replace(path + tail, kept + tail)
+        except OSError as exc:
+            raise StoreError(f"cannot move {path} aside: {exc.strerror or exc}") from exc
+        return kept
+    finally:
+        if lock is not None:
+            lock()                          # released with its file or connection
 
 
 def _create(path: str) -> None:
@@ -366,10 +486,11 @@ def _create(path: str) -> None:
         finally:
             conn.close()
         os.replace(tmp, path)
-    except sqlite3.Error as exc:
-        raise StoreError(f"cannot create store {path}: {exc}") from exc
-    except OSError as exc:
-        raise StoreError(f"cannot create store {path}: {exc.strerror or exc}") from exc
+    except (sqlite3.Error, OSError) as exc:
+        if disk_full(path, exc):
+            raise StoreError(full_disk_message(path, "create")) from exc
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise StoreError(f"cannot create store {path}: {reason}") from exc
 
 
 def _prepare(conn: sqlite3.Connection, path: str) -> None:
@@ -379,7 +500,7 @@ def _prepare(conn: sqlite3.Connection, path: str) -> None:
     objects = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
     fresh = app_id == 0 and version == 0 and objects == 0
     if not fresh and app_id != APPLICATION_ID:
-        raise StoreError(f"{path} is an SQLite file but not a coolmuscle store")
+        raise _damaged(path, "is an SQLite file but not a coolmuscle store")
     if not fresh and not 1 <= version <= SCHEMA_VERSION:
         raise StoreError(f"{path}: store schema {version} is not supported "
                          f"(this version reads 1..{SCHEMA_VERSION})")
@@ -396,7 +517,7 @@ def _prepare(conn: sqlite3.Connection, path: str) -> None:
         conn.execute("COMMIT")
     check = conn.execute("PRAGMA quick_check").fetchone()[0]
     if check != "ok":
-        raise StoreError(f"{path} is damaged: {check}")
+        raise _damaged(path, f"is damaged: {check}")
 
 
 # -- encoding ----------------------------------------------------------------------

@@ -60,6 +60,19 @@ RESOLUTIONS: dict[int, Resolution] = {
 RESOLUTIONS[100] = Resolution(100, 50000, 1, 999_999_999, True)
 
 
+#: The position counter counts 1/50000 turn in a signed 32-bit number: the K37 table's
+#: maximum positions are 2**31 of those counts at every resolution (42,949,672 pulses at
+#: 1000 ppr, 8,589,934 at 200; capped at 999,999,999 by the data range), so past them
+#: the count wraps (docs/fidelity.md "Servo, load and alarms").
+COUNTS_PER_REV = 50_000
+
+
+def counter_half_range(pulses_per_rev: int) -> float:
+    """Half the span of the position counter, in pulses at ``pulses_per_rev``: Px stays
+    within [-half, half) and wraps round past it."""
+    return 2.0 ** 31 * pulses_per_rev / COUNTS_PER_REV
+
+
 def resolution(k37: int) -> Resolution:
     """The :class:`Resolution` for ``k37``; ``KeyError`` for an N/A value."""
     return RESOLUTIONS[k37]

@@ -13,6 +13,7 @@ over_temperature    the driver case is at this temperature now;      temperature
                     it cools by the I²t model                        -40..200, default
                                                                      alarm + 5)
 over_current        power module over current: alarm Ux=64 now       —
+                    (CM1: 4, its EIP manual's 3.1.2 "Over Current")
 regeneration        regenerative over voltage: alarm Ux=2 now        —
 over_speed          alias of regeneration (6.6 "over speed/          —
                     regenerative voltage")
@@ -61,7 +62,7 @@ class Faults:
         self._handlers: dict[str, tuple[Callable[[dict[str, object]], None], set[str]]] = {
             "overload": (self._overload, {"torque", "clear"}),
             "over_temperature": (self._temperature, {"temperature"}),
-            "over_current": (lambda p: self._alarm(Ux.OVER_CURRENT), set()),
+            "over_current": (lambda p: self._alarm(motor.firmware.over_current_ux), set()),
             "regeneration": (lambda p: self._alarm(Ux.OVER_SPEED), set()),
             "over_speed": (lambda p: self._alarm(Ux.OVER_SPEED), set()),
             "supply_voltage": (self._supply, {"volts", "clear"}),
@@ -104,7 +105,7 @@ class Faults:
         self.check(fault, params)(params)
 
     # -- handlers ---------------------------------------------------------------
-    def _alarm(self, bit: Ux) -> None:
+    def _alarm(self, bit: int) -> None:
         self.motor.raise_alarm(int(bit))
 
     def _overload(self, p: dict[str, object]) -> None:

@@ -6,7 +6,8 @@ constant ``time_constant``.  On each stretch of motion the heating is taken cons
 the stretch's mean of (T / rated)² (5-point Gauss–Legendre on the closed-form torque, the
 exponential transient of a tracking piece on its own stretch), so the temperature rises
 and cools in closed form and the instant it passes the alarm level (Ux=128) is solved,
-not polled (docs/fidelity.md "Servo, load and alarms").
+not polled (docs/fidelity.md "Servo, load and alarms").  A free motor (``)``, an alarm)
+carries no current: it only cools.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ class Thermal:
         at an end), so ``False`` means never; a short spike at the torque limit (a csp
         step) is then answered without integrating every stretch."""
         rel = max(0.0, (after_ns - motion.origin_ns) / NS_PER_S)
-        scale = motion.drive.percent_per_accel / 100.0
+        scale = _heating_scale(motion)
         for piece in motion.pieces:
             if piece.end <= rel:
                 continue
@@ -111,17 +112,23 @@ class Thermal:
         return steady + (temp - steady) * math.exp(-dt / self.time_constant)
 
 
+def _heating_scale(motion: Motion) -> float:
+    """Torque (pulses/s²) to a fraction of rated, for heating: 0 with the servo off
+    (the driver sends no current into a free motor, whatever its pieces say)."""
+    drive = motion.drive
+    return drive.percent_per_accel / 100.0 if drive.enabled else 0.0
+
+
 def _peak_square(motion: Motion) -> float:
     """A bound of (torque / rated)² over the whole motion."""
-    peak = motion.peak("torque")
-    return (peak * motion.drive.percent_per_accel / 100.0) ** 2
+    return (motion.peak("torque") * _heating_scale(motion)) ** 2
 
 
 def _stretches(motion: Motion, t0: int, t1: int | None) -> Iterator[tuple[float, float]]:
     """(mean (T/rated)², duration s) of each stretch of ``motion`` within [t0, t1]."""
     a_rel = max(0.0, (t0 - motion.origin_ns) / NS_PER_S)
     b_rel = math.inf if t1 is None else (t1 - motion.origin_ns) / NS_PER_S
-    scale = motion.drive.percent_per_accel / 100.0
+    scale = _heating_scale(motion)
     for piece in motion.pieces:
         lo, hi = max(a_rel, piece.start), min(b_rel, piece.end)
         if hi <= lo:

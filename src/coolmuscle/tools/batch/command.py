@@ -25,6 +25,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from ..cli.host_commands import FirmwareChoice
 from ..cli.usage import UsageError
 from .engine import Engine, EngineError, open_engine
 from .figures import ns_to_seconds
@@ -266,8 +267,9 @@ def batch(
         None, "--results", metavar="FILE.csv",
         help="Write one row per script with the run's figures: CSV, or Parquet for "
              "FILE.parquet (needs pyarrow)."),
-    motors: int = typer.Option(1, "--motors", help=MOTORS_HELP),
-    firmware: str = typer.Option("cm2", "--firmware", help=FIRMWARE_HELP),
+    motors: int = typer.Option(1, "--motors", min=1, max=15, help=MOTORS_HELP),
+    firmware_choice: FirmwareChoice = typer.Option(FirmwareChoice.cm2, "--firmware",
+                                                   help=FIRMWARE_HELP),
     until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help=UNTIL_HELP),
     machine: Path | None = typer.Option(None, "--machine", metavar="AXIS.toml",
@@ -275,6 +277,7 @@ def batch(
                                                 "a '# chain: machine=' header."),
 ) -> None:
     """Run many scripts side by side and report pass/fail per script, like a test runner."""
+    firmware = firmware_choice.value
     check_options(motors, firmware, until)
     paths = script_paths(scripts)
     machine_text = (str(machine), read_text(machine, "machine file")) if machine else None

@@ -19,6 +19,10 @@ from pathlib import Path
 
 import typer
 
+from ...cml.parser import parse
+from ...errors import CmlSyntaxError
+from ..cli.host_commands import FirmwareChoice
+from ..script.runner import ScriptError, parse_line
 from .command import (
     FIRMWARE_HELP,
     JOBS_HELP,
@@ -116,8 +120,11 @@ def build_jobs(script: Path, text: str, machine: tuple[str, str] | None,
     if total > MAX_RUNS:
         raise usage_error(f"--vary: {total} combinations, more than {MAX_RUNS} runs")
     jobs: list[Job] = []
+    varied_lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
+                    if placeholders(line)]
     for combination in itertools.product(*(values for _, values in vary)):
         values = dict(zip(names, combination))
+        _check_cml(script, varied_lines, values)
         label = ",".join(f"{n}={v}" for n, v in values.items())
         run_machine = (machine[0], substitute(machine[1], values)) if machine else None
         jobs.append(make_job(f"{script}[{label}]", substitute(text, values), script.parent,
@@ -125,6 +132,26 @@ def build_jobs(script: Path, text: str, machine: tuple[str, str] | None,
                              machine=run_machine, figures=True,
                              values=tuple(values.items())))
     return jobs
+
+
+def _check_cml(script: Path, lines: list[tuple[int, str]], values: dict[str, str]) -> None:
+    """Each CML line with a placeholder is still CML with ``values`` put in: ``S.1={S}``
+    with S=abc would be a line the motor refuses in silence, and the run would pass."""
+    for number, template in lines:
+        line = substitute(template, values)
+        try:
+            step = parse_line(line.rstrip("\r"), number)
+        except ScriptError:
+            continue                    # a directive: make_job says what is wrong with it
+        if step.kind != "send":
+            continue
+        try:
+            parse(line.rstrip("\r"))
+        except CmlSyntaxError as exc:
+            given = ", ".join(f"{name}={values[name]}" for name in placeholders(template))
+            reason = str(exc).split(" at column ")[0]
+            raise usage_error(f"--vary {given}: line {number} of {script} becomes {line!r}, "
+                              f"not CML ({reason})") from None
 
 
 def sweep(
@@ -146,14 +173,16 @@ def sweep(
                                help="Figure for --plot: final_position, peak_speed, "
                                     "peak_torque, peak_temperature, duration_s "
                                     "(m2.peak_speed for motor 2)."),
-    motors: int = typer.Option(1, "--motors", help=MOTORS_HELP),
-    firmware: str = typer.Option("cm2", "--firmware", help=FIRMWARE_HELP),
+    motors: int = typer.Option(1, "--motors", min=1, max=15, help=MOTORS_HELP),
+    firmware_choice: FirmwareChoice = typer.Option(FirmwareChoice.cm2, "--firmware",
+                                                   help=FIRMWARE_HELP),
     until: float | None = typer.Option(None, "--until", metavar="SECONDS",
                                           help=UNTIL_HELP),
     junit: Path | None = typer.Option(None, "--junit", metavar="FILE.xml",
                                          help="Write JUnit XML: one testcase per run."),
 ) -> None:
     """Run one script for every combination of --vary values; one results row per run."""
+    firmware = firmware_choice.value
     check_options(motors, firmware, until)
     if script.is_dir():
         raise usage_error(f"{script}: sweep takes one script, not a directory")

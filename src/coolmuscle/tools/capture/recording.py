@@ -12,7 +12,11 @@ stopped=WHY``.
 :class:`CaptureFile` takes the relay's bytes with the instant they were seen
 (:meth:`CaptureFile.put`, cheap, any thread) and writes them on a thread of its own, so
 a slow or full disk never holds the relay up; the file is written as it goes, whole
-lines at a time.
+lines at a time, a long line in pieces (:class:`SessionWriter`).  At most
+``MAX_QUEUED`` bytes wait to be written: beyond that :meth:`CaptureFile.put` waits until
+the writer has caught up (the relay then stops reading that side: back pressure), unless
+the capture is ending (:meth:`CaptureFile.stop_waiting`), so what waits is written within
+a fraction of a second when it ends.
 """
 
 from __future__ import annotations
@@ -34,6 +38,13 @@ __all__ = ["CaptureFile", "header_lines"]
 #: chunk would compete with the relay's threads for the processor and the interpreter
 #: just when they pass bytes on.  A round with nothing new ends a line held at a lone CR.
 ROUND = 0.02
+#: Bytes, and line ends, waiting to be written at most before :meth:`CaptureFile.put`
+#: waits.  The writer takes about 60 ms a MiB of long lines and 20 µs a line, so what
+#: waits is written within about 0.4 s when the capture ends.
+MAX_QUEUED = 1 << 20
+MAX_QUEUED_LINES = 16_384
+#: Longest single wait of ``put`` before it looks again (s).
+PUT_POLL = 0.1
 
 
 def _word(value: str) -> str:
@@ -83,26 +94,63 @@ class CaptureFile:
         self.file.write("".join(line + "\n" for line in header(started)))
         self.writer = SessionWriter(self.file.write, stamps=True)
         self._failed = False
-        self._items: deque[tuple[int, Direction, bytes]] = deque()
+        self._items: deque[tuple[int, Direction, bytes, int]] = deque()
+        self._queued = 0                 # bytes in _items
+        self._lines = 0                  # line ends in _items
         self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)
         self._closing = threading.Event()
+        self._ending = threading.Event()
+        self.peak_queued = 0
         self._thread = threading.Thread(target=self._run, name="capture-writer", daemon=True)
         self._thread.start()
 
     def put(self, direction: Direction, data: bytes) -> None:
-        """``data`` seen now going to the motor (``">"``) or coming from it (``"<"``)."""
-        with self._lock:          # stamps in the order of the queue
-            self._items.append((time.monotonic_ns(), direction, data))
+        """``data`` seen now going to the motor (``">"``) or coming from it (``"<"``);
+        waits while ``MAX_QUEUED`` bytes wait to be written (not once the capture ends)."""
+        lines = data.count(b"\n") + data.count(b"\r")
+        with self._room:
+            while (self._queued >= MAX_QUEUED or self._lines >= MAX_QUEUED_LINES) \
+                    and not self._ending.is_set():
+                self._room.wait(PUT_POLL)
+            self._items.append((time.monotonic_ns(), direction, data, lines))  # in order
+            self._queued += len(data)
+            self._lines += lines
+            self.peak_queued = max(self.peak_queued, self._queued)
+            if self._half_full():
+                self._room.notify_all()          # the writer starts at once
+
+    def stop_waiting(self) -> None:
+        """The capture ends: :meth:`put` takes what comes without waiting from now on."""
+        self._ending.set()
+        with self._room:
+            self._room.notify_all()
+
+    def _take(self) -> tuple[int, Direction, bytes] | None:
+        with self._room:
+            if not self._items:
+                return None
+            at, direction, data, lines = self._items.popleft()
+            self._queued -= len(data)
+            self._lines -= lines
+            self._room.notify_all()
+            return at, direction, data
+
+    def _half_full(self) -> bool:
+        return self._queued >= MAX_QUEUED // 2 or self._lines >= MAX_QUEUED_LINES // 2
 
     def _run(self) -> None:
         while True:
-            closing = self._closing.wait(ROUND)
+            with self._room:       # a round, or at once when half full or closing
+                self._room.wait_for(lambda: self._closing.is_set() or self._half_full(),
+                                    timeout=ROUND)
+            closing = self._closing.is_set()
             if not self._items:
                 if closing:
                     return
                 self.writer.tick()
-            while self._items:
-                at, direction, data = self._items.popleft()
+            while (item := self._take()) is not None:
+                at, direction, data = item
                 if self._failed:
                     continue
                 try:
@@ -114,7 +162,10 @@ class CaptureFile:
 
     def close(self, stopped: str | None) -> None:
         """Write what is queued and pending; the end line when ``stopped`` says why."""
+        self.stop_waiting()
         self._closing.set()
+        with self._room:
+            self._room.notify_all()
         self._thread.join()
         if self._failed:
             self.file.close()

@@ -7,11 +7,15 @@ program's own pacing is kept.  Each chunk is handed to the recorder just before 
 passed on, stamped with the instant it was read (:class:`~.recording.CaptureFile` keeps
 it in memory; the file is written on a thread of its own).
 
-Output to the host program never blocks the motor's side: what the host side does not
-take at once waits in a buffer (``MAX_PENDING``; beyond it, bytes from the motor are
-still recorded but no longer passed on, said once).  The host program's bytes are
-written to the motor as they come; a motor that does not read holds the host program
-up (back pressure), as a wire with flow control would.
+What the host side does not take at once waits in a buffer of at most ``MAX_PENDING``
+bytes; while it is full the motor is not read (back pressure: the motor's link holds
+its bytes, as a wire with flow control would), so memory does not grow with what a
+host program leaves unread.  The host program's bytes are written to the motor as they
+come; a motor that does not read holds the host program up the same way.  The
+recording is bounded too (:class:`~.recording.CaptureFile`: a side is not read while
+the file's writer catches up).  Every wait looks at least every ``POLL`` seconds
+whether the relay stops, so Ctrl-C ends it at once; what the host program has not
+taken by then gets ``flush`` seconds more (:meth:`Relay.close`).
 
 Sockets are read and written as sockets, and the threads are woken through a socket
 pair, not a pipe: on Windows a socket is no file descriptor and ``select`` takes
@@ -33,8 +37,9 @@ from .ends import READ_SIZE, LinkBroken, MotorPort, PtyHostSide, TcpHostSide
 
 __all__ = ["Relay"]
 
-#: Bytes from the motor kept for a host program that does not read (64 MiB).
-MAX_PENDING = 64 << 20
+#: Bytes from the motor kept for a host program that does not read them yet; while
+#: that many wait, the motor is not read.
+MAX_PENDING = 4 << 20
 #: Longest wait of either thread before it looks whether the relay stops (s).
 POLL = 0.1
 
@@ -65,7 +70,7 @@ class Relay:
         self._host_generation = 0          # a new host program, or none: watch afresh
         self._client: socket.socket | None = None
         self._pending = bytearray()
-        self._warned_pending = False
+        self._room = threading.Condition(self._out_lock)    # the pending bytes went down
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -86,7 +91,8 @@ class Relay:
         with self._out_lock:
             if self.reason is None:
                 self.reason, self.error = reason, error
-        self._done.set()
+            self._done.set()
+            self._room.notify_all()
         self._wake()
 
     def wait(self) -> str:
@@ -95,8 +101,9 @@ class Relay:
             pass
         return self.reason or "closed"
 
-    def close(self) -> None:
-        """Stop and release both ends (once; later calls do nothing)."""
+    def close(self, flush: float = 1.0) -> None:
+        """Stop and release both ends (once; later calls do nothing); what the host
+        program has not taken yet gets ``flush`` seconds to go on."""
         if self._closed:
             return
         self._closed = True
@@ -104,7 +111,7 @@ class Relay:
         for thread in self._threads:
             if thread.ident is not None:
                 thread.join(timeout=2)
-        self._flush_before_close()
+        self._flush_before_close(flush)
         self._detach()
         for wake in (self._wake_r, self._wake_w):
             wake.close()
@@ -145,15 +152,11 @@ class Relay:
                     return                  # the host left; its thread notices
             if not data:
                 return
-            if len(self._pending) + len(data) > MAX_PENDING:
-                self.dropped += len(data)
-                if not self._warned_pending:
-                    self._warned_pending = True
-                    self.say(f"the host program reads nothing: bytes from the motor beyond "
-                             f"{MAX_PENDING >> 20} MiB are recorded, not passed on")
-                return
             self._pending += data
-        self._wake()                        # the host thread waits until it can write
+            self._wake()                    # the host thread waits until it can write
+            while (len(self._pending) >= MAX_PENDING and self._host_fd == fd
+                   and not self._done.is_set()):
+                self._room.wait(POLL)       # the motor is not read meanwhile
 
     def _flush_pending(self) -> None:
         with self._out_lock:
@@ -165,6 +168,8 @@ class Relay:
                 pass
             except OSError:
                 self._pending.clear()
+            if len(self._pending) < MAX_PENDING:
+                self._room.notify_all()
 
     def _flush_before_close(self, limit: float = 1.0) -> None:
         """What the host program has not taken yet goes on (for ``limit`` s at most):
@@ -287,5 +292,6 @@ class Relay:
                 self._host_generation += 1
                 self.dropped += len(self._pending)
                 self._pending.clear()
+                self._room.notify_all()
         if client is not None:
             client.close()

@@ -84,6 +84,8 @@ class _Checker:
         self.report = CheckReport(program.path, fw.name)
         self.rt3 = fw.max_bank_steps is not None   # RT3 and CM1 bank rules
         self.memory = Memory(fw)
+        #: (start, end) of the statement being checked in its line (``None``: the line)
+        self._span: tuple[int, int] | None = None
         self.defined: dict[tuple[bool, int, int], BankBlock] = {}
         for block in program.banks:
             self.defined.setdefault((block.ladder, block.number, block.motor_id), block)
@@ -92,9 +94,13 @@ class _Checker:
         for line in self.program.source_lines:
             if line.error is not None:
                 self._syntax(line, line.error)
-            for statement in line.statements:
-                for each in tree.flat(statement):
-                    self._ranges(line, each)
+            flat = [each for statement in line.statements for each in tree.flat(statement)]
+            parts = _parts(line.raw) if flat else []
+            for i, each in enumerate(flat):
+                # each statement's diagnostics point into its own part of the line
+                self._span = parts[i] if len(parts) == len(flat) else None
+                self._ranges(line, each)
+            self._span = None
         set_before: set[RegKey] = set()
         for item in self.program.items:
             if isinstance(item, BankBlock):
@@ -107,6 +113,16 @@ class _Checker:
         return self.report
 
     # -- per line ------------------------------------------------------------------------
+    def _column(self, line: SourceLine, needle: str) -> int:
+        """The 1-based column of ``needle`` in the statement being checked (its first
+        occurrence there; in the whole line when no statement is being checked)."""
+        if self._span is not None and needle:
+            start, end = self._span
+            found = line.raw.upper().find(needle.upper(), start, end)
+            if found >= 0:
+                return found + 1
+        return tree.column(line.raw, needle)
+
     def _syntax(self, line: SourceLine, error: CmlSyntaxError) -> None:
         message = str(error).split(" at column ")[0]
         self.report.add(line, "syntax", message, column=error.position + 1)
@@ -123,11 +139,11 @@ class _Checker:
         if motor is not None:
             if not 1 <= motor <= 15:
                 self.report.add(line, "range", f"motor ID {motor} is not 1..15",
-                                column=tree.column(line.raw, f".{motor}") + 1)
+                                column=self._column(line, f".{motor}") + 1)
             elif self.motors is not None and motor > self.motors:
                 self.report.add(line, "motor-id", f"motor ID {motor} is beyond the "
                                 f"{self.motors} motor(s) of the chain",
-                                column=tree.column(line.raw, f".{motor}") + 1)
+                                column=self._column(line, f".{motor}") + 1)
         if isinstance(statement, (ast.BankBegin, ast.StartBank, ast.Call)):
             ladder = getattr(statement, "ladder", None)
             if ladder is None:
@@ -146,14 +162,14 @@ class _Checker:
                 if isinstance(ref, ast.Input) and not 1 <= ref.index <= self.fw.inputs:
                     self.report.add(line, "no-such-input", f"I{ref.index}: the motor has "
                                     f"inputs I1..I{self.fw.inputs} ({self.fw.name}); it "
-                                    "reads OFF", column=tree.column(line.raw, f"I{ref.index}"))
+                                    "reads OFF", column=self._column(line, f"I{ref.index}"))
 
     def _bank_number(self, line: SourceLine, number: int | None, ladder: bool) -> None:
         top = self.fw.ladder_banks if ladder else self.fw.program_banks
         if number is not None and not 1 <= number <= top:
             kind = "ladder" if ladder else "program"
             self.report.add(line, "bank-number", f"{kind} bank {number} does not exist "
-                            f"(1..{top})", column=tree.column(line.raw, str(number)))
+                            f"(1..{top})", column=self._column(line, str(number)))
 
     def _register(self, line: SourceLine, reg: ast.Reg) -> bool:
         text = tree.reg_text(reg.kind, reg.index, reg.motor)
@@ -162,7 +178,7 @@ class _Checker:
                 self.fw.spec(reg.number)
             except KeyError:
                 self.report.add(line, "range", f"K{reg.number} does not exist (K20..K89)",
-                                column=tree.column(line.raw, text))
+                                column=self._column(line, text))
                 return False
             return True
         top = self.fw.registers.limit(reg.kind)
@@ -171,7 +187,7 @@ class _Checker:
         if reg.number > top:
             self.report.add(line, "range", f"{reg.kind}{reg.number} does not exist "
                             f"({reg.kind}0..{reg.kind}{top} on {self.fw.name})",
-                            column=tree.column(line.raw, text))
+                            column=self._column(line, text))
             return False
         return True
 
@@ -192,7 +208,7 @@ class _Checker:
         except OutOfRangeError as error:
             reg = tree.reg_text(target.kind, target.index, target.motor)
             self.report.add(line, "range", f"{reg}={literal}: {error}",
-                            column=tree.column(line.raw, target.kind))
+                            column=self._column(line, target.kind))
 
     def _direct(self, line: SourceLine, set_before: set[RegKey]) -> None:
         for statement in line.statements:
@@ -418,6 +434,30 @@ def _split_commas(code: str) -> list[str]:
             current.append(ch)
     pieces.append("".join(current))
     return pieces
+
+
+def _parts(raw: str) -> list[tuple[int, int]]:
+    """(start, end) of each part of a line between the separators ``,`` ``:`` ``;``
+    outside parentheses: one a statement, a branch's condition or one of its actions
+    (the order of :func:`tree.flat`).  ``[]`` when the line does not scan."""
+    try:
+        toks, _ = scan(raw)
+    except CmlSyntaxError:
+        return []
+    parts: list[tuple[int, int]] = []
+    depth, start = 0, -1
+    for tok in toks:
+        if tok.kind == "(":
+            depth += 1
+        elif tok.kind == ")":
+            depth -= 1
+        if tok.kind == "eof" or (depth == 0 and tok.kind in (",", ":", ";")):
+            if start >= 0:
+                parts.append((start, tok.start))
+            start = -1
+        elif start < 0:
+            start = tok.start
+    return parts
 
 
 def check_program(program: ProgramFile, *, firmware: str | None = None,

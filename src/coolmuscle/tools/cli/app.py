@@ -261,16 +261,25 @@ def _modbus_notice(station: int, state: Path | None, asked: bool = False) -> str
 
 
 def _reset_state(state: Path | None) -> None:
-    """``sim --reset``: forget what the state directory holds (factory state)."""
+    """``sim --reset``: forget what the state directory holds (factory state).  A store
+    file that cannot be read at all (damaged, not a store) is kept aside, not lost."""
     if state is None:
         return
-    from ...motor.state.store import DEFAULT_FILENAME, Store
+    from ...errors import DamagedStoreError
+    from ...motor.state.store import DEFAULT_FILENAME, Store, set_aside
     path = state / DEFAULT_FILENAME
     if not path.exists():
         return
-    with Store(path, writer=True) as store:     # not under a running sim
-        for motor_id in store.motors():
-            store.delete(motor_id)
+    try:
+        with Store(path, writer=True) as store:     # not under a running sim
+            for motor_id in store.motors():
+                store.delete(motor_id)
+    except DamagedStoreError as exc:
+        kept = set_aside(path)
+        err.print(f"coolmuscle: state reset: {_show_path(path)} {exc.problem}: kept it as "
+                  f"{_show_path(Path(kept))}; {_show_path(state)} holds factory settings",
+                  markup=False)
+        return
     err.print(f"coolmuscle: state reset: {_show_path(state)} holds factory settings",
               markup=False)
 
@@ -563,12 +572,17 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(sig, handler)
 
 
+#: The commands that handle Ctrl-C as KeyboardInterrupt themselves: the terminal (at
+#: its prompt a key), batch and sweep (they report what finished).  Every other command
+#: stops with one line and 130 (typer turns a KeyboardInterrupt into a silent 130).
+_OWN_CTRL_C = ("term", "batch", "sweep")
+
+
 def _main(argv: list[str] | None) -> None:
     if threading.current_thread() is threading.main_thread():
         install_startup_handlers()    # also when started as coolmuscle.tools.cli.app:main
         args = sys.argv[1:] if argv is None else argv
-        if next((a for a in args if not a.startswith("-")), "") not in ("sim", "run"):
-            # the interactive tools (term) handle Ctrl-C as KeyboardInterrupt themselves
+        if next((a for a in args if not a.startswith("-")), "") in _OWN_CTRL_C:
             signal.signal(signal.SIGINT, signal.default_int_handler)
     from ..web.access import expand_web_flag  # a bare --web: 127.0.0.1:8080
     from ..web.command import expand_twin_flag  # a bare --twin: the default load

@@ -82,6 +82,18 @@ def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list
         _fail(str(exc), 1)
 
 
+def _program() -> str:
+    """This command as a path sudo finds: sudo does not keep an activated virtual
+    environment, so ``coolmuscle`` alone may be another one, or none."""
+    import os
+    import shlex
+    import sys
+    run = sys.argv[0] if sys.argv else ""
+    if os.path.basename(run) == "coolmuscle" and os.path.isabs(run):
+        return shlex.quote(run)
+    return f"{shlex.quote(sys.executable)} -m coolmuscle"
+
+
 @lab_app.command("up")
 def lab_up(
     namespace: str = _NAMESPACE,
@@ -89,7 +101,7 @@ def lab_up(
     slave_if: str = _SLAVE_IF,
 ) -> None:
     """Make the veth pair and print which end to give the master."""
-    typer.echo(_lab("up", namespace, master_if, slave_if).instructions())
+    typer.echo(_lab("up", namespace, master_if, slave_if).instructions(_program()))
 
 
 @lab_app.command("down")

@@ -15,9 +15,15 @@ from typing import Any
 
 import typer
 
+from .ports import port_url
 from .usage import UsageError
 
 __all__ = ["register"]
+
+#: ``--baud`` as in capture and the desk commands (``--baudrate``: a hidden alias).
+_BAUD_HELP = "Baud rate of the motor's port (K20)."
+_PORT_HELP = ("The motor: a serial device (/dev/ttyUSB0), HOST:PORT (127.0.0.1:5150, what "
+              "'coolmuscle sim' serves) or a pyserial URL (socket://, coolmuscle://).")
 
 
 class Format(str, Enum):
@@ -103,11 +109,13 @@ def _junit_path(path: Path | None) -> None:
 def _check_script_lines(path: Path, report: Any) -> None:
     """The script lines (``@wait`` ...) as ``coolmuscle run`` reads them: a directive
     ``run`` refuses (``@wiat``) is a ``script`` error here too (docs/scripts.md)."""
+    from ...motor.state.firmware import get_firmware
     from ..script.runner import ScriptError, parse_line
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return
+    inputs = get_firmware(report.firmware).inputs
     for number, raw in enumerate(text.splitlines(), start=1):
         source = raw.rstrip("\r")
         stripped = source.lstrip()
@@ -115,7 +123,10 @@ def _check_script_lines(path: Path, report: Any) -> None:
                 not stripped.startswith("<<"):
             continue
         try:
-            parse_line(stripped, number)
+            step = parse_line(stripped, number)
+            if step.kind == "input" and step.args[1] > inputs:
+                raise ScriptError(f"@input {step.args[1]}: the motor has inputs 1..{inputs} "
+                                  f"({report.firmware})", number)
         except ScriptError as exc:
             message = str(exc).split(": ", 1)[1] if str(exc).startswith("line ") else str(exc)
             report.add(number, "script", message)
@@ -124,12 +135,12 @@ def _check_script_lines(path: Path, report: Any) -> None:
 
 def upload(
     file: Path = typer.Argument(..., metavar="FILE.cml", help="File to send."),
-    port: str = typer.Option(..., "--port", metavar="URL",
-                             help="Serial device or pyserial URL (socket://, coolmuscle://)."),
+    port: str = typer.Option(..., "--port", metavar="PORT", help=_PORT_HELP),
     save: bool = typer.Option(False, "--save", help="Send $ afterwards (2.1.2)."),
     verify: bool = typer.Option(True, "--verify/--no-verify",
                                 help="Read the banks back and compare."),
-    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    baud: int = typer.Option(38400, "--baud", metavar="BPS", help=_BAUD_HELP),
+    baudrate: int | None = typer.Option(None, "--baudrate", hidden=True),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for each reply."),
     firmware: FirmwareChoice | None = typer.Option(None, "--firmware",
                                                       help="Skip reading ?85."),
@@ -141,7 +152,8 @@ def upload(
         raise UsageError(f"{file} is a directory, not a .cml file")
     if not file.is_file():
         raise UsageError(f"no such file: {file}")
-    result = upload_file(file, port, save=save, verify=verify, baudrate=baudrate,
+    result = upload_file(file, port_url(port), save=save, verify=verify,
+                         baudrate=baudrate if baudrate is not None else baud,
                          timeout=timeout, firmware=firmware.value if firmware else None,
                          out=sys.stdout, progress=sys.stderr.isatty())
     if not result.ok:
@@ -149,8 +161,9 @@ def upload(
 
 
 def term(
-    url: str = typer.Argument(..., metavar="URL", help="Serial device or pyserial URL."),
-    baudrate: int = typer.Option(38400, "--baudrate", help="Host baud rate (K20)."),
+    url: str = typer.Argument(..., metavar="PORT", help=_PORT_HELP),
+    baud: int = typer.Option(38400, "--baud", metavar="BPS", help=_BAUD_HELP),
+    baudrate: int | None = typer.Option(None, "--baudrate", hidden=True),
     motor: int = typer.Option(1, "--motor", min=1, max=15, help="Motor ID for :save/:send."),
     timeout: float = typer.Option(1.0, "--timeout", help="Seconds to wait for replies."),
     history: Path | None = typer.Option(None, "--history", metavar="FILE",
@@ -161,7 +174,8 @@ def term(
     """Interactive terminal: line editing, history, colour, :send, :save, :log."""
     from ..term.terminal import main
 
-    main(url, baudrate=baudrate, motor=motor, timeout=timeout, history=history, log=log)
+    main(port_url(url), baudrate=baudrate if baudrate is not None else baud, motor=motor,
+         timeout=timeout, history=history, log=log)
 
 
 def register(app: typer.Typer) -> None:

@@ -148,8 +148,12 @@ def _input_args(arg: str, line_no: int) -> tuple[int, ...]:
     match = _INPUT.match(arg.strip())
     if not match:
         raise ScriptError("@input needs [ID.]N on|off, e.g. '@input 1.3 on'", line_no)
-    motor = int(match.group(1) or 1)
-    return motor, int(match.group(2)), int(match.group(3).lower() in ("on", "1"))
+    motor = _motor_arg(match.group(1), "@input", line_no)
+    number = int(match.group(2))
+    if number < 1:
+        raise ScriptError(f"@input {number}: inputs are numbered from 1 (I1..I6 on CM2, "
+                          "I1..I4 on RT3 and CM1)", line_no)
+    return motor, number, int(match.group(3).lower() in ("on", "1"))
 
 
 def _analog_args(arg: str, line_no: int) -> tuple[int, ...]:
@@ -157,7 +161,37 @@ def _analog_args(arg: str, line_no: int) -> tuple[int, ...]:
     match = _ANALOG.match(arg.strip())
     if not match:
         raise ScriptError("@analog needs [ID] COUNTS, e.g. '@analog 1 512'", line_no)
-    return int(match.group(1) or 1), int(match.group(2))
+    counts = int(match.group(2))
+    if counts > 1023:
+        raise ScriptError(f"@analog {counts}: the analog input is 0..1023 counts (6.6 ?74)",
+                          line_no)
+    return _motor_arg(match.group(1), "@analog", line_no), counts
+
+
+def _motor_arg(text: str | None, directive: str, line_no: int) -> int:
+    motor = int(text or 1)
+    if not 1 <= motor <= 15:
+        raise ScriptError(f"{directive}: motor ID {motor} is not 1..15 (1.1)", line_no)
+    return motor
+
+
+def check_steps(script: Script, chain: Device) -> None:
+    """The ``@input`` / ``@analog`` lines against the chain they will run on: a motor ID
+    it has, an input its firmware has.  :class:`ScriptError` (bad usage, exit 2) naming
+    the line and the allowed range, before anything runs."""
+    steps = [step for step in script.steps if step.kind in ("input", "analog")]
+    if not steps:
+        return
+    ids = chain.motor_ids
+    inputs = chain.firmware.inputs
+    for step in steps:
+        motor = step.args[0]
+        if motor not in ids:
+            raise ScriptError(f"@{step.kind}: no motor ID{motor} on this chain (IDs "
+                              f"{ids[0]}..{ids[-1]}; --motors sets how many)", step.line_no)
+        if step.kind == "input" and step.args[1] > inputs:
+            raise ScriptError(f"@input {step.args[1]}: the motor has inputs 1..{inputs} "
+                              f"({chain.firmware.name})", step.line_no)
 
 
 def _parse_directive(name: str, arg: str, line_no: int, source: str) -> Step:
@@ -376,6 +410,7 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     at the first failure; the result says which.
     """
     script = source if isinstance(source, Script) else load_script(source)
+    check_steps(script, chain)
     kernel = chain.kernel
     host_line = chain.host_line
     recorder = Recorder(kernel, on_entry)

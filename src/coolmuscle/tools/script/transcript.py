@@ -24,6 +24,12 @@ seen, into script lines that ``coolmuscle run --check`` replays:
 Received lines end at CR, LF or CRLF as the runner splits them; a CR whose LF has not
 come yet is held until the next byte, a byte the other way, or :meth:`SessionWriter.tick`.
 
+A line longer than ``MAX_PIECE`` bytes (without its end) is written in pieces as it
+comes, each at most that long: a sent line as ``@send`` pieces, a received line as
+``<<`` pieces (no ``@until``: a ``@wait`` brings the replay to when each came), so the
+writer's memory does not grow with a line's length (a 64 MiB line without a line end
+is 1,024 pieces).  The replay sends and expects the same bytes in the same order.
+
 :class:`LineFile` is where the lines go: whole lines at a time, each written to the
 kernel at once (a cut-short session is valid up to its last line); when the disk is
 full or fails it says so once, trims what it wrote half and takes no more: the session
@@ -51,6 +57,8 @@ _LINE_END = re.compile(rb"\r\n|\r(?=[^\n])|\n")
 _SENT_END = re.compile(rb"[\r\n]")
 #: Bytes written as themselves in a plain sent line: printable ASCII.
 _PRINTABLE = re.compile(rb"[\x20-\x7e]*")
+#: Longest piece of one line written at once (bytes, before escaping).
+MAX_PIECE = 64 * 1024
 
 
 #: Every byte (as a latin-1 character) -> how an ``@until`` pattern says it.
@@ -149,7 +157,9 @@ class SessionWriter:
         self._tx_cut = False          # its first part went out already (as @send)
         self._tx_text = bytearray()   # the whole line so far (for the echo)
         self._tx_after_cr = False     # the last byte sent was a CR
+        self._tx_long = False         # the line being sent went out in pieces (too long)
         self._rx = bytearray()        # received bytes of a line not ended yet
+        self._rx_cut = False          # the line being received went out in pieces
         self._rx_time = 0.0           # when its last byte came
         self._rx_after_cr = False     # the last received line ended with a lone CR
         self._sent: list[bytes] = []  # lines sent whose echo has not come
@@ -206,6 +216,12 @@ class SessionWriter:
             self._tx += data[start:]
             self._tx_time = at
             self._tx_after_cr = False
+            while len(self._tx) >= MAX_PIECE:   # a long line: out in pieces as it comes
+                rest = self._tx[MAX_PIECE:]
+                self._emit_sent(at, bytes(self._tx[:MAX_PIECE]), ended=False)
+                self._tx += rest                 # (_emit_sent emptied it)
+                self._tx_text.clear()            # (too long to be an echo worth matching)
+                self._tx_long = True
 
     def _emit_sent(self, at: float, data: bytes, *, ended: bool) -> None:
         """One line sent (``ended``: with its CR or LF) or the part of one so far."""
@@ -221,11 +237,11 @@ class SessionWriter:
         body = data.rstrip(b"\r\n")
         if ended:
             self._tx_text += body
-            if data != b"\n":
+            if data != b"\n" and not self._tx_long:
                 self._sent.append(bytes(self._tx_text))
                 del self._sent[:-32]
             self._tx_text.clear()
-            self._tx_cut = False
+            self._tx_cut = self._tx_long = False
         else:
             self._tx_text += body
             self._tx_cut = data != b"\n"
@@ -254,11 +270,23 @@ class SessionWriter:
         while True:
             match = _LINE_END.search(self._rx, scan)
             if match is None:
-                return
+                break
             raw = bytes(self._rx[:match.end()])
             del self._rx[:match.end()]
             scan = 0
             self._line_received(at, raw)
+        while len(self._rx) >= MAX_PIECE:
+            self._received_piece()
+
+    def _received_piece(self) -> None:
+        """The first ``MAX_PIECE`` bytes of a long received line go out as a piece (a CR
+        at the end of what came stays: its LF may follow)."""
+        cut = min(MAX_PIECE, len(self._rx) - (1 if self._rx.endswith(b"\r") else 0))
+        self._sent_part_first()
+        self._wait_until(self._rx_time)
+        self._emit_received(self._rx_time, bytes(self._rx[:cut]), until=False)
+        del self._rx[:cut]
+        self._rx_cut = True
 
     def _flush_held_cr(self) -> None:
         if self._rx.endswith(b"\r"):          # (every other line end has been taken)
@@ -274,6 +302,11 @@ class SessionWriter:
 
     def _line_received(self, at: float, raw: bytes) -> None:
         self._sent_part_first()
+        if self._rx_cut:                 # the last piece of a long line
+            self._rx_cut = False
+            self._wait_until(at)
+            self._emit_received(at, raw, until=False)
+            return
         text = raw.rstrip(b"\r\n")
         until = bool(text) and text not in self._sent
         if text in self._sent:

@@ -19,8 +19,11 @@ no prompt_toolkit.  Commands start with ``:``:
 ``:save [ID]``       ``$`` and wait for ``saved.n`` (default: the terminal's motor)
 ``:log FILE``        record the session as a golden transcript (docs/scripts.md);
                      ``:log off`` stops
-``:motor ID``        the motor ID ``:save`` and ``:send`` use
+``:motor ID``        the motor ID ``:save`` and ``:send`` use (one that answers)
 ``:help``, ``:quit`` (or Ctrl-D)
+
+A lost connection (the peer closed it, the cable was pulled) is said at once, in red,
+and ends the terminal with exit status 1: no line typed after it is lost silently.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 from ...client import AsyncCoolMuscle, connect_async
 from ...client.program import load_program
 from ...client.protocol import MotorEvent
-from ...errors import CoolMuscleError
+from ...errors import CoolMuscleError, CoolMuscleTimeout, TransportError
 from ...motor.status import Ux
 from ...needs import needs_extra
 from ..script.transcript import TranscriptRecorder
@@ -105,6 +108,8 @@ class Terminal:
         self._untap: Callable[[], None] | None = None
         #: The loop time of the last line the motor said or the terminal sent.
         self.last_activity = 0.0
+        #: why the connection was lost (``None``: it works)
+        self.lost: BaseException | None = None
 
     def _touch(self) -> None:
         try:
@@ -126,8 +131,18 @@ class Terminal:
         if line.startswith(":"):
             return await self.command(line[1:].strip())
         self._touch()
-        self.client.write_line(line)
+        try:
+            self.client.write_line(line)
+        except TransportError as exc:
+            self.connection_lost(exc)
+            return False
         return True
+
+    def connection_lost(self, error: BaseException) -> None:
+        """The port failed: said once, in red; the session ends (exit status 1)."""
+        if self.lost is None:
+            self.lost = error
+            self.show(f"connection lost: {error}; the terminal ends", "error")
 
     async def command(self, text: str) -> bool:
         words = shlex.split(text) if text else [""]
@@ -144,13 +159,23 @@ class Terminal:
             elif name == "log" and len(args) == 1:
                 self.log(args[0])
             elif name == "motor" and len(args) == 1 and args[0].isdigit():
-                self.motor = self.client.motor(int(args[0])).id    # 1..15 (1.1)
-                self.show(f"motor ID{self.motor}", "info")
+                await self.select_motor(int(args[0]))
             else:
                 self.show(HELP, "info")
         except (CoolMuscleError, OSError, ValueError) as exc:
             self.show(f"{name}: {exc}", "error")
         return True
+
+    async def select_motor(self, motor_id: int) -> None:
+        """``:motor ID``: a motor ID of the chain (1..15, 1.1) that answers ``?99``."""
+        motor = self.client.motor(motor_id)
+        try:
+            await motor.get_status()
+        except CoolMuscleTimeout:
+            raise CoolMuscleError(f"ID{motor.id} does not answer (no reply to "
+                                  f"?99.{motor.id}): still ID{self.motor}") from None
+        self.motor = motor.id
+        self.show(f"motor ID{self.motor}", "info")
 
     def log(self, target: str) -> None:
         if self.recorder is not None and self._untap is not None:
@@ -197,7 +222,7 @@ class Terminal:
             self.log("off")
 
 
-async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
+async def _session(client: AsyncCoolMuscle, url: str, history: History) -> Terminal:
     """On a terminal: prompt_toolkit's prompt, history and colours."""
     from prompt_toolkit import PromptSession
     from prompt_toolkit.patch_stdout import patch_stdout
@@ -205,10 +230,16 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
     term = Terminal(client, url)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
+
+    def lost(error: BaseException) -> None:
+        term.connection_lost(error)
+        if prompt.app.is_running:
+            prompt.app.exit(exception=EOFError())       # the prompt ends at once
+    client.add_failure_listener(lost)
     show(f"coolmuscle term: {url} (motor ID{client.id}); :help for commands", "info")
     try:
         with patch_stdout(raw=True):
-            while True:
+            while term.lost is None:
                 try:
                     line = await prompt.prompt_async(f"ID{term.motor}> ")
                 except EOFError:
@@ -219,24 +250,27 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History) -> None:
                     break
     finally:
         term.close()
+    return term
 
 
-async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> None:
+async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Terminal:
     """Input from a file or a pipe: each line sent as it is read; at the end of the input
     (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds."""
     term = Terminal(client, url, show=show_plain)
     client.subscribe(term.on_event)
+    client.add_failure_listener(term.connection_lost)
     loop = asyncio.get_running_loop()
     term.last_activity = loop.time()
     try:
-        while True:
+        while term.lost is None:
             line = await asyncio.to_thread(sys.stdin.readline)
             if not line or not await term.handle(line.rstrip("\r\n")):
                 break
-        while (left := term.last_activity + quiet - loop.time()) > 0:
+        while term.lost is None and (left := term.last_activity + quiet - loop.time()) > 0:
             await asyncio.sleep(min(left, 0.05))
     finally:
         term.close()
+    return term
 
 
 def _history(path: Path) -> History:
@@ -273,14 +307,16 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
             client.add_tap(recorder.tap)
         try:
             if store is not None:
-                await _session(client, url, store)
+                term = await _session(client, url, store)
             else:
-                await _plain_session(client, url, timeout)
+                term = await _plain_session(client, url, timeout)
         finally:
             if recorder is not None:
                 recorder.close()
     finally:
         await client.close()
+    if term.lost is not None:
+        raise SystemExit(1)
 
 
 def main(url: str, **options: Any) -> None:

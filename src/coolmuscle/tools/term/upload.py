@@ -19,7 +19,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 from ...client import connect
 from ...client.banks import UploadResult
 from ...client.program import BankBlock, ProgramFile, load_program
-from ...errors import CoolMuscleError
+from ...errors import CoolMuscleError, CoolMuscleTimeout
 
 __all__ = ["upload_file", "motors_of"]
 
@@ -47,6 +47,7 @@ def upload_file(path: Path, url: str, *, save: bool = False, verify: bool = True
         raise CoolMuscleError(f"{path}: {len(bad)} syntax error(s); nothing was sent")
     with connect(url, baudrate=baudrate, timeout=timeout, firmware=firmware,
                  **(serial_options or {})) as motor:
+        _check_motors(motor, motors_of(program), url, timeout)
         total = program.send_count()
         bar = Progress(TextColumn("sending"), BarColumn(), MofNCompleteColumn(),
                        console=Console(stderr=True), transient=True, disable=not progress)
@@ -63,6 +64,19 @@ def upload_file(path: Path, url: str, *, save: bool = False, verify: bool = True
     if hint:
         console.print(hint, markup=False)
     return result
+
+
+def _check_motors(motor: Any, ids: list[int], url: str, timeout: float) -> None:
+    """Every motor ID the file addresses answers ``?99`` before anything is sent: a file
+    for ID2 sent to a chain without one stops here, with nothing half sent."""
+    for motor_id in ids:
+        try:
+            motor.motor(motor_id).get_status()
+        except CoolMuscleTimeout:
+            raise CoolMuscleError(
+                f"ID{motor_id} does not answer (no reply to ?99.{motor_id} within "
+                f"{timeout:g} s): the chain at {url} has no motor ID{motor_id}, or it is "
+                "off or not wired; nothing was sent") from None
 
 
 def _firmware_hint(path: Path, written_for: str | None, motor: Any) -> str | None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,12 +33,12 @@ with needs_extra("plot", "plotting (--plot)"):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
     from matplotlib.typing import ColorType
 
     from .recorder import Sample, TraceRecorder
@@ -160,6 +161,52 @@ def interpolated_pairs(recorder: TraceRecorder) -> list[tuple[int, int]]:
     return recorder.feed.interpolated_pairs()
 
 
+@dataclass
+class PlotData:
+    """What a trace plot shows, read from a recorder: the sample instants, each motor's
+    samples and what the panels need to know of each motor.  Read in the model's thread
+    (:func:`plot_times`, :func:`sample_motors`, :func:`plot_facts`); drawing it
+    (:func:`draw_plot`) touches no model state, so it may run in any thread."""
+
+    times: list[int]
+    samples: dict[int, list[Sample]]
+    input_counts: dict[int, int]
+    output_functions: dict[int, list[int]]
+    analog_out: dict[int, bool]            # K35 is not 0: the analog output is in use
+    stoppers: dict[int, list[list[float]]]   # each motor's stoppers at each instant
+    pulses_per_rev: set[int]
+    pairs: list[tuple[int, int]]
+
+
+def plot_times(recorder: TraceRecorder, step: float | None = None) -> list[int]:
+    """The instants a plot of everything recorded up to now samples (the model's thread)."""
+    end_ns = recorder.feed.now
+    span = max((end_ns - recorder.start) / NS_PER_S, 1e-3)
+    return recorder.times(step or span / MAX_POINTS, end_ns)
+
+
+def sample_motors(recorder: TraceRecorder, times: Sequence[int]) -> dict[int, list[Sample]]:
+    """Every motor's samples at ``times`` (the model's thread; past instants, exact)."""
+    return {mid: [recorder.sample(mid, x) for x in times] for mid in recorder.motor_ids}
+
+
+def plot_facts(recorder: TraceRecorder, times: list[int], samples: dict[int, list[Sample]],
+               xy: Sequence[tuple[int, int]] | None = None) -> PlotData:
+    """The plot's data: ``samples`` at ``times`` and what each motor's panels need (the
+    model's thread).  ``xy``: pairs whose XY path is drawn (default: those that
+    interpolated, 4.4; ``[]`` for none)."""
+    traces = recorder.traces
+    motors = recorder.motor_ids
+    pairs = [p for p in (interpolated_pairs(recorder) if xy is None else xy)
+             if p[0] in samples and p[1] in samples]
+    return PlotData(times=times, samples=samples,
+                    input_counts={m: traces[m].input_count for m in motors},
+                    output_functions={m: list(traces[m].output_functions()) for m in motors},
+                    analog_out={m: recorder.chain.get_param(m, 35) != 0 for m in motors},
+                    stoppers={m: [traces[m].stoppers(x) for x in times] for m in motors},
+                    pulses_per_rev={traces[m].pulses_per_rev for m in motors}, pairs=pairs)
+
+
 def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None = None,
                title: str = "", xy: Sequence[tuple[int, int]] | None = None) -> Path:
     """Draw ``recorder`` into ``path`` (PNG, SVG or PDF by extension).
@@ -167,21 +214,27 @@ def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None 
     ``xy``: pairs of motor IDs whose XY path is drawn beside the time panels (default:
     the pairs that interpolated; ``[]`` for none).
     """
-    end_ns = recorder.feed.now
-    span = max((end_ns - recorder.start) / NS_PER_S, 1e-3)
-    times = recorder.times(step or span / MAX_POINTS, end_ns)
+    times = plot_times(recorder, step)
+    return draw_plot(plot_facts(recorder, times, sample_motors(recorder, times), xy), path,
+                     title)
+
+
+def draw_plot(plot: PlotData, path: str | Path, title: str = "") -> Path:
+    """Draw ``plot`` into ``path`` (PNG, SVG or PDF by extension).  Touches no model
+    state and no pyplot state (a :class:`~matplotlib.figure.Figure` of its own), so it
+    runs in any thread."""
+    times, data = plot.times, plot.samples
+    span = max((times[-1] - times[0]) / NS_PER_S, 1e-3)
     t = [x / NS_PER_S for x in times]
-    motors = recorder.motor_ids
+    motors = tuple(data)
     multi = len(motors) > 1
-    data = {mid: [recorder.sample(mid, x) for x in times] for mid in motors}
     colors = dict(zip(motors, _palette(len(motors))))
-    traces = recorder.traces
-    bit_rows = {mid: _bit_rows(data[mid], mid, traces[mid].input_count, multi,
-                               traces[mid].output_functions())
+    bit_rows = {mid: _bit_rows(data[mid], mid, plot.input_counts[mid], multi,
+                               plot.output_functions[mid])
                 for mid in motors}
     occurring = {status_class(s.status) for d in data.values() for s in d}
-    show_analog = any(_changes([s.analog_in for s in data[m]])
-                      or recorder.chain.get_param(m, 35) != 0 for m in motors)
+    show_analog = any(_changes([s.analog_in for s in data[m]]) or plot.analog_out[m]
+                      for m in motors)
     show_encoder = any(_changes([s.encoder for s in d]) for d in data.values())
     timeline_rows = len(motors) + sum(len(r) for r in bit_rows.values())
 
@@ -193,28 +246,27 @@ def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None 
     panels.append(("timeline", max(1.0, ROW_HEIGHT_IN * timeline_rows + 0.5)))
     heights = [h for _, h in panels]
     legend_outside = len(motors) > 4
-    pairs = [p for p in (interpolated_pairs(recorder) if xy is None else xy)
-             if p[0] in data and p[1] in data]
+    pairs = plot.pairs
     width = 12.5 if legend_outside else 11
     if pairs:
-        fig = plt.figure(figsize=(width + 7, max(sum(heights) + 1.2, 8)))
+        fig = Figure(figsize=(width + 7, max(sum(heights) + 1.2, 8)))
         grid = fig.add_gridspec(len(panels), 2, height_ratios=heights,
                                 width_ratios=[width, 6.5])
         axes = [fig.add_subplot(grid[0, 0])]
         axes += [fig.add_subplot(grid[i, 0], sharex=axes[0]) for i in range(1, len(panels))]
         _xy_panel(fig.add_subplot(grid[:, 1]), data, pairs, colors)
     else:
-        fig, axes = plt.subplots(len(panels), 1, sharex=True,
-                                 figsize=(width, sum(heights) + 1.2),
-                                 gridspec_kw={"height_ratios": heights})
+        fig = Figure(figsize=(width, sum(heights) + 1.2))
+        axes = list(fig.subplots(len(panels), 1, sharex=True,
+                                 gridspec_kw={"height_ratios": heights}))
     ax = {name: a for (name, _), a in zip(panels, axes)}
     for mid in motors:
         _draw_motor(ax, t, data[mid], mid, colors[mid])
-        _draw_stoppers(ax["position"], mid, traces[mid].stoppers(), colors[mid], multi)
+        _draw_stoppers(ax["position"], mid, t, plot.stoppers[mid], colors[mid], multi)
     ax["position"].set_ylabel("position [pulse]")
     ax["speed"].set_ylabel("speed [pps]")
     ax["torque"].set_ylabel("torque [%]")
-    _speed_axis(ax["speed"], {traces[m].pulses_per_rev for m in motors})
+    _speed_axis(ax["speed"], plot.pulses_per_rev)
     if show_analog:
         ax["analog"].set_ylabel("analog [V]")
         ax["analog"].set_ylim(-0.1, 5.1)
@@ -231,7 +283,6 @@ def plot_trace(recorder: TraceRecorder, path: str | Path, *, step: float | None 
     fig.tight_layout(rect=(0, 0, 0.88 if legend_outside else 1, 1))
     path = Path(path)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 
@@ -301,14 +352,20 @@ def _draw_timeline(ax: Axes, t: list[float], data: dict[int, list[Sample]],
     ax.grid(True, axis="x", alpha=0.3)
 
 
-def _draw_stoppers(ax: Axes, motor: int, stoppers: Sequence[float], color: object,
-                   multi: bool) -> None:
+def _draw_stoppers(ax: Axes, motor: int, t: list[float], walls: list[list[float]],
+                   color: object, multi: bool) -> None:
     """The machine file's stoppers (a pushed object, 4.1.4) as dotted lines, in the
-    motor's user coordinates."""
-    for where in stoppers:
-        ax.axhline(where, color=color, linestyle=":", linewidth=1.2)
-        name = f"ID{motor} stopper" if multi else "stopper"
-        ax.annotate(f"{name} {where:g} (machine file)", (0.01, where),
+    motor's user coordinates of each instant: a line steps where an origin set moved
+    them, so the trace never crosses a stopper it did not touch."""
+    if not walls or not walls[0]:
+        return
+    name = f"ID{motor} stopper" if multi else "stopper"
+    for k in range(len(walls[0])):
+        values = [w[k] for w in walls]
+        ax.step(t, values, where="post", color=color, linestyle=":", linewidth=1.2)
+        shown = f"{values[0]:g}" if values[-1] == values[0] else \
+            f"{values[0]:g} -> {values[-1]:g}"
+        ax.annotate(f"{name} {shown} (machine file)", (0.01, values[0]),
                     xycoords=("axes fraction", "data"), fontsize="x-small",
                     va="bottom", color=color)
 

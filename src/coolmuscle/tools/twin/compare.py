@@ -6,7 +6,8 @@ the real motor is paired with a line of the virtual one, and judged:
 * **equal**: the same bytes, within the timing tolerance;
 * **within tolerance**: a polled value (6.6 ``?95``-``?98``) that differs, but by no
   more than the value tolerance below;
-* **different bytes**: other bytes (or a polled value beyond its tolerance);
+* **different value**: a polled value beyond its tolerance;
+* **different bytes**: other bytes;
 * **different timing**: the same bytes, later or earlier than the timing tolerance;
 * **missing** / **extra**: a line only the real / only the virtual motor said.
 
@@ -53,11 +54,13 @@ if TYPE_CHECKING:
 
 __all__ = ["Tolerance", "Verdict", "Report", "compare", "compare_session", "junit_suite"]
 
-Kind = Literal["equal", "close", "bytes", "timing", "missing", "extra"]
+Kind = Literal["equal", "close", "value", "bytes", "timing", "missing", "extra"]
+#: The words of each verdict, the same in the rows and in the summary.
 KIND_NAMES: dict[str, str] = {"equal": "equal", "close": "within tolerance",
-                              "bytes": "different bytes", "timing": "different timing",
-                              "missing": "missing", "extra": "extra"}
-DIFFERENCES = ("bytes", "timing", "missing", "extra")
+                              "value": "different value", "bytes": "different bytes",
+                              "timing": "different timing", "missing": "missing",
+                              "extra": "extra"}
+DIFFERENCES = ("value", "bytes", "timing", "missing", "extra")
 
 
 @dataclass(frozen=True)
@@ -119,7 +122,7 @@ class Verdict:
                     f"{self.tolerance_s * 1000:.1f} ms)")
         if self.band is not None:
             lo, hi = self.band
-            name = "within tolerance" if self.kind == "close" else "different value"
+            name = KIND_NAMES[self.kind]
             return (f"{where}: {name}: {said}: {self.off:g} outside {lo:.1f}..{hi:.1f}"
                     if self.off else f"{where}: {name}: {said} (tolerance {lo:.1f}..{hi:.1f})")
         return f"{where}: {KIND_NAMES[self.kind]}: {said} at {virtual.time:.3f} s"
@@ -257,7 +260,7 @@ def _cells(v: Verdict) -> list[str]:
     def text(line: Line | None) -> str:
         return escape(line.data.rstrip(b"\r\n")) if line is not None else "(nothing)"
 
-    name = KIND_NAMES[v.kind] if v.band is None or v.kind != "bytes" else "different value"
+    name = KIND_NAMES[v.kind]
     if v.kind == "timing" and v.dt is not None:
         by, tol = f"{v.dt * 1000:+.1f} ms", f"{v.tolerance_s * 1000:.1f} ms"
     elif v.band is not None:
@@ -391,7 +394,7 @@ def _judge(real: Line, virtual: Line, tol: float, timely: bool, session: Session
         band = (min(span) - margin, max(span) + margin)
         off = round(max(band[0] - value, value - band[1], 0.0), 3)
         if off > 0:
-            return Verdict("bytes", real, virtual, tol, band, off)
+            return Verdict("value", real, virtual, tol, band, off)
         if not timely:
             return Verdict("timing", real, virtual, tol, band)
         return Verdict("equal" if real.data == virtual.data else "close", real, virtual, tol,

@@ -5,7 +5,13 @@ rule "safe defaults"): the dashboard binds 127.0.0.1 unless told otherwise.  Whe
 is bound to any other address, every request but the page itself needs the token
 printed at start.  On loopback a browser page from another site must not drive the
 motors either (cross-site WebSocket, DNS rebinding), so the ``Host`` header must name
-a loopback host and a WebSocket's ``Origin`` must be the page's own.
+a loopback host and a WebSocket's ``Origin`` must be the page's own.  Nor may it make
+the simulator prepare downloads (a cross-site ``<img src=".../api/plot.png">`` would
+pause the motors' time for each plot): a request for a download whose ``Origin`` is not
+the page's own, or whose ``Sec-Fetch-Site`` (Fetch Metadata, sent by every current
+browser) is other than ``same-origin`` or ``none`` (typed in, a bookmark), is refused
+(:meth:`Access.fetch_ok`).  A client that sends neither (a script, curl) is not a
+browser page and is let in, as for the WebSocket.
 """
 
 from __future__ import annotations
@@ -131,6 +137,21 @@ class Access:
         except ValueError:          # "http://[::1" and other unparsable origins: refused
             return False
         return bool(host_header) and netloc == str(host_header).lower()
+
+
+    def fetch_ok(self, origin: str | None, fetch_site: str | None,
+                 host_header: str | None) -> bool:
+        """A download asked by the page itself (or by no browser), never by another
+        site's page: ``Origin`` as :meth:`origin_ok`, ``Sec-Fetch-Site`` ``same-origin``
+        or ``none`` when given."""
+        if fetch_site is not None and fetch_site.strip().lower() not in SAME_SITE_FETCHES:
+            return False
+        return self.origin_ok(origin, host_header)
+
+
+#: ``Sec-Fetch-Site`` values of a request the page itself made, or the user (typed in,
+#: a bookmark); ``same-site`` is another port or scheme of the host: another site here.
+SAME_SITE_FETCHES = frozenset({"same-origin", "none"})
 
 
 def _host_of(host_header: str) -> str:

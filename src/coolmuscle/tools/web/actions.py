@@ -8,20 +8,27 @@ host line: an ``errorNN.n`` message when K23 includes 16, else silence), inputs 
 the analog input through ``set_input`` / ``set_analog``, faults through
 ``inject_fault`` (docs/machine-file.md "Faults").  Bad requests get a clear message
 (:class:`RequestError`), never a traceback.
+
+Each request runs in the event loop's thread when its turn comes (:mod:`.turns`),
+except a bank upload's pure work: its text is checked in a worker thread and its lines
+are sent a slice at a time (:mod:`.banks`); :meth:`Actions.handle` hands that one back
+as an awaitable.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from ...cml.parser import parse
 from ...device import Device
 from ...errors import CmlSyntaxError, CoolMuscleError
-from .banks import list_banks, upload_banks
+from .banks import check_program_text, firmware_of, list_banks, refusal, send_slice, start_upload
 from .hub import Note
+from .turns import in_worker
 
 log = logging.getLogger(__name__)
 
@@ -60,31 +67,36 @@ class Actions:
         self._note = note           # adds a line to every page's console log
         self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
             "cml": self.cml, "input": self.input, "analog": self.analog,
-            "fault": self.fault, "banks": self.banks, "bank_upload": self.bank_upload,
+            "fault": self.fault, "banks": self.banks,
             **(extra or {}),
         }
 
-    def handle(self, request: Any) -> dict[str, Any]:
-        """Answer one request (never raises)."""
+    def handle(self, request: Any) -> dict[str, Any] | Awaitable[dict[str, Any]]:
+        """Answer one request (never raises): at once, or, for a request that runs in
+        steps (a bank upload), an awaitable of the answer."""
         if not isinstance(request, dict):
             return {"t": "result", "ok": False, "error": "a request is a JSON object"}
         rid = request.get("id")
         rid = rid if isinstance(rid, (int, str)) and not isinstance(rid, bool) else None
         kind = request.get("t")
+        if kind == "bank_upload":
+            return self._answer_steps(rid, request)
         handler = self._handlers.get(kind) if isinstance(kind, str) else None
         try:
             if request.get("t") == "invalid":
                 raise RequestError(str(request.get("error")))
             if handler is None:
                 raise RequestError(f"unknown request {str(request.get('t'))[:40]!r}")
-            answer = handler(request)
-            return {"t": "result", "id": rid, "ok": True, **answer}
-        except (RequestError, CoolMuscleError, ValueError, LookupError) as exc:
-            return {"t": "result", "id": rid, "ok": False, "error": str(exc) or type(exc).__name__}
-        except Exception:
-            log.exception("dashboard request %r failed", request.get("t"))
-            return {"t": "result", "id": rid, "ok": False,
-                    "error": "internal error (logged by the simulator)"}
+            return {"t": "result", "id": rid, "ok": True, **handler(request)}
+        except Exception as exc:
+            return _failed(rid, kind, exc)
+
+    async def _answer_steps(self, rid: int | str | None, request: dict[str, Any]
+                            ) -> dict[str, Any]:
+        try:
+            return {"t": "result", "id": rid, "ok": True, **await self.bank_upload(request)}
+        except Exception as exc:
+            return _failed(rid, "bank_upload", exc)
 
     # -- argument checks -----------------------------------------------------
     def _motor(self, request: dict[str, Any]) -> int:
@@ -144,10 +156,13 @@ class Actions:
 
     def fault(self, request: dict[str, Any]) -> dict[str, Any]:
         motor, name, params = self._motor(request), request.get("fault"), request.get("params", {})
-        if name not in FAULTS:
+        if not isinstance(name, str) or name not in FAULTS:
             raise RequestError(f"unknown fault {str(name)[:40]!r} (known: {', '.join(FAULTS)})")
         if not isinstance(params, dict) or not all(_param_ok(v) for v in params.values()):
             raise RequestError("fault parameters are numbers, true/false or short text")
+        for key in params:
+            if not (key.isidentifier() and key.islower()) or key in RESERVED_PARAMETERS:
+                raise RequestError(f"fault {name!r} takes no parameter {key[:40]!r}")
         self._call(lambda: self.device.inject_fault(motor, name, **params))
         return {}
 
@@ -155,15 +170,41 @@ class Actions:
         motor = self._motor(request)
         return {"banks": self._call(list_banks, self.device, motor)}
 
-    def bank_upload(self, request: dict[str, Any]) -> dict[str, Any]:
+    async def bank_upload(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Check the text in a worker thread, then send it a slice at a time in the
+        model's thread (:mod:`.banks`)."""
         motor, text = self._motor(request), request.get("text")
         if not isinstance(text, str):
             raise RequestError("bank_upload: 'text' must be text")
         if len(text) > MAX_BANK_TEXT:
             raise RequestError(f"bank text too long ({len(text)} characters, at most "
                                f"{MAX_BANK_TEXT})")
-        result: dict[str, Any] = self._call(upload_banks, self.device, motor, text, self._note)
-        return result
+        firmware = firmware_of(self.device)
+        program, diagnostics = await in_worker(
+            check_program_text, text, firmware.name if firmware else "cm2",
+            len(self.device.motor_ids))
+        refused = refusal(program, diagnostics)
+        if refused is not None:
+            return refused
+        job = self._call(start_upload, self.device, motor, program, self._note)
+        while (done := self._call(send_slice, job)) is None:
+            await asyncio.sleep(0)         # the others' turn between two slices
+        return {"diagnostics": diagnostics, **done}
+
+
+#: Parameter names a fault request may not use: the names of ``inject_fault``'s own
+#: arguments (a page sending them made the call fail with a traceback).
+RESERVED_PARAMETERS = frozenset({"motor", "fault", "self"})
+
+
+def _failed(rid: int | str | None, kind: object, exc: Exception) -> dict[str, Any]:
+    """The answer to a request that failed: its message, or (a bug) an internal error
+    logged with its traceback."""
+    if isinstance(exc, (RequestError, CoolMuscleError, ValueError, LookupError)):
+        return {"t": "result", "id": rid, "ok": False, "error": str(exc) or type(exc).__name__}
+    log.error("dashboard request %r failed", str(kind)[:40], exc_info=exc)
+    return {"t": "result", "id": rid, "ok": False,
+            "error": "internal error (logged by the simulator)"}
 
 
 def _is_int(value: Any) -> bool:

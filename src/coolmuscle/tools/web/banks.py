@@ -3,17 +3,22 @@
 An upload is the client's own (:func:`coolmuscle.client.banks.upload`, the code behind
 ``coolmuscle upload`` and ``Motor.upload``), run on the device by :class:`DeviceLink`
 instead of a serial port.  The text is checked first by ``coolmuscle check``'s checker
-(a text with errors is not sent; each error names its line); then every line goes to
-``Device.execute(origin="web")`` (bank headers, bodies and ``END`` as typed), and every
-bank is read back with ``?#.n`` / ``?L#.n`` and compared in canonical form
+(:func:`check_program_text`: pure work, run in a worker thread, never in the event
+loop; a text with errors is not sent, each error names its line); then every line goes
+to ``Device.execute(origin="web")`` (bank headers, bodies and ``END`` as typed), and
+every bank is read back with ``?#.n`` / ``?L#.n`` and compared in canonical form
 (:func:`coolmuscle.client.banks.compare_bank`).  Lines without ``.n`` address the motor
-chosen on the page.  The whole upload runs in one call in the model's thread, at one
-instant, so a page closed during an upload leaves the banks either as they were (the
+chosen on the page.  The lines are sent in the model's thread a slice at a time
+(:func:`send_slice`, ``SLICE_LINES`` lines), between which the simulator and the other
+clients run on; the upload is a sender of its own (``session``), so the lines another
+page or host sends meanwhile never land in its banks.  A page closed during an upload
+does not cut it short: it runs to its end, so the banks are left as they were (the
 request never arrived whole) or fully written.
 """
 
 from __future__ import annotations
 
+from collections.abc import Generator, Iterator
 from typing import Any, TypeVar
 
 from ...client.banks import parse_bank_listing, upload
@@ -46,24 +51,40 @@ def list_banks(device: Device, motor: int) -> dict[str, Any]:
 
 
 def check_text(device: Device, text: str) -> tuple[ProgramFile, list[dict[str, Any]]]:
-    """Parse and check ``text``; diagnostics as ``{line, column, severity, message}``."""
-    program = parse_program(text, "<page>")
+    """Parse and check ``text`` for ``device``'s firmware and chain (any thread)."""
     firmware = firmware_of(device)
-    report = check_program(program, firmware=firmware.name if firmware else "cm2",
-                           motors=len(device.motor_ids))
+    return check_program_text(text, firmware.name if firmware else "cm2",
+                              len(device.motor_ids))
+
+
+#: Findings of the checker an answer lists at most (then one line says how many more):
+#: a 48 KiB text of errors made a half-megabyte answer.
+MAX_DIAGNOSTICS = 200
+
+
+def check_program_text(text: str, firmware: str, motors: int
+                       ) -> tuple[ProgramFile, list[dict[str, Any]]]:
+    """Parse and check ``text``; diagnostics as ``{line, column, severity, message}``
+    (the first ``MAX_DIAGNOSTICS``, errors first, then a line saying how many more).
+    Pure work (no model state): the web server runs it in a worker thread."""
+    program = parse_program(text, "<page>")
+    report = check_program(program, firmware=firmware, motors=motors)
     found = [{"line": d.line, "column": d.column, "severity": d.severity, "rule": d.rule,
               "message": d.message + (f" (error{d.motor_error:02d})"
                                       if d.motor_error is not None else "")}
              for d in report.diagnostics]
+    if len(found) > MAX_DIAGNOSTICS:
+        found.sort(key=lambda d: (d["severity"] != "error", d["line"]))
+        more = len(found) - MAX_DIAGNOSTICS
+        found = found[:MAX_DIAGNOSTICS] + [{
+            "line": found[MAX_DIAGNOSTICS]["line"], "column": 1, "severity": "note",
+            "rule": "more", "message": f"{more} more findings (coolmuscle check lists "
+                                       "them all)"}]
     return program, found
 
 
-def upload_banks(device: Device, motor: int, text: str, note: Note) -> dict[str, Any]:
-    """Check, send and read back ``text``; lines without ``.n`` go to ``motor``.
-
-    ``differences`` holds what the client's upload reports: each error the motor
-    printed (K23 16) and each line the read-back differs in."""
-    program, diagnostics = check_text(device, text)
+def refusal(program: ProgramFile, diagnostics: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The answer to a text that is not sent (errors, or no bank in it); ``None``: send it."""
     if any(d["severity"] == "error" for d in diagnostics):
         return {"uploaded": False, "diagnostics": diagnostics, "differences": []}
     if not program.banks:
@@ -71,21 +92,66 @@ def upload_banks(device: Device, motor: int, text: str, note: Note) -> dict[str,
             "line": 1, "column": 1, "severity": "error", "rule": "no-bank",
             "message": "no bank here: a bank starts with B#.n or L#.n and ends with END"}],
             "differences": []}
+    return None
+
+
+def upload_banks(device: Device, motor: int, text: str, note: Note) -> dict[str, Any]:
+    """Check, send and read back ``text`` in one call (the model's thread; the web server
+    uses the steps below instead); lines without ``.n`` go to ``motor``.
+
+    ``differences`` holds what the client's upload reports: each error the motor
+    printed (K23 16) and each line the read-back differs in."""
+    program, diagnostics = check_text(device, text)
+    refused = refusal(program, diagnostics)
+    if refused is not None:
+        return refused
+    job = start_upload(device, motor, program, note)
+    while (done := send_slice(job, 1 << 30)) is None:
+        pass
+    return {"diagnostics": diagnostics, **done}
+
+
+#: Lines one slice of an upload sends in the model's thread before the others' turn.
+SLICE_LINES = 32
+
+
+class Upload:
+    """An upload under way: its link and the client's operation driven on it."""
+
+    def __init__(self, link: DeviceLink, steps: Iterator[None]) -> None:
+        self.link = link
+        self.steps = steps
+
+
+def start_upload(device: Device, motor: int, program: ProgramFile, note: Note) -> Upload:
+    """Begin sending ``program`` (the model's thread): a bank half typed in the page's
+    console ends first, as when the page's own upload began."""
     link = DeviceLink(device, motor, note)
-    link.send("")                          # end a bank half typed in the console
-    result = link.run(upload(link.session, program, motor=motor))
-    return {"uploaded": True, "diagnostics": diagnostics, "differences": result.report(),
-            "banks": result.banks}
+    link.send("", session=None)            # end a bank half typed in the console
+    return Upload(link, link.drive(upload(link.session, program, motor=motor)))
+
+
+def send_slice(job: Upload, lines: int = SLICE_LINES) -> dict[str, Any] | None:
+    """Send about ``lines`` more lines of ``job`` (the model's thread); its result when
+    it has ended (``uploaded``, ``differences``, ``banks``), else ``None``."""
+    target = job.link.lines_sent + lines
+    try:
+        while job.link.lines_sent < target:
+            next(job.steps)
+    except StopIteration as stop:
+        result = stop.value
+        return {"uploaded": True, "differences": result.report(), "banks": result.banks}
+    return None
 
 
 class DeviceLink:
     """Runs the client's sans-IO operations (:mod:`coolmuscle.client.ops`) on a device.
 
-    Each line an operation sends goes to ``Device.execute(line, origin="web")`` (lines
-    without ``.n`` to ``motor``) and into the pages' log (``note``); the replies the
-    motor printed at once are fed to the client's protocol as received lines.  Nothing
-    waits: the motor has taken a line when ``execute`` returns, so a pause passes no
-    time, and an exchange the motor left unanswered is a
+    Each line an operation sends goes to ``Device.execute(line, origin="web")`` as a
+    sender of its own (lines without ``.n`` to ``motor``) and into the pages' log
+    (``note``); the replies the motor printed at once are fed to the client's protocol
+    as received lines.  Nothing waits: the motor has taken a line when ``execute``
+    returns, so a pause passes no time, and an exchange the motor left unanswered is a
     :class:`~coolmuscle.errors.CoolMuscleTimeout` at once.  Runs in the model's thread.
     """
 
@@ -93,11 +159,23 @@ class DeviceLink:
         self.device = device
         self.motor = motor
         self.note = note
+        self.lines_sent = 0
         firmware = firmware_of(device)
         self.session = Session(firmware=firmware.name if firmware else None)
 
     def run(self, op: Op[T]) -> T:
         """Drive ``op`` to its end; its exceptions propagate."""
+        steps = self.drive(op)
+        while True:
+            try:
+                next(steps)
+            except StopIteration as stop:
+                value: T = stop.value
+                return value
+
+    def drive(self, op: Op[T]) -> Generator[None, None, T]:
+        """Drive ``op``, pausing after each exchange with the motor (``next()`` goes on;
+        the operation's result is the generator's return value)."""
         result: Any = None
         error: CoolMuscleError | None = None
         while True:
@@ -111,12 +189,17 @@ class DeviceLink:
                 result = self._do(request)
             except CoolMuscleError as exc:
                 error = exc
+            if isinstance(request, Exchange):
+                yield
 
-    def send(self, line: str) -> None:
-        """One line to the motor, as the page's console sends it; its replies to the protocol."""
+    def send(self, line: str, *, session: object = ...) -> None:
+        """One line to the motor, as the page's console sends it; its replies to the
+        protocol.  ``session``: the sender (default: this link's own)."""
         if line:
             self.note([self.device.kernel.now, ">", line, self.motor, "web"])
-        replies = self.device.execute(line, origin="web", motor=self.motor)
+        replies = self.device.execute(line, origin="web", motor=self.motor,
+                                      session=self if session is ... else session)
+        self.lines_sent += 1
         self.session.protocol.receive(
             b"".join(reply.encode("latin-1", "replace") + b"\r\n" for reply in replies))
 

@@ -3,9 +3,11 @@
 The trace is sampled from the recorder in the model's thread a few hundred rows at a
 time, between which the simulator runs on (virtual time keeps pace with the wall clock),
 up to the instant of the request; the file is then written from those rows in a worker
-thread, which touches no model state.  The plot is drawn in the model's thread (it reads
-the recorder) and pauses the simulator for about a second.  One download is prepared
-at a time; another request meanwhile gets 429.
+thread, which touches no model state.  The plot is sampled the same way, a few hundred
+samples a turn, and drawn in a worker thread from what was sampled (matplotlib never
+runs in the event loop).  One download is prepared at a time; another request
+meanwhile gets 429.  Who may download is the server's check (:mod:`.access`: a request
+from another site is refused).
 """
 
 from __future__ import annotations
@@ -14,11 +16,13 @@ import asyncio
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 from ...frontends.transports.base import Port
 from ...needs import has_extra, needs_extra
 from ..trace.recorder import TraceRecorder, parquet_available
-from .traces import plot, trace_rows, write_rows
+from .traces import draw, plot_facts, plot_times, sample_motors, trace_rows, write_rows
+from .turns import in_worker
 
 with needs_extra("web", "the web page"):
     from aiohttp import web
@@ -28,6 +32,8 @@ with needs_extra("web", "the web page"):
 MAX_TRACE_SAMPLES = 600_000
 #: Rows sampled in one turn of the model's loop.
 ROWS_PER_TURN = 400
+#: Samples (instants x motors) of a plot taken in one turn of the model's loop.
+SAMPLES_PER_TURN = 400
 
 _TYPES = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "png": "image/png"}
 
@@ -58,7 +64,7 @@ class Downloads:
             return _error(409, "Parquet needs pyarrow (pip install pyarrow); CSV works")
         async with self._busy:
             header, rows = await self._sample()
-            body = await asyncio.to_thread(self._write, f"trace.{fmt}", header, rows)
+            body = await in_worker(self._write, f"trace.{fmt}", header, rows)
         return _file(f"trace.{fmt}", body)
 
     async def _sample(self) -> tuple[list[str], list[list[float]]]:
@@ -94,10 +100,16 @@ class Downloads:
         recorder = self._recorder()
         assert recorder is not None
         async with self._busy:
-            with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
-                path = Path(tmp) / "plot.png"
-                self.port.call(plot, recorder, path, self.title)
-                body = path.read_bytes()
+            times = self.port.call(plot_times, recorder)
+            step = max(1, SAMPLES_PER_TURN // max(len(recorder.motor_ids), 1))
+            samples: dict[int, list[Any]] = {}
+            for at in range(0, len(times), step):
+                part = self.port.call(sample_motors, recorder, times[at:at + step])
+                for motor, values in part.items():
+                    samples.setdefault(motor, []).extend(values)
+                await asyncio.sleep(0)         # the others' turn between two slices
+            facts = self.port.call(plot_facts, recorder, times, samples)
+            body = await in_worker(draw, facts, self.title)
         return _file("plot.png", body)
 
 

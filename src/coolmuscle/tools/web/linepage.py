@@ -36,9 +36,10 @@ from ..check.lint import check_program
 from .access import DEFAULT_HOST, DEFAULT_PORT
 from .actions import MAX_BANK_TEXT, MAX_LINE
 from .deskpage import Desk
-from .hub import SNAP_FIELDS, Client, Hub
+from .hub import SNAP_FIELDS, Hub
 from .line import LineDevice
 from .server import WebTransport
+from .turns import Turns
 from .twin import TWIN_FIELDS, LiveTwin
 
 __all__ = ["LinePage"]
@@ -99,6 +100,7 @@ class LinePage(WebTransport):
         self.hub = LineHub(line, self.twin)
         line.log = self.hub.add_log
         self.desk = Desk(line, self.hub.add_log, lambda: line.kernel.now)
+        self.turns = Turns(self._handle)
         if self.twin is not None:
             self.twin.attach(line, self.hub)
         await self._listen()
@@ -138,9 +140,6 @@ class LinePage(WebTransport):
             self.hub.broadcast(json.dumps(self._hello(), separators=(",", ":")))
 
     # -- requests ---------------------------------------------------------------------
-    def _request(self, client: Client, request: Any) -> None:
-        self._answer_later(client, self._handle(request))
-
     async def _handle(self, request: Any) -> dict[str, Any]:
         if not isinstance(request, dict):
             return {"t": "result", "ok": False, "error": "a request is a JSON object"}

@@ -13,7 +13,9 @@ Routes (aiohttp):
 The page is one more client of the device API (origin ``web``).  Access rules are in
 :mod:`.access`; a WebSocket message larger than ``MAX_MESSAGE`` closes that socket
 with status 1009 (message too big) and nothing else; malformed JSON is answered with
-an error frame.
+an error frame.  The pages' requests take turns with a bound per wake-up and per page
+(:mod:`.turns`): a request beyond a page's queue is refused with a message, and what a
+page queued is dropped when it leaves.
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,8 @@ from .banks import firmware_of
 from .deskpage import ChainRunner, Desk
 from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
-from .traces import start_recording
+from .traces import FORGET_EVERY_S, forget_old, start_recording
+from .turns import Turns
 
 with needs_extra("web", "the web page"):
     from aiohttp import WSMsgType, web
@@ -101,11 +103,13 @@ class WebTransport(Transport):
         self.hub: Hub | None = None
         self.actions: Actions | None = None
         self.desk: Desk | None = None
-        self._tasks: set[asyncio.Task[None]] = set()
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
         self._recorder: TraceRecorder | None = None
         self._device: Device | None = None
+        self.turns: Turns | None = None
+        self.cross_site_refused = 0
+        self._trimmer: asyncio.Task[None] | None = None
 
     # -- life cycle ---------------------------------------------------------------
     async def start(self, port: Port) -> None:
@@ -118,6 +122,7 @@ class WebTransport(Transport):
                                {"record": self._record_request})
         self.desk = Desk(ChainRunner(port, device, self.hub.add_log), self.hub.add_log,
                          lambda: device.kernel.now)
+        self.turns = Turns(self._handle)
         if self.record:
             self.start_recording()
         await self._listen()
@@ -149,11 +154,24 @@ class WebTransport(Transport):
         the recorder looks at every motor after every kernel event."""
         if self._recorder is None and self.port is not None and self._device is not None:
             self._recorder = self.port.call(start_recording, self._device)
+            if self._recorder is not None:
+                self._trimmer = asyncio.get_running_loop().create_task(
+                    self._trim_recording(), name="coolmuscle-web-recording-window")
             if self._recorder is not None and self.hub is not None:
                 self.hub.add_log([self._device.kernel.now, "note",
                                   "trace recording started", 0, "web"])
                 self.hub.broadcast(json.dumps({"t": "recording", "on": True}))
         return self._recorder is not None
+
+    async def _trim_recording(self) -> None:
+        """Keep the recording to its window (:func:`.traces.forget_old`), now and then."""
+        while True:
+            await asyncio.sleep(FORGET_EVERY_S)
+            if self._recorder is not None and self.port is not None:
+                try:
+                    self.port.call(forget_old, self._recorder)
+                except Exception:              # a model failure must not end the server
+                    log.exception("dashboard: trimming the recording failed")
 
     def _record_request(self, _request: dict[str, Any]) -> dict[str, Any]:
         if not self.start_recording():
@@ -177,11 +195,14 @@ class WebTransport(Transport):
         return {"host": host, "port": port, "url": self.url, "token": self.access.token}
 
     async def close(self) -> None:
-        for task in list(self._tasks):
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
         await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
                                for ws in list(self._sockets)), return_exceptions=True)
+        if self._trimmer is not None:
+            self._trimmer.cancel()
+            await asyncio.gather(self._trimmer, return_exceptions=True)
+            self._trimmer = None
+        if self.turns is not None:
+            await self.turns.close_all()
         if self.hub is not None:
             await self.hub.close()
         if self._runner is not None:
@@ -215,6 +236,11 @@ class WebTransport(Transport):
         if not public and not self.access.token_ok(_token(request)):
             return _error(401, "the dashboard needs the token printed when the simulator "
                                "started")
+        if request.path.startswith("/api/") and not public and not self.access.fetch_ok(
+                request.headers.get("Origin"), request.headers.get("Sec-Fetch-Site"),
+                request.headers.get("Host")):
+            self.cross_site_refused += 1
+            return _error(403, "a download asked by another site's page is refused")
         try:
             response: web.StreamResponse = await handler(request)
         except web.HTTPException as exc:
@@ -269,7 +295,7 @@ class WebTransport(Transport):
             hello, seen = self._hello(), self.hub.pending()     # one instant: no await
             await ws.send_str(json.dumps(hello, separators=(",", ":")))
             self.hub.add(client, seen)
-            await self._receive(ws, client)
+            await self._receive(ws, client, request)
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
@@ -277,39 +303,54 @@ class WebTransport(Transport):
             self._sockets.discard(ws)
         return ws
 
-    async def _receive(self, ws: web.WebSocketResponse, client: Client) -> None:
-        async for msg in ws:
-            if msg.type == WSMsgType.TEXT:
-                self._request(client, _loads(msg.data))
-            elif msg.type == WSMsgType.BINARY:
-                client.queue_direct(json.dumps({"t": "result", "ok": False,
-                                                "error": "send JSON text frames"}))
-            elif msg.type == WSMsgType.ERROR:
-                log.info("dashboard WebSocket closed: %s", ws.exception())
-                break
+    async def _receive(self, ws: web.WebSocketResponse, client: Client,
+                       request: web.Request) -> None:
+        """Queue the page's requests for their turn (:mod:`.turns`); one beyond its
+        queue's bound is refused with a message; what it queued is dropped when it leaves.
+        Reading pauses for the others once the pages have read their share of a wake-up."""
+        assert self.turns is not None
+        page = self.turns.open(lambda answer: self._answer(client, answer),
+                               lambda: ws.closed or request.transport is None)
+        try:
+            async for msg in ws:
+                if page.gone():
+                    break                       # the connection was lost: read no further
+                if msg.type == WSMsgType.TEXT:
+                    asked = _loads(msg.data)
+                    if not self.turns.submit(page, asked):
+                        self._answer(client, _busy(asked, self.turns.max_queued))
+                elif msg.type == WSMsgType.BINARY:
+                    client.queue_direct(json.dumps({"t": "result", "ok": False,
+                                                    "error": "send JSON text frames"}))
+                elif msg.type == WSMsgType.ERROR:
+                    log.info("dashboard WebSocket closed: %s", ws.exception())
+                    break
+                await self.turns.read_turn()    # the other clients' turn, now and then
+        finally:
+            self.turns.close(page)
 
-    def _request(self, client: Client, request: Any) -> None:
-        """Answer one request of a page: the desk's (:mod:`.deskpage`) as a task of its
-        own, the others at once."""
-        assert self.actions is not None and self.hub is not None
+    def _handle(self, request: Any) -> Any:
+        """Run one request of a page: the desk's (:mod:`.deskpage`) as steps the page
+        waits for (an awaitable, run as a task by :mod:`.turns`), the others at once."""
+        assert self.actions is not None
         if self.desk is not None and isinstance(request, dict) \
                 and self.desk.handles(request.get("t")):
-            self._answer_later(client, self.desk.handle(request))
-            return
-        answer = self.actions.handle(request)
+            return self.desk.handle(request)
+        return self.actions.handle(request)
+
+    def _answer(self, client: Client, answer: dict[str, Any]) -> None:
+        assert self.hub is not None
         client.queue_direct(json.dumps(answer, separators=(",", ":")))
         self.hub.changed()
 
-    def _answer_later(self, client: Client,
-                      answer: Coroutine[Any, Any, dict[str, Any]]) -> None:
-        async def reply() -> None:
-            result = await answer
-            client.queue_direct(json.dumps(result, separators=(",", ":")))
-            if self.hub is not None:
-                self.hub.changed()
-        task = asyncio.get_running_loop().create_task(reply(), name="coolmuscle-web-request")
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+
+def _busy(request: Any, bound: int) -> dict[str, Any]:
+    """The answer to a request beyond its page's queue (not run)."""
+    rid = request.get("id") if isinstance(request, dict) else None
+    rid = rid if isinstance(rid, (int, str)) and not isinstance(rid, bool) else None
+    return {"t": "result", "id": rid, "ok": False,
+            "error": f"busy: {bound} requests of this page are waiting to run; this one "
+                     "was not run (wait for their answers)"}
 
 
 def _io_counts(device: Device) -> dict[str, int]:

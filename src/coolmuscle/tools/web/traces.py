@@ -2,10 +2,14 @@
 
 Recording is off until asked (the page's Record button, ``run --web``): the recorder
 (:mod:`coolmuscle.tools.trace.recorder`) looks at every motor after every kernel event.
+It keeps the last ``RECORD_WINDOW_S`` seconds of virtual time (:func:`forget_old`, run
+every ``FORGET_EVERY_S`` wall seconds by the server): what came before is forgotten, so
+memory stays bounded however long the page records (docs/web.md "Record and download").
 A download samples it in the model's thread (:mod:`.downloads`) and the file is written
 here from those rows in a worker thread: CSV as ``coolmuscle run --trace`` writes it, or
 Parquet with typed columns.  The plot is the one of ``coolmuscle run --plot``
-(:func:`coolmuscle.tools.trace.plot.plot_trace`).
+(:mod:`coolmuscle.tools.trace.plot`), sampled in the model's thread and drawn by
+:func:`draw` in a worker thread.
 """
 
 from __future__ import annotations
@@ -13,13 +17,16 @@ from __future__ import annotations
 import csv
 import importlib
 import math
+import tempfile
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ...chain import Chain
 from ...device import Device
 from ...needs import has_extra
+from ...sim.kernel import NS_PER_S
 from ..trace.recorder import INTEGER_FIELDS, TraceRecorder, record
 
 
@@ -37,6 +44,23 @@ def start_recording(device: Device) -> TraceRecorder | None:
         threading.Thread(target=importlib.import_module, args=("coolmuscle.tools.trace.plot",),
                          name="coolmuscle-web-plot-import", daemon=False).start()
     return recorder
+
+
+#: Virtual seconds of history the page's recording keeps.
+RECORD_WINDOW_S = 3600.0
+#: Wall seconds between two trims of the page's recording.
+FORGET_EVERY_S = 60.0
+
+
+def forget_old(recorder: TraceRecorder, window_s: float = RECORD_WINDOW_S) -> None:
+    """Forget the recording before the last ``window_s`` virtual seconds: its start
+    moves up to there (downloads begin at it).  The model's thread."""
+    upto = recorder.feed.now - int(window_s * NS_PER_S)
+    if upto <= recorder.start:
+        return
+    for trace in recorder.traces.values():
+        trace.forget_before(upto)
+    recorder.start = upto
 
 
 def trace_rows(recorder: TraceRecorder, step: float,
@@ -59,10 +83,32 @@ def write_rows(path: Path, header: list[str], rows: list[list[float]]) -> None:
             writer.writerow([f"{row[0]:.9f}"] + [_cell(v) for v in row[1:]])
 
 
-def plot(recorder: TraceRecorder, path: Path, title: str) -> None:
-    """Plot what ``recorder`` holds into ``path`` (PNG); reads the model (its thread)."""
-    from ..trace.plot import plot_trace
-    plot_trace(recorder, path, title=title)
+def plot_times(recorder: TraceRecorder) -> list[int]:
+    """The instants the plot samples (the model's thread)."""
+    from ..trace.plot import plot_times as times
+    return times(recorder)
+
+
+def sample_motors(recorder: TraceRecorder, times: list[int]) -> dict[int, list[Any]]:
+    """Every motor's samples at ``times`` (the model's thread)."""
+    from ..trace.plot import sample_motors as sample
+    return sample(recorder, times)
+
+
+def plot_facts(recorder: TraceRecorder, times: list[int],
+               samples: dict[int, list[Any]]) -> Any:
+    """What the plot draws, read from the recorder (the model's thread)."""
+    from ..trace.plot import plot_facts as facts
+    return facts(recorder, times, samples)
+
+
+def draw(facts: Any, title: str) -> bytes:
+    """The plot as PNG bytes, drawn from ``facts`` alone (any thread: a worker's)."""
+    from ..trace.plot import draw_plot
+    with tempfile.TemporaryDirectory(prefix="coolmuscle-web-") as tmp:
+        path = Path(tmp) / "plot.png"
+        draw_plot(facts, path, title)
+        return path.read_bytes()
 
 
 def _cell(value: float) -> str:

@@ -20,7 +20,7 @@ window.Coolmuscle.panels = function ({ state, $, request, note, localNote }) {
     $("bank-upload").addEventListener("click", uploadBank);
     $("bank-start").addEventListener("click", () => {
       const head = bankHead();
-      if (!head) { showDiag([{ text: "the text has no bank header (B#.n or L#.n)", error: true }]); return; }
+      if (!head) { showDiag([], { text: "the text has no bank header (B#.n or L#.n)", error: true }); return; }
       sendLine("[" + (head.ladder ? "L" : "") + head.number + "." + head.motor);
     });
     $("bank-stop").addEventListener("click", () => {
@@ -45,36 +45,44 @@ window.Coolmuscle.panels = function ({ state, $, request, note, localNote }) {
 
   async function listBanks() {
     const r = await request("banks", { motor: Number($("bank-motor").value) });
-    if (!r.ok) { showDiag([{ text: r.error, error: true }]); return; }
+    if (!r.ok) { showDiag([], { text: r.error, error: true }); return; }
     state.banks = r.banks.banks;
     const list = $("bank-list");
     list.textContent = "";
     list.add(new Option(state.banks.length ? "view a bank…" : "no banks", ""));
     for (const b of state.banks) list.add(new Option(b.label + " (" + b.lines.length + " lines)", b.label));
-    showDiag([{ text: r.banks.summary || (state.banks.length + " banks") }]);
+    showDiag([], { text: r.banks.summary || (state.banks.length + " banks") });
   }
 
   async function uploadBank() {
     const text = $("bank-text").value;
-    if (text.length > MAX_BANK) { showDiag([{ text: "bank text too long (at most " + MAX_BANK + " characters)", error: true }]); return; }
+    if (text.length > MAX_BANK) { showDiag([], { text: "bank text too long (at most " + MAX_BANK + " characters)", error: true }); return; }
     // the request as sent (JSON escapes control characters 6 bytes each) within the
     // simulator's message limit (server.MAX_MESSAGE, 256 KiB)
     if (new TextEncoder().encode(JSON.stringify({ text })).length > MAX_MESSAGE - 1024) {
-      showDiag([{ text: "bank text too large to send (control characters count six bytes each)", error: true }]); return;
+      showDiag([], { text: "bank text too large to send (control characters count six bytes each)", error: true }); return;
     }
-    showDiag([{ text: "checking and uploading…" }]);
+    showDiag([], { text: "checking and uploading…" });
     const r = await request("bank_upload", { motor: Number($("bank-motor").value), text });
-    if (!r.ok) { showDiag([{ text: r.error, error: true }]); return; }
+    if (!r.ok) { showDiag([], { text: r.error, error: true }); return; }
+    // the findings are numbered (the checker's, then the read-back differences); the
+    // outcome is said once below them, not counted as one of them
     const items = r.diagnostics.map((d) => ({ text: "line " + d.line + ":" + d.column + " " + d.severity + ": " + d.message, error: d.severity === "error", line: d.line }));
+    let verdict;
     if (r.uploaded) {
-      if (r.differences.length) r.differences.forEach((d) => items.push({ text: d, error: true }));
-      else items.push({ text: "uploaded " + r.banks.join(", ") + "; read back identical", ok: true });
-    } else items.push({ text: "not uploaded", error: true });
-    showDiag(items);
+      r.differences.forEach((d) => items.push({ text: d, error: true }));
+      verdict = r.differences.length
+        ? { text: "uploaded " + r.banks.join(", ") + "; read back different", error: true }
+        : { text: "uploaded " + r.banks.join(", ") + "; read back identical", ok: true };
+    } else verdict = { text: "not uploaded", error: true };
+    showDiag(items, verdict);
   }
 
-  function showDiag(items) {
-    const ol = $("bank-result");
+  function showDiag(items, verdict) {
+    const said = $("bank-verdict");
+    said.textContent = verdict.text;
+    said.className = "diag verdict" + (verdict.error ? " error" : verdict.ok ? " ok" : "");
+    const ol = $("bank-findings");
     ol.textContent = "";
     for (const it of items) {
       const li = document.createElement("li");
