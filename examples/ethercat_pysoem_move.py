@@ -1,8 +1,10 @@
 """Move a virtual Cool Muscle from a real EtherCAT master (SOEM through pysoem).
 
-    sudo coolmuscle ethercat lab up
-    sudo ip netns exec coolmuscle-lab coolmuscle sim --ethercat cmlab-slave &
-    sudo python examples/ethercat_pysoem_move.py cmlab-master
+    coolmuscle ethercat lab run -- python examples/ethercat_pysoem_move.py cmlab-master
+
+(no root needed: a lab of its own, docs/ethercat.md; as root after ``coolmuscle ethercat
+lab up`` and ``ip netns exec coolmuscle-lab coolmuscle sim --ethercat cmlab-slave &``,
+``python examples/ethercat_pysoem_move.py cmlab-master``.)
 
 Brings the bridge to OP, enables ID1 (controlwords 06h, 07h, 0Fh: manual 6.1.2) and
 moves it 4,000 pulses in csp (one target a millisecond, 6.3), printing 6041h and

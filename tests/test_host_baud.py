@@ -1,10 +1,12 @@
-"""A host at another baud rate than K20 (ch. 3 K20): garbage both ways, with pacing.
+"""A host at another baud rate than K20 (ch. 3 K20), or another frame than the motor's
+(8 data bits, K82 parity, 1 stop bit; 5.6.1): garbage both ways, with pacing.
 
 The UART model (coolmuscle.device.uart, docs/fidelity.md "Baud rate of the host") is
 checked on frames worked out by hand; the host line garbles a host's bytes and what that
-host reads only while pacing is on and its port's rate differs from K20; a pty client
-that sets its port to another rate than the motor gets no answer, and gets one again at
-the right rate.
+host reads only while pacing is on and its port's rate (or frame, when the port says it)
+differs from the motor's; K82 frames the motor's bytes with a parity bit (11 bits on the
+wire); a pty client that sets its port to another rate than the motor gets no answer,
+and gets one again at the right rate.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import pytest
 import serial
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.device.uart import as_read_at
+from coolmuscle.device.hostline import byte_time_ns
+from coolmuscle.device.uart import Frame, as_read_at
 from coolmuscle.frontends.transports.pty import PtyTransport, client_baud
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.sim.kernel import seconds
@@ -59,6 +62,50 @@ def test_garbage_never_reads_as_the_text_sent() -> None:
         for read in RATES:
             if sent != read:
                 assert text not in as_read_at(text, sent, read)
+
+
+def test_a_parity_bit_read_as_the_stop_bit_is_a_framing_error() -> None:
+    # 8E1 read as 8N1 at one rate: 0x01 (one 1: parity 1) has its parity bit where the
+    # reader samples the stop bit, high: read right; 0x03 (two 1s: parity 0) low there:
+    # a framing error, 0x00; the reader then finds the stop bit high (no false start)
+    assert as_read_at(b"\x01\x03", 38400, 38400, Frame(parity="E"), Frame()) == b"\x01\x00"
+
+
+def test_a_reader_with_parity_checks_the_stop_bit_sent_as_parity() -> None:
+    # 8N1 read as 8E1: the stop bit (1) is read as the parity bit, the idle line as stop
+    assert as_read_at(b"\x01", 38400, 38400, Frame(), Frame(parity="E")) == b"\x01"
+    assert as_read_at(b"\x03", 38400, 38400, Frame(), Frame(parity="E")) == b"\x00"
+    assert as_read_at(b"\x03", 38400, 38400, Frame(), Frame(parity="M")) == b"\x03"
+    assert as_read_at(b"\x03", 38400, 38400, Frame(), Frame(parity="S")) == b"\x00"
+    assert as_read_at(b"\x03", 38400, 38400, Frame(parity="O"), Frame(parity="O")) == b"\x03"
+
+
+def test_seven_data_bits_read_an_eighth_bit_as_the_stop_bit() -> None:
+    # 8N1 read as 7N1: bit 7 is sampled as the stop bit
+    assert as_read_at(b"\x41", 9600, 9600, Frame(), Frame(7)) == b"\x00"
+    assert as_read_at(b"\xc1", 9600, 9600, Frame(), Frame(7)) == b"\x41"
+    assert as_read_at(b"\xc1", 9600, 9600, Frame(7), Frame(7)) == b"\x41"
+    assert as_read_at(b"\xc1", 9600, 9600, Frame(7, "N", 2), Frame(7)) == b"\x41"
+
+
+def test_a_frame_a_uart_cannot_take_is_refused() -> None:
+    for bad in ((9, "N", 1), (8, "X", 1), (8, "N", 3)):
+        with pytest.raises(ValueError):
+            Frame(*bad)
+
+
+def test_a_parity_bit_makes_a_byte_eleven_bits_long() -> None:
+    assert byte_time_ns(38400, Frame(parity="E")) == 11 * 10**9 // 38400
+    assert byte_time_ns(38400, Frame(7, "N", 1.5)) == int(9.5 * 10**9) // 38400
+    chain = Chain(pacing=True)
+    chain.execute("K82.1=1")                         # ch. 3 K82: even parity
+    arrived: list[int] = []
+    chain.host_line.add_listener(lambda data: arrived.append(chain.kernel.now))
+    start = chain.kernel.now
+    chain.host_line.write(b"ab")
+    chain.kernel.run(until=seconds(0.1))
+    assert arrived == [start + 2 * (11 * 10**9 // 38400)]
+    chain.close()
 
 
 # -- the host line -------------------------------------------------------------------
@@ -116,6 +163,43 @@ def test_a_host_follows_a_k20_change_to_be_answered() -> None:
     chain.host_line.feed(b"\r?96.1\r", host)
     chain.kernel.run(until=seconds(0.3))
     assert b"".join(heard).endswith(b"?96.1\r\nPx.1=0\r\n")
+    chain.close()
+
+
+def test_k82_frames_the_motors_bytes_a_host_must_match() -> None:
+    chain = Chain(pacing=True)
+    chain.execute("K82.1=2")                         # ch. 3 K82: odd parity
+    frame = [Frame()]
+    host = object()
+    chain.host_line.set_host_baud(host, lambda: 38400)
+    chain.host_line.set_host_frame(host, lambda: frame[0])
+    heard: list[bytes] = []
+    plain: list[bytes] = []
+    chain.host_line.add_listener(heard.append, host)
+    chain.host_line.add_listener(plain.append)
+    chain.host_line.feed(b"?96.1\r", host)
+    chain.kernel.run(until=seconds(0.1))
+    assert b"Px.1" not in b"".join(plain)            # the motor read garbage
+    assert heard == [as_read_at(chunk, 38400, 38400, Frame(parity="O"), Frame())
+                     for chunk in plain]
+    frame[0] = Frame(parity="O")                     # the host sets its port to 8O1
+    heard.clear()
+    chain.host_line.feed(b"\r?96.1\r", host)
+    chain.kernel.run(until=seconds(0.2))
+    assert b"".join(heard).endswith(b"?96.1\r\nPx.1=0\r\n")
+    chain.close()
+
+
+def test_a_host_that_does_not_say_its_frame_is_taken_as_matched() -> None:
+    chain = Chain(pacing=True)
+    chain.execute("K82.1=1")
+    host = object()
+    chain.host_line.set_host_baud(host, lambda: 38400)    # a pty: the rate, no frame
+    heard: list[bytes] = []
+    chain.host_line.add_listener(heard.append, host)
+    chain.host_line.feed(b"?96.1\r", host)
+    chain.kernel.run(until=seconds(0.1))
+    assert b"".join(heard) == b"?96.1\r\nPx.1=0\r\n"
     chain.close()
 
 

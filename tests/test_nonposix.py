@@ -7,8 +7,9 @@ and ``grp`` impossible to import and deletes what Windows lacks (``socket.AF_PAC
 ``signal.SIGHUP``, ``signal.pthread_sigmask`` ...); ``multiprocessing`` has only the
 ``spawn`` start method.  Real peers talk to it: pyserial (``socket://``), pymodbus,
 pycomm3, an HTTP GET; the command line runs ``run``, ``batch`` (with a process pool),
-``sweep``, ``check``, ``upload``, ``term`` (its input from a pipe), ``capture`` over TCP
-and the host library; one sim per state directory still holds.  What needs POSIX
+``sweep``, ``check``, ``upload``, ``term`` (its input from a pipe), ``capture`` over TCP,
+the host library and an RFC 2217 port (``sim --rfc2217``, pyserial's ``rfc2217://``);
+one sim per state directory still holds.  What needs POSIX
 (``--pty``, ``--stdio``, ``--modbus-rtu``, ``--com1``, ``capture --pty``, ``--ethercat``)
 is refused with one line and exit status 2.
 """
@@ -122,6 +123,23 @@ def test_sim_on_tcp_modbus_tcp_and_the_web_page_with_real_peers(sim: ServedSim,
             assert port.read_until(b"K37.1=7\r\n").endswith(b"K37.1=7\r\n")
 
 
+def test_an_rfc2217_port_is_the_com_port_where_there_is_no_pty(tmp_path: Path) -> None:
+    """``sim --rfc2217``: a serial port that pyserial's ``rfc2217://`` client (and a
+    virtual COM port tool) opens, its rate told to the paced line as a pty's would be;
+    ``term`` reaches it too."""
+    with served(tmp_path, "rfc", "--pace", tcp=False, rfc2217=True) as sim:
+        with serial.serial_for_url(sim.rfc2217_url, baudrate=38400, timeout=2) as port:
+            port.write(b"?96.1\r")
+            assert port.read_until(b"Px.1=0\r\n").endswith(b"?96.1\r\nPx.1=0\r\n")
+            port.baudrate = 9600                 # another rate than K20: garbage
+            port.timeout = 0.5
+            port.reset_input_buffer()
+            port.write(b"?96.1\r")
+            assert b"Px.1" not in port.read(64)
+        done = coolmuscle("term", sim.rfc2217_url, "--timeout", "0.5", stdin="?96.1\n:quit\n")
+        assert (done.returncode, done.stdout) == (0, "Px.1=0\n"), done
+
+
 def test_ethernet_ip_with_pycomm3(tmp_path: Path) -> None:
     from pycomm3 import CIPDriver
 
@@ -190,7 +208,8 @@ def test_capture_relays_over_tcp(sim: ServedSim, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("args, line", [
     (["sim", "--pty"], "coolmuscle: error: --pty needs a POSIX system (Linux, macOS); on "
-                       'Windows use --tcp and a virtual COM port tool (README.md "Windows")'),
+                       "Windows use --rfc2217 [HOST:]PORT (a COM port to rfc2217:// clients "
+                       'and virtual COM port tools) or --tcp (README.md "Windows")'),
     (["sim", "--stdio"], "coolmuscle: error: --stdio needs a POSIX system (Linux, macOS); on "
                          "Windows use --tcp"),
     (["sim", "--modbus-rtu", "pty"], "coolmuscle: error: --modbus-rtu needs a POSIX system "

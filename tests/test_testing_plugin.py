@@ -95,12 +95,48 @@ def test_a_broken_bank_fails_the_right_test_naming_its_line(tmp_path: Path) -> N
 
 def test_the_lab_is_skipped_with_its_reason_where_it_cannot_be_made(
         tmp_path: Path) -> None:
+    """Where no lab can be made the sample's lab test is skipped with the reason.  On a
+    machine that makes labs, the sample runs with a PATH that has no ``ip`` (the python
+    it runs is named in full), which is one of the reasons a lab cannot be made."""
     reason = unavailable()
+    env: dict[str, str] = {}
     if reason is None:
-        pytest.skip("this machine makes labs: the sample's lab test runs in "
-                    "test_the_sample_project_passes_with_coverage_and_leaves_nothing")
-    done, _ = run_sample(tmp_path, "tests/test_lab.py", "-rs")
-    assert done.returncode == 0 and reason in done.stdout, done.stdout
+        env["PATH"] = str(tmp_path / "no-ip")
+        (tmp_path / "no-ip").mkdir()
+        reason = "the EtherCAT lab needs the 'ip' command (iproute2)"
+    done, _ = run_sample(tmp_path, "tests/test_lab.py", "-rs", **env)
+    assert done.returncode == 0 and reason in done.stdout, done.stdout + done.stderr
+    assert "1 skipped" in done.stdout, done.stdout
+
+
+@pytest.mark.slow
+def test_without_root_the_lab_test_runs_in_a_lab_of_its_own() -> None:
+    """As a user made for the test: the sample's lab test is skipped with the command to
+    use, and passes under it (pytest in a user and network namespace of its own, where
+    ``cm_lab`` makes its pair and serves the bridge; the ledger finds nothing left)."""
+    from coolmuscle.frontends.ethercat.lab import userns_problem
+    from coolmuscle.testing.lab import RUN_INSIDE
+    from unprivileged_support import unprivileged_user, veth_lock
+    if userns_problem() is not None:
+        pytest.skip(f"no user namespace for an unprivileged user: {userns_problem()}")
+    with unprivileged_user() as user:
+        sample = user.copy(SAMPLE, "user-project")
+        user.path.insert(1, str(sample))
+        pytest_args = [user.python, "-m", "pytest", "-p", "coolmuscle.testing.plugin", "-p",
+                       "no:cacheprovider", "-q", "-n", "0", "-rs", "--basetemp",
+                       str(user.home / "base"), "--cm-ledger", str(user.home / "ledger.jsonl"),
+                       "tests/test_lab.py"]
+        alone = user.run(pytest_args, cwd=sample)
+        assert alone.returncode == 0, alone.stdout + alone.stderr
+        assert "1 skipped" in alone.stdout and RUN_INSIDE in alone.stdout, alone.stdout
+        with veth_lock():
+            inside = user.run([user.python, "-m", "coolmuscle", "ethercat", "lab", "run",
+                               "--no-sim", "--", *pytest_args], cwd=sample)
+        assert inside.returncode == 0, inside.stdout[-3000:] + inside.stderr[-3000:]
+        assert "1 passed" in inside.stdout, inside.stdout
+        noted = read_ledger(user.home / "ledger.jsonl")
+        assert {e["kind"] for e in noted} == {"process", "namespace"}, noted
+        assert user.processes() == []
 
 
 def test_loading_the_plugin_imports_nothing_else() -> None:

@@ -12,8 +12,10 @@ the ``coolmuscle`` command)::
 A part that needs what only some systems have (a pseudo-terminal, a raw Ethernet
 socket) is imported only where it is used, and refused elsewhere with one line
 (:class:`NotOnThisSystemError`, exit status 2): :func:`needs_posix`,
-:func:`needs_af_packet`.  What is asked is the capability itself (can the modules be
-imported, does ``socket`` have the constant), not the system's name.
+:func:`needs_af_packet`.  What only makes a part late under load where it is missing
+(real-time scheduling) is said once: :func:`realtime_problem`.  What is asked is the
+capability itself (can the modules be imported, does ``socket`` have the constant, can
+a thread be scheduled so), not the system's name.
 
 Standard library and :mod:`coolmuscle.errors` only: every layer may use it.
 """
@@ -86,7 +88,8 @@ def require_extra(extra: str, what: str) -> None:
 
 
 #: What to use instead of a POSIX-only option on Windows, by default.
-INSTEAD = "--tcp and a virtual COM port tool (README.md \"Windows\")"
+INSTEAD = ("--rfc2217 [HOST:]PORT (a COM port to rfc2217:// clients and virtual COM port "
+           "tools) or --tcp (README.md \"Windows\")")
 
 
 def posix_terminals() -> bool:
@@ -116,3 +119,29 @@ def needs_af_packet(option: str) -> None:
     if not hasattr(socket, "AF_PACKET"):
         raise NotOnThisSystemError(
             f"{option} needs Linux (a raw AF_PACKET socket for the EtherCAT frames)")
+
+
+def realtime_problem() -> str | None:
+    """Why a thread cannot run under ``SCHED_FIFO`` here (asked by trying it in a thread
+    that then ends), or ``None`` when it can: a front end that answers in real time (the
+    EtherCAT bridge) then runs at normal priority and says so once."""
+    import os
+    import threading
+
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is None:
+        return "this system has no SCHED_FIFO"
+    refused: list[OSError] = []
+
+    def probe() -> None:
+        try:
+            setter(0, os.SCHED_FIFO, os.sched_param(1))
+        except OSError as exc:
+            refused.append(exc)
+    thread = threading.Thread(target=probe, name="coolmuscle-realtime-probe")
+    thread.start()
+    thread.join()
+    if refused:
+        return ("SCHED_FIFO needs the machine's CAP_SYS_NICE (root) or a real-time "
+                "priority limit (ulimit -r)")
+    return None

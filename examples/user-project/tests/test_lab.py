@@ -1,4 +1,5 @@
-"""The EtherCAT bridge for a master in the test (``cm_lab``: root only, else skipped)."""
+"""The EtherCAT bridge for a master in the test (``cm_lab``: as root, or without root inside
+``coolmuscle ethercat lab run --no-sim -- pytest``; else skipped with the reason)."""
 
 from __future__ import annotations
 

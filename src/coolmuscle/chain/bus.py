@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Final, Protocol
 
 from ..cml import ast
 from ..device.api import Event, EventListener
-from ..device.hostline import BAUD_RATES, HostLine, LineSettings
+from ..device.hostline import BAUD_RATES, PARITY_OF_K82, HostLine, LineSettings
+from ..device.uart import PLAIN, Frame
 from ..errors import NoSuchMotorError
 from ..motor.context import Context
 from ..motor.status import Report
@@ -35,6 +36,14 @@ if TYPE_CHECKING:
 log = logging.getLogger("coolmuscle.chain.daisy")
 
 _NO_ECHO: Final = int(Report.NO_ECHO)
+
+
+def _frame_of_k82(k82: int) -> Frame:
+    """The frame of the host line: 8 data bits, K82's parity, 1 stop bit (5.6.1; a
+    firmware without K82 reads it 0: no parity)."""
+    parity = PARITY_OF_K82.get(k82, "N")
+    return PLAIN if parity == "N" else Frame(parity=parity)
+
 
 #: Origins whose replies are printed on the host line (docs/device-api.md).
 HOST_LINE_ORIGINS: Final = frozenset({"host", "bank", "ladder", "motor"})
@@ -115,14 +124,14 @@ class ChainBus:
         version = first.params.version
         if version == self._settings_version:       # ID1's K values unchanged since
             return self._settings_now
-        no_echo, k70, k20, modbus = first.k(23) & _NO_ECHO, first.k(70), first.k(20), \
-            first.k(81) != 0
-        key: Key = (no_echo, k70, k20, modbus)
+        no_echo, k70, k20, modbus, k82 = first.k(23) & _NO_ECHO, first.k(70), \
+            first.k(20), first.k(81) != 0, first.k(82)
+        key: Key = (no_echo, k70, k20, modbus, k82)
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
             found = self._settings_cache.put(key, LineSettings(
                 echo=not no_echo, delimiter=b"\r\n" if k70 == 1 else b"\r",
-                baud=BAUD_RATES.get(k20, 38400), modbus=modbus))
+                baud=BAUD_RATES.get(k20, 38400), modbus=modbus, frame=_frame_of_k82(k82)))
         self._settings_now, self._settings_version = found, version
         return found
 

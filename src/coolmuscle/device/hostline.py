@@ -9,10 +9,13 @@ This is motor behaviour, so it lives in the model, not in a transport:
 * optional wire-time pacing: bytes leave at the K20 baud rate, 10 bits a byte
   (start, 8 data, stop; 5.6.1), scheduled in virtual time;
 * with pacing, a host whose port is set to another rate than K20 (ch. 3 K20: "the host
-  baud rate needs to be changed to match") sends the motor garbage and reads garbage:
-  each side reads what its UART makes of the other's bytes (:mod:`.uart`).  A transport
+  baud rate needs to be changed to match") or another frame than the motor's (8 data
+  bits, K82 parity, 1 stop bit; 5.6.1) sends the motor garbage and reads garbage: each
+  side reads what its UART makes of the other's bytes (:mod:`.uart`).  A transport
   that knows its host's rate tells the line (:meth:`HostLine.set_host_baud`: the pty
-  reads the rate the client set); one that does not (TCP, stdio) is always matched.
+  reads the rate the client set, an RFC 2217 client sets it), and its frame if it
+  knows it (:meth:`HostLine.set_host_frame`); one that does not (TCP, stdio) is
+  always matched.
 
 Transports (TCP, pty, stdio, pyserial URL) only shuttle bytes: they call
 :meth:`HostLine.feed` with what the host sent and subscribe to the bytes the
@@ -43,7 +46,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
-from .uart import as_read_at
+from .uart import PLAIN, Frame, as_read_at
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +59,12 @@ MAX_LINE = 512
 ByteListener = Callable[[bytes], None]
 #: The baud rate a host's port is set to now, or ``None`` when not known (matched).
 HostBaud = Callable[[], int | None]
+#: The frame a host's port is set to now (data bits, parity, stop bits), or ``None`` when
+#: not known (the motor's).
+HostFrame = Callable[[], Frame | None]
+
+#: K82 value -> the parity of the motor's frame (ch. 3 K82: 0 none, 1 even, 2 odd).
+PARITY_OF_K82: dict[int, str] = {0: "N", 1: "E", 2: "O"}
 
 #: :attr:`HostLine._open_echo` when no sender's echo is half-way out (``None`` is a sender).
 _NOBODY = object()
@@ -70,6 +79,7 @@ class LineSettings:
     delimiter: bytes = b"\r\n"      # K70: 0 -> CR, 1 -> CRLF
     baud: int = 38400               # K20
     modbus: bool = True             # K81 not 0: COM0 may speak Modbus RTU (the mode decides)
+    frame: Frame = PLAIN            # 8 data bits, K82 parity, 1 stop bit (5.6.1)
 
 
 class LineMode(Protocol):
@@ -82,9 +92,11 @@ class LineMode(Protocol):
         """Bytes from the host, arrived at ``kernel.now``."""
 
 
-def byte_time_ns(baud: int) -> int:
-    """Wire time of one byte (10 bits) at ``baud``."""
-    return (10 * NS_PER_S) // baud
+def byte_time_ns(baud: int, frame: Frame = PLAIN) -> int:
+    """Wire time of one byte at ``baud`` (10 bits; 11 with a parity bit)."""
+    if frame is PLAIN:
+        return (10 * NS_PER_S) // baud
+    return int(frame.bits * NS_PER_S) // baud
 
 
 class HostLine:
@@ -113,6 +125,7 @@ class HostLine:
         self._listeners: list[ByteListener] = []
         #: source -> its port's baud rate (:meth:`set_host_baud`); listener -> its source
         self._host_baud: dict[object, HostBaud] = {}
+        self._host_frame: dict[object, HostFrame] = {}
         self._listener_source: dict[ByteListener, object] = {}
         self._tx_free_at = 0  # virtual time the transmitter is free again (pacing)
         self._rx_free_at = 0
@@ -148,9 +161,22 @@ class HostLine:
         else:
             self._host_baud[source] = baud
 
+    def set_host_frame(self, source: object, frame: HostFrame | None) -> None:
+        """How to read the frame ``source``'s port is set to (``None``: not known, the
+        motor's).  Asked with the rate, with pacing only."""
+        if frame is None:
+            self._host_frame.pop(source, None)
+        else:
+            self._host_frame[source] = frame
+
     def _host_rate(self, source: object) -> int | None:
         baud = self._host_baud.get(source)
         return baud() if baud is not None else None
+
+    def _frame_of(self, source: object, motor: Frame) -> Frame:
+        frame = self._host_frame.get(source)
+        found = frame() if frame is not None else None
+        return found if found is not None else motor
 
     def write(self, data: bytes | bytearray | memoryview) -> None:
         """Send raw bytes to the host (paced when pacing is on)."""
@@ -161,10 +187,11 @@ class HostLine:
         if not self.pacing:
             self._deliver(data)
             return
-        baud = self._settings().baud
+        settings = self._settings()
+        baud, frame = settings.baud, settings.frame
         start = max(self.kernel.now, self._tx_free_at)
-        self._tx_free_at = start + len(data) * byte_time_ns(baud)
-        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data, baud),
+        self._tx_free_at = start + len(data) * byte_time_ns(baud, frame)
+        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data, baud, frame),
                                 priority=PRIO_REPORT, name="hostline-tx")
 
     def send_line(self, text: str) -> None:
@@ -174,20 +201,24 @@ class HostLine:
             return
         self.write(text.encode("latin-1", "replace") + settings.delimiter)
 
-    def _deliver(self, data: bytes, baud: int = 0) -> None:
-        """``baud``: the motor's rate on the wire (paced), 0 when unpaced."""
+    def _deliver(self, data: bytes, baud: int = 0, frame: Frame = PLAIN) -> None:
+        """``baud``, ``frame``: the motor's on the wire (paced); ``baud`` 0 unpaced."""
         self.bytes_out += len(data)
         mismatched = bool(baud and self._host_baud)
         for listener in list(self._listeners):
             try:
-                listener(self._as_heard(listener, data, baud) if mismatched else data)
+                listener(self._as_heard(listener, data, baud, frame) if mismatched else data)
             except Exception:  # a broken client must not stop the motor
                 log.exception("host line listener failed")
 
-    def _as_heard(self, listener: ByteListener, data: bytes, baud: int) -> bytes:
+    def _as_heard(self, listener: ByteListener, data: bytes, baud: int,
+                  frame: Frame) -> bytes:
         """What ``listener``'s host reads of ``data`` sent at ``baud`` (.uart)."""
-        host = self._host_rate(self._listener_source.get(listener))
-        return data if host is None else as_read_at(data, baud, host)
+        source = self._listener_source.get(listener)
+        host = self._host_rate(source)
+        if host is None:
+            return data
+        return as_read_at(data, baud, host, frame, self._frame_of(source, frame))
 
     # -- input ----------------------------------------------------------
     def feed(self, data: bytes | bytearray | memoryview, source: object = None) -> None:
@@ -198,13 +229,16 @@ class HostLine:
         if not self.pacing:
             self._receive(data, source)
             return
-        baud = self._settings().baud
-        wire = len(data) * byte_time_ns(baud)
+        settings = self._settings()
+        baud, motor = settings.baud, settings.frame
+        wire = len(data) * byte_time_ns(baud, motor)
         if self._host_baud:
             host = self._host_rate(source)
-            if host is not None and host != baud:    # sent at the host's rate, read at K20
-                wire = len(data) * byte_time_ns(host)
-                data = as_read_at(data, host, baud)
+            frame = self._frame_of(source, motor) if host is not None else motor
+            if host is not None and (host != baud or frame != motor):
+                # sent at the host's rate and frame, read at K20 and K82
+                wire = len(data) * byte_time_ns(host, frame)
+                data = as_read_at(data, host, baud, frame, motor)
         start = max(self.kernel.now, self._rx_free_at)
         self._rx_free_at = start + wire
         self.kernel.schedule_at(self._rx_free_at, lambda: self._receive(data, source),
@@ -314,6 +348,8 @@ class HostLine:
         self._hosts.discard(source)
         if source is None:
             return
+        self._host_baud.pop(source, None)
+        self._host_frame.pop(source, None)
         self._assembly.pop(source, None)
         if self.on_source_end is not None:
             self.on_source_end(source)

@@ -1,46 +1,90 @@
-"""What a UART set to one baud rate reads of bytes sent at another (ch. 3 K20).
+"""What a UART set to one baud rate and frame reads of bytes sent at another (ch. 3 K20).
 
 ch. 3 K20: "When changed, the host baud rate needs to be changed to match COOL MUSCLE's
-changed baud rate."  A motor and a host at different rates do not see each other's
-bytes; each reads what its own UART makes of the other's waveform.  This module
-computes that, deterministically, for the host line's wire model
-(:class:`~coolmuscle.device.hostline.HostLine` with pacing on; docs/fidelity.md
-"Baud rate of the host").
+changed baud rate."  A motor and a host at different rates (or frames: ch. 3 K82, the
+parity) do not see each other's bytes; each reads what its own UART makes of the
+other's waveform.  This module computes that, deterministically, for the host line's
+wire model (:class:`~coolmuscle.device.hostline.HostLine` with pacing on;
+docs/fidelity.md "Baud rate of the host").
 
-The model (the frame of 5.6.1: 8 data bits, no parity, 1 stop bit):
+The model (the motor's frame, 5.6.1: 8 data bits, K82 parity, 1 stop bit; a host's
+port may be set to another :class:`Frame`):
 
-* the sender puts each byte on the line as a 10-bit frame, start bit (0), the data
-  bits least significant first, stop bit (1), frames back to back, the line idle (1)
-  before and after the chunk;
+* the sender puts each byte on the line as a frame, start bit (0), the data bits least
+  significant first, the parity bit if any, the stop bits (1; one and a half or two),
+  frames back to back, the line idle (1) before and after the chunk;
 * the receiver waits for the line to be low (a falling edge, or at once when the line
   is still low after a frame: it re-synchronises on it, as a 16550 does after a
   framing error), then samples the middle of each of its own bit cells: the start bit
-  (high there: a false start, it waits again), 8 data bits and the stop bit;
-* a stop bit read as 0 is a framing error: the byte reads as 0x00 (what a Linux port
-  in raw mode delivers, termios(3) ``IGNPAR`` unset); after the stop bit's sample the
-  receiver waits for the next start.
+  (high there: a false start, it waits again), its data bits, its parity bit if any,
+  and the first stop bit;
+* a stop bit read as 0 is a framing error, a parity bit that does not match the data a
+  parity error: either way the byte reads as 0x00 (what a Linux port in raw mode
+  delivers, termios(3) ``IGNPAR`` unset); after the stop bit's sample the receiver
+  waits for the next start.  Fewer than 8 data bits read as the low bits of a byte.
 
 Time is counted in units of ``1 / (2 * sent * read)`` seconds, so every instant is an
-integer: a sent bit lasts ``2 * read`` units, a read bit ``2 * sent``.
+integer: a sent bit lasts ``2 * read`` units (a half bit, for one and a half stop bits,
+``read``), a read bit ``2 * sent``.
 """
 
 from __future__ import annotations
 
-__all__ = ["as_read_at"]
+from dataclasses import dataclass
 
-#: Bits of one frame: start, 8 data, stop (5.6.1).
+__all__ = ["Frame", "as_read_at", "PARITIES"]
+
+#: Bits of the motor's frame without parity: start, 8 data, stop (5.6.1).
 FRAME_BITS = 10
 
+#: The parities of a frame: none, even, odd, mark (always 1), space (always 0).
+PARITIES = ("N", "E", "O", "M", "S")
 
-def as_read_at(data: bytes, sent_baud: int, read_baud: int) -> bytes:
-    """The bytes a UART at ``read_baud`` reads of ``data`` sent at ``sent_baud``.
 
-    Equal rates give ``data`` back unchanged."""
-    if sent_baud == read_baud or not data:
-        return data
+@dataclass(frozen=True)
+class Frame:
+    """How a UART frames a byte: data bits (5 to 8), parity (:data:`PARITIES`), stop
+    bits (1, 1.5 or 2).  The default is the motor's with K82 = 0 (5.6.1)."""
+
+    data_bits: int = 8
+    parity: str = "N"
+    stop_bits: float = 1
+
+    def __post_init__(self) -> None:
+        if (self.data_bits not in (5, 6, 7, 8) or self.parity not in PARITIES
+                or self.stop_bits not in (1, 1.5, 2)):
+            raise ValueError(f"not a UART frame: {self}")
+
+    @property
+    def bits(self) -> float:
+        """Bit times of one frame on the line (start, data, parity, stop)."""
+        return 1 + self.data_bits + (self.parity != "N") + self.stop_bits
+
+    def parity_bit(self, value: int) -> int:
+        """The parity bit this frame sends after the data bits of ``value``."""
+        ones = bin(value & ((1 << self.data_bits) - 1)).count("1")
+        return {"E": ones & 1, "O": 1 - (ones & 1), "M": 1}.get(self.parity, 0)
+
+
+#: The motor's frame with K82 = 0, and a host's port set the factory way.
+PLAIN = Frame()
+
+
+def as_read_at(data: bytes, sent_baud: int, read_baud: int, sent: Frame = PLAIN,
+               read: Frame = PLAIN) -> bytes:
+    """The bytes a UART at ``read_baud`` framing ``read`` reads of ``data`` sent at
+    ``sent_baud`` framing ``sent``.
+
+    Equal rates, data bits and parity give ``data`` back (its low data bits)."""
+    if sent_baud == read_baud and (sent.data_bits, sent.parity) == (read.data_bits,
+                                                                    read.parity):
+        mask = (1 << read.data_bits) - 1
+        return data if mask == 0xFF else bytes(byte & mask for byte in data)
     if sent_baud <= 0 or read_baud <= 0:
         raise ValueError(f"baud rates must be positive, not {sent_baud} / {read_baud}")
-    line = _Waveform(data, 2 * read_baud)
+    if not data:
+        return data
+    line = _Waveform(data, sent, read_baud)
     read_bit = 2 * sent_baud
     half = sent_baud
     out = bytearray()
@@ -53,34 +97,44 @@ def as_read_at(data: bytes, sent_baud: int, read_baud: int) -> bytes:
             ready = start + half + 1
             continue
         value = 0
-        for bit in range(8):
+        for bit in range(read.data_bits):
             value |= line.level(start + (bit + 1) * read_bit + half) << bit
-        stop_at = start + (FRAME_BITS - 1) * read_bit + half
-        out.append(value if line.level(stop_at) else 0)
+        cell = read.data_bits + 1
+        good = True
+        if read.parity != "N":
+            good = line.level(start + cell * read_bit + half) == read.parity_bit(value)
+            cell += 1
+        stop_at = start + cell * read_bit + half
+        out.append(value if good and line.level(stop_at) else 0)
         ready = stop_at + 1
 
 
 class _Waveform:
-    """The line level of a chunk sent as back-to-back frames, idle around it."""
+    """The line level of a chunk sent as back-to-back frames, idle around it, in half
+    bits (one and a half stop bits are three)."""
 
-    def __init__(self, data: bytes, bit_units: int) -> None:
-        self._bits: list[int] = []
+    def __init__(self, data: bytes, frame: Frame, read_baud: int) -> None:
+        self._halves: list[int] = []
+        stop_halves = int(2 * frame.stop_bits)
         for byte in data:
-            self._bits.append(0)
-            self._bits.extend((byte >> i) & 1 for i in range(8))
-            self._bits.append(1)
-        self._unit = bit_units
+            bits = [0, *((byte >> i) & 1 for i in range(frame.data_bits))]
+            if frame.parity != "N":
+                bits.append(frame.parity_bit(byte))
+            for bit in bits:
+                self._halves += (bit, bit)
+            self._halves += [1] * stop_halves
+        self._unit = read_baud           # a half bit lasts ``read`` units
 
     def level(self, t: int) -> int:
         index = t // self._unit
-        return self._bits[index] if 0 <= index < len(self._bits) else 1
+        return self._halves[index] if 0 <= index < len(self._halves) else 1
 
     def next_low(self, t: int) -> int | None:
         """The first instant at or after ``t`` at which the line is low, or None."""
         index = max(0, t // self._unit)
-        if index < len(self._bits) and self._bits[index] == 0 and t >= 0:
+        if index < len(self._halves) and self._halves[index] == 0 and t >= 0:
             return t
-        for later in range(index + 1, len(self._bits)):
-            if self._bits[later] == 0:
+        for later in range(index + 1, len(self._halves)):
+            if self._halves[later] == 0:
                 return later * self._unit
         return None

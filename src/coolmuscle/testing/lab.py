@@ -2,11 +2,19 @@
 
 The one place that knows how a lab is made: :func:`unavailable` says why none can be
 (the clear reason a test is skipped with), :func:`open_lab` makes one and removes it
-again.  Today a lab needs root: a veth pair whose slave end is moved into a network
-namespace of its own, where ``coolmuscle sim --ethercat`` serves the bridge
-(frontends/ethercat/lab.py; docs/ethercat.md), while the master's end stays with the
-test.  A rootless lab (a user namespace) changes :func:`unavailable` and
-:attr:`LabLink.slave_prefix` here and nothing else.
+again, and :attr:`LabLink.slave_prefix` is how the bridge is started on its end.
+
+* **root**: a veth pair whose slave end is moved into a network namespace of its own,
+  where ``coolmuscle sim --ethercat`` serves the bridge (``ip netns exec``;
+  frontends/ethercat/lab.py; docs/ethercat.md), while the master's end stays with the
+  test;
+* **without root**: the test's master must be in the lab's namespace, so the tests run
+  in one: ``coolmuscle ethercat lab run --no-sim -- pytest ...`` puts pytest in a user
+  and network namespace of its own, where it is root of the namespace; the pair is
+  made there with both ends in that namespace, the bridge started on one end without
+  a prefix and the test's master on the other.  Outside such a namespace an
+  unprivileged run is skipped with the command to use (or, where the kernel refuses
+  user namespaces, what to enable).
 """
 
 from __future__ import annotations
@@ -18,7 +26,10 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-__all__ = ["LabLink", "LabUnavailable", "unavailable", "open_lab"]
+__all__ = ["LabLink", "LabUnavailable", "unavailable", "open_lab", "RUN_INSIDE"]
+
+#: How an unprivileged user runs the tests in a lab of their own (docs/ethercat.md).
+RUN_INSIDE = "coolmuscle ethercat lab run --no-sim -- pytest ..."
 
 
 class LabUnavailable(RuntimeError):
@@ -27,16 +38,23 @@ class LabUnavailable(RuntimeError):
 
 @dataclass(frozen=True)
 class LabLink:
-    """A lab's link: the master's interface here, the slave's in ``namespace``."""
+    """A lab's link: the master's interface here, the slave's in ``namespace`` (``None``:
+    both ends here, in the namespace the tests run in)."""
 
-    namespace: str
+    namespace: str | None
     master_if: str
     slave_if: str
 
     @property
     def slave_prefix(self) -> list[str]:
         """The command that runs a program on the slave's side of the link."""
-        return ["ip", "netns", "exec", self.namespace]
+        return ["ip", "netns", "exec", self.namespace] if self.namespace else []
+
+
+def _own_namespace() -> bool:
+    """Root of a user namespace below the machine's (``lab run``, ``unshare -Urn``)."""
+    from ..frontends.ethercat.lab import in_user_namespace
+    return hasattr(os, "geteuid") and os.geteuid() == 0 and in_user_namespace()
 
 
 def unavailable() -> str | None:
@@ -45,10 +63,15 @@ def unavailable() -> str | None:
         return "the EtherCAT lab needs Linux (veth pairs and network namespaces)"
     if shutil.which("ip") is None:
         return "the EtherCAT lab needs the 'ip' command (iproute2)"
-    if os.geteuid() != 0:
-        return ("the EtherCAT lab needs root (veth pairs and network namespaces); "
-                "run the tests as root to include it")
-    return None
+    from ..frontends.ethercat.lab import privileged, userns_problem
+    if privileged() or _own_namespace():
+        return None
+    problem = userns_problem()
+    if problem is not None:
+        return (f"the EtherCAT lab needs root or a user namespace of its own, and {problem}; "
+                "or run the tests as root")
+    return ("the EtherCAT lab needs root, or a network namespace of its own that the "
+            f"test's master shares: without root run the tests in one: {RUN_INSIDE}")
 
 
 @contextmanager
@@ -59,14 +82,24 @@ def open_lab(prefix: str) -> Iterator[LabLink]:
     reason = unavailable()
     if reason is not None:
         raise LabUnavailable(reason)
-    from ..frontends.ethercat.lab import Lab, LabError, create, destroy
-    lab = Lab(f"{prefix}ns", f"{prefix}m", f"{prefix}s", inside="slave")
-    destroy(lab, mark=prefix)                   # left over from a killed run
+    from ..frontends.ethercat.lab import (
+        Lab,
+        LabError,
+        create,
+        create_here,
+        destroy,
+        destroy_here,
+        privileged,
+    )
+    here = not privileged()
+    lab = Lab("" if here else f"{prefix}ns", f"{prefix}m", f"{prefix}s", inside="slave")
+    make, remove = (create_here, destroy_here) if here else (create, destroy)
+    remove(lab, mark=prefix)                    # left over from a killed run
     try:
-        create(lab, mark=prefix)
+        make(lab, mark=prefix)
     except LabError as exc:
         raise LabUnavailable(f"the EtherCAT lab could not be made: {exc}") from None
     try:
-        yield LabLink(lab.namespace, lab.master_if, lab.slave_if)
+        yield LabLink(None if here else lab.namespace, lab.master_if, lab.slave_if)
     finally:
-        destroy(lab, mark=prefix)
+        remove(lab, mark=prefix)

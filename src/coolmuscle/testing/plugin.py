@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 CHAIN_OPTIONS = ("motors", "firmware", "machine", "banks", "setup", "plant", "pacing",
                  "state_dir")
 SIM_OPTIONS = ("motors", "firmware", "machine", "state", "tcp", "modbus_tcp", "pty", "enip",
-               "web", "args")
+               "web", "rfc2217", "args")
 
 
 @dataclass

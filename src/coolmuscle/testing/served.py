@@ -4,10 +4,10 @@
   to a log file that :meth:`Program.wait_for` reads; :meth:`Program.close` ends its whole
   process group, so nothing it started is left behind;
 * :class:`ServedSim` is ``coolmuscle sim`` on free ports, any front door: the CML text
-  line on TCP (``--tcp 0``) or a pty, Modbus TCP (``--modbus-tcp 0``), the CM1
-  EtherNet/IP module (``--enip 127.0.0.1:0 --enip-io-port 0``), the web dashboard
-  (``--web 0``); it reads where each is served from the banner, so no test depends on a
-  fixed port being free (docs/transports.md);
+  line on TCP (``--tcp 0``), a pty or an RFC 2217 port (``--rfc2217 0``), Modbus TCP
+  (``--modbus-tcp 0``), the CM1 EtherNet/IP module (``--enip 127.0.0.1:0
+  --enip-io-port 0``), the web dashboard (``--web 0``); it reads where each is served
+  from the banner, so no test depends on a fixed port being free (docs/transports.md);
 * :func:`wait_until` (and :func:`wait_until_async`) polls a condition in wall time,
   :func:`free_port` and :func:`closed_port` give ports for programs that cannot say
   which port they got.
@@ -171,19 +171,22 @@ class ServedSim(Program):
     """``coolmuscle sim ARGS`` on free ports, started and ready (its banner printed).
 
     ``tcp``: ``--tcp 0`` (:attr:`port`, :attr:`url`); ``modbus_tcp``: ``--modbus-tcp 0``
-    (:attr:`modbus_port`); ``pty``: ``True`` for ``--pty`` or a path for ``--pty-link``
-    (:attr:`pty`: the device, or the link); ``enip``: the CM1 EtherNet/IP module on free
-    TCP and UDP ports (:attr:`enip_port`, :attr:`enip_io_port`; the chain must be CM1,
-    ``--firmware cm1``); ``web``: the dashboard (:attr:`web_url`, :attr:`web_port`);
-    ``state``: ``--state DIR``, else ``--no-state``.  :attr:`served` holds every banner
+    (:attr:`modbus_port`); ``rfc2217``: ``--rfc2217 0`` (:attr:`rfc2217_url`); ``pty``:
+    ``True`` for ``--pty`` or a path for ``--pty-link`` (:attr:`pty`: the device, or the
+    link); ``enip``: the CM1 EtherNet/IP module on free TCP and UDP ports
+    (:attr:`enip_port`, :attr:`enip_io_port`; the chain must be CM1, ``--firmware cm1``);
+    ``web``: the dashboard (:attr:`web_url`, :attr:`web_port`); ``state``: ``--state
+    DIR``, else ``--no-state``.  :attr:`served` holds every banner
     item (``{"tcp": "127.0.0.1:40123", ...}``)."""
 
     def __init__(self, log: Path, *args: str, tcp: bool = True, modbus_tcp: bool = False,
                  pty: bool | Path = False, enip: bool = False, web: bool = False,
                  state: Path | None = None, prefix: Sequence[str] = (),
-                 env: Mapping[str, str] | None = None, ready_timeout: float = 30) -> None:
+                 env: Mapping[str, str] | None = None, ready_timeout: float = 30,
+                 rfc2217: bool = False) -> None:
         argv = ["sim", *(["--tcp", "0"] if tcp else []),
                 *(["--modbus-tcp", "0"] if modbus_tcp else []),
+                *(["--rfc2217", "0"] if rfc2217 else []),
                 *(["--pty"] if pty is True else []),
                 *(["--pty-link", str(pty)] if isinstance(pty, Path) else []),
                 *(["--enip", "127.0.0.1:0", "--enip-io-port", "0"] if enip else []),
@@ -218,6 +221,11 @@ class ServedSim(Program):
         return f"socket://127.0.0.1:{self.port}"
 
     @property
+    def rfc2217_url(self) -> str:
+        """The pyserial URL of the RFC 2217 port (``rfc2217://127.0.0.1:PORT``)."""
+        return f"rfc2217://127.0.0.1:{self._port('rfc2217')}"
+
+    @property
     def modbus_port(self) -> int:
         return self._port("modbus-tcp")
 
@@ -249,7 +257,7 @@ class ServedSim(Program):
         found: list[tuple[str, int]] = []
         for name, text in self.served.items():
             match = re.match(r"(?:http://)?[\w.:\[\]-]*?:(\d+)", text)
-            if name in ("tcp", "modbus-tcp", "web", "enip") and match:
+            if name in ("tcp", "modbus-tcp", "rfc2217", "web", "enip") and match:
                 found.append(("tcp", int(match.group(1))))
             if name == "enip":
                 found.append(("udp", self.enip_io_port))

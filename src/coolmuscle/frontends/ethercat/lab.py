@@ -5,19 +5,36 @@ namespace, the other (the slave's) moves into a new namespace, so frames cross a
 real link.  Both ends carry the alias ``coolmuscle-lab`` and ``down`` removes only
 links and namespaces carrying that mark.  Needs root (``ip`` from iproute2).
 
-The same helpers make the per-test links of the test suite (:func:`veth_pair`).
+Without root (``coolmuscle ethercat lab run``): :func:`enter_namespace` moves this
+process into a user namespace of its own (where it is root, mapped to the user) and a
+network namespace owned by it (unshare(2) with ``CLONE_NEWUSER | CLONE_NEWNET``), and
+:func:`create_here` makes the pair there, both ends in that one namespace: the bridge
+on one end and the master on the other are both inside, and a raw socket works there
+(``CAP_NET_RAW`` of the namespace).  Everything goes with the namespace's last
+process.  :func:`userns_problem` says why a kernel refuses it.
+
+The same helpers make the per-test links of the test suite (:func:`veth_pair`) and of
+the pytest plug-in's ``cm_lab`` (coolmuscle.testing.lab).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
 import logging
+import os
 import shutil
 import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 log = logging.getLogger(__name__)
+
+#: unshare(2) flags (linux/sched.h), for Pythons before 3.12's ``os.unshare``.
+CLONE_NEWNET = 0x40000000
+CLONE_NEWUSER = 0x10000000
 
 MARK = "coolmuscle-lab"
 DEFAULT_NAMESPACE = "coolmuscle-lab"
@@ -119,6 +136,115 @@ def destroy(lab: Lab, *, mark: str = MARK) -> list[str]:
             ip("netns", "del", lab.namespace, check=False)
             removed.append(lab.namespace)
     return removed
+
+
+def create_here(lab: Lab, *, mark: str = MARK) -> Lab:
+    """Make the pair with both ends in the current network namespace (a namespace of
+    this process's own: :func:`enter_namespace`); on failure remove what was made."""
+    ip("link", "set", "lo", "up")
+    ip("link", "add", lab.master_if, "type", "veth", "peer", "name", lab.slave_if)
+    try:
+        for iface in (lab.master_if, lab.slave_if):
+            ip("link", "set", iface, "alias", mark)
+            _quiet(None, iface)
+            ip("link", "set", iface, "up")
+    except BaseException:
+        destroy_here(lab, mark=mark)
+        raise
+    return lab
+
+
+def destroy_here(lab: Lab, *, mark: str = MARK) -> list[str]:
+    """Remove the pair :func:`create_here` made (it carries ``mark``)."""
+    removed = []
+    for iface in (lab.master_if, lab.slave_if):
+        if _marked(None, iface, mark):
+            ip("link", "del", iface, check=False)       # the peer goes with it
+            removed.append(iface)
+            break
+    return removed
+
+
+def in_user_namespace() -> bool:
+    """This process is in a user namespace below the first (its root is not the
+    machine's): the first maps every id to itself (user_namespaces(7))."""
+    try:
+        first = Path("/proc/self/uid_map").read_text().split()
+    except OSError:
+        return False
+    return first[:3] != ["0", "0", "4294967295"]
+
+
+def privileged() -> bool:
+    """Root of the machine: ``ip netns`` and a veth pair across namespaces work."""
+    return hasattr(os, "geteuid") and os.geteuid() == 0 and not in_user_namespace()
+
+
+def _sysctl(name: str) -> int | None:
+    try:
+        return int(Path("/proc/sys", *name.split(".")).read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def userns_problem() -> str | None:
+    """Why this kernel will not give an unprivileged user a user namespace, or ``None``
+    (read from its settings; :func:`enter_namespace` finds the rest)."""
+    if _sysctl("user.max_user_namespaces") == 0:
+        return ("this kernel allows no user namespaces (user.max_user_namespaces=0); "
+                "root enables them: sysctl -w user.max_user_namespaces=15000")
+    if _sysctl("kernel.unprivileged_userns_clone") == 0:
+        return ("this kernel refuses user namespaces to unprivileged users "
+                "(kernel.unprivileged_userns_clone=0); root enables them: "
+                "sysctl -w kernel.unprivileged_userns_clone=1")
+    if _sysctl("kernel.apparmor_restrict_unprivileged_userns") == 1:
+        return ("AppArmor keeps capabilities from unprivileged user namespaces "
+                "(kernel.apparmor_restrict_unprivileged_userns=1); root allows them: "
+                "sysctl -w kernel.apparmor_restrict_unprivileged_userns=0")
+    return None
+
+
+def _unshare(flags: int) -> None:
+    unshare = getattr(os, "unshare", None)
+    if unshare is not None:                      # Python 3.12 and later
+        unshare(flags)
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.unshare(ctypes.c_int(flags)) != 0:
+        code = ctypes.get_errno()
+        raise OSError(code, os.strerror(code))
+
+
+def enter_namespace() -> bool:
+    """Move this process (it must have one thread) into a network namespace of its own:
+    root of the machine keeps its user namespace, anyone else gets a user namespace of
+    its own too, where it is root mapped to itself.  Whether a user namespace was made;
+    :class:`LabError` saying what is missing when the kernel refuses."""
+    user = not privileged()
+    uid, gid = os.getuid(), os.getgid()
+    try:
+        _unshare(CLONE_NEWNET | (CLONE_NEWUSER if user else 0))
+    except OSError as exc:
+        raise LabError(_refused(exc, user)) from None
+    if user:
+        try:
+            Path("/proc/self/setgroups").write_text("deny")
+            Path("/proc/self/uid_map").write_text(f"0 {uid} 1")
+            Path("/proc/self/gid_map").write_text(f"0 {gid} 1")
+        except OSError as exc:
+            raise LabError(f"cannot map this user into its namespace: {exc}") from None
+    return user
+
+
+def _refused(exc: OSError, user: bool) -> str:
+    what = "a user and network namespace" if user else "a network namespace"
+    reason = userns_problem() if user else None
+    if exc.errno == errno.EINVAL and user:
+        reason = "this process runs several threads (unshare(2) needs one)"
+    elif exc.errno == errno.ENOSPC:
+        reason = reason or ("no user namespace left (user.max_user_namespaces reached); "
+                            "root raises it: sysctl -w user.max_user_namespaces=15000")
+    return f"cannot make {what}: {exc.strerror or exc}" + (f": {reason}" if reason else "")
 
 
 def up(namespace: str = DEFAULT_NAMESPACE, master_if: str = DEFAULT_MASTER_IF,

@@ -2,7 +2,8 @@
 
 This package owns the byte pipes between a host program and the motor's host line
 (:class:`coolmuscle.device.hostline.HostLine`): ``tcp`` (asyncio server, many clients),
-``pty`` (a pseudo-terminal serial programs open as a port) and ``stdio``.  They move
+``pty`` (a pseudo-terminal serial programs open as a port), ``rfc2217`` (a serial port
+over Telnet, RFC 2217) and ``stdio``.  They move
 bytes only; line discipline, echo and delimiters are the model's.
 
 The registry maps a name to ``"module:attribute"`` and imports the module only when
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
 BUILTIN: dict[str, str] = {
     "tcp": "coolmuscle.frontends.transports.tcp:TcpTransport",
     "pty": "coolmuscle.frontends.transports.pty:PtyTransport",
+    "rfc2217": "coolmuscle.frontends.transports.rfc2217:Rfc2217Transport",
     "stdio": "coolmuscle.frontends.transports.stdio:StdioTransport",
     "modbus-tcp": "coolmuscle.frontends.transports.modbus_tcp:ModbusTcpTransport",
     "modbus-rtu": "coolmuscle.frontends.transports.serial_line:ModbusRtuTransport",

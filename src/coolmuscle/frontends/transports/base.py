@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 
 from ...device.api import Device
 from ...device.hostline import HostLine
+from ...device.uart import Frame
 from ...sim.realtime import RealtimeDriver
 
 log = logging.getLogger(__name__)
@@ -200,6 +201,14 @@ class Port:
         if setter is not None:
             setter(lane.source, baud)
 
+    def set_host_frame(self, lane: Lane, frame: Callable[[], Frame | None]) -> None:
+        """How to read the frame ``lane``'s host set on its port (data bits, parity,
+        stop bits: an RFC 2217 client's); with wire pacing it is read beside the rate
+        (``HostLine.set_host_frame``)."""
+        setter = getattr(self.host_line, "set_host_frame", None)
+        if setter is not None:
+            setter(lane.source, frame)
+
     def discard_partial(self) -> bool:
         """Forget a partly received line of the default host (see report)."""
         try:
@@ -273,6 +282,16 @@ class Lane:
             fn()
         except Exception:
             log.exception("lane flow control failed")
+
+    def purge(self) -> None:
+        """Forget the bytes of this host not yet on the line (a port's transmit buffer
+        emptied)."""
+        self._pieces.clear()
+        self.backlog = 0
+        if self._paused:
+            self._paused = False
+            if self._resume is not None:
+                self._call(self._resume)
 
     def close(self) -> None:
         """The host went away: the lines it sent still run, in turn; then its half

@@ -8,7 +8,7 @@ errors to one-line messages and exit codes.  No traceback reaches the user
   or a runtime error (port in use, store); 2 bad usage or a bad script;
   70 an internal error (a bug: please report it).
 
-``sim`` serves a virtual chain over TCP / a pty / stdio in real time until Ctrl-C or
+``sim`` serves a virtual chain over TCP / a pty / RFC 2217 / stdio in real time until Ctrl-C or
 SIGTERM (docs/transports.md); ``run`` plays a script in fast virtual time and checks
 its expectations (docs/scripts.md); ``check``, ``upload``, ``term`` and ``capture`` are
 the host tools of :mod:`coolmuscle.tools` (docs/user-guide.md).
@@ -34,7 +34,7 @@ from rich.console import Console
 from ...device.api import ChainFactory, Device
 from ...errors import TransportError
 from ...frontends.transports.base import Transport
-from ...needs import needs_posix
+from ...needs import needs_posix, realtime_problem
 from ..script.runner import Script, load_script
 from .exits import EXIT_FAILED, EXIT_INTERNAL, EXIT_USAGE, guarded  # noqa: F401 (public)
 from .run import header_defaults, make_chain, run_command, setup_logging
@@ -137,20 +137,23 @@ def _setup_logging(verbose: bool) -> None:
 # -- sim -----------------------------------------------------------------
 def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
                 modbus: tuple[str | None, str | None, str | None] = (None, None, None),
-                enip: bool = False) -> list[Transport]:
+                enip: bool = False, rfc2217: str | None = None) -> list[Transport]:
     from ...frontends import transports
     from ...frontends.transports.tcp import DEFAULT_PORT, parse_address
 
     chosen: list[Transport] = []
     modbus_rtu, modbus_tcp, com1 = modbus
-    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip):
+    if tcp is None and not (pty or pty_link or stdio or modbus_rtu or modbus_tcp or enip
+                            or rfc2217 is not None):
         tcp = str(DEFAULT_PORT)
-    if tcp is not None:
+    for option, name, value in (("--tcp", "tcp", tcp), ("--rfc2217", "rfc2217", rfc2217)):
+        if value is None:
+            continue
         try:
-            host, port = parse_address(tcp)
+            host, port = parse_address(value)
         except TransportError as exc:
-            raise UsageError(f"--tcp: {exc}") from None
-        chosen.append(transports.create("tcp", host=host, port=port))
+            raise UsageError(f"{option}: {exc}") from None
+        chosen.append(transports.create(name, host=host, port=port))
     if pty or pty_link is not None:
         needs_posix("--pty-link" if pty_link is not None and not pty else "--pty")
         chosen.append(transports.create("pty", link=pty_link))
@@ -164,7 +167,7 @@ def _transports(tcp: str | None, pty: bool, pty_link: Path | None, stdio: bool,
 def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, pty: bool,
                          pty_link: Path | None, stdio: bool,
                          modbus: tuple[str | None, str | None, str | None],
-                         ) -> tuple[list[Transport], int, str]:
+                         rfc2217: str | None = None) -> tuple[list[Transport], int, str]:
     """``--ethercat IFACE --bridge B``: the slave plus any line transport asked for."""
     from .ethercat import EthercatUsageError, chain_firmware, sim_transport
     if motors not in (1, 4):
@@ -174,8 +177,12 @@ def _ethercat_transports(iface: str, bridge: str, motors: int, tcp: str | None, 
     except EthercatUsageError as exc:
         raise UsageError(f"--bridge: {exc}") from None
     chosen: list[Transport] = [sim_transport(iface, bridge)]
-    if tcp or pty or pty_link or stdio or any(modbus):
-        chosen += _transports(tcp, pty, pty_link, stdio, modbus)
+    problem = realtime_problem()
+    if problem is not None:          # said once: the frame thread and the model's both
+        err.print(f"coolmuscle: note: the bridge runs at normal priority ({problem}); "
+                  "its answers and cycles may come late on a busy machine", markup=False)
+    if tcp or pty or pty_link or stdio or any(modbus) or rfc2217 is not None:
+        chosen += _transports(tcp, pty, pty_link, stdio, modbus, rfc2217=rfc2217)
     return chosen, 4, fw
 
 
@@ -292,6 +299,10 @@ def sim(
     pty: bool = typer.Option(False, "--pty", help="Serve a pseudo-terminal serial port."),
     pty_link: Path | None = typer.Option(None, "--pty-link", metavar="PATH",
                                             help="Stable symlink to the pty (implies --pty)."),
+    rfc2217: str | None = typer.Option(
+        None, "--rfc2217", metavar="[HOST:]PORT",
+        help="Serve an RFC 2217 serial port (rfc2217:// clients, virtual COM port tools; "
+             "host 127.0.0.1)."),
     stdio: bool = typer.Option(False, "--stdio",
                                help="Serve stdin/stdout (ends at end of input)."),
     modbus_rtu: str | None = typer.Option(
@@ -356,13 +367,14 @@ def sim(
             raise UsageError("--ethercat and --enip exclude each other (the bridge's four "
                              "motors are not the EtherNet/IP module's CM1)")
         chosen, motors, fw = _ethercat_transports(ethercat, bridge, motors, tcp, pty, pty_link,
-                                                  stdio, (modbus_rtu, modbus_tcp, com1))
+                                                  stdio, (modbus_rtu, modbus_tcp, com1),
+                                                  rfc2217)
         if reset:
             _reset_state(state_dir)
         chain = _make_chain(motors, firmware, state_dir, pace, machine, fw)
     else:
         chosen = _transports(tcp, pty, pty_link, stdio, (modbus_rtu, modbus_tcp, com1),
-                             enip=enip is not None)
+                             enip=enip is not None, rfc2217=rfc2217)
         chosen += _enip_transports(enip, enip_io_port, firmware, enip_priority)
         if reset:
             _reset_state(state_dir)

@@ -1,4 +1,4 @@
-"""``coolmuscle ethercat ...`` (lab up/down, esi) and the ``sim --ethercat`` helpers.
+"""``coolmuscle ethercat ...`` (lab up/down/run, esi) and the ``sim --ethercat`` helpers.
 
 Registered on the main command in :mod:`coolmuscle.tools.cli.app` with ``add_typer``.
 The bridge is :mod:`coolmuscle.frontends.ethercat` (docs/ethercat.md): the ESI file
@@ -8,6 +8,7 @@ comes from its description, the lab and the transport are its I/O.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Literal, NoReturn, overload
 
 import typer
@@ -22,8 +23,8 @@ if TYPE_CHECKING:
 app = typer.Typer(name="ethercat", no_args_is_help=True,
                   help="The EtherCAT Cool Muscle Bridge: lab link and ESI file (docs/ethercat.md).")
 lab_app = typer.Typer(name="lab", no_args_is_help=True,
-                      help="A veth pair with one end in a network namespace, for trying "
-                           "the bridge without hardware (root).")
+                      help="A veth pair for trying the bridge without hardware: up/down "
+                           "(root), or run a master in a lab of its own (no root needed).")
 app.add_typer(lab_app)
 
 
@@ -75,6 +76,10 @@ def _lab(step: str, namespace: str, master_if: str, slave_if: str) -> Lab | list
     from ...frontends.ethercat import lab
     from ...needs import needs_af_packet
     needs_af_packet("coolmuscle ethercat lab")
+    if not lab.privileged():
+        _fail(f"ethercat lab {step} needs root (a network namespace for the slave's end); "
+              "without root run the master in a lab of its own: coolmuscle ethercat lab "
+              "run -- COMMAND (docs/ethercat.md)", 1)
     run = lab.up if step == "up" else lab.down
     try:
         return run(namespace, master_if, slave_if)
@@ -113,6 +118,39 @@ def lab_down(
     """Remove the pair and the namespace that ``up`` made (nothing else)."""
     removed = _lab("down", namespace, master_if, slave_if)
     typer.echo("removed: " + ", ".join(removed) if removed else "nothing to remove")
+
+
+@lab_app.command("run")
+def lab_run(
+    command: list[str] = typer.Argument(..., metavar="-- COMMAND [ARGS]...",
+                                        help="The master to run, on the master's end."),
+    bridge: str = typer.Option("EB02", "--bridge", metavar="EB01|EB02|EB12",
+                               help="Bridge variant the lab's sim serves."),
+    no_sim: bool = typer.Option(False, "--no-sim",
+                                help="Make the link only (COMMAND starts its own sim)."),
+    state: Path | None = typer.Option(None, "--state", metavar="DIR",
+                                      help="State directory of the sim (default: none)."),
+    master_if: str = _MASTER_IF,
+    slave_if: str = typer.Option("cmlab-slave", "--slave-if", help="The slave's end."),
+) -> None:
+    """Run COMMAND in a lab of its own: a network namespace (and, without root, a user
+    namespace) with the veth pair, the bridge on one end, COMMAND on the other
+    ($COOLMUSCLE_LAB_MASTER_IF); all gone when COMMAND ends, with its exit status."""
+    from ...frontends.ethercat.lab import LabError
+    from ...needs import needs_af_packet
+    from .labrun import run_lab
+    needs_af_packet("coolmuscle ethercat lab run")
+    try:
+        chain_firmware(bridge)
+    except EthercatUsageError as exc:
+        _fail(f"--bridge: {exc}", 2)
+    try:
+        code = run_lab(command, bridge=ident.variant(bridge).code, sim=not no_sim,
+                       state=state, master_if=master_if, slave_if=slave_if,
+                       say=lambda line: typer.echo(line, err=True))
+    except LabError as exc:
+        _fail(str(exc), 1)
+    raise typer.Exit(code)
 
 
 @app.command("esi")
