@@ -25,11 +25,14 @@ Printed side by side, for the axes following (csp moving) and holding (same targ
 The loop runs as ``sim --ethercat`` runs the model's thread where the system allows it
 (root, CAP_SYS_NICE): under SCHED_FIFO at the transport's priority.  It waits for a
 cycle by sleeping until ``--spin-us`` before it and spinning the rest (a sleeping
-virtual CPU wakes 0.1-1 ms late); and the cyclic collector runs between cycles, when
-the next one is at least ``GC_SLACK`` away, instead of at whatever allocation crosses
-its threshold inside a cycle (a generation-1 collection is 1-2.7 ms here).
+virtual CPU wakes 0.1-1 ms late); and the cyclic collector is set as ``sim --ethercat``
+sets it (``transport.cycle_collector``: what ships is measured).  The collections that
+start during each run are counted by generation with the longest one
+(``gc.callbacks``).  ``--collector between`` runs the collector between cycles instead
+(automatic collection off, a collection when the next cycle is at least ``GC_SLACK``
+away), for comparison.
 
-    PYTHONPATH=src python bench/bench_ethercat_csp.py [--seconds 60]
+    PYTHONPATH=src python bench/bench_ethercat_csp.py [--seconds 60] [--collector between]
 """
 
 from __future__ import annotations
@@ -48,7 +51,11 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from coolmuscle.chain import Chain  # noqa: E402
 from coolmuscle.frontends.ethercat.bridge.app import BridgeApp  # noqa: E402
-from coolmuscle.frontends.ethercat.transport import MODEL_PRIORITY, CycleLateness  # noqa: E402
+from coolmuscle.frontends.ethercat.transport import (  # noqa: E402
+    MODEL_PRIORITY,
+    CycleLateness,
+    cycle_collector,
+)
 from coolmuscle.sim.kernel import Kernel  # noqa: E402
 from coolmuscle.sim.realtime import RealtimeClock  # noqa: E402
 
@@ -93,7 +100,24 @@ def triangle(i: int) -> int:
     return 2 * phase if phase < 2000 else 8000 - 2 * phase if phase < 6000 else 2 * phase - 16000
 
 
-def run(seconds: float, moving: bool, spin: float) -> dict[str, Any]:
+class Collections:
+    """The collections that start while it is installed: how many by generation, and
+    the longest (gc.callbacks)."""
+
+    def __init__(self) -> None:
+        self.count = [0, 0, 0]
+        self.longest = 0.0
+        self._began = 0.0
+
+    def __call__(self, phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            self._began = time.perf_counter()
+        else:
+            self.count[info["generation"]] += 1
+            self.longest = max(self.longest, time.perf_counter() - self._began)
+
+
+def run(seconds: float, moving: bool, spin: float, between: bool) -> dict[str, Any]:
     kernel = Kernel()
     chain = Chain(kernel, AXES, firmware="cm2")
     app = BridgeApp(chain, "EB02")
@@ -124,9 +148,12 @@ def run(seconds: float, moving: bool, spin: float) -> dict[str, Any]:
         lateness.append(clock.lateness(kernel.now))
 
     app.start_cycles(CYCLE_NS, note)
-    gc.freeze()                                # as the transport does once it has started
-    gc.disable()                               # collected between cycles (below)
+    undo = cycle_collector()                   # as the transport does once it has started
+    if between:
+        gc.disable()                           # collected between cycles (below)
     thresholds = gc.get_threshold()
+    collections = Collections()
+    gc.callbacks.append(collections)
     steal0 = steal_ticks()
     for i in range(cycles):
         due = clock.wall_at(base_virtual + (i + 1) * CYCLE_NS)
@@ -137,7 +164,7 @@ def run(seconds: float, moving: bool, spin: float) -> dict[str, Any]:
                              base_virtual + cycles * CYCLE_NS))
         cpu += time.process_time() - c0
         counts = gc.get_count()
-        if (counts[0] > thresholds[0]
+        if (between and counts[0] > thresholds[0]
                 and clock.wall_at(kernel.now + CYCLE_NS) - time.perf_counter() > GC_SLACK):
             gc.collect(2 if counts[2] >= thresholds[2] else 1 if counts[1] >= thresholds[1]
                        else 0)
@@ -146,8 +173,9 @@ def run(seconds: float, moving: bool, spin: float) -> dict[str, Any]:
     total_cpu = time.process_time() - t0_cpu
     steal = (steal_ticks() - steal0) / os.sysconf("SC_CLK_TCK")
     app.stop_cycles()
+    gc.callbacks.remove(collections)
     gc.enable()
-    gc.unfreeze()
+    undo()
     lateness.sort()
     positions = [chain.snapshot(a).position for a in range(1, AXES + 1)]
     words = [od.get(0x6041 + 0x800 * a) for a in range(AXES)]
@@ -155,7 +183,8 @@ def run(seconds: float, moving: bool, spin: float) -> dict[str, Any]:
             "axis_cycle_us": cpu / cycles / AXES * 1e6, "wall": wall, "steal": steal,
             "p99_ms": lateness[int(0.99 * (len(lateness) - 1))] * 1e3,
             "worst_ms": lateness[-1] * 1e3,
-            "positions": positions, "words": words}
+            "positions": positions, "words": words,
+            "collections": collections.count, "longest_gc_ms": collections.longest * 1e3}
 
 
 def run_empty(seconds: float, spin: float) -> dict[str, Any]:
@@ -188,15 +217,19 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--spin-us", type=float, default=300.0,
                     help="spin this long before each cycle instead of sleeping (0: sleep)")
+    ap.add_argument("--collector", choices=("shipped", "between"), default="shipped",
+                    help="the collector as sim --ethercat sets it, or run between cycles")
     args = ap.parse_args()
+    between = args.collector == "between"
     fifo = realtime()
     load = os.getloadavg()
-    moving = run(args.seconds, True, args.spin_us / 1e6)
-    holding = run(args.seconds, False, args.spin_us / 1e6)
+    moving = run(args.seconds, True, args.spin_us / 1e6, between)
+    holding = run(args.seconds, False, args.spin_us / 1e6, between)
     empty = run_empty(args.seconds, args.spin_us / 1e6)
     print(f"4-axis bridge in csp at 1 ms, {args.seconds:g} s each (manual 6.3); "
           f"{'SCHED_FIFO' if fifo else 'normal priority (no CAP_SYS_NICE)'}, "
-          f"spin {args.spin_us:g} us; load average {load[0]:.2f} before, "
+          f"spin {args.spin_us:g} us; collector {args.collector}; "
+          f"load average {load[0]:.2f} before, "
           f"{os.getloadavg()[0]:.2f} after")
     print(f"{'':24s}{'csp moving':>14s}{'csp holding':>14s}{'empty cycle':>14s}{'goal':>10s}")
     rows = (moving, holding, empty)
@@ -209,6 +242,10 @@ def main() -> None:
     floor = empty["missed"] / empty["cycles"]
     print(f"{'missed beyond the empty':24s}" + "".join(
         f"{r['missed'] / r['cycles'] - floor:>14.2%}" for r in rows[:2]))
+    print(f"{'collections (gen 0/1/2)':24s}" + "".join(
+        f"{'/'.join(map(str, r['collections'])):>14s}" for r in rows[:2]))
+    print(f"{'longest collection (ms)':24s}" + "".join(
+        f"{r['longest_gc_ms']:>14.3f}" for r in rows[:2]))
     print(f"{'CPU share':24s}{moving['cpu_share']:>14.1%}{holding['cpu_share']:>14.1%}")
     print(f"{'per axis-cycle (us)':24s}{moving['axis_cycle_us']:>14.1f}"
           f"{holding['axis_cycle_us']:>14.1f}{GOAL_US:>10.0f}")

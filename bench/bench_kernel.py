@@ -15,7 +15,14 @@ millisecond (a host that scans every millisecond, like a PLC).
   acceleration, torque, in-position test, status, output word, analog output) and
   runs the same host logic.  It uses the same planner and servo solution, so its
   samples are the same numbers: the benchmark asserts that both traces are identical
-  at every millisecond of a common window, then times each alone.
+  at every millisecond of a common window, then times each alone.  Its in-position
+  test is the model's rule (ch. 3 K55): the actual position within K55 of the target
+  once the command is on its final approach (from where it stays within K55 of the
+  target, a few ms before it ends), tested at each tick; the model finds the instant
+  itself and the host answers on the next whole millisecond, so both start the next
+  move on the same tick.  That move then reverses while the command still
+  decelerates, and the loop plans and solves it as the axis does (``Axis.move``: the
+  command runs on to its end, the new move starts there from rest).
 
 A third run plays the loop as a real program bank (``B1.1`` / ``X0.1`` /
 ``S1.1, A1.1, P1.1`` / ``P2.1`` / ``X.1-`` / ``END``, started with ``[1.1``): closed
@@ -40,7 +47,7 @@ from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.motor.motion.axis import Axis
 from coolmuscle.motor.motion.planner import Waypoint, limits_from_data, plan_moves
-from coolmuscle.motor.motion.profile import Profile, hold
+from coolmuscle.motor.motion.profile import Profile, hold, stops_then_restarts
 from coolmuscle.motor.signals.analog_output import output_volts
 from coolmuscle.motor.status import status_line
 from coolmuscle.sim.kernel import NS_PER_MS, NS_PER_S
@@ -164,10 +171,12 @@ class Naive:
         self.ppr = 1000                   # K37=3
         self.limits = limits_from_data(S_VALUE, A_VALUE, k37=3, k44=100, k51=0, k69=0)
         self.profile = hold(0.0, 0)
+        self.rest: Profile | None = None  # the plan from rest of a restarted reversal
         self.tracking = solve(self.motor.axis, self.profile, 0, None)
         self.shaft = shaft
         self.torque = torque
         self.target = 0.0
+        self.approach: int | None = None  # the command's final approach (K55)
         self.moving = False
         self.moves = 0
         self.reports: list[tuple[int, str]] = []
@@ -176,19 +185,32 @@ class Naive:
         self._go()
 
     def _go(self) -> None:
-        target = float(TARGETS[self.moves % 2])
-        start = self.profile.state_at(self.now)
-        self.profile = plan_moves(start, [Waypoint(target, self.limits)], self.now)
-        self.tracking = solve(self.motor.axis, self.profile, self.now, self.tracking)
+        from coolmuscle.motor.motion.dynamics import Motion
+        target, now = float(TARGETS[self.moves % 2]), self.now
+        waypoints = [Waypoint(target, self.limits)]
+        rest = self.rest
+        command = rest if rest is not None and now >= rest.origin_ns else self.profile
+        profile = plan_moves(command.state_at(now), waypoints, now)
+        end = command.end_ns
+        if end is not None and stops_then_restarts(self.profile, profile):
+            # in position before the command ended, and the new move reverses: as
+            # Axis.move, the command runs on to its end and the move starts from rest
+            self.rest = plan_moves(command.state_at(end), waypoints, end)
+            self.tracking = Motion.continued(self.tracking, now, self.rest)
+        else:
+            self.rest = None
+            self.tracking = solve(self.motor.axis, profile, now, self.tracking)
+        self.profile = profile
         self.target = target
+        self.approach = self.profile.settles_ns(target, self.window)
         self.moving = True
         self.moves += 1
 
     def tick(self) -> None:
         t = self.now
         command, position, speed = self.shaft(self.tracking, self.profile, t)
-        ended = self.profile.end_ns is not None and t >= self.profile.end_ns
-        if self.moving and ended and abs(command - position) <= self.window:
+        approaching = self.approach is not None and t >= self.approach
+        if self.moving and approaching and abs(self.target - position) <= self.window:
             self.moving = False
             self.reports.append((t, status_line(1, 8)))   # K23=1 report
             self._go()                                     # the host, this millisecond

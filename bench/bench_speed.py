@@ -31,6 +31,9 @@ Rows (docs/performance.md; * marks the three tightest goals):
    simulation, the transcript written to a file), as a user feels it.
 2. * ``coolmuscle run --motors 15``, every motor looping its PTP bank, 600 simulated s:
    the same, a process running the installed ``coolmuscle`` command.
+2b. ``coolmuscle run --motors 15`` where motor N loops a two-point PTP bank over N x
+   1,000 pulses at speed 100 (:func:`ptp_script`), 600 simulated s, its transcript
+   captured: many more moves printed than in row 2 (the short moves of the first motors).
 3. bench_chain.py's 15-motor chain, 60 simulated s, in process (no start-up).
 4. The start of ``coolmuscle run`` on a one-line script (``?96.1``): wall seconds.
 5. The cost of one move through a program bank (planner, servo and load model,
@@ -77,6 +80,17 @@ END
 
 #: The competing process: one CPU-bound busy loop, as another program on a user's machine.
 COMPETITOR = "while True:\n    pass\n"
+
+
+def ptp_script(motors: int) -> str:
+    """Every motor loops a two-point PTP bank (``S1,A1,P1`` / ``P2``) at speed 100, motor
+    N over N x 1,000 pulses: short moves on the first motors, so many moves printed."""
+    lines = []
+    for n in range(1, motors + 1):
+        lines.append(f"S1.{n}=100, A1.{n}=100, P1.{n}={1000 * n}, P2.{n}=0")
+        lines += [f"B1.{n}", "X0", f"S1.{n}, A1.{n}, P1.{n}", f"P2.{n}", "X-", "END"]
+    lines += [f"[1.{n}" for n in range(1, motors + 1)]
+    return "\n".join(lines) + "\n"
 
 
 def chain_script(motors: int) -> str:
@@ -216,6 +230,8 @@ def main() -> int:
 GOALS = {
     "run1": ("coolmuscle run, 1 motor PTP bank, 10 h", 4_500.0, 10_000.0, "x", True, True),
     "run15": ("coolmuscle run --motors 15, 600 s", 130.0, 1_000.0, "x", True, True),
+    "run15ptp": ("coolmuscle run --motors 15, 1,000-15,000 pulses", 840.0, 1_000.0, "x",
+                 True, True),
     "chain": ("bench_chain, 15 motors, in process", 327.0, 1_500.0, "x", True, False),
     "start": ("start of coolmuscle run, one line", 0.65, 0.25, "s", False, False),
     "move": ("cost per move through a program bank", 200.0, 50.0, "us", False, False),
@@ -238,6 +254,8 @@ def run(opts: argparse.Namespace, scale: float, work: Path, base_root: Path | No
     b2.write_text(B2_SCRIPT)
     m15 = work / "m15.cml"
     m15.write_text(chain_script(15))
+    ptp15 = work / "ptp15.cml"
+    ptp15.write_text(ptp_script(15))
     one = work / "one.cml"
     one.write_text("?96.1\n")
     for tree in trees:                        # byte-compile, as an installed package is
@@ -261,6 +279,11 @@ def run(opts: argparse.Namespace, scale: float, work: Path, base_root: Path | No
                                        f"{600 * scale:g}"), "wall")
         results["run15"] = [600 * scale / x["wall"] for x in r]
         cpu["run15"] = [600 * scale / x["cpu"] for x in r]
+    if "run15ptp" in rows:
+        r = best(trees, rep, timed_cli("run", str(ptp15), "--motors", "15", "--until",
+                                       f"{600 * scale:g}"), "wall")
+        results["run15ptp"] = [600 * scale / x["wall"] for x in r]
+        cpu["run15ptp"] = [600 * scale / x["cpu"] for x in r]
     if "chain" in rows:
         r = best(trees, rep, lambda t: t.worker("chain", "15", f"{60 * scale:g}"), "wall")
         results["chain"] = [x["ratio"] for x in r]

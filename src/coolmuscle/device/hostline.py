@@ -199,7 +199,9 @@ class HostLine:
         settings = self._settings()
         if settings.modbus and self.mode is not None and self.mode.active():
             return
-        self.write(text.encode("latin-1", "replace") + settings.delimiter)
+        # joined, never ``+``: compiled, mypyc 1.19 leaks the left operand of bytes + bytes
+        # (docs/performance.md "Compiled hot modules")
+        self.write(b"".join((text.encode("latin-1", "replace"), settings.delimiter)))
 
     def _deliver(self, data: bytes, baud: int = 0, frame: Frame = PLAIN) -> None:
         """``baud``, ``frame``: the motor's on the wire (paced); ``baud`` 0 unpaced."""
@@ -314,16 +316,16 @@ class HostLine:
                        delimiter: bytes, typed: bool) -> None:
         """The echo at the end of a line: the rest of the line and the delimiter; the
         whole line when what was shown of it was cut off by another host's line (or,
-        while hosts share the line, by anything)."""
+        while hosts share the line, by anything).  Joined, never ``+`` (send_line)."""
         if asm.cut or (asm.shown and not typed and self._open_echo is not source):
-            out = bytes(asm.buf) + delimiter
+            out = b"".join((asm.buf, delimiter))
         else:
-            out = bytes(asm.held) + bytes(echo) + delimiter
+            out = b"".join((asm.held, echo, delimiter))
         other = self._open_echo
         if other is not _NOBODY and other is not source:
             # another host's typed echo is half-way out: end it there, and it is sent
             # again whole at its own line end
-            out = delimiter + out
+            out = b"".join((delimiter, out))
             cut = self._assembly.get(other)
             if cut is not None:
                 cut.cut = True

@@ -23,6 +23,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ...errors import TransportError
@@ -41,6 +42,22 @@ MODEL_PRIORITY = 20
 SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
 #: Python switches threads every 5 ms by default: far longer than a 1 ms cycle.
 SWITCH_INTERVAL = 0.0002
+
+
+def cycle_collector() -> Callable[[], None]:
+    """The cyclic garbage collector while the bridge cycles (``sim --ethercat``); returns
+    what undoes it.
+
+    The start-up objects leave it (``gc.freeze``: no collection walks them again, shorter
+    GIL pauses) and automatic collection stays on at the interpreter's thresholds.
+    Chosen by measurement (bench/bench_ethercat_csp.py, which runs this very setting;
+    docs/performance.md): a csp cycle leaves nothing behind for the collector (the
+    motion caches keep no per-cycle entry), so with the compiled modules not one
+    collection starts in 16,000 cycles, and a raised threshold or collecting between
+    cycles has nothing to change (a threshold raised far would only make each collection
+    that other traffic, the CML port or Modbus, still causes longer)."""
+    gc.freeze()
+    return gc.unfreeze
 
 
 def check_interface(iface: str) -> None:
@@ -203,6 +220,7 @@ class EthercatTransport(Transport):
         self.lateness: CycleLateness | None = None
         self.realtime_model = True
         self._old_policy: tuple[int, os.sched_param] | None = None
+        self._collector: Callable[[], None] = lambda: None   # undoes cycle_collector
 
     async def start(self, port: Port) -> None:
         from .bridge.app import BridgeApp
@@ -211,7 +229,7 @@ class EthercatTransport(Transport):
             raise TransportError("ethercat: no device behind this port")
         self.app = BridgeApp(port.device, self.bridge)
         self.frames = FrameThread(self.app.stack.esc, self.iface)
-        gc.freeze()        # the start-up objects leave the collector: shorter GIL pauses
+        self._collector = cycle_collector()
         self._model_realtime(True)
         self.frames.start()
         # The bridge's 1 ms cycle (6.3) runs in the model's thread as kernel events on
@@ -277,4 +295,4 @@ class EthercatTransport(Transport):
             self.frames.close()
             self.frames = None
             self._model_realtime(False)
-            gc.unfreeze()
+            self._collector()

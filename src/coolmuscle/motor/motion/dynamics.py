@@ -227,10 +227,12 @@ def command_pieces(profile: Profile, origin_ns: int,
     """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
 
     Remembered in ``memos`` for a reused plan (the same segment tuple: planner.plan_moves)
-    seen from the same offset: a repeated move builds its command once."""
-    if memos is None:
-        return _command_pieces(profile, origin_ns)
+    seen from the same offset: a repeated move builds its command once.  A hold (no
+    segments: csp's command, a new position every cycle) is one constant piece, built
+    faster than looked up, and is not kept."""
     segments, base = profile.segments, profile.origin_ns
+    if memos is None or not segments:
+        return _command_pieces(profile, origin_ns)
     key: Key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
            None if profile.end_ns is None else profile.end_ns - base)
     found = memos.commands.get(key)

@@ -11,6 +11,7 @@ usual help and error messages.
 from __future__ import annotations
 
 import logging
+import os
 import re
 import sys
 import time
@@ -250,9 +251,20 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
             stderr_line(f"coolmuscle: warning: {text}")
 
         from ..trace.recorder import DEFAULT_WARN_BYTES
-        result = run_script(script, chain, until=until, trace=trace,
-                            on_entry=None if check else show, trace_step=trace_step,
-                            trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn)
+        # the transcript goes to stdout and --record's file as it comes and nothing of
+        # it is kept: a run of any length in bounded memory
+        golden = _Recording(record) if record is not None else None
+        try:
+            result = run_script(script, chain, until=until, trace=trace,
+                                on_entry=None if check else show, trace_step=trace_step,
+                                trace_warn_bytes=DEFAULT_WARN_BYTES, on_warning=warn,
+                                keep=False, record=golden.write if golden else None)
+        except BaseException:
+            if golden is not None:
+                golden.discard()              # a run that did not end leaves the file be
+            raise
+        if golden is not None:
+            golden.close()
         sys.stdout.flush()
         if plot is not None:
             from ..trace.plot import plot as plot_chain
@@ -263,11 +275,6 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
                 plot_chain(chain, plot, title=title, xy=pairs)
     finally:
         chain.close()
-    if record is not None:
-        try:
-            record.write_text(result.to_script(), encoding="utf-8")
-        except OSError as exc:
-            raise ScriptError(f"cannot write {record}: {exc.strerror or exc}") from exc
     if junit is not None:
         write_run_junit(junit, file, result, time.perf_counter() - started)
     if not result.ok:
@@ -278,6 +285,46 @@ def run_command(file: Path, until: float | None = None, trace: Path | None = Non
     elif script.expectations:
         stderr_line(f"coolmuscle: {result.summary()}")
     return 0
+
+
+class _Recording:
+    """``--record``'s file, written as the run goes into a temporary file beside it that
+    replaces it when the run has ended (a run stopped by an error or Ctrl-C leaves the
+    file as it was); a file that cannot be written is a :class:`ScriptError` (exit 2)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.part = path.with_name(f".{path.name}.part")
+        try:
+            self.file = self.part.open("w", encoding="utf-8")
+        except OSError as exc:
+            raise self.failed(exc) from exc
+
+    def failed(self, exc: OSError) -> ScriptError:
+        return ScriptError(f"cannot write {self.path}: {exc.strerror or exc}")
+
+    def write(self, text: str) -> None:
+        try:
+            self.file.write(text)
+        except OSError as exc:
+            raise self.failed(exc) from exc
+
+    def close(self) -> None:
+        """The run has ended: the file in place."""
+        try:
+            self.file.close()
+            os.replace(self.part, self.path)
+        except OSError as exc:
+            self.discard()
+            raise self.failed(exc) from exc
+
+    def discard(self) -> None:
+        """The run did not end: the temporary file removed, the file left as it was."""
+        try:
+            self.file.close()
+        except OSError:
+            pass
+        self.part.unlink(missing_ok=True)
 
 
 def write_run_junit(path: Path, file: Path, result: Any, wall_s: float) -> Path:

@@ -140,17 +140,29 @@ class LineWriter:
 
 
 class Recorder:
-    """Listens to the host line: keeps the byte stream, complete lines and entries.
+    """Listens to the host line: the entries, the complete lines and the byte stream.
 
     ``on_entry`` is called with every entry as it is made (``None``: nobody); when it
-    raises, it is not called again and the exception is kept in :attr:`display_error`."""
+    raises, it is not called again and the exception is kept in :attr:`display_error`.
+    ``on_line`` is called with every complete line received, without its end.
 
-    def __init__(self, kernel: Any, on_entry: Callable[[TranscriptEntry], None] | None) -> None:
+    ``keep`` (the default) keeps every entry in :attr:`entries` and every line in
+    :attr:`lines`; without it nothing is kept but what :attr:`stream_limit` allows,
+    so a run of any length records in bounded memory (``coolmuscle run``: the entries
+    go to the display as they come).  :attr:`received` counts every byte."""
+
+    def __init__(self, kernel: Any, on_entry: Callable[[TranscriptEntry], None] | None,
+                 *, keep: bool = True, on_line: Callable[[str], None] | None = None) -> None:
         self.kernel = kernel
         self.on_entry = on_entry
+        self.on_line = on_line
+        self.keep = keep
+        #: The bytes received, up to :attr:`stream_limit` of them (-1: all of them).
         self.stream = bytearray()
+        self.stream_limit = -1
+        self.received = 0
         self.entries: list[TranscriptEntry] = []
-        self.lines: list[str] = []   # complete received lines, without terminator
+        self.lines: list[str] = []   # complete received lines, without terminator (keep)
         self._line = bytearray()
         self._held: TranscriptEntry | None = None  # a CR-ended line that may get its LF
         self.display_error: Exception | None = None
@@ -158,7 +170,8 @@ class Recorder:
         self._writer = on_entry if type(on_entry) is LineWriter else None
 
     def emit(self, entry: TranscriptEntry) -> None:
-        self.entries.append(entry)
+        if self.keep:
+            self.entries.append(entry)
         if self.on_entry is not None:
             try:
                 self.on_entry(entry)
@@ -174,21 +187,32 @@ class Recorder:
             held, self._held = self._held, None
             self.emit(held)
 
+    def _got_line(self, text: str) -> None:
+        if self.keep:
+            self.lines.append(text)
+        if self.on_line is not None:
+            self.on_line(text)
+
     def on_bytes(self, data: bytes) -> None:
         now: int = self.kernel.now
-        self.stream += data
+        self.received += len(data)
+        limit = self.stream_limit
+        if limit < 0 or len(self.stream) < limit:
+            self.stream += data
         kind = _line_kind(data) if self._held is None and not self._line else _NOT_ONE_LINE
         if kind != _NOT_ONE_LINE:
             # one whole CR LF line (a report, a reply): what the loop below makes of it
             text = data[:-2].decode("latin-1")
-            self.lines.append(text)
-            # the host line's own bytes (a buffer would be copied)
-            entry = TranscriptEntry(now, "<", data if type(data) is bytes else bytes(data))
+            self._got_line(text)
             writer = self._writer
             if writer is None or kind != _PLAIN_LINE:
-                self.emit(entry)
+                # the host line's own bytes (a buffer would be copied)
+                self.emit(TranscriptEntry(now, "<", data if type(data) is bytes
+                                          else bytes(data)))
                 return
-            self.entries.append(entry)
+            if self.keep:
+                self.entries.append(TranscriptEntry(now, "<", data if type(data) is bytes
+                                                    else bytes(data)))
             try:
                 writer.received(now, text)      # what writer(entry) would write
             except Exception as exc:
@@ -197,13 +221,15 @@ class Recorder:
         for byte in data:
             if byte == 0x0A and self._held is not None and not self._line:
                 held, self._held = self._held, None
-                self.emit(TranscriptEntry(held.time, "<", held.data + b"\n"))
+                # joined, never ``+``: compiled, mypyc 1.19 leaks the left operand of
+                # bytes + bytes (docs/performance.md "Compiled hot modules")
+                self.emit(TranscriptEntry(held.time, "<", b"".join((held.data, b"\n"))))
                 continue
             self.flush_held()
             self._line.append(byte)
             if byte in (0x0D, 0x0A):
                 entry = TranscriptEntry(now, "<", bytes(self._line))
-                self.lines.append(self._line[:-1].decode("latin-1"))
+                self._got_line(self._line[:-1].decode("latin-1"))
                 self._line.clear()
                 if byte == 0x0D:
                     self._held = entry

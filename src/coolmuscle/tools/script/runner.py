@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Literal
 from ...device.api import Device
 from ...errors import CoolMuscleError
 from ...sim.kernel import seconds, to_seconds
+from .golden import GoldenWriter
+from .golden import split_lines as split_lines
 from .record import Direction as Direction
 from .record import Recorder
 from .record import TranscriptEntry as TranscriptEntry
@@ -88,12 +90,6 @@ def unescape(text: str) -> bytes:
     if bad_char is not None:
         raise ValueError(f"character {bad_char.group()!r} is not a byte (use \\xNN)")
     return out.encode("latin-1")
-
-
-def split_lines(data: bytes) -> list[bytes]:
-    """Split at CR, LF or CRLF, keeping the terminators; the last piece may be partial."""
-    pieces = re.findall(rb"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+$", data)
-    return [p for p in pieces if p]
 
 
 # -- parsing ------------------------------------------------------------
@@ -319,28 +315,21 @@ class RunResult:
         return f"ok: {checked}, ended at {to_seconds(self.end_time):.6f} s"
 
     def to_script(self) -> str:
-        """The script with ``<<`` lines of what was actually received (a golden transcript)."""
+        """The script with ``<<`` lines of what was actually received (a golden
+        transcript): what ``run_script(..., record=...)`` writes as the run goes."""
         out: list[str] = []
-        offsets = dict(self.marks)
+        writer = GoldenWriter(self.script, out.append)
         start = 0
-        for step in self.script.lines:
-            if step.kind == "expect":
-                continue
-            out.append(step.source)
-            end = offsets.get(step.line_no)
-            if end is None:
-                continue
-            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:end])]
+        for line_no, end in self.marks:
+            writer.step(line_no)
+            writer.received(self.received[start:end])
+            writer.mark()
             start = end
         if start < len(self.received) or self.tail_seconds > 0:
-            if self.tail_seconds > 0:
-                out.append(f"@wait {_fmt_seconds(self.tail_seconds)}")
-            out += [f"<< {escape(piece)}" for piece in split_lines(self.received[start:])]
-        return "\n".join(out) + "\n"
-
-
-def _fmt_seconds(value: float) -> str:
-    return f"{value:.9f}".rstrip("0").rstrip(".") or "0"
+            writer.tail(self.tail_seconds)
+            writer.received(self.received[start:])
+        writer.finish()
+        return "".join(out) or "\n"
 
 
 # -- running ------------------------------------------------------------
@@ -369,13 +358,39 @@ class _Checker:
                        f'{to_seconds(now):.6f} s); before it: "{escape(before)}"',
                        step.line_no, now)
 
-    def leftover(self, now: int) -> Failure | None:
-        extra = bytes(self.stream[self.pos:])
+    def leftover(self, received: int, now: int) -> Failure | None:
+        """The bytes after the last expectation (``received`` in all; the stream holds
+        at least the first :data:`_SHOWN` of them)."""
+        extra = received - self.pos
         if not extra:
             return None
+        shown = bytes(self.stream[self.pos:self.pos + _SHOWN])
         return Failure("unexpected",
-                       f'after the last expectation the motor sent {len(extra)} more byte(s): '
-                       f'"{escape(extra[:80])}"{"..." if len(extra) > 80 else ""}', None, now)
+                       f'after the last expectation the motor sent {extra} more byte(s): '
+                       f'"{escape(shown)}"{"..." if extra > _SHOWN else ""}', None, now)
+
+
+#: The bytes after the last expectation that a failure shows.
+_SHOWN = 80
+
+
+class _Untils:
+    """The ``@until`` steps' patterns, matched against each complete line as it arrives.
+
+    Each ``@until`` looks at the lines received since the previous one matched (or
+    since the start), in order, so which line meets which pattern depends only on the
+    order of the lines: the first line that matches the first pattern meets it, the
+    first line after it that matches the second pattern meets that, and so on.  Done
+    as the lines come, no line is kept."""
+
+    def __init__(self, steps: tuple[Step, ...]) -> None:
+        self.patterns = [step.pattern for step in steps
+                         if step.kind == "until" and step.pattern is not None]
+        self.met = 0          # patterns met so far
+
+    def line(self, text: str) -> None:
+        if self.met < len(self.patterns) and self.patterns[self.met].search(text):
+            self.met += 1
 
 
 def _start_trace(chain: Device, trace: str | os.PathLike[str], step: float,
@@ -397,7 +412,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                until: float | None = None, trace: str | os.PathLike[str] | None = None,
                on_entry: Callable[[TranscriptEntry], None] | None = None,
                trace_step: float = 0.001, trace_warn_bytes: int | None = None,
-               on_warning: Callable[[str], None] | None = None) -> RunResult:
+               on_warning: Callable[[str], None] | None = None,
+               keep: bool = True, record: Callable[[str], object] | None = None) -> RunResult:
     """Run a script against ``chain`` in fast virtual time and check its expectations.
 
     ``source`` is a :class:`Script`, a path or script text (:func:`load_script`).
@@ -408,32 +424,46 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     called with every transcript entry as it happens (for live display; if it raises,
     the run goes on silently and the exception is re-raised at the end).  The run stops
     at the first failure; the result says which.
+
+    ``keep`` (the default) keeps the whole transcript and every byte received in the
+    result.  Without it the run keeps neither (the result's ``transcript`` and
+    ``received`` are empty; ``on_entry`` is where the transcript goes) and checks as
+    the bytes come: ``@until`` looks at each line as it arrives and the received bytes
+    are kept only up to the last expectation, so a run of any length stays in bounded
+    memory (``coolmuscle run``).  ``record`` is given the run written back as a golden
+    transcript (what :meth:`RunResult.to_script` gives) a line at a time, as it goes
+    (``coolmuscle run --record``); when it raises, the run goes on and the exception
+    is raised at the end.
     """
     script = source if isinstance(source, Script) else load_script(source)
     check_steps(script, chain)
     kernel = chain.kernel
     host_line = chain.host_line
-    recorder = Recorder(kernel, on_entry)
+    steps = script.steps
+    untils = _Untils(steps)
+    recorder = Recorder(kernel, on_entry, keep=keep, on_line=untils.line if untils.patterns
+                        else None)
     checker = _Checker(recorder.stream)
+    # without keep: the stream is kept up to the last expectation, then only what a
+    # failure would show of the bytes after it
+    last_expect = max((i for i, step in enumerate(steps) if step.kind == "expect"), default=-1)
+    if not keep and last_expect < 0:
+        recorder.stream_limit = 0
     tracer = (_start_trace(chain, trace, trace_step, trace_warn_bytes, on_warning)
               if trace is not None else None)
     remove = host_line.add_listener(recorder.on_bytes)
+    golden = GoldenWriter(script, record) if record is not None else None
+    unrecord = host_line.add_listener(golden.received) if golden is not None else None
     failure: Failure | None = None
     exception: BaseException | None = None
     marks: list[tuple[int, int]] = []
     tail = 0.0
-    scan = [0]  # next complete line @until looks at
-
-    def matched(pattern: re.Pattern[str]) -> bool:
-        while scan[0] < len(recorder.lines):
-            line = recorder.lines[scan[0]]
-            scan[0] += 1
-            if pattern.search(line):
-                return True
-        return False
+    waited_for = 0        # @until steps run so far
 
     try:
-        for step in script.steps:
+        for index, step in enumerate(steps):
+            if golden is not None and step.kind != "expect":
+                golden.step(step.line_no)
             try:
                 if step.kind in ("send", "raw"):
                     recorder.sent(TranscriptEntry(kernel.now, ">", step.data, step.line_no))
@@ -446,29 +476,38 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                     chain.set_analog(step.args[0], step.args[1])
                 elif step.kind == "until":
                     assert step.pattern is not None
-                    pattern = step.pattern
+                    waited_for += 1
+                    wanted = waited_for
                     # the closure runs before the loop goes on (B023)
-                    waited = kernel.run_until(lambda: matched(pattern),  # noqa: B023
+                    waited = kernel.run_until(lambda: untils.met >= wanted,  # noqa: B023
                                               seconds(step.seconds))
                     if not waited:
                         failure = Failure("timeout", f"line {step.line_no}: @until "
-                                          f"{pattern.pattern!r} timed out after {step.seconds:g} s "
-                                          f"(virtual time {kernel.now_s:.6f} s)",
-                                          step.line_no, kernel.now)
+                                          f"{step.pattern.pattern!r} timed out after "
+                                          f"{step.seconds:g} s (virtual time "
+                                          f"{kernel.now_s:.6f} s)", step.line_no, kernel.now)
+                    elif untils.met == len(untils.patterns):
+                        recorder.on_line = None      # no @until left: lines are not looked at
                 elif step.kind == "expect":
                     failure = checker.expect(step, kernel.now)
+                    if not keep and index == last_expect:
+                        recorder.stream_limit = checker.pos + _SHOWN
             except Exception as exc:  # a model bug: report it, never crash the runner
                 exception = exc
                 failure = Failure("error", f"line {step.line_no}: the motor model raised "
                                   f"{type(exc).__name__}: {exc}", step.line_no, kernel.now)
             if step.kind != "expect":
-                marks.append((step.line_no, len(recorder.stream)))
+                marks.append((step.line_no, recorder.received))
+                if golden is not None:
+                    golden.mark()
             if failure is not None:
                 break
         if failure is None and until is not None:
             target = seconds(until)
             if target > kernel.now:
                 tail = to_seconds(target - kernel.now)
+                if golden is not None:
+                    golden.tail(tail)
                 try:
                     kernel.run(until=target)
                 except Exception as exc:
@@ -476,10 +515,13 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
                     failure = Failure("error", f"the motor model raised {type(exc).__name__}: "
                                       f"{exc}", None, kernel.now)
         if failure is None and script.expectations:
-            failure = checker.leftover(kernel.now)
+            failure = checker.leftover(recorder.received, kernel.now)
     finally:
         remove()
         recorder.finish()
+        if golden is not None and unrecord is not None:
+            unrecord()
+            golden.finish()
         raised = sys.exc_info()[0]
         interrupted = raised is not None and not issubclass(
             raised, Exception)                # Ctrl-C, a stop signal: stop at once
@@ -488,6 +530,9 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
             close()
     if recorder.display_error is not None:
         raise recorder.display_error
-    return RunResult(script=script, transcript=recorder.entries, received=bytes(recorder.stream),
+    if golden is not None and golden.error is not None:
+        raise golden.error
+    return RunResult(script=script, transcript=recorder.entries,
+                     received=bytes(recorder.stream) if keep else b"",
                      failure=failure, expectations=script.expectations, matched=checker.matched,
                      end_time=kernel.now, marks=marks, tail_seconds=tail, exception=exception)
