@@ -1,9 +1,10 @@
 """Test doubles for the front-end tests: a fake chain with the real HostLine.
 
 ``FakeChain`` has the final ``Chain`` constructor and attributes (``kernel``,
-``host_line``, ``motor_ids``, ``close()``) and a tiny line callback, so transports,
-pacing and the script runner are exercised with the real echo / delimiter / pacing
-behaviour of :class:`coolmuscle.device.hostline.HostLine` until the motor model lands:
+``host_line``, ``motor_ids``, ``subscribe()`` (no events), ``close()``) and a tiny line
+callback, so transports, pacing and the script runner are exercised with the real
+echo / delimiter / pacing behaviour of :class:`coolmuscle.device.hostline.HostLine`
+until the motor model lands:
 
 * ``?96.n``   -> ``Px.n=<counter>`` (counter starts at 1, one per reply, all motors);
 * ``^.n``     -> ``Ux.n=8`` after ``move_time`` seconds of virtual time (kernel event);
@@ -74,6 +75,10 @@ class FakeChain:
                 self.settings = replace(self.settings, baud=BAUD_RATES[value])
         elif text == "boom":
             raise RuntimeError("fake model failure")
+
+    def subscribe(self, listener: Any) -> Any:
+        """The device API's event stream: a fake chain says nothing there."""
+        return lambda: None
 
     def close(self) -> None:
         self.closed = True

@@ -71,7 +71,7 @@ ROOMS: dict[str, tuple[tuple[str, ...], ...]] = {
     ),
     "coolmuscle.chain": (
         ("daisy",),                      # Chain: the device API
-        ("bus", "firmware_modbus", "machine", "banklines"),
+        ("bus", "firmware_modbus", "machine", "banklines", "power"),
         ("links",),
     ),
     "coolmuscle.motor": (

@@ -272,3 +272,22 @@ def test_version_title_fields_and_profile() -> None:
     assert version.profile() == "cm2"
     assert parse_version("ID2 : CM1v3.00C.1 #0000A00000").profile() == "cm1"
     assert parse_version("ID2 : CM1v3.00R.1 #0000A00000").profile() == "rt3"
+
+
+def test_an_exchange_gets_its_own_echoes_after_one_of_the_same_text_lost_them() -> None:
+    """A dead line (docs/wire-faults.md) loses the lines and so their echoes: the same
+    lines sent again are echoed for the new exchange, not credited to the abandoned one
+    (which would leave this and every later exchange one echo behind)."""
+    proto = Protocol()
+    proto.echo = True
+    first = Exchange(("P1.1", "?96.1"), named("Px", 1), 1)
+    proto.begin(first)
+    proto.abandon()                                   # nothing came back
+    second = Exchange(("P1.1", "?96.1"), named("Px", 1), 1)
+    proto.begin(second)
+    proto.receive(b"P1.1\r\nP1.1=0\r\n?96.1\r\nPx.1=0\r\n")
+    assert second.complete and [line.text for line in second.lines] == ["P1.1=0", "Px.1=0"]
+    third = Exchange(("P1.1", "?96.1"), named("Px", 1), 1)
+    proto.begin(third)
+    proto.receive(b"P1.1\r\nP1.1=5\r\n?96.1\r\nPx.1=0\r\n")
+    assert third.complete and third.lines[0].text == "P1.1=5"

@@ -180,7 +180,7 @@ def test_yaml_blocks_parse(block: Block) -> None:
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.lang == "toml"], ids=lambda b: b.id)
 def test_toml_blocks_parse_and_machine_files_load(block: Block) -> None:
     data = tomllib.loads(block.body)
-    if "axis" in data:
+    if "axis" in data or "wire" in data:
         from coolmuscle.chain.machine import load_machine
         path = Path(os.environ.get("TMPDIR", "/tmp")) / f"docs-{os.getpid()}.toml"
         path.write_text(block.body, encoding="utf-8")

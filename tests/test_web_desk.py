@@ -159,16 +159,17 @@ def test_page_of_a_line_over_tcp_says_real_polls_and_refuses_what_only_a_sim_has
                     {"t": "input", "motor": 1, "n": 1, "on": True},
                     {"t": "fault", "motor": 1, "fault": "overload"},
                     {"t": "k_write", "motor": 2, "k": 24, "value": 2500},
-                    {"t": "cml", "line": "?99.3", "motor": 3}], start=1)]
+                    {"t": "cml", "line": "?99.3", "motor": 3},
+                    {"t": "wire_fault", "door": "host-line", "kind": "drop"}], start=1)]
                 return hello, results, snap
         finally:
             await page.close()
 
-    hello, (console, inputs, fault, k_write, no_motor), snap = asyncio.run(main())
+    hello, (console, inputs, fault, k_write, no_motor, wire), snap = asyncio.run(main())
     line = hello["line"]
     assert line["kind"] == "real"
     assert line["text"] == f"2 real motors on socket://127.0.0.1:{port} (K20 38.4 kbps)"
-    assert hello["motors"] == [1, 2] and hello["faults"] == {}
+    assert hello["motors"] == [1, 2] and hello["faults"] == {} and hello["wire"] is None
     fields = hello["fields"]
     row = dict(zip(fields, snap["m"][0], strict=True))
     assert (row["id"], row["position"], row["speed"], row["torque"]) == (1, 0, 0, 0)
@@ -176,6 +177,7 @@ def test_page_of_a_line_over_tcp_says_real_polls_and_refuses_what_only_a_sim_has
     assert console["replies"] == ["Sx.1=0"]
     assert not inputs["ok"] and "wired" in inputs["error"]
     assert not fault["ok"] and "virtual motor only" in fault["error"]
+    assert not wire["ok"] and "virtual motor's doors only" in wire["error"]
     assert k_write["ok"] and host.query("K24.2", r"K24\.2=-?\d+") == "K24.2=2500"
     assert not no_motor["ok"] and no_motor["error"].startswith("no motor ID3 on socket://")
 

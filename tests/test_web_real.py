@@ -124,6 +124,7 @@ def test_pty_page_says_real_and_a_k_edit_survives_a_restart_after_save(
     page = pages(url)
     expect(page.by("line-badge")).to_have_text(f"real motor on {link} at 38.4 kbps")
     expect(page.by("line-badge")).to_have_class(re.compile(r"\breal\b"))
+    expect(page.by("wire-door")).to_be_hidden()          # wire faults: a virtual motor's
     expect(page.by("position-1")).to_have_text(re.compile(r"^-?\d+$"), timeout=10_000)
     page.by("k-read").click()
     expect(page.by("k-value-24")).to_have_value("1000", timeout=10_000)

@@ -95,6 +95,9 @@ class ChainBus:
         self._settings_version = -1     # ID1's params.version of _settings_now
         self.host_line = HostLine(kernel, on_line, self._line_settings, pacing=pacing)
         self.links = ChainLinks(count, self._k65)
+        #: The first ID the host line cannot reach (a motor powered off, a broken link:
+        #: the chain's wire faults, chain/power.py); 0 while it reaches every motor.
+        self.cut_from = 0
 
     # -- the motors ---------------------------------------------------------------------
     @property
@@ -194,7 +197,8 @@ class ChainBus:
     def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
              origin: str = "motor") -> None:
         """Report a line: on the host line (per origin) and to every subscriber."""
-        if origin in HOST_LINE_ORIGINS:
+        cut = self.cut_from
+        if origin in HOST_LINE_ORIGINS and not (cut and motor >= cut):
             hop_from = min(motor, len(self.motors))
             if self.paced and hop_from > 1:     # back up the chain to ID1 (ch. 3 K65)
                 size = len(text) + len(self._line_settings().delimiter)

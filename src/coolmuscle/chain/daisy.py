@@ -27,6 +27,9 @@ from ..cml import ast
 from ..cml.ast import inner_motor
 from ..cml.parser import parse
 from ..device.api import CyclicState, EventListener, MotorSnapshot, TargetStream
+from ..device.wire.chain import cut_from
+from ..device.wire.line import LineFaults
+from ..device.wire.schedule import ActiveFault, WireFault, WireFaults, WireRecord, wire_fault
 from ..errors import (
     CmlSyntaxError,
     MotorError,
@@ -49,6 +52,7 @@ from ..motor.status import Report
 from ..sim.kernel import PRIO_IO, Kernel
 from ..sim.memo import Memo
 from .bus import ChainBus, ChainCommands
+from .power import power_off, power_on_again
 
 if TYPE_CHECKING:
     from ..device.api import Device
@@ -59,6 +63,11 @@ if TYPE_CHECKING:
     from .machine import Machine
 
 log = logging.getLogger(__name__)
+
+#: Origins whose lines travel the chain from ID1 (the host line, a bank or ladder line
+#: of a motor for another): a motor powered off or beyond a broken link never gets them.
+_THROUGH_ID1 = frozenset({"host", "bank", "ladder"})
+
 
 class _Stream:
     """Cyclic position mode for one motor (device API ``target_stream``)."""
@@ -105,6 +114,16 @@ class Chain:
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
                       if self.state_dir else None)
+        #: What ``$`` saved, by motor, when there is no store: a power cycle (a wire
+        #: fault) brings it back within the run (docs/wire-faults.md)
+        self._saved: dict[int, dict[str, object]] = {}
+        #: Wire faults at every door (docs/wire-faults.md): the doors ask it
+        self.wire_faults = WireFaults(self.kernel)
+        self.wire_faults.listen(self._wire_record)
+        self.wire_faults.watch("chain", self._chain_fault)
+        #: The first ID cut off from ID1 (the bus's ``cut_from``, read here in plain
+        #: Python on every line: an attribute of the compiled bus costs more)
+        self._cut = 0
         try:
             self._build(motors, per_motor, machine)
         except BaseException:      # a damaged store, a bad machine file: let the state go
@@ -127,7 +146,8 @@ class Chain:
         if machine is not None:           # wired before power-up (K46 odd searches then)
             self.load_machine(machine)
         for motor in self.motors.values():
-            motor.power_on()
+            if self.wire_faults.lasting("chain", "power_off", motor.id) is None:
+                motor.power_on()          # one a machine file keeps off powers up later
 
     # -- device API: identity -------------------------------------------------------
     @property
@@ -240,6 +260,8 @@ class Chain:
         return answer in ("Y", "N")
 
     def _run_statements(self, statements: list[ast.Statement], ctx: Context) -> None:
+        if self._cut and ctx.origin in _THROUGH_ID1:
+            statements = self._reachable(statements, ctx)
         for stmt in statements:
             motor_id = inner_motor(stmt) or ctx.default_motor
             motor = self.motors.get(motor_id)
@@ -248,6 +270,12 @@ class Chain:
             else:
                 self.beyond_chain(motor_id, stmt, ctx)
         end_of_line(ctx)          # an "@" of a branch left without its partner (4.4)
+
+    def _reachable(self, statements: list[ast.Statement], ctx: Context) -> list[ast.Statement]:
+        """The statements whose motor the line reaches: not one powered off or beyond a
+        broken link (chain/power.py)."""
+        cut = self._cut
+        return [stmt for stmt in statements if (inner_motor(stmt) or ctx.default_motor) < cut]
 
     # -- chain timing (ch. 3 K65; .links) ----------------------------------------------
     def _arrivals(self, routed: list[list[tuple[ast.Statement, int]]],
@@ -293,21 +321,22 @@ class Chain:
         """Commands that act on the whole chain: ``]``, ``]1``, ``*``, ``*1``, ``}``, ``>``,
         ``<``."""
         op = stmt.op
+        reached = self._reached(ctx)
         if op == "pause":          # 2.1.2 "]": stop all motors, pause the banks
-            for each in self.motors.values():
+            for each in reached:
                 each.program.pause()
-            for each in self.motors.values():
+            for each in reached:
                 each.stop()
         elif op == "pause_motor":
             motor.stop()
         elif op == "estop":
-            for each in self.motors.values():
+            for each in reached:
                 each.emergency_stop()
                 each.program.emergency()
         elif op == "estop_release":
-            for each in self.motors.values():
+            for each in reached:
                 each.emergency_release()
-            for each in self.motors.values():
+            for each in reached:
                 if not each.estopped:
                     each.program.emergency_released()
         elif op == "stop_after_line":
@@ -316,6 +345,12 @@ class Chain:
             motor.program.next_line(ctx)
         elif op == "prev_line":
             motor.program.prev_line(ctx)
+
+    def _reached(self, ctx: Context) -> list[Motor]:
+        """The motors a chain-wide command of ``ctx`` reaches: all of them, but those
+        cut off from ID1 for a line that travels the chain (chain/power.py)."""
+        cut = self._cut if ctx.origin in _THROUGH_ID1 else 0
+        return [m for m in self.motors.values() if not cut or m.id < cut]
 
     def bank_command(self, motor: MotorCore, stmt: ast.Statement, ctx: Context) -> None:
         """Bank execution commands: ``[`` ``]L`` ``B100`` ... (6.5; RT3 2.3, 3.2)."""
@@ -363,6 +398,8 @@ class Chain:
         found = self.bus.require(motor)
         if self.store is not None:
             self.store.save_snapshot(motor, found.to_snapshot())
+        else:
+            self._saved[motor] = found.to_snapshot()
 
     def _restore(self) -> None:
         for motor in self.motors.values():
@@ -515,6 +552,65 @@ class Chain:
         self.bus.require(motor).inject_fault(fault, **params)
         self._changed()
 
+    # -- device API: wire faults (docs/wire-faults.md) -------------------------------------
+    def inject_wire_fault(self, door: str, kind: str, *, at: float = 0.0,
+                          until: float | None = None, every: int | None = None,
+                          probability: float | None = None, seed: int | None = None,
+                          count: int | None = None, motor: int | None = None,
+                          **params: object) -> int:
+        """Install a wire fault ``at`` seconds from now (until ``until`` s from now);
+        returns its number.  ``ValueError`` for an unknown door, kind or parameter."""
+        schedule = {"at": at, "until": until, "every": every, "probability": probability,
+                    "seed": seed, "count": count, "motor": motor}
+        return self.add_wire_fault(wire_fault(
+            door, kind, {k: v for k, v in schedule.items() if v is not None}, params))
+
+    def add_wire_fault(self, fault: WireFault) -> int:
+        """Install a checked :class:`~coolmuscle.device.wire.schedule.WireFault` (the
+        machine file's ``[[wire.fault]]``); returns its number."""
+        if fault.motor is not None:
+            self.bus.require(fault.motor)
+            if fault.kind == "link_break" and fault.motor >= len(self.motors):
+                raise ValueError(f"link_break: motor {fault.motor} is the last on the "
+                                 f"chain; its COM1 has no link to another motor")
+        if fault.door in ("host-line", "chain") and self.host_line.wire is None:
+            self.host_line.wire = LineFaults(self.kernel, self.wire_faults,
+                                             self.host_line.hand_out)
+        return self.wire_faults.add(fault).id
+
+    def clear_wire_faults(self, fault: int | None = None, *, door: str | None = None) -> int:
+        """End wire faults: number ``fault``, those of ``door``, or all; how many ended."""
+        return self.wire_faults.clear(fault, door)
+
+    def _saved_state(self, motor: int) -> dict[str, object] | None:
+        """What a power cycle of ``motor`` brings back: the store's snapshot (or what
+        ``$`` saved in this run without a store)."""
+        if self.store is None:
+            return self._saved.get(motor)
+        try:
+            return self.store.load(motor)
+        except StoreError as exc:
+            log.warning("motor %d powers up without its saved data: %s", motor, exc)
+            return None
+
+    def _wire_record(self, record: WireRecord) -> None:
+        """Every wire fault's doing is an event (kind ``wire``), for the trace, the
+        transcript and the web page; never printed on the host line."""
+        self.bus.emit(record.motor or 0, "wire", record.line(), origin="api")
+
+    def _chain_fault(self, fault: ActiveFault, on: bool) -> None:
+        """A ``chain`` fault begins or ends: who is cut off; a motor powered off or on."""
+        self._cut = self.bus.cut_from = cut_from(self.wire_faults)
+        motor = self.motors.get(fault.motor or 0)
+        if fault.kind != "power_off" or motor is None:
+            return
+        if on:
+            power_off(motor)
+        elif self.wire_faults.lasting("chain", "power_off", motor.id) is None:
+            power_on_again(motor, self._saved_state(motor.id))
+        self.bus.poke()
+        self._changed()
+
     # -- device API: events, observers and traces ---------------------------------
     def subscribe(self, listener: EventListener) -> Callable[[], None]:
         return self.bus.subscribe(listener)
@@ -522,7 +618,7 @@ class Chain:
     def trace_feed(self) -> TraceFeed:
         """Record every motor from now on (:class:`coolmuscle.device.trace.TraceFeed`)."""
         from ..device.trace import TraceFeed  # traces are optional: loaded when used
-        return TraceFeed(self.kernel, self.motors, self.observe)
+        return TraceFeed(self.kernel, self.motors, self.observe, self.wire_faults)
 
     # -- device API: Modbus (5.6) -------------------------------------------------
     def modbus_request(self, unit: int, pdu: bytes, *, tcp: bool = False) -> bytes | None:

@@ -20,6 +20,7 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from ..device.wire.schedule import SCHEDULE_KEYS, WireFault, wire_fault
 from ..errors import CoolMuscleError
 from ..motor.signals.analog import source_from_config
 from ..motor.signals.encoder import gearing_from_config
@@ -40,6 +41,8 @@ class MachineHost(Protocol):
     def set_input(self, motor: int, number: int, on: bool) -> None: ...
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None: ...
+
+    def add_wire_fault(self, fault: WireFault) -> int: ...
 
 
 class MachineFileError(CoolMuscleError, ValueError):
@@ -122,6 +125,8 @@ class AxisSpec:
 class Machine:
     axes: list[AxisSpec]
     source: str = "<machine>"
+    #: ``[[wire.fault]]``: communication faults (docs/wire-faults.md)
+    wire: list[WireFault] = field(default_factory=list)
 
 
 # -- reading ------------------------------------------------------------------------
@@ -147,7 +152,7 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
         raise MachineFileError(f"{source}: not valid TOML: {exc}") from None
     except RecursionError:
         raise MachineFileError(f"{source}: arrays or tables nested too deeply") from None
-    unknown = set(data) - {"axis", "name", "description"}
+    unknown = set(data) - {"axis", "name", "description", "wire"}
     if unknown:
         raise MachineFileError(f"{source}: unknown top-level key {sorted(unknown)[0]!r}")
     tables = data.get("axis", [])
@@ -162,7 +167,29 @@ def parse_machine(text: str, source: str = "<machine>") -> Machine:
     ids = [a.motor for a in axes]
     if len(set(ids)) != len(ids):
         raise MachineFileError(f"{source}: two [[axis]] tables for the same motor")
-    return Machine(axes, source)
+    return Machine(axes, source, _wire(data.get("wire", {}), source))
+
+
+def _wire(value: object, source: str) -> list[WireFault]:
+    """``[[wire.fault]]``: each checked against the wire-fault vocabulary."""
+    if not isinstance(value, dict):
+        raise MachineFileError(f"{source}: 'wire' must be a table holding [[wire.fault]]")
+    unknown = set(value) - {"fault"}
+    if unknown:
+        raise MachineFileError(f"{source}: wire: unknown key {sorted(unknown)[0]!r} (fault)")
+    faults = []
+    for i, table in enumerate(_list(value.get("fault", []), f"{source}: wire.fault")):
+        where = f"{source}: wire.fault[{i + 1}]"
+        schedule = {k: v for k, v in table.items() if k in SCHEDULE_KEYS[2:]}
+        params = {k: v for k, v in table.items() if k not in SCHEDULE_KEYS}
+        try:
+            faults.append(wire_fault(table.get("door"), table.get("kind"), schedule,
+                                     params, where))
+        except ValueError as exc:
+            message = str(exc)
+            raise MachineFileError(message if message.startswith(where)
+                                   else f"{where}: {message}") from None
+    return faults
 
 
 def _axis(t: dict[str, Any], index: int, source: str) -> AxisSpec:
@@ -315,6 +342,12 @@ def apply_machine(machine: Machine, chain: MachineHost) -> None:
             if isinstance(exc, MachineFileError):
                 raise
             raise MachineFileError(f"{machine.source}: motor {spec.motor}: {exc}") from None
+    for i, fault in enumerate(machine.wire):
+        try:
+            chain.add_wire_fault(fault)
+        except (ValueError, LookupError) as exc:
+            raise MachineFileError(f"{machine.source}: wire.fault[{i + 1}] ({fault.door} "
+                                   f"{fault.kind}): {exc}") from None
 
 
 def _install(spec: AxisSpec, motor: Motor, chain: MachineHost) -> None:

@@ -14,7 +14,7 @@ Motion (2.1.1, 2.1.2): ``S.n``/``A.n``/``M.n``/``P.n`` then ``^.n``, followed by
 
 from __future__ import annotations
 
-from ..errors import InvalidArgumentError, OutOfRangeError
+from ..errors import CoolMuscleTimeout, InvalidArgumentError, OutOfRangeError
 from ..motor.programs.queries import format_value
 from ..motor.state.firmware import Firmware, get_firmware
 from ..motor.state.memory import Memory, NoSuchRegisterError
@@ -70,6 +70,13 @@ def _check_index(fw: Firmware, kind: str, index: int) -> None:
         raise NoSuchRegisterError(f"{kind}{index} does not exist ({kind}0..{kind}{top})")
 
 
+def _surely_there(fw: Firmware, kind: str, index: int) -> bool:
+    """Whether the motor has memory ``kind`` ``index`` whatever it was told: on the R
+    type an allocation (2.1.2 ``\\P``, ``\\N``) may leave any P, N or R out but
+    index 0 (direct mode)."""
+    return index == 0 or kind not in ("P", "N", "R") or not fw.can_allocate
+
+
 def _expected(fw: Firmware, kind: str, value: int | str, k37: int) -> str:
     """The text the motor prints for ``value`` once stored (6.6), or error00."""
     stored = _memory(fw, k37).normalise(kind, value)
@@ -93,7 +100,8 @@ def read_register(session: Session, motor: int, kind: str, index: int) -> Op[int
     fw = yield from firmware(session, motor)
     _check_index(fw, kind, index)
     name = register_name(kind, index, motor)
-    line = yield from _write_then_read(session, motor, None, name)
+    line = yield from _write_then_read(session, motor, None, name,
+                                       _surely_there(fw, kind, index))
     value = (line.value or "").strip()
     if kind == "V" and len(value) >= 2 and value[0] == value[-1] == '"':
         return value[1:-1]
@@ -113,28 +121,40 @@ def write_register(session: Session, motor: int, kind: str, index: int,
     expected = _expected(fw, kind, value, k37)
     name = register_name(kind, index, motor)
     text = f'"{value}"' if isinstance(value, str) else str(int(value))
-    line = yield from _write_then_read(session, motor, f"{name}={text}", name)
+    line = yield from _write_then_read(session, motor, f"{name}={text}", name,
+                                       _surely_there(fw, kind, index))
     got = (line.value or "").strip()
     if kind == "V" and expected.startswith('"'):
         same = got.lower() == expected.lower()  # state names print in canonical case
     else:
         same = got == expected
     if not same:
+        if kind != "V":
+            line.int_value()      # a read-back that is no number is garbled: ProtocolError
         raise OutOfRangeError(f"{name}={text} was not applied: the motor holds {got!r}")
 
 
 def _write_then_read(session: Session, motor: int, assignment: str | None,
-                     name: str) -> Op[Received]:
+                     name: str, surely: bool = True) -> Op[Received]:
     """An assignment (or nothing), the query of the same name and a ``?96`` fence: the
     query's reply is the readback.  A memory number the motor does not have answers
-    error00 (K23 16) or nothing; both raise :class:`OutOfRangeError`."""
+    error00 (K23 16) or nothing; both raise :class:`OutOfRangeError`.  When the fence
+    is answered and the query is not, the reply was lost on the line
+    (:class:`CoolMuscleTimeout`) if the memory is ``surely`` there; else the query is
+    asked once more to tell a lost reply from a memory the motor does not have."""
     short = name.split(".")[0]
     lines = (assignment, name) if assignment is not None else (name,)
     answer = yield from fenced(session, motor, lines)
     for line in answer[:-1]:
         if line.name == short and line.motor == motor:
             return line
-    raise OutOfRangeError(f"{name}: no such register on the motor (no reply to {name})")
+    if not surely:
+        again = yield from fenced(session, motor, (name,))
+        if not any(line.name == short and line.motor == motor for line in again[:-1]):
+            raise OutOfRangeError(f"{name}: no such register on the motor (no reply to "
+                                  f"{name})")
+    raise CoolMuscleTimeout(f"no reply to {name}, though the ?96.{motor} after it was "
+                            "answered: the reply was lost on the line")
 
 
 def write_param(session: Session, motor: int, k: int, value: int) -> Op[None]:

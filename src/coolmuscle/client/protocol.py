@@ -231,8 +231,21 @@ class Protocol:
         return self._event(line)
 
     def _echo_of(self, text: str) -> bool:
-        """Whether ``text`` is the echo of a line sent; credits the exchange that sent it."""
-        index = next((i for i, (sent, _o) in enumerate(self._sent) if sent == text), None)
+        """Whether ``text`` is the echo of a line sent; credits the exchange that sent it.
+
+        When ``text`` is the next line of the pending exchange to be echoed (echoes come
+        in the order the lines went), that line is matched first: the same text sent by
+        an exchange that timed out with its echo lost (a dead line) is older, and its
+        echo is not coming; matching it would leave every later exchange one echo
+        behind.  Otherwise the oldest line of that text is (a late echo)."""
+        current = self.exchange
+        index = None
+        if current is not None and not current.complete and \
+                current.echoed < len(current.send) and current.send[current.echoed] == text:
+            index = next((i for i, (sent, owner) in enumerate(self._sent)
+                          if sent == text and owner is current), None)
+        if index is None:
+            index = next((i for i, (sent, _o) in enumerate(self._sent) if sent == text), None)
         if index is None:
             return False
         owner = self._sent[index][1]

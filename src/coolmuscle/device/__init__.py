@@ -1,6 +1,6 @@
-"""The device API (:mod:`.api`), the host line every text front end feeds (:mod:`.hostline`)
-and the trace feed traces and plots read (:mod:`.trace`, imported when used: it needs the
-motor model).
+"""The device API (:mod:`.api`), the host line every text front end feeds (:mod:`.hostline`),
+the trace feed traces and plots read (:mod:`.trace`, imported when used: it needs the
+motor model) and the wire faults every door asks (:mod:`.wire`, docs/wire-faults.md).
 
 ``from coolmuscle.device import Device, Event, MotorSnapshot`` is the stable import.
 """

@@ -24,8 +24,10 @@ from .hostline import ByteListener, HostLine
 if TYPE_CHECKING:
     from ..motor.state.firmware import Firmware
     from .trace import TraceFeed
+    from .wire.schedule import WireFaults
 
-EventKind = Literal["reply", "status", "input", "output", "message", "origin", "alarm"]
+EventKind = Literal["reply", "status", "input", "output", "message", "origin", "alarm",
+                    "wire"]
 Origin = Literal["host", "api", "modbus", "bank", "ladder", "motor", "fieldbus", "web"]
 
 
@@ -193,6 +195,23 @@ class Device(Protocol):
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         """Inject a fault now (see docs/machine-file.md for names)."""
+
+    @property
+    def wire_faults(self) -> WireFaults:
+        """The wire faults of this device (docs/wire-faults.md): every door asks it what
+        to do to the messages it sends; the state lives here, in virtual time."""
+
+    def inject_wire_fault(self, door: str, kind: str, *, at: float = 0.0,
+                          until: float | None = None, every: int | None = None,
+                          probability: float | None = None, seed: int | None = None,
+                          count: int | None = None, motor: int | None = None,
+                          **params: object) -> int:
+        """Install a wire fault of ``door`` (``host-line``, ``chain``, ``modbus-rtu``,
+        ``modbus-tcp``, ``enip``) ``at`` seconds from now, until ``until`` seconds from
+        now; returns its number.  ``ValueError`` for an unknown door, kind or parameter."""
+
+    def clear_wire_faults(self, fault: int | None = None, *, door: str | None = None) -> int:
+        """End wire faults: number ``fault``, those of ``door``, or all; how many ended."""
 
     def machine_data(self, motor: int) -> dict[str, float]:
         """The load and drive data ``motor`` runs with, by the keys of a machine

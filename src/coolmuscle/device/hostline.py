@@ -36,6 +36,11 @@ line answers, so one host's echo never runs into another's (docs/fidelity.md
 COM0 can also speak Modbus RTU (5.6, K81): a :class:`LineMode` installed as
 :attr:`HostLine.mode` then takes the received bytes instead of the text line,
 and text replies are not sent while it is active.
+
+Wire faults (docs/wire-faults.md): once one of the host line or the chain is installed,
+a :class:`WireHook` as :attr:`HostLine.wire` decides what the host gets of each piece
+sent, and when (:mod:`.wire.line`), and whether what the host sends is lost; without
+one, bytes go straight to the listeners.
 """
 
 from __future__ import annotations
@@ -80,6 +85,18 @@ class LineSettings:
     baud: int = 38400               # K20
     modbus: bool = True             # K81 not 0: COM0 may speak Modbus RTU (the mode decides)
     frame: Frame = PLAIN            # 8 data bits, K82 parity, 1 stop bit (5.6.1)
+
+
+class WireHook(Protocol):
+    """The host line's wire faults (:class:`coolmuscle.device.wire.line.LineFaults`):
+    installed as :attr:`HostLine.wire` once a ``host-line`` or ``chain`` fault is."""
+
+    def deliver(self, data: bytes, baud: int, frame: Frame, echo: bool) -> None:
+        """A piece the motor sends now at ``baud`` in ``frame`` (``echo``: of what the
+        host typed); hands what the host gets to ``hand_out``."""
+
+    def swallows(self, data: bytes) -> bool:
+        """Whether the bytes the host sends now are lost (a dead line)."""
 
 
 class LineMode(Protocol):
@@ -134,6 +151,9 @@ class HostLine:
         #: COM0 in another protocol's mode (Modbus RTU); ``None``: always text.  It is
         #: asked only while the settings say COM0 may speak it (``LineSettings.modbus``).
         self.mode: LineMode | None = None
+        #: The wire faults between the motor and the host (docs/wire-faults.md);
+        #: ``None`` until one is installed: then bytes go straight to the listeners.
+        self.wire: WireHook | None = None
 
     # -- output ---------------------------------------------------------
     def add_listener(self, listener: ByteListener,
@@ -178,20 +198,22 @@ class HostLine:
         found = frame() if frame is not None else None
         return found if found is not None else motor
 
-    def write(self, data: bytes | bytearray | memoryview) -> None:
-        """Send raw bytes to the host (paced when pacing is on)."""
+    def write(self, data: bytes | bytearray | memoryview, echo: bool = False) -> None:
+        """Send raw bytes to the host (paced when pacing is on); ``echo``: they are the
+        echo of what the host typed (the wire faults leave echoes alone unless told)."""
         if not data:
             return
         self._open_echo = _NOBODY
         data = bytes(data)                 # a buffer the caller may reuse: copied
         if not self.pacing:
-            self._deliver(data)
+            self._deliver(data, echo=echo)
             return
         settings = self._settings()
         baud, frame = settings.baud, settings.frame
         start = max(self.kernel.now, self._tx_free_at)
         self._tx_free_at = start + len(data) * byte_time_ns(baud, frame)
-        self.kernel.schedule_at(self._tx_free_at, lambda: self._deliver(data, baud, frame),
+        self.kernel.schedule_at(self._tx_free_at,
+                                lambda: self._deliver(data, baud, frame, echo),
                                 priority=PRIO_REPORT, name="hostline-tx")
 
     def send_line(self, text: str) -> None:
@@ -203,8 +225,17 @@ class HostLine:
         # (docs/performance.md "Compiled hot modules")
         self.write(b"".join((text.encode("latin-1", "replace"), settings.delimiter)))
 
-    def _deliver(self, data: bytes, baud: int = 0, frame: Frame = PLAIN) -> None:
+    def _deliver(self, data: bytes, baud: int = 0, frame: Frame = PLAIN,
+                 echo: bool = False) -> None:
         """``baud``, ``frame``: the motor's on the wire (paced); ``baud`` 0 unpaced."""
+        wire = self.wire
+        if wire is not None:          # the wire faults decide what the host gets, when
+            wire.deliver(data, baud, frame, echo)
+            return
+        self.hand_out(data, baud, frame)
+
+    def hand_out(self, data: bytes, baud: int = 0, frame: Frame = PLAIN) -> None:
+        """Give bytes that reached the host's end of the line to every listener."""
         self.bytes_out += len(data)
         mismatched = bool(baud and self._host_baud)
         for listener in list(self._listeners):
@@ -228,6 +259,9 @@ class HostLine:
         if not data:
             return
         data = bytes(data)                 # a buffer the caller may reuse: copied
+        hook = self.wire
+        if hook is not None and hook.swallows(data):
+            return
         if not self.pacing:
             self._receive(data, source)
             return
@@ -301,7 +335,7 @@ class HostLine:
             if asm.held:                 # held while others were connected: first
                 echo[:0] = asm.held
                 asm.held.clear()
-            self.write(bytes(echo))
+            self.write(bytes(echo), True)
             asm.shown = True
             self._open_echo = source
         if failure is not None:
@@ -329,7 +363,7 @@ class HostLine:
             cut = self._assembly.get(other)
             if cut is not None:
                 cut.cut = True
-        self.write(out)
+        self.write(out, True)
 
     def discard_partial(self, source: object = None) -> None:
         """Forget a partly received line of ``source`` (its sender went away mid-line)."""

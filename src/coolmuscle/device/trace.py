@@ -39,6 +39,7 @@ from ..sim.kernel import Kernel
 
 if TYPE_CHECKING:
     from ..motor.motor import Motor
+    from .wire.schedule import WireFaults, WireRecord
 
 #: Ux bits during which the motor makes no torque: motor free and the alarms.
 _NO_TORQUE = int(Ux.MOTOR_FREE | ALARM_BITS)
@@ -256,9 +257,15 @@ class MotorTrace:
 
 
 class TraceFeed:
-    """The recording of every motor of a chain (see the module docstring)."""
+    """The recording of every motor of a chain (see the module docstring).
 
-    def __init__(self, kernel: Kernel, motors: Mapping[int, Motor], observe: Observe) -> None:
+    With ``wire`` (the device's wire faults, docs/wire-faults.md) it also counts what
+    the faults did: :meth:`wire_count` at any instant, :meth:`wire_times` when;
+    :attr:`wire_column` says whether a trace shows it (a fault was installed when the
+    feed opened: a run without faults keeps its columns)."""
+
+    def __init__(self, kernel: Kernel, motors: Mapping[int, Motor], observe: Observe,
+                 wire: WireFaults | None = None) -> None:
         self._kernel = kernel
         self._motors = motors
         #: Kernel time the feed opened: samples are exact from here on.
@@ -268,6 +275,29 @@ class TraceFeed:
             trace._record(self.capture)
         self._remove = kernel.add_observer(self.capture)
         self._unobserve = observe(self.capture)
+        self.wire_column = wire is not None and bool(wire.faults)
+        self._wire_times: list[int] = []
+        self._wire_counts: list[int] = []
+        self._wire_total = 0
+        self._unlisten_wire = wire.listen(self._wire_record) if wire is not None else None
+
+    # -- wire faults -----------------------------------------------------------------
+    def _wire_record(self, record: WireRecord) -> None:
+        self._wire_total += 1
+        _append(self._wire_times, self._wire_counts, record.time, self._wire_total)
+
+    def wire_count(self, t: int) -> int:
+        """How many things the wire faults did up to kernel time ``t``."""
+        i = bisect_right(self._wire_times, t) - 1
+        return self._wire_counts[i] if i >= 0 else 0
+
+    def wire_times(self) -> Sequence[int]:
+        """Instants a wire fault did something (ascending; read-only)."""
+        return self._wire_times
+
+    def forget_wire_before(self, upto: int) -> None:
+        """Forget the wire counts only instants before ``upto`` need."""
+        _trim_pairs(self._wire_times, self._wire_counts, upto)
 
     @property
     def now(self) -> int:
@@ -291,6 +321,9 @@ class TraceFeed:
         """Stop noting discrete changes (what was recorded stays readable)."""
         self._remove()
         self._unobserve()
+        if self._unlisten_wire is not None:
+            self._unlisten_wire()
+            self._unlisten_wire = None
         for trace in self.traces.values():
             trace._unlisten(self.capture)
 

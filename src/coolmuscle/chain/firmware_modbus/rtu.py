@@ -20,10 +20,12 @@ silently.  No I/O here: the host line brings the bytes and sends the responses.
 from __future__ import annotations
 
 import logging
+from functools import partial
 from typing import TYPE_CHECKING
 
-from ...device.hostline import BAUD_RATES
+from ...device.hostline import BAUD_RATES, byte_time_ns
 from ...sim.kernel import NS_PER_S, PRIO_IO, Timer
+from .faults import rtu_reply
 from .slave import ModbusSlave
 
 if TYPE_CHECKING:
@@ -105,6 +107,9 @@ class RtuSlaveLine:
         self._last_rx = 0
         self._timer: Timer | None = None
         self._f_run = 0
+        #: a reply a wire fault holds back holds the later ones too (the slave answers
+        #: one request after the other)
+        self._reply_free_at = 0
         self.escaped = False
         self.frames = 0
         self.bad_frames = 0
@@ -174,8 +179,25 @@ class RtuSlaveLine:
             self.failures += 1
             log.exception("modbus: the model failed on %s", pdu[:16].hex(" "))
             return
-        if reply is not None:
-            self.device.host_line.write(rtu_frame(address, reply))
+        if reply is None:
+            return
+        frame = rtu_frame(address, reply)
+        faults = self.device.wire_faults
+        now = self.kernel.now
+        if not faults.live("modbus-rtu") and self._reply_free_at <= now:
+            self.device.host_line.write(frame)
+            return
+        baud = byte_baud(self.device.get_param(1, 20))      # a character: 10 bits (5.6.1)
+        out = rtu_reply(faults, frame, byte_time_ns(baud), rtu_frame)
+        at = max(now + out.late, self._reply_free_at)        # replies go out in order
+        for pause, piece in out.pieces:
+            at += pause
+            if at <= now:
+                self.device.host_line.write(piece)
+            else:
+                self.kernel.schedule_at(at, partial(self.device.host_line.write, piece),
+                                        priority=PRIO_IO, name="modbus-rtu fault")
+        self._reply_free_at = at
 
     def _look_for_escape(self, frame: bytes) -> None:
         """5.6.9: nine F in a row (across dropped frames) leave Modbus mode for now."""

@@ -20,6 +20,8 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
+from ...device.wire.chain import cut_from
+from .faults import refusal
 from .registers import CML_COMMAND, CML_COMMAND_MODBUS, LONG, MotorMap, RegisterError, long_of
 
 if TYPE_CHECKING:
@@ -136,14 +138,25 @@ class ModbusSlave:
         motor = table.get(unit)
         return [] if motor is None else [motor]
 
+    def _reached(self, motors: list[int]) -> list[int]:
+        """The motors a request reaches: not one powered off or beyond a broken link
+        (the chain's wire faults; the request travels the chain from COM0 of ID1)."""
+        cut = cut_from(self.device.wire_faults)
+        return [m for m in motors if m < cut] if cut else motors
+
     # -- requests -----------------------------------------------------------------
     def handle(self, unit: int, pdu: bytes, *, tcp: bool = False) -> bytes | None:
         """The response PDU to ``pdu`` sent to ``unit``, or ``None`` for no reply."""
-        motors = self.targets(unit, tcp=tcp)
+        motors = self._reached(self.targets(unit, tcp=tcp))
         if not motors or not pdu or pdu[0] & 0x80:
             if motors:
                 self.dropped += 1
             return None
+        if unit != BROADCAST:       # a wire fault may answer it instead (docs/wire-faults.md)
+            refused, answer = refusal(self.device.wire_faults,
+                                      "modbus-tcp" if tcp else "modbus-rtu", pdu)
+            if refused:
+                return answer
         self.requests += 1
         reply: bytes | None = None
         for motor in motors:

@@ -48,6 +48,7 @@ from .cip.producer import Producer
 from .cip.router import Router
 from .cm1.adapter import Cm1Module
 from .cm1.objects import DESCRIPTION, ObjectModel
+from .faults import EnipFaults
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +102,7 @@ class EnipTransport(StreamServer):
         self.producer: Producer | None = None
         self._io_sock: socket.socket | None = None
         self.objects: ObjectModel | None = None
+        self.faults: EnipFaults | None = None
         #: When each TCP connection last brought a whole encapsulation packet (monotonic s).
         self._last_packet: dict[asyncio.StreamWriter, float] = {}
         self.idle_closed = 0
@@ -113,6 +115,9 @@ class EnipTransport(StreamServer):
             raise TransportError("enip: no device behind this port")
         self.module = Cm1Module(device, self.motor)
         self.table = ConnectionTable(self.module, DESCRIPTION, self.host, 0, port.call)
+        self.faults = EnipFaults(device, port.call)         # docs/wire-faults.md
+        self.table.open_check = self.faults.check_open
+        self.table.t2o_lost = self.faults.lose_t2o
         objects = ObjectModel(self.module, host=self.host,
                               output_owned=lambda: self.table is not None
                               and self.table.owner is not None, reset=self._reset)
@@ -270,6 +275,8 @@ class EnipTransport(StreamServer):
 
     def _io_datagram(self, data: bytes, addr: tuple[str, int]) -> None:
         assert self.table is not None
+        if self.faults is not None and self.faults.lose_o2t(data):
+            return                        # lost on the wire: the watchdog runs on
         with self.lock:
             _accepted, output = self.table.accept(data, addr[0], time.monotonic_ns())
         if output is not None:          # the model's work, without the producer's lock
@@ -285,6 +292,8 @@ class EnipTransport(StreamServer):
                 gone = self.table.expire(time.monotonic_ns())
             if gone and self.producer is not None:
                 self.producer.wake()
+            if gone and self.faults is not None:
+                self.faults.timed_out(gone)
             self._close_idle(time.monotonic())
         except Exception:  # the watchdogs must go on whatever one connection did
             log.exception("enip: I/O watchdog failed")

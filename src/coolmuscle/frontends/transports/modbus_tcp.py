@@ -34,9 +34,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections import deque
+from functools import partial
 
+from ...chain.firmware_modbus.faults import tcp_reply
 from ...device.api import Device
 from ...errors import TransportError
+from ...sim.kernel import PRIO_REPORT, Kernel
 from .base import DEFAULT_MAX_BUFFER, Port
 from .lograte import LogLimiter
 from .stream_server import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CLIENTS, StreamServer
@@ -88,6 +92,7 @@ class ModbusTcpTransport(StreamServer):
     async def serve_connection(self, reader: asyncio.StreamReader,
                                writer: asyncio.StreamWriter, peer: str) -> None:
         buf = bytearray()
+        outbox = _Outbox(writer)
         while True:
             data = await reader.read(READ_SIZE)
             if not data:
@@ -97,12 +102,11 @@ class ModbusTcpTransport(StreamServer):
                 if writer.transport.is_closing():
                     return                     # reset or closed: answer it no more
                 before = self.requests
-                out, ok, more = self._take_adus(buf)
+                out, ok, more = self._take_adus(buf, outbox)
                 if self.requests != before:
                     self.request_seen(writer)
                 if out:
-                    if not self.send(writer, bytes(out)):
-                        return
+                    outbox.send(bytes(out))    # after any reply a wire fault holds
                     if writer.transport.get_write_buffer_size() > self.max_buffer:
                         await writer.drain()   # it does not read: read no more of it
                 if not ok or not more:
@@ -114,10 +118,12 @@ class ModbusTcpTransport(StreamServer):
                                    "closed", peer)
                 break
 
-    def _take_adus(self, buf: bytearray) -> tuple[bytearray, bool, bool]:
+    def _take_adus(self, buf: bytearray,
+                   outbox: _Outbox | None = None) -> tuple[bytearray, bool, bool]:
         """Answer the complete ADUs at the start of ``buf`` (consumed) within the
         per-wake-up budget; ``ok`` is ``False`` when the stream lost its framing,
-        ``more`` is ``True`` when the budget ran out before the complete ADUs did."""
+        ``more`` is ``True`` when the budget ran out before the complete ADUs did.
+        A reply a wire fault holds back goes to ``outbox`` (after the ones before it)."""
         out = bytearray()
         budget = MAX_ADUS_PER_WAKE
         deadline = time.perf_counter() + MAX_SECONDS_PER_WAKE
@@ -137,9 +143,31 @@ class ModbusTcpTransport(StreamServer):
                 continue   # not Modbus (protocol id 0)
             self.requests += 1
             reply = self._answer(adu[6], adu[7:])
-            if reply:
-                out += adu[0:4] + (len(reply) + 1).to_bytes(2, "big") + adu[6:7] + reply
+            if not reply:
+                continue
+            answer = adu[0:4] + (len(reply) + 1).to_bytes(2, "big") + adu[6:7] + reply
+            if self._device is not None and self._device.wire_faults.live("modbus-tcp"):
+                answer, late = self._fault(answer)
+                if late and outbox is not None:
+                    outbox.send(bytes(out))
+                    out.clear()
+                    self._hold(outbox, answer, late)
+                    continue
+            out += answer
         return out, True, False
+
+    def _fault(self, answer: bytes) -> tuple[bytes, int]:
+        """The reply as the ``modbus-tcp`` wire faults make it, and how late (ns)."""
+        assert self.port is not None and self._device is not None
+        faults = self._device.wire_faults
+        fate = self.port.call(tcp_reply, faults, answer[6], answer)
+        return answer[:6] + bytes((fate.unit,)) + answer[7:], fate.late
+
+    def _hold(self, outbox: _Outbox, answer: bytes, late: int) -> None:
+        """Send ``answer`` ``late`` ns of virtual time from now (the kernel's event)."""
+        assert self.port is not None and self._device is not None
+        kernel = self._device.kernel
+        self.port.call(lambda: outbox.hold(kernel, answer, kernel.now + late))
 
     def _answer(self, unit: int, pdu: bytes) -> bytes | None:
         assert self.port is not None
@@ -154,3 +182,41 @@ class ModbusTcpTransport(StreamServer):
     def _handle(self, unit: int, pdu: bytes) -> bytes | None:
         assert self._device is not None
         return self._device.modbus_request(unit, pdu, tcp=True)
+
+
+class _Outbox:
+    """One connection's replies in order: a reply a wire fault holds back (``late``)
+    holds the ones after it too, as bytes on one TCP stream do."""
+
+    def __init__(self, writer: asyncio.StreamWriter) -> None:
+        self.writer = writer
+        #: replies not yet written, in order; ``[None]`` a place held for a late one
+        self._queue: deque[list[bytes | None]] = deque()
+        self._free_at = 0
+
+    def send(self, data: bytes) -> None:
+        if not data:
+            return
+        if self._queue:
+            self._queue.append([data])
+        else:
+            self._write(data)
+
+    def hold(self, kernel: Kernel, data: bytes, at: int) -> None:
+        """``data`` goes out at virtual time ``at``, and not before what is held."""
+        place: list[bytes | None] = [None]
+        self._queue.append(place)
+        self._free_at = at = max(at, self._free_at)
+        kernel.schedule_at(at, partial(self._ready, place, data), priority=PRIO_REPORT,
+                           name="modbus-tcp fault")
+
+    def _ready(self, place: list[bytes | None], data: bytes) -> None:
+        place[0] = data
+        while self._queue and self._queue[0][0] is not None:
+            ready = self._queue.popleft()[0]
+            if ready is not None:
+                self._write(ready)
+
+    def _write(self, data: bytes) -> None:
+        if not self.writer.transport.is_closing():
+            self.writer.write(data)

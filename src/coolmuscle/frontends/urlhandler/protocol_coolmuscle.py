@@ -9,6 +9,8 @@ options:
 - ``motors=N``                   motors on the chain, 1..15 (default 1)
 - ``firmware=cm2|rt3|cm1``       firmware profile (default cm2)
 - ``state=PATH``                 state directory of the persistent store (default: none)
+- ``machine=PATH``               a machine file installed before power-up
+  (docs/machine-file.md): the load, sensors, faults, and wire faults (docs/wire-faults.md)
 - ``mode=realtime|fast``         ``realtime`` (default): virtual time follows the wall
   clock while the port is used.  ``fast``: virtual time moves only inside ``read``:
   a read with timeout T advances virtual time by up to T instantly, stopping as soon
@@ -59,7 +61,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("coolmuscle.frontends.urlhandler")
 
-URL_FORMAT = ("coolmuscle://[?motors=N][&firmware=cm2|rt3|cm1][&state=PATH]"
+URL_FORMAT = ("coolmuscle://[?motors=N][&firmware=cm2|rt3|cm1][&state=PATH][&machine=PATH]"
               "[&mode=realtime|fast][&pacing=on|off][&scale=X]"
               "[&logging=debug|info|warning|error]")
 
@@ -72,13 +74,16 @@ _BOOL = {"on": True, "1": True, "true": True, "yes": True,
 
 
 def _default_chain_factory(kernel: Kernel | None, motors: int, *, firmware: str,
-                           state_dir: Path | None, pacing: bool) -> Device:
+                           state_dir: Path | None, pacing: bool,
+                           machine: Path | None = None) -> Device:
     from ...chain.daisy import Chain
-    return Chain(kernel, motors, firmware=firmware, state_dir=state_dir, pacing=pacing)
+    return Chain(kernel, motors, firmware=firmware, state_dir=state_dir, pacing=pacing,
+                 machine=machine)
 
 
 #: Builds the chain behind each port: ``factory(kernel, motors, firmware=..., state_dir=...,
-#: pacing=...)``.  Tests and embedders may replace it.
+#: pacing=...)`` (and ``machine=...`` when the URL names one).  Tests and embedders may
+#: replace it.
 chain_factory: Callable[..., Device] = _default_chain_factory
 
 
@@ -92,7 +97,7 @@ def parse_url(url: str) -> dict[str, Any]:
         raise bad(f"not starting with coolmuscle:// ({parts.scheme!r})")
     if parts.netloc or parts.path not in ("", "/"):
         raise bad(f"unexpected {parts.netloc + parts.path!r} before '?'")
-    options: dict[str, Any] = {"motors": 1, "firmware": "cm2", "state": None,
+    options: dict[str, Any] = {"motors": 1, "firmware": "cm2", "state": None, "machine": None,
                                "mode": "realtime", "pacing": False, "scale": 1.0,
                                "logging": None}
     try:
@@ -113,6 +118,10 @@ def parse_url(url: str) -> dict[str, Any]:
             if not value:
                 raise bad("state needs a directory")
             options["state"] = Path(value).expanduser()
+        elif option == "machine":
+            if not value:
+                raise bad("machine needs a file")
+            options["machine"] = Path(value).expanduser()
         elif option == "mode":
             if value not in MODES:
                 raise bad(f"unknown mode {value!r}")
@@ -183,10 +192,11 @@ class Serial(SerialBase):
                 options["state"].mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise SerialException(f"coolmuscle: cannot use state directory: {exc}") from exc
+        extra = {"machine": options["machine"]} if options["machine"] is not None else {}
         try:
             chain = self._given_chain or chain_factory(
                 None, options["motors"], firmware=options["firmware"],
-                state_dir=options["state"], pacing=options["pacing"])
+                state_dir=options["state"], pacing=options["pacing"], **extra)
         except (CoolMuscleError, OSError, ValueError) as exc:
             raise SerialException(f"coolmuscle: cannot start the virtual chain: {exc}") from exc
         with self._cond:

@@ -17,7 +17,8 @@ from typing import Any, Final, Literal
 
 from ...sim.kernel import to_seconds
 
-Direction = Literal[">", "<"]
+#: ``>`` sent, ``<`` received, ``#`` a note (a wire fault, docs/wire-faults.md)
+Direction = Literal[">", "<", "#"]
 
 #: Bytes that :func:`escape` shows as themselves: printable ASCII but the backslash.
 _PLAIN: Final = re.compile(rb"[\x20-\x5b\x5d-\x7e]*")
@@ -95,7 +96,8 @@ def seconds_text(ns: int) -> str:
 
 @dataclass(frozen=True, init=False)
 class TranscriptEntry:
-    """One line sent (``>``) or received (``<``) at virtual time ``time`` (ns)."""
+    """One line sent (``>``), received (``<``) or noted (``#``: a wire fault) at virtual
+    time ``time`` (ns)."""
 
     time: int
     direction: Direction
@@ -119,7 +121,10 @@ class TranscriptEntry:
         return TranscriptEntry, (self.time, self.direction, self.data, self.line_no)
 
     def format(self) -> str:
-        """``   1.100000 < Ux.1=8``: seconds, direction, bytes without their line end."""
+        """``   1.100000 < Ux.1=8``: seconds, direction, bytes without their line end (a
+        ``#`` note as its text)."""
+        if self.direction == "#":
+            return f"{seconds_text(self.time)} # {self.data.decode('utf-8', 'replace')}"
         return f"{seconds_text(self.time)} {self.direction} {escape(strip_end(self.data))}"
 
 
@@ -239,6 +244,11 @@ class Recorder:
     def sent(self, entry: TranscriptEntry) -> None:
         self.flush_held()
         self.emit(entry)
+
+    def note(self, text: str) -> None:
+        """A ``#`` entry now: what a wire fault did to the bytes (after what came before)."""
+        self.flush_held()
+        self.emit(TranscriptEntry(self.kernel.now, "#", text.encode("utf-8", "replace")))
 
     def finish(self) -> None:
         self.flush_held()

@@ -7,7 +7,8 @@ This module owns:
   ``@input [ID.]N on|off``, ``@analog [ID] COUNTS`` and expectations ``<< BYTES``
   (escapes ``\\r \\n \\t \\0 \\e \\\\ \\xNN``);
 * running a script against a chain in fast (unpaced, deterministic) virtual time,
-  producing a timestamped transcript of every line sent and received;
+  producing a timestamped transcript of every line sent and received, and of what each
+  wire fault did (``#`` entries, docs/wire-faults.md);
 * checking the received byte stream against the expectations, in order, byte for
   byte, and reporting the first mismatch with context;
 * recording a run back as a golden transcript (:meth:`RunResult.to_script`).
@@ -454,6 +455,8 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
     remove = host_line.add_listener(recorder.on_bytes)
     golden = GoldenWriter(script, record) if record is not None else None
     unrecord = host_line.add_listener(golden.received) if golden is not None else None
+    unsubscribe = chain.subscribe(lambda event: recorder.note(event.text)
+                                  if event.kind == "wire" else None)
     failure: Failure | None = None
     exception: BaseException | None = None
     marks: list[tuple[int, int]] = []
@@ -518,6 +521,7 @@ def run_script(source: str | os.PathLike[str] | Script, chain: Device, *,
             failure = checker.leftover(recorder.received, kernel.now)
     finally:
         remove()
+        unsubscribe()
         recorder.finish()
         if golden is not None and unrecord is not None:
             unrecord()

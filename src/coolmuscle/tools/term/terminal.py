@@ -6,7 +6,10 @@ motor says appears as it arrives, also between lines you type, in colour:
 * replies (``Px.1=10000``) green, K23 reports (``Ux.1=8`` with its flags decoded,
   ``IN.1=``, ``OUT.1=``) cyan, messages (``saved.1``, ``End.1``) yellow, errors
   (``error01.1: syntax error!!``, no answer, a lost connection) red, unreadable bytes
-  magenta.  The echo is not shown twice: you see what you typed at the prompt.
+  magenta.  The echo is not shown twice: you see what you typed at the prompt.  A
+  query whose reply does not come within the timeout (``--timeout``, 1 s) is said so
+  (``no reply to '?96.1' within 1 s``), and a line whose echo does not come either
+  (the line is down).
 
 Line editing and history come from prompt_toolkit (the ``term`` extra; history kept in
 ``$XDG_STATE_HOME/coolmuscle/term_history``).  When the input is not a terminal (a
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import shlex
 import sys
 from collections.abc import Callable
@@ -53,6 +57,9 @@ __all__ = ["run_term", "STYLES", "HELP"]
 STYLES = {"reply": "ansigreen", "status": "ansicyan", "input": "ansicyan",
           "output": "ansicyan", "message": "ansiyellow", "error": "ansired",
           "garbled": "ansimagenta", "info": "ansiblue"}
+
+#: A line the motor answers with a reply: a query (6.6) or a K parameter read alone.
+_ASKS = re.compile(r"\s*(\?|K\d+(\.\d+)?\s*$)", re.IGNORECASE)
 
 HELP = """commands: :send FILE.cml   :save [ID]   :log FILE | :log off   :motor ID
           :help   :quit (or Ctrl-D); anything else is sent to the motor as typed"""
@@ -99,17 +106,28 @@ def describe(event: MotorEvent) -> tuple[str, str]:
 class Terminal:
     """One terminal session on one connection."""
 
-    def __init__(self, client: AsyncCoolMuscle, url: str, show: Show = show) -> None:
+    def __init__(self, client: AsyncCoolMuscle, url: str, show: Show = show,
+                 timeout: float = 1.0) -> None:
         self.client = client
         self.url = url
         self.motor = client.id
         self.show = show
+        self.timeout = timeout
         self.recorder: TranscriptRecorder | None = None
         self._untap: Callable[[], None] | None = None
         #: The loop time of the last line the motor said or the terminal sent.
         self.last_activity = 0.0
         #: why the connection was lost (``None``: it works)
         self.lost: BaseException | None = None
+        self.lines_in = 0             # line ends received, echoes too
+        self.events_in = 0            # lines received that are not an echo
+        #: lines whose echo or reply is still awaited (:meth:`_watch`)
+        self.watching = 0
+        client.add_tap(self._count)
+
+    def _count(self, direction: str, data: bytes) -> None:
+        if direction == "<":
+            self.lines_in += data.count(b"\r")       # K70: CR or CR LF (ch. 3)
 
     def _touch(self) -> None:
         try:
@@ -119,6 +137,7 @@ class Terminal:
 
     def on_event(self, event: MotorEvent) -> None:
         self._touch()
+        self.events_in += 1
         text, style = describe(event)
         self.show(text, style)
 
@@ -136,7 +155,31 @@ class Terminal:
         except TransportError as exc:
             self.connection_lost(exc)
             return False
+        self._watch(line)
         return True
+
+    def _watch(self, line: str) -> None:
+        """Say so when what a line brings does not come within the timeout: its echo
+        (once the motor is known to echo, ch. 3 K23 8) and, for a query, its reply
+        (a dropped reply, a dead line: docs/wire-faults.md)."""
+        echo = self.client.echo is True
+        query = bool(_ASKS.match(line))
+        if echo or query:
+            self.watching += 1
+            asyncio.get_running_loop().call_later(self.timeout, self._check, line,
+                                                  self.lines_in, self.events_in, query, echo)
+
+    def _check(self, line: str, lines: int, events: int, query: bool, echo: bool) -> None:
+        """``lines``, ``events``: the counts when ``line`` was sent.  The echo is no
+        event (the client knows it), so a reply is an event; any line end is a line."""
+        self.watching -= 1
+        if self.lost is not None:
+            return
+        if echo and self.lines_in == lines:
+            self.show(f"no answer to {line!r} within {self.timeout:g} s, not even its "
+                      "echo: is the line down?", "error")
+        elif query and self.events_in == events:
+            self.show(f"no reply to {line!r} within {self.timeout:g} s", "error")
 
     def connection_lost(self, error: BaseException) -> None:
         """The port failed: said once, in red; the session ends (exit status 1)."""
@@ -222,12 +265,13 @@ class Terminal:
             self.log("off")
 
 
-async def _session(client: AsyncCoolMuscle, url: str, history: History) -> Terminal:
+async def _session(client: AsyncCoolMuscle, url: str, history: History,
+                   timeout: float = 1.0) -> Terminal:
     """On a terminal: prompt_toolkit's prompt, history and colours."""
     from prompt_toolkit import PromptSession
     from prompt_toolkit.patch_stdout import patch_stdout
 
-    term = Terminal(client, url)
+    term = Terminal(client, url, timeout=timeout)
     client.subscribe(term.on_event)
     prompt: PromptSession[str] = PromptSession(history=history)
 
@@ -255,8 +299,9 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History) -> Termi
 
 async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Terminal:
     """Input from a file or a pipe: each line sent as it is read; at the end of the input
-    (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds."""
-    term = Terminal(client, url, show=show_plain)
+    (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds and every
+    line's echo or reply came or was said missing."""
+    term = Terminal(client, url, show=show_plain, timeout=quiet)
     client.subscribe(term.on_event)
     client.add_failure_listener(term.connection_lost)
     loop = asyncio.get_running_loop()
@@ -266,8 +311,9 @@ async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Ter
             line = await asyncio.to_thread(sys.stdin.readline)
             if not line or not await term.handle(line.rstrip("\r\n")):
                 break
-        while term.lost is None and (left := term.last_activity + quiet - loop.time()) > 0:
-            await asyncio.sleep(min(left, 0.05))
+        while term.lost is None and ((left := term.last_activity + quiet - loop.time()) > 0
+                                     or term.watching):
+            await asyncio.sleep(min(max(left, 0.0), 0.05) or 0.01)
     finally:
         term.close()
     return term
@@ -307,7 +353,7 @@ async def run_term(url: str, *, baudrate: int = 38400, motor: int = 1,
             client.add_tap(recorder.tap)
         try:
             if store is not None:
-                term = await _session(client, url, store)
+                term = await _session(client, url, store, timeout)
             else:
                 term = await _plain_session(client, url, timeout)
         finally:

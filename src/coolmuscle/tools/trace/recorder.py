@@ -43,7 +43,7 @@ FIELDS = ("target", "command", "position", "speed", "torque", "status", "inputs"
 MAX_EDGE_SAMPLES = 200_000
 
 #: Columns holding whole numbers (Parquet int64); the others are float64.
-INTEGER_FIELDS = frozenset({"status", "inputs", "outputs", "analog_in", "encoder"})
+INTEGER_FIELDS = frozenset({"status", "inputs", "outputs", "analog_in", "encoder", "wire"})
 
 
 class TraceFormatError(ValueError):
@@ -93,6 +93,7 @@ class TraceRecorder:
             times.update(trace.state_times())
             times.update(trace.piece_starts())
             times.update(trace.pulse_edges(self.start, end)[:MAX_EDGE_SAMPLES])
+        times.update(self.feed.wire_times())
         return sorted(times)
 
     def sample(self, motor_id: int, t: int) -> Sample:
@@ -114,10 +115,15 @@ class TraceRecorder:
             row: list[float] = [t / NS_PER_S]
             for trace in self.traces.values():
                 row.extend(trace.sample(t).row())
+            if self.feed.wire_column:
+                row.append(self.feed.wire_count(t))
             yield row
 
     def header(self) -> list[str]:
-        return ["time_s"] + [f"m{mid}.{f}" for mid in self.traces for f in FIELDS]
+        """``time_s``, each motor's FIELDS, and ``wire`` (what the wire faults did so
+        far, docs/wire-faults.md) when a wire fault was installed as recording began."""
+        wire = ["wire"] if self.feed.wire_column else []
+        return ["time_s"] + [f"m{mid}.{f}" for mid in self.traces for f in FIELDS] + wire
 
     def write(self, path: str | Path, step: float = 0.001) -> Path:
         """Write the trace: Parquet for a ``.parquet`` path (pyarrow), else CSV."""
@@ -371,6 +377,9 @@ class TraceStream:
         row: list[float] = [t / NS_PER_S]
         for values in samples:
             row.extend(values)
+        feed = self.recorder.feed
+        if feed.wire_column:
+            row.append(feed.wire_count(t))
         self.rows_written += 1
         if self._parquet:
             for column, value in zip(self._columns, row):
@@ -400,6 +409,7 @@ class TraceStream:
             if end > a:
                 times.update(trace.pulse_edges(a, end)[:MAX_EDGE_SAMPLES])
             times.update(t for t in trace.analog_times() if t >= a)
+        times.update(t for t in self.recorder.feed.wire_times() if t >= a)
         return times
 
     # -- bounded memory ---------------------------------------------------------------
@@ -407,6 +417,7 @@ class TraceStream:
         """Forget what only rows before ``upto`` needed (keep what covers ``upto``)."""
         for trace in self.recorder.traces.values():
             trace.forget_before(upto)
+        self.recorder.feed.forget_wire_before(upto)
 
     def _flush_parquet(self, final: bool = False) -> None:
         if not final and len(self._columns[0]) < PARQUET_ROWS:

@@ -11,8 +11,8 @@ every request asks the motor over the line (user's requests before the poll):
   client's upload with read-back (:func:`coolmuscle.client.banks.upload`), as ``coolmuscle
   upload`` does;
 * the desk's (:mod:`.deskpage`): the K editor, the buttons, scan, backup, restore;
-* inputs, the analog input, faults and the trace recorder belong to a virtual motor:
-  refused with a line that says so.
+* inputs, the analog input, faults, wire faults and the trace recorder belong to a
+  virtual motor: refused with a line that says so.
 
 With a twin (:mod:`.twin`) the snapshot rows carry the virtual motor's position, speed
 and torque beside the real ones, and the page hears each difference beyond the
@@ -51,6 +51,9 @@ _VIRTUAL_ONLY = {
              "(K23 2 reports, ?70)",
     "analog": "the analog input of a real motor is wired (?74 reads it)",
     "fault": "faults are injected into a virtual motor only",
+    "wire_fault": "wire faults are injected into a virtual motor's doors only",
+    "wire_clear": "wire faults are injected into a virtual motor's doors only",
+    "wire_faults": "wire faults are injected into a virtual motor's doors only",
     "record": "the trace recorder records a virtual chain; with --twin, Save capture "
               "keeps the session",
 }
@@ -130,7 +133,7 @@ class LinePage(WebTransport):
         return {"t": "hello", "motors": list(line.motor_ids), "firmware": firmware.name,
                 "title": self.title, "time": line.kernel.now, "fields": fields,
                 "io": {"inputs": firmware.inputs, "outputs": firmware.outputs},
-                "faults": {}, "log": list(self.hub.history),
+                "faults": {}, "wire": None, "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()), "recording": False,
                 "line": self.line_info()}
 

@@ -39,6 +39,7 @@ from .downloads import Downloads
 from .hub import SNAP_FIELDS, Client, Hub
 from .traces import FORGET_EVERY_S, forget_old, start_recording
 from .turns import Turns
+from .wirefaults import WirePanel, vocabulary
 
 with needs_extra("web", "the web page"):
     from aiohttp import WSMsgType, web
@@ -119,7 +120,8 @@ class WebTransport(Transport):
         self.port, self._device = port, device
         self.hub = Hub(device, port.call)
         self.actions = Actions(device, port.call, self.hub.add_log,
-                               {"record": self._record_request})
+                               {"record": self._record_request,
+                                **WirePanel(device, port.call).handlers()})
         self.desk = Desk(ChainRunner(port, device, self.hub.add_log), self.hub.add_log,
                          lambda: device.kernel.now)
         self.turns = Turns(self._handle)
@@ -272,7 +274,8 @@ class WebTransport(Transport):
         return {"t": "hello", "motors": list(device.motor_ids),
                 "firmware": firmware.name if firmware else "",
                 "title": self.title, "time": device.kernel.now, "fields": SNAP_FIELDS,
-                "io": counts, "faults": FAULTS, "log": list(self.hub.history),
+                "io": counts, "faults": FAULTS, "wire": vocabulary(),
+                "log": list(self.hub.history),
                 "snap": json.loads(self.hub.snapshot_frame()),
                 "recording": self._recorder is not None, "line": self.line_info()}
 

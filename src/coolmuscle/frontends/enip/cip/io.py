@@ -17,7 +17,8 @@ is its :class:`~.description.AdapterDescription`; what it drives is a :class:`Mo
   exact size and a sequence number newer than the last (modulo 2^32); an unchanged
   CIP sequence count is not new data.  Each accepted packet restarts the
   inactivity watchdog: O->T RPI × 4·2^multiplier.  On expiry the connection closes,
-  production stops and the module's outputs go back to their power-up image.
+  production stops, the module's outputs go back to their power-up image and its
+  I/O state is "faulted" until a connection opens again (Identity extended status 2).
 * Class 3 (explicit, to the Message Router) connections belong to the TCP session
   that opened them; a repeated sequence count gets the previous reply again.
 * Each kind has its own limit (the description's ``max_io_connections`` and
@@ -82,6 +83,8 @@ class Connection:
     last_reply: tuple[int, bytes] | None = None
     packets_in: int = 0
     packets_out: int = 0
+    #: the next T->O packet is lost on the way (:attr:`ConnectionTable.t2o_lost`)
+    lose_next: bool = False
 
     @property
     def io(self) -> bool:
@@ -153,6 +156,13 @@ class ConnectionTable:
         self._next_id = 0x5A00_0000 ^ (id(self) & 0x00FF_FFF0)
         self.timeouts = 0
         self.dropped = 0
+        self.lost = 0
+        #: Asked before a Forward_Open is served: raises ``CipError`` to refuse it (the
+        #: product's wire faults); ``None``: every open is judged on its own merits.
+        self.open_check: Callable[[connmgr.OpenRequest], None] | None = None
+        #: Asked at each refresh, in the model's thread: whether the next T->O packet of
+        #: a connection is lost on the wire (it is produced and counted, not sent).
+        self.t2o_lost: Callable[[Connection], bool] | None = None
         #: The input image productions send; refreshed by the loop (:meth:`refresh`).
         self.image = bytes(adapter.connection.input_size)
 
@@ -174,6 +184,8 @@ class ConnectionTable:
         """Forward_Open: the reply body and the CPF items to send with it."""
         if req.triad in self.by_triad:
             raise req.failure(connmgr.DUPLICATE)
+        if self.open_check is not None:
+            self.open_check(req)
         if req.transport_class == 3:
             connmgr.check_class3(req, self.adapter.identity)
             if self.count(io=False) >= self.adapter.max_msg_connections:
@@ -300,8 +312,14 @@ class ConnectionTable:
         self.call(self.module.write_output, body, run)
 
     def refresh(self) -> None:
-        """Read the input image from the module (the model's thread only)."""
+        """Read the input image from the module (the model's thread only); ask which
+        connections lose their next T->O packet."""
         self.image = bytes(self.call(self.module.input_image))
+        lost = self.t2o_lost
+        if lost is not None:
+            for conn in list(self.by_triad.values()):
+                if conn.io and not conn.lose_next:
+                    conn.lose_next = lost(conn)
 
     def next_production(self) -> int | None:
         """The earliest T->O production instant (ns), ``None`` without class 1."""
@@ -315,7 +333,12 @@ class ConnectionTable:
         for conn in list(self.by_triad.values()):
             if not conn.io or conn.to_addr is None or now < conn.next_due:
                 continue
-            out.append((self._packet(conn, self.image), conn.to_addr))
+            packet = self._packet(conn, self.image)
+            if conn.lose_next:              # produced, lost on the way
+                conn.lose_next = False
+                self.lost += 1
+            else:
+                out.append((packet, conn.to_addr))
             rpi = conn.to_rpi_ns
             conn.next_due += rpi
             if conn.next_due <= now:                 # more than one RPI late: no burst
@@ -337,6 +360,8 @@ class ConnectionTable:
             self.timeouts += 1
             log.info("enip: connection %08X timed out", conn.ot_id)
             self._drop(conn)
+            if conn.io:           # Identity status: a faulted I/O connection (CIP 5A-2.2)
+                self.module.io_state = "faulted"
         return gone
 
     def next_watchdog(self) -> int | None:

@@ -84,10 +84,12 @@ class Producer(threading.Thread):
                 self._wake.clear()
                 continue
             with self.lock:
+                lost = self.table.lost
                 packets = self.table.due(time.monotonic_ns())
+                produced = bool(packets) or self.table.lost != lost   # sent or lost
             for packet, addr in packets:
                 self._send(packet, addr)
-            if packets:
+            if produced:
                 self.refresh()
 
     def _send(self, packet: bytes, addr: tuple[str, int]) -> None:

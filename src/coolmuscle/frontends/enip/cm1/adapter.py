@@ -19,8 +19,9 @@ moves a motor itself.
 * Communication error code (3.1.1): bit 0 when the motor refused a value (an
   ``OutOfRangeError`` of the device API), bit 1 when the serial line timed out after
   working, bit 2 when it never worked; the last two come from
-  :meth:`Cm1Module.serial_fault`, the module's own link (the motor model has no
-  serial fault of its own; ``errors`` there sets bit 0 until cleared).  While the
+  :meth:`Cm1Module.serial_fault`, the module's own link, or from the device's wire
+  faults (the ``enip`` door's ``serial_link``; the motor powered off times the line
+  out; ``errors`` sets bit 0 until cleared).  While the
   line is faulted the input image keeps its last motor values and writes are not
   delivered.
 
@@ -35,6 +36,7 @@ from collections.abc import Callable
 from typing import Any, Literal
 
 from ....device import Device
+from ....device.wire.chain import cut_from
 from ....errors import CoolMuscleError
 from ..cip.io import IoState
 
@@ -50,6 +52,9 @@ ERR_NEVER = 0x0004
 
 SerialState = Literal["ok", "errors", "timeout", "absent"]
 
+_SERIAL_STATES: dict[str, SerialState] = {"timeout": "timeout", "absent": "absent",
+                                          "errors": "errors"}
+
 #: Control word value -> the CML action sent to the motor (3.2.3).
 ACTIONS = {3: "(", 4: ")", 5: "|"}
 
@@ -64,11 +69,27 @@ class Cm1Module:
         self._acted_control = 0
         self._acted_k52 = 0
         self._refused = False
-        self.serial: SerialState = "ok"
+        self._serial: SerialState = "ok"      # set by serial_fault()
         self.header_run = True
         self.io_state: IoState = "none"
         self._last = (0, 0)
         self.commands = 0
+
+    @property
+    def serial(self) -> SerialState:
+        """The module's serial link to the motor now: a wire fault of the ``enip`` door
+        (``serial_link``), the motor cut off by the chain's faults (powered off: the
+        line times out), else what :meth:`serial_fault` set (docs/wire-faults.md)."""
+        faults = self.device.wire_faults
+        if faults.live("enip"):
+            fault = faults.lasting("enip", "serial_link")
+            if fault is not None:
+                return _SERIAL_STATES[str(fault.params["state"])]
+        if faults.live("chain"):
+            cut = cut_from(faults)
+            if cut and self.motor >= cut:
+                return "timeout"
+        return self._serial
 
     # -- the images ----------------------------------------------------------------------
     def input_image(self) -> bytes:
@@ -167,6 +188,6 @@ class Cm1Module:
         ``absent`` (3.1.1 bits 0, 1, 2)."""
         if state not in ("ok", "errors", "timeout", "absent"):
             raise ValueError(f"unknown serial state {state!r}")
-        self.serial = state
+        self._serial = state
         if state == "ok":
             self._refused = False

@@ -181,6 +181,7 @@
     if (!same || redo || !state.cards.size) buildMotors(msg.motors);
     desk.hello(msg);
     if (!$("faults").childElementCount) buildFaults(msg.faults);
+    if (msg.wire && !$("wire-door").options.length) wire.build(msg.wire);
     if (msg.time < state.lastTime) resetSeries();   // a restarted simulator
     $("log").textContent = "";
     onLog(msg.log, 0);
@@ -420,6 +421,7 @@
 
   const { setupBanks, buildFaults } = window.Coolmuscle.panels(
     { state, $, request, note, localNote });
+  const wire = window.Coolmuscle.wirePanel({ $, request, note });    // wire.js
   const desk = window.Coolmuscle.desk({ state, $, request, note, localNote });
 
   // -- downloads ---------------------------------------------------------------------------

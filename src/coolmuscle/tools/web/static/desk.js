@@ -28,6 +28,7 @@ window.Coolmuscle.desk = function ({ state, $, request, note, localNote }) {
     document.body.classList.toggle("real", real);
     $("vtime-label").textContent = real ? "time" : "virtual time";
     $("faults-panel").hidden = real;
+    $("wire-panel").hidden = real;
     $("trace-panel").hidden = real;
     // a real motor's inputs and analog input are wired: shown, not driven
     for (const el of document.querySelectorAll(".inputs .toggle, .a-range")) el.disabled = real;
