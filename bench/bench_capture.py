@@ -1,4 +1,4 @@
-"""Benchmark: what ``coolmuscle capture`` adds to a host program's line (issue 25).
+"""Benchmark: what ``coolmuscle capture`` adds to a host program's line.
 
 1. Latency.  ``coolmuscle sim --pace`` (bytes take their wire time at K20 = 38.4 kbps)
    stands in for the motor, ``coolmuscle capture`` relays to it and writes the capture
@@ -12,7 +12,7 @@
 2. Throughput.  A plain TCP peer stands in for the motor; 1 MiB of random bytes goes
    each way at once, straight and through the relay (which records every byte).
 
-Goal (issue 25): the relay adds at most 1 ms p99 per line at 38.4 kbps.  Runs about
+Goal: the relay adds at most 1 ms p99 per line at 38.4 kbps.  Runs about
 a minute and a half::
 
     PYTHONPATH=src python bench/bench_capture.py [--queries 1000] [--rounds 3]

@@ -1,4 +1,4 @@
-"""Kernel benchmark (issue 3 acceptance): simulated seconds per wall second.
+"""Kernel benchmark: simulated seconds per wall second.
 
 Run: ``PYTHONPATH=src python bench/bench_kernel.py`` (about 15-30 s).
 
@@ -46,7 +46,6 @@ from typing import Any
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.device.api import Event
 from coolmuscle.motor.motion.axis import Axis
-from coolmuscle.motor.motion.dynamics import clear_solutions, solution_reuse
 from coolmuscle.motor.motion.planner import Waypoint, limits_from_data, plan_moves
 from coolmuscle.motor.motion.profile import Profile, hold, stops_then_restarts
 from coolmuscle.motor.signals.analog_output import output_volts
@@ -96,12 +95,12 @@ class ClosedForm:
 
 
 class Afresh(ClosedForm):
-    """The closed form with every move solved afresh: the solved-motion cache
-    (coolmuscle.motor.motion.dynamics.clear_solutions) is emptied before each move, as if no two
-    moves of the machine were alike."""
+    """The closed form with every move planned and solved afresh: the chain's memos
+    (``Chain.motion_memos``, coolmuscle.motor.motion.dynamics.MotionMemos) are emptied
+    before each move, as if no two moves of the machine were alike."""
 
     def _go(self) -> None:
-        clear_solutions()
+        self.chain.motion_memos.clear()
         super()._go()
 
 
@@ -267,9 +266,9 @@ def main() -> int:
     samples = compare_traces()
     print(f"traces identical at all {samples} millisecond samples of {WINDOW_S} s "
           "(command, position, speed, torque, status, outputs, analog out)")
-    clear_solutions()
     wall_closed, closed = timed(ClosedForm, CLOSED_S)
-    hits, solves = solution_reuse()
+    assert isinstance(closed, ClosedForm)
+    hits, solves = closed.chain.motion_memos.reuse()
     wall_naive, naive = timed(Naive, NAIVE_S)
     assert isinstance(closed, ClosedForm)
     events = closed.chain.kernel.events_run
@@ -282,7 +281,7 @@ def main() -> int:
     print(f"naive 1 ms  : {NAIVE_S:>6} s simulated in {wall_naive:6.3f} s wall, "
           f"{naive.moves} moves, 1000 ticks a second -> {rt_naive:,.0f}x real time")
     print(f"              (repeated moves reuse their solution: {hits} reused, "
-          f"{solves} solved over the 3 runs)")
+          f"{solves} solved in one run, its own chain)")
     wall_fresh, _ = timed(Afresh, CLOSED_S / 4)
     rt_fresh = CLOSED_S / 4 / wall_fresh
     print(f"every move solved afresh: {CLOSED_S // 4:>6} s simulated in {wall_fresh:6.3f} s wall "

@@ -1,8 +1,8 @@
-"""Speed where users feel it (issues 18 and 26): every row of the table in one run.
+"""Speed where users feel it: every row of the table of goals in one run.
 
 Run: ``PYTHONPATH=src python bench/bench_speed.py [--baseline REF] [--repeat N] [--quick]
 [--only ROW,...]`` (five to ten minutes; ``--quick`` divides the simulated times by ten;
-``--only start`` measures the rows named, keys of :data:`ISSUE`; the first run also
+``--only start`` measures the rows named, keys of :data:`GOALS`; the first run also
 builds the baseline's compiled modules, a few minutes, kept in a cache).
 
 The machine of a user is seldom idle, so the bench starts **one competing CPU-bound
@@ -13,16 +13,17 @@ prints the load average before and after.
 Each row is measured on this tree twice, running its sources (``COOLMUSCLE_PURE=1``)
 and its compiled hot modules (coolmuscle/_accel.py; build them first with ``python -m
 coolmuscle.tools.accel build``), and, side by side in the same run, on the **previous
-tree** (``--baseline REF``, default :data:`BASELINE`: main before issue 26's work),
-extracted from git into a cache directory and compiled there as a user's install
-compiles it (``--baseline-sources``: run it as sources).  The trees take turns,
+tree** (``--baseline REF``, default :data:`BASELINE`: main before the goals with a
+competing process were worked on), extracted from git into a cache directory and
+compiled there as a user's install compiles it (``--baseline-sources``: run it as
+sources).  The trees take turns,
 ``--repeat`` times each, and the best (least disturbed) run of each is shown next to
 the goal.  Without git or the commit (``--baseline none``) the baseline column shows
-the figure issue 18 recorded.  Every figure comes from a fresh interpreter (the
+the figure recorded when the goals were set.  Every figure comes from a fresh interpreter (the
 ``coolmuscle`` command or :mod:`speed_worker`), with byte-compiled modules as an
 installed package has them.
 
-Rows (docs/performance.md; * marks the three goals issue 26 left open):
+Rows (docs/performance.md; * marks the three tightest goals):
 
 1. * ``coolmuscle run`` on a script whose one motor loops a PTP bank of 1.1 s moves,
    10 simulated hours (``--until 36000``): simulated time over the wall time of the
@@ -38,9 +39,10 @@ Rows (docs/performance.md; * marks the three goals issue 26 left open):
 5. The cost of one move through a program bank (planner, servo and load model,
    in-position, report, next line), in process, with kernel events and Python calls
    per move.
-6. * ``Chain.target_stream`` with a new target every 1 ms on 4 motors (csp, issue 12
-   item 9), in process: wall time per axis-cycle.  (The 4-axis bridge in csp, paced
-   to the wall clock, is bench_ethercat_csp.py.)
+6. * ``Chain.target_stream`` with a new target every 1 ms on 4 motors (cyclic
+   synchronous position of the EtherCAT bridge), in process: wall time per
+   axis-cycle.  (The 4-axis bridge in csp, paced to the wall clock, is
+   bench_ethercat_csp.py.)
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-#: main before issue 26's work: the previous tree.
+#: main before the goals with a competing process were worked on: the previous tree.
 BASELINE = "d0b6843"
 
 B2_SCRIPT = """\
@@ -201,10 +203,10 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="simulated times / 10")
     parser.add_argument("--alone", action="store_true",
                         help="no competing process (for comparison; goals are judged with it)")
-    parser.add_argument("--only", default=",".join(ISSUE),
-                        help=f"the rows to measure, comma-separated ({', '.join(ISSUE)})")
+    parser.add_argument("--only", default=",".join(GOALS),
+                        help=f"the rows to measure, comma-separated ({', '.join(GOALS)})")
     opts = parser.parse_args()
-    unknown = set(opts.only.split(",")) - set(ISSUE)
+    unknown = set(opts.only.split(",")) - set(GOALS)
     if unknown:
         parser.error(f"--only: unknown row {sorted(unknown)[0]!r}")
     scale = 0.1 if opts.quick else 1.0
@@ -223,9 +225,9 @@ def main() -> int:
         shutil.rmtree(work, ignore_errors=True)
 
 
-#: Each row: (label, recorded in issue 18 as "today", goal, unit, higher is better, open
-#: in issue 26).
-ISSUE = {
+#: Each row: (label, recorded when the goals were set, goal, unit, higher is better, one
+#: of the tightest goals).
+GOALS = {
     "run1": ("coolmuscle run, 1 motor PTP bank, 10 h", 4_500.0, 10_000.0, "x", True, True),
     "run15": ("coolmuscle run --motors 15, 600 s", 130.0, 1_000.0, "x", True, True),
     "run15ptp": ("coolmuscle run --motors 15, 1,000-15,000 pulses", 840.0, 1_000.0, "x",
@@ -307,16 +309,16 @@ def run(opts: argparse.Namespace, scale: float, work: Path, base_root: Path | No
 
     names = [t.name for t in trees]
     if len(trees) == 2:
-        names.insert(0, "today (issue 18)")
+        names.insert(0, "when the goals were set")
     competing = "alone (--alone)" if opts.alone else "one competing CPU-bound process running"
     print(f"best of {rep} runs each; simulated times x{scale:g}; {competing}; "
           f"load average {load} before, {_load()} after")
     if note:
         print(f"{names[0]}: {note}; gain = this tree compiled / {names[0]}")
-    print(f"{'row (* open in issue 26)':46} {names[0]:>18} {names[1]:>12} {names[2]:>12} "
+    print(f"{'row (* the tightest goals)':46} {names[0]:>18} {names[1]:>12} {names[2]:>12} "
           f"{'goal':>9}  {'gain':>6}  verdict")
     failed = 0
-    for key, (label, today, goal, unit, higher, open_) in ISSUE.items():
+    for key, (label, today, goal, unit, higher, open_) in GOALS.items():
         if key not in results:
             continue
         values = results[key]

@@ -1,4 +1,4 @@
-"""The three targets the host library is tested against (issue 7 acceptance).
+"""The three targets the host library is tested against, with the same results expected.
 
 * ``inproc``: ``coolmuscle://?mode=fast`` - the simulator in-process, virtual time;
 * ``tcp``: the simulator in a :class:`ServiceThread` behind a :class:`TcpTransport`,

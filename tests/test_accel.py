@@ -5,8 +5,8 @@ bytes as the sources; the build (coolmuscle/tools/accel/compiler.py) compiles, k
 sources or fails as ``COOLMUSCLE_COMPILE`` and the machine say.  tests/test_packaging.py
 builds and installs real wheels.
 
-Issue 18 ("the motion is unchanged: traces identical") and issue 12 item 9 ("the
-motion identical to the exact model"): tests/accel_worker.py runs every example and
+The compiled code must not change the motion (traces identical, and the same as the
+exact model): tests/accel_worker.py runs every example and
 golden transcript with a 1 ms trace, a 4-axis csp stream and a 15-motor PTP bank, once
 compiled and once with ``COOLMUSCLE_PURE=1``; the two digests must be equal line by line.
 """

@@ -1,4 +1,4 @@
-"""Alarms out of the servo and load model, and injected faults (issue 3 scope 2, 8).
+"""Alarms out of the servo and load model, and injected faults.
 
 Each gives its Ux value (cml-users-guide.txt 6.6 ?99), its ``Ux.n=`` event (ch. 3 K23
 function 1), the K34 alarm output (function 2), the motor going free, and its recovery by

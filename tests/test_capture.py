@@ -1,5 +1,5 @@
 """``coolmuscle capture`` with real clients and a simulator standing in for the motor
-(issue 25 item 1; docs/user-guide.md "coolmuscle capture").
+(docs/user-guide.md "coolmuscle capture").
 
 The "real motor" is ``coolmuscle sim --machine heavy.toml`` (a heavier load, more
 friction and a stopper that a move pushes against until the overload alarm), served on

@@ -1,6 +1,6 @@
 """``coolmuscle run`` without typer (coolmuscle.tools.cli.entry): the same bytes, errors and
 exit codes as the typer command, a start that loads only what the run needs
-(issue 18, docs/performance.md "Starting a run")."""
+(the start of a run is a goal of docs/performance.md)."""
 
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def test_a_plain_run_loads_no_command_line_library_nor_unused_protocols(tmp_path
 
 @pytest.mark.parametrize("args", [("--version",), ("version",)])
 def test_version_answers_as_the_typer_command_without_loading_it(args: tuple[str, ...]) -> None:
-    """Two lines: the version, then compiled or the sources and why (issue 26)."""
+    """Two lines: the version, then compiled or the sources and why."""
     code = QUICK + "; print(sorted({'typer', 'rich', 'click'} & set(sys.modules)), file=sys.stderr)"
     quick, full = run(code, *args), run(TYPER, *args)
     assert quick.returncode == full.returncode == 0

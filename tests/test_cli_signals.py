@@ -99,7 +99,7 @@ SWEEP = (0.0, 0.001, 0.002, 0.004, 0.007, 0.01, 0.015, 0.02, 0.03, 0.04, 0.055, 
 
 def test_sigint_at_a_sweep_of_instants_from_the_handlers_on_is_one_line(
         started: list[Program], tmp_path: Path) -> None:
-    """Issue 28 defect 1: SIGINT 50 ms after ``sim --tcp 0 --state DIR`` started printed a
+    """SIGINT 50 ms after ``sim --tcp 0 --state DIR`` started printed a
     traceback ending in ``SignalStop: SIGINT`` with exit 1 (the handler raised while the
     package, runpy or the entry module were still loading, outside any code that catches
     it).  From the instant our handlers are installed every SIGINT gives one line: before

@@ -1,4 +1,4 @@
-"""Issue 7 acceptance: one suite of client operations on three targets, same results.
+"""One suite of client operations on three targets, same results.
 
 The targets (tests/client_targets.py): the simulator in-process (``coolmuscle://``,
 virtual time), over TCP (``socket://``, real time), and over a socat pseudo-terminal

@@ -191,10 +191,9 @@ def test_a_million_lines_sent_leave_memory_flat() -> None:
 def test_a_million_csp_cycles_leave_memory_flat() -> None:
     """One axis of the EtherCAT bridge following a triangle in csp (a new target each
     1 ms cycle), a million cycles: the bridge's compiled modules, the motor's solve and
-    its reports.  The solved-motion caches and the CML mailbox are bounded; they are
+    its reports.  The chain's motion memos and the CML mailbox are bounded; they are
     emptied before each count so only what a cycle leaves behind is counted."""
     from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
-    from coolmuscle.motor.motion import dynamics
 
     chain = Chain(None, 1, firmware="cm2")
     kernel = chain.kernel
@@ -221,8 +220,7 @@ def test_a_million_csp_cycles_leave_memory_flat() -> None:
             kernel.run(until=kernel.now + 1_000_000)
 
     def settle() -> None:
-        dynamics.clear_solutions()
-        dynamics._COMMANDS.clear()
+        chain.motion_memos.clear()
         for mailbox in app.drive.mailboxes.values():
             mailbox.clear()
 

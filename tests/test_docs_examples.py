@@ -1,4 +1,4 @@
-"""Every code block of README.md and docs/ runs as written (issue 17, "the first hour").
+"""Every code block of README.md and docs/ runs as written (what a newcomer meets first).
 
 Blocks are fenced with a language: ``sh`` and ``python`` blocks run, ``toml`` blocks
 must parse (a machine file must load), ``text`` blocks (output, pictures, synopses) are

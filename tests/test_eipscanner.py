@@ -1,4 +1,4 @@
-"""EIPScanner (the C++ EtherNet/IP scanner library) as a second Class 1 originator (issue 27).
+"""EIPScanner (the C++ EtherNet/IP scanner library) as a second Class 1 originator.
 
 tests/eipscanner_originator.cpp is our own small program on EIPScanner's public API;
 this test builds it with cmake in a temporary folder against an installed EIPScanner

@@ -1,4 +1,4 @@
-"""SOEM (pysoem) drives the bridge's CiA402 axes over a veth pair (issue 12 acceptance).
+"""SOEM (pysoem) drives the bridge's CiA402 axes over a veth pair: a real master's view.
 
 ethercat-bridge-users-guide.txt 6.1 (06h/07h/0Fh to Operation enabled, fault and
 fault reset), 6.3 (csp ramp on four axes), Appendix 4 (homing on a stopper),

@@ -1,4 +1,4 @@
-"""SOEM (pysoem) as the master of the bridge over a veth pair (issue 11 acceptance).
+"""SOEM (pysoem) as the master of the bridge over a veth pair: a real master's view.
 
 Manual sections: 5.2 (ESM, AL status codes), 5.4.1 (abort codes), 6.3.1/6.3.3
 (24-byte csp images), Appendix 6 (1000h, 1008h, 1018h).

@@ -1,4 +1,4 @@
-"""The cheaper paths of issue 18 / issue 12 item 9 against the exact ones they replace.
+"""The cheaper paths of the hot code against the exact ones they replace.
 
 * The overload watcher (ch. 3 K57) walks the stretches beyond rated torque at once; the
   reference below is the watcher as it was, one kernel event per crossing.  Both run on
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 
 class EventOverload(alarms._AlarmWatch):
-    """The overload watcher before issue 18: an event where the torque goes beyond
+    """The overload watcher as it was first written: an event where the torque goes beyond
     rated ("enter"), one where it comes back ("leave"), the alarm K57 ms after an
     enter without a leave."""
 
@@ -129,7 +129,7 @@ def test_ch3_k57_overload_walk_matches_one_event_per_crossing(
        limit=st.integers(3, 100), period=st.integers(200, 4000))
 def test_a_csp_stream_gives_the_same_motion_and_reports_with_fewer_events(
         amplitude: int, k57: int, limit: int, period: int) -> None:
-    """Issue 12 item 9: a target every 1 ms; the walk gives what the events gave."""
+    """Cyclic synchronous position: a target every 1 ms; the walk gives what the events gave."""
     runs = []
     for exact in (True, False):
         chain, events = twin(exact, f"K57.1={k57}, M.1={limit}")

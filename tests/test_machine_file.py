@@ -1,4 +1,4 @@
-"""Machine files (issue 3 scope 8; docs/machine-file.md): schema checks, the examples,
+"""Machine files (docs/machine-file.md): schema checks, the examples,
 the shaft's start position and resolution scaling, input and fault schedules, the
 reserved analog/encoder tables, and ``coolmuscle run --machine``.
 """

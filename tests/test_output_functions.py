@@ -106,7 +106,7 @@ def test_k34_0_and_5_have_no_function(function: int) -> None:
 # -- CM1: cm1-ethernetip-interface-manual.txt Appendix A K33, K34 ----------------------
 def test_cm1_appendix_a_factory_outputs_are_off_and_k34_0_follows_its_own_command(
         make_chain: ChainFactory) -> None:
-    """Issue 28 defect 2: a CM1 at its factory K33=0, K34=0 read ``OUT.1=03`` (its K33 0
+    """A CM1 at its factory K33=0, K34=0 read ``OUT.1=03`` (its K33 0
     was taken for CM2's "Low Active").  Appendix A: "K33 Output Logic 0:Normally open
     1: Normally closed" (open: the port is on while its signal is) and "K34 ... 0:Command"
     (the output follows the commands ``O#``/``F#`` of its own number)."""

@@ -1,5 +1,5 @@
-"""The package build compiles the hot modules (issue 26 item 1, docs/performance.md
-"Compiled hot modules"): what a user gets from ``python -m build`` / ``pip install .``.
+"""The package build compiles the hot modules (docs/performance.md "Compiled hot
+modules"): what a user gets from ``python -m build`` / ``pip install .``.
 
 A copy of the checkout is built as ``python -m build`` builds it (an sdist, then a wheel
 from the sdist, each in its own isolated build environment with the pinned build

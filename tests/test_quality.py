@@ -1,4 +1,4 @@
-"""Quality gates (issue 28): the type checker and the linter, as ``./scripts/test`` runs them.
+"""Quality gates: the type checker and the linter, as ``./scripts/test`` runs them.
 
 * ``mypy`` (pinned in the ``accel`` extra: the one that compiles the hot modules) checks the
   whole package with ``--strict``, with the settings of ``[tool.mypy]`` in pyproject.toml.

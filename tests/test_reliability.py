@@ -1,4 +1,4 @@
-"""The reliability suite (issue 16 acceptance; docs/reliability.md), short versions.
+"""The reliability suite (docs/reliability.md), short versions.
 
 * fuzz of every front end on one server (CML over TCP and a pty, bank uploads
   (cml-users-guide.txt 2.2.2), Modbus TCP (5.6)) with a liveness check between
@@ -208,7 +208,7 @@ def test_kill_9_during_dollar_leaves_the_last_save(tmp_path: Path) -> None:
         acknowledged = saved
 
 
-# -- EtherNet/IP (the CM1 module, landed with issue 14) -------------------------------------
+# -- EtherNet/IP (the CM1 module) -------------------------------------------------------------
 def _encap(command: int, data: bytes, session: int = 0, context: bytes = b"\0" * 8) -> bytes:
     return struct.pack("<HHII8sI", command, len(data), session, 0, context, 0) + data
 
@@ -261,7 +261,7 @@ def test_fuzz_the_ethernet_ip_front_end_with_a_liveness_check_between_batches() 
                 round_trip(sock, b"\r?96.1\r", b"Px.1=", timeout=3)
 
 
-# -- the web dashboard (HTTP / WebSocket, landed with issue 12) ----------------------------
+# -- the web dashboard (HTTP / WebSocket) ------------------------------------------------
 def _http_alive(port: int, timeout: float = 3.0) -> None:
     with socket.create_connection(("127.0.0.1", port), timeout=timeout) as sock:
         sock.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")

@@ -1,4 +1,4 @@
-"""A reversal after an early in-position, solved from the command's end (issue 18).
+"""A reversal after an early in-position, solved from the command's end.
 
 Ch. 3 K55: in position may come before the command ends; a bank's next move then
 starts while the command still decelerates.  The planner stops that command and starts
@@ -16,7 +16,6 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.motion import dynamics
 from coolmuscle.motor.motion.planner import Limits, plan_moves
 from coolmuscle.motor.motion.profile import stops_then_restarts
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
@@ -135,10 +134,10 @@ def test_a_repeated_cycle_reuses_its_solved_moves() -> None:
         chain, events = twin(exact, bank)
         chain.execute("[1.1")
         chain.kernel.run(until=seconds(5))
-        dynamics.clear_solutions()
+        chain.motion_memos.clear()
         before = len(events)
         chain.kernel.run(until=seconds(125))
-        counts.append((dynamics.solution_reuse(), len(events) - before))
+        counts.append((chain.motion_memos.reuse(), len(events) - before))
     ((reused0, solved0), moves0), ((reused1, solved1), moves1) = counts
     assert moves0 == moves1 > 100
     assert solved0 >= moves0 - 2 and reused0 <= 2                # each move solved afresh
@@ -169,14 +168,14 @@ def _wp(target: float, lim: Limits):  # noqa: ANN202
 def _cycle(fresh: bool, speeds: tuple[int, ...], k55: int) -> tuple[list[tuple[int, str]],
                                                                      list[float]]:
     """Motors looping PTP banks at ``speeds`` for 60 s: what they printed and when, and
-    every shaft every 7 ms; ``fresh``: every solved or spliced motion forgotten after
+    every shaft every 7 ms; ``fresh``: every plan, solved or spliced motion forgotten after
     each trajectory change, so that each is computed afresh."""
     chain = Chain(motors=len(speeds))
     events: list[tuple[int, str]] = []
     chain.subscribe(lambda e: events.append((e.time, e.text)))
     for n, s in enumerate(speeds, 1):
         if fresh:
-            chain.motors[n].axis.trajectory_listeners.append(dynamics.clear_solutions)
+            chain.motors[n].axis.trajectory_listeners.append(chain.motion_memos.clear)
         for line in (f"K23.{n}=1, K55.{n}={k55}",
                      f"S1.{n}={s}, A1.{n}=100, P1.{n}=10000, P2.{n}=0", f"B1.{n}", "X0",
                      f"S1.{n}, A1.{n}, P1.{n}", f"P2.{n}", "X-", "END"):
@@ -198,8 +197,8 @@ def _cycle(fresh: bool, speeds: tuple[int, ...], k55: int) -> tuple[list[tuple[i
 @example(speeds=(101, 102), k55=5)
 def test_reused_solutions_and_splices_are_the_fresh_ones_to_the_bit(
         speeds: tuple[int, ...], k55: int) -> None:
-    """docs/performance.md: the solved motions (``dynamics._solved``, ``_placed``) and the
-    splices of a repeated reversal (``Motion.continued``, ``_SPLICED``) reused by a cycle
+    """docs/performance.md: the plans and solved motions (``dynamics.MotionMemos``) and the
+    splices of a repeated reversal (``Motion.continued``) reused by a cycle
     are what computing them afresh gives: the same reports at the same instants and the
     same shaft, bit for bit."""
     assert _cycle(False, speeds, k55) == _cycle(True, speeds, k55)

@@ -1,4 +1,4 @@
-"""The servo and load model (issue 3 scope 2): tracking error, torque limit lag, stoppers,
+"""The servo and load model: tracking error, torque limit lag, stoppers,
 coasting when free, and the CM1 stepper (docs/fidelity.md "Servo, load and alarms").
 
 cml-users-guide.txt 6.6 ?95 (Pe), ?98 (Ix), 2.1.1 "M" (torque limit, % of the maximum
@@ -17,7 +17,6 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from coolmuscle.chain.daisy import Chain
-from coolmuscle.motor.motion import dynamics
 from coolmuscle.motor.motion import expoly as xp
 from coolmuscle.motor.motion.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
 from coolmuscle.sim.kernel import NS_PER_S, ms, seconds
@@ -255,8 +254,6 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers(
     (same drive, same command relative to where it starts); the reused motion is the
     one a fresh solve gives, to the last bit, and the same move elsewhere differs only
     by where it is."""
-    from coolmuscle.motor.motion.dynamics import clear_solutions, solution_reuse
-
     chain = make_chain(plant={"load_inertia": 2e-4})
 
     motor = chain.motors[1]
@@ -266,12 +263,13 @@ def test_a_repeated_move_reuses_its_solution_with_exactly_the_same_numbers(
     axis = motor.axis
     args = (axis.profile, axis.motion.origin_ns, axis.motion.position_at(axis.motion.origin_ns),
             axis.motion.velocity_at(axis.motion.origin_ns), axis.motion.drive)
-    reused_before, _ = solution_reuse()
-    again = Motion(*args)
-    assert solution_reuse()[0] == reused_before + 1
-    clear_solutions()
-    fresh = Motion(*args)
-    assert solution_reuse() == (0, 1)
+    memos = axis.memos                      # the chain's, shared by its motors
+    reused_before, _ = memos.reuse()
+    again = Motion(*args, memos)
+    assert memos.reuse()[0] == reused_before + 1
+    memos.clear()
+    fresh = Motion(*args, memos)
+    assert memos.reuse() == (0, 1)
     for a, b in zip(again.pieces, fresh.pieces, strict=True):
         assert (a.start, a.end, a.mode, a.pos, a.cmd, a.torque, a.err(), a.vel()) == \
                (b.start, b.end, b.mode, b.pos, b.cmd, b.torque, b.err(), b.vel())
@@ -303,7 +301,6 @@ FASTER_THAN_TOP_SPEED = ["K56.1=32767", "S.1=7027", "A.1=7698", "P.1=1", "^.1",
 def test_the_fuzzed_sequence_stays_far_below_the_piece_limit(
         gap_ms: int, caplog: pytest.LogCaptureFixture) -> None:
     counts: list[int] = []
-    dynamics.clear_solutions()
     chain = Chain(motors=2)
     for motor in chain.motors.values():          # every motion each axis solves
         axis = motor.axis

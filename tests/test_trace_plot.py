@@ -1,4 +1,4 @@
-"""Traces and plots (issue 3 scope 9): ``--trace`` CSV / Parquet, ``--plot`` panels.
+"""Traces and plots: ``--trace`` CSV / Parquet, ``--plot`` panels.
 
 The trace samples the closed-form history exactly; position-derived outputs
 (rotation pulses) are evaluated at each sample and their edges are sample instants.

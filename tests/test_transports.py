@@ -97,7 +97,7 @@ ECHOED = (b"?96.1", b"P1.1=5", b"S.1=100", b"A.1=7", b"P2.1=-30")
 @given(st.data())
 def test_several_hosts_each_lines_echo_is_a_whole_line_however_the_bytes_come(
         data: st.DataObject) -> None:
-    """Issue 28 defect 3, any interleaving: two or three hosts' lines in chunks of any
+    """Any interleaving: two or three hosts' lines in chunks of any
     size, taking turns in any order.  Every line of the shared output is one host's
     whole line (its echo) or a reply, each line sent is echoed once, and the echo comes
     before the reply to it (ch. 3 K23 8: the echo is part of the answer)."""

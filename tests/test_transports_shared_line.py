@@ -129,7 +129,7 @@ def test_a_tcp_half_line_and_a_pty_line_are_never_one_line(served: ServiceThread
 
 def test_each_senders_echo_is_its_own_whole_line_on_tcp_and_on_the_pty(
         served: ServiceThread) -> None:
-    """Issue 28 defect 3: a TCP client sends ``P1.1=12`` without its line end, a pty
+    """A TCP client sends ``P1.1=12`` without its line end, a pty
     client ``?96.1\\r``, the TCP client finishes with ``3\\r``.  The lines ran apart, but
     both received ``P1.1=12?96.1\\r\\n``, the reply and a stray ``3\\r\\n``.  The echo is
     part of the motor's answer to its sender's line (ch. 3 K23 8): with several hosts

@@ -1,4 +1,4 @@
-"""``coolmuscle compare`` (issue 25 item 2): a capture of a "real" motor (a hidden machine,
+"""``coolmuscle compare`` (docs/twin.md): a capture of a "real" motor (a hidden machine,
 tests/twin_support.py) against the virtual motor: with the hidden machine every line
 is within tolerance; with the default machine the differences are found and named;
 timing, missing lines and the report and plot files are what they say."""

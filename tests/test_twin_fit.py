@@ -1,4 +1,4 @@
-"""``coolmuscle fit`` (issue 25 item 3): the hidden machine's load and servo parameters
+"""``coolmuscle fit`` (docs/twin.md): the hidden machine's load and servo parameters
 are recovered from a noisy, quantized capture within 5 %, the fitted machine file then
 makes ``compare`` pass, and fits that cannot be done are refused in one line with exit 2
 and nothing written."""

@@ -1,5 +1,4 @@
-"""The twin loop end to end, through the real relay (issue 25 "How to test without
-hardware"; docs/twin.md).
+"""The twin loop end to end, through the real relay, without hardware (docs/twin.md).
 
 A ``coolmuscle sim`` with the hidden machine file of the twin tests (a heavier load,
 more friction, a softer position loop, a stopper) stands in for the user's real motor on

@@ -1,4 +1,4 @@
-"""Reading captures (issue 25, /work format of docs/twin.md "The capture file"): what the
+"""Reading captures (the format of docs/twin.md "The capture file"): what the
 relay writes is read back with its instants and polled values; anything else is one
 clean error; any text gives a result or that error (hypothesis)."""
 
@@ -60,7 +60,7 @@ def test_the_agreed_format_example_reads_with_its_instants() -> None:
 def test_a_capture_of_the_hidden_machine_replays_with_check_and_no_difference(
         exact_text: str, make_chain: ChainFactory) -> None:
     """The capture is a golden transcript: `run --check` on the hidden machine matches
-    every line (issue 25 "the capture replays with --check ... 0 differences")."""
+    every line (a capture replays with --check with 0 differences)."""
     session = parse_session(exact_text)
     chain = make_chain(machine=parse_machine(HIDDEN_TOML))
     try:

@@ -1,4 +1,4 @@
-"""Wireshark's dissectors as a second, independent oracle for every wire (issue 27).
+"""Wireshark's dissectors as a second, independent oracle for every wire.
 
 Each test captures with tshark a session that the usual peer drives (pysoem, pycomm3
 and ethernetip, pymodbus, aiohttp), then reads the capture back with Wireshark's

@@ -1,4 +1,4 @@
-"""Captures of a "real" motor without hardware, for the twin's tests (issue 25).
+"""Captures of a "real" motor without hardware, for the twin's tests (docs/twin.md).
 
 A hidden machine file stands in for the real machine: the identification session of
 examples/twin/identify.py is played on a virtual motor with it, in virtual time, and

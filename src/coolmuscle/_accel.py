@@ -49,6 +49,7 @@ if TYPE_CHECKING:
 
 #: The modules compiled, leaves of the import graph first; one a line.
 MODULES: list[str] = [
+    "coolmuscle.sim.memo",
     "coolmuscle.cml.ast",
     "coolmuscle.motor.state.param_table",
     "coolmuscle.motor.motion.expoly",

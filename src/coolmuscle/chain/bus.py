@@ -26,6 +26,7 @@ from ..errors import NoSuchMotorError
 from ..motor.context import Context
 from ..motor.status import Report
 from ..sim.kernel import PRIO_REPORT, Kernel
+from ..sim.memo import Key, Memo
 from .links import ChainLinks
 
 if TYPE_CHECKING:
@@ -89,7 +90,7 @@ class ChainBus:
         #: motor looks only there while no watcher listens to every motor).
         self._watching: dict[int, list[Watcher]] = {}
         self._everywhere = 0            # watchers without ``motors``
-        self._settings_cache: dict[tuple[int, int, int, bool, int], LineSettings] = {}
+        self._settings_cache: Memo[Key, LineSettings] = Memo(64)
         self._settings_now = LineSettings()
         self._settings_version = -1     # ID1's params.version of _settings_now
         self.host_line = HostLine(kernel, on_line, self._line_settings, pacing=pacing)
@@ -126,14 +127,14 @@ class ChainBus:
         version = first.params.version
         if version == self._settings_version:       # ID1's K values unchanged since
             return self._settings_now
-        key = (first.k(23) & _NO_ECHO, first.k(70), first.k(20), first.k(81) != 0,
-               first.k(82))
+        no_echo, k70, k20, modbus, k82 = first.k(23) & _NO_ECHO, first.k(70), \
+            first.k(20), first.k(81) != 0, first.k(82)
+        key: Key = (no_echo, k70, k20, modbus, k82)
         found = self._settings_cache.get(key)    # read at every line sent: no new object
         if found is None:
-            found = self._settings_cache[key] = LineSettings(
-                echo=not key[0], delimiter=b"\r\n" if key[1] == 1 else b"\r",
-                baud=BAUD_RATES.get(key[2], 38400), modbus=key[3],
-                frame=_frame_of_k82(key[4]))
+            found = self._settings_cache.put(key, LineSettings(
+                echo=not no_echo, delimiter=b"\r\n" if k70 == 1 else b"\r",
+                baud=BAUD_RATES.get(k20, 38400), modbus=modbus, frame=_frame_of_k82(k82)))
         self._settings_now, self._settings_version = found, version
         return found
 

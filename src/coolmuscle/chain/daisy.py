@@ -39,6 +39,7 @@ from ..errors import (
     StoreError,
 )
 from ..motor.context import Context
+from ..motor.motion.dynamics import MotionMemos
 from ..motor.motor import Motor
 from ..motor.programs.banks import BankUploads
 from ..motor.programs.coordinated import LINE_PAIRS, end_of_line, pair_line
@@ -49,6 +50,7 @@ from ..motor.state.memory import VNumber, VState
 from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..motor.status import Report
 from ..sim.kernel import PRIO_IO, Kernel
+from ..sim.memo import Memo
 from .bus import ChainBus, ChainCommands
 from .power import power_off, power_on_again
 
@@ -62,26 +64,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a host
-#: or PLC sends the same few lines over and over.  Bounded; errors are not kept.
-_PARSED: dict[str, tuple[ast.Line, ...]] = {}
-_PARSED_MAX = 256
-
-
 #: Origins whose lines travel the chain from ID1 (the host line, a bank or ladder line
 #: of a motor for another): a motor powered off or beyond a broken link never gets them.
 _THROUGH_ID1 = frozenset({"host", "bank", "ladder"})
-
-
-def _parse(text: str) -> list[ast.Line]:
-    """:func:`parse`, remembering recent lines."""
-    found = _PARSED.get(text)
-    if found is None:
-        found = tuple(parse(text))
-        if len(_PARSED) >= _PARSED_MAX:
-            _PARSED.clear()
-        _PARSED[text] = found
-    return list(found)
 
 
 class _Stream:
@@ -121,6 +106,11 @@ class Chain:
         self.host_line = self.bus.host_line
         self.links = self.bus.links
         self._observers: list[Callable[[], None]] = []
+        #: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a
+        #: host or PLC sends the same few lines over and over.  Errors are not kept.
+        self._parsed: Memo[str, tuple[ast.Line, ...]] = Memo(256)
+        #: The plans and solved motions of the chain, shared by its motors.
+        self.motion_memos = MotionMemos()
         self._bank_lines: BankLineObservers | None = None   # observe_bank_lines
         self.state_dir = Path(state_dir) if state_dir else None
         self.store = (Store(self.state_dir / "coolmuscle.sqlite3", writer=True)
@@ -146,7 +136,8 @@ class Chain:
         for motor_id in range(1, motors + 1):
             profile = self.firmware if len(per_motor) == 1 else \
                 get_firmware(per_motor[min(motor_id, len(per_motor)) - 1])
-            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self.bus)
+            self.motors[motor_id] = Motor(motor_id, self.kernel, profile, self.bus,
+                                          self.motion_memos)
         self.uploads = BankUploads(self.motors)
         self.host_line.on_source_end = self._source_ended
         self.motors[1].params.on_change(
@@ -231,7 +222,7 @@ class Chain:
         if self._baud_answer(text):
             return
         try:
-            lines = _parse(text)
+            lines = self._parse(text)
         except CmlSyntaxError as error:
             self.motors.get(ctx.default_motor, self.motors[1]).report_error(ctx, error)
             return
@@ -249,6 +240,13 @@ class Chain:
             else:
                 self._run_statements([stmt for stmt, _ in line], line_ctx)
         self.bus.poke()
+
+    def _parse(self, text: str) -> list[ast.Line]:
+        """:func:`parse`, remembering recent lines."""
+        found = self._parsed.get(text)
+        if found is None:
+            found = self._parsed.put(text, tuple(parse(text)))
+        return list(found)
 
     def _baud_answer(self, text: str) -> bool:
         """The line after a K20 prompt (ch. 3 K23 16 "Change Baud Rate ?? XXX kbps

@@ -75,26 +75,16 @@ PARITY_OF_K82: dict[int, str] = {0: "N", 1: "E", 2: "O"}
 _NOBODY = object()
 
 
-@dataclass(init=False, unsafe_hash=True)
+@dataclass(unsafe_hash=True)
 class LineSettings:
     """What the host line needs from the motor's parameters, read live (immutable by
     convention)."""
 
-    echo: bool                  # K23 without 8
-    delimiter: bytes            # K70: 0 -> CR, 1 -> CRLF
-    baud: int                   # K20
-    modbus: bool                # K81 not 0: COM0 may speak Modbus RTU (the mode decides)
-    frame: Frame                # 8 data bits, K82 parity, 1 stop bit (5.6.1)
-
-    def __init__(self, echo: bool = True, delimiter: bytes = b"\r\n",
-                 baud: int = 38400, modbus: bool = True, frame: Frame = PLAIN) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
-        self.echo = echo
-        self.delimiter = delimiter
-        self.baud = baud
-        self.modbus = modbus
-        self.frame = frame
+    echo: bool = True               # K23 without 8
+    delimiter: bytes = b"\r\n"      # K70: 0 -> CR, 1 -> CRLF
+    baud: int = 38400               # K20
+    modbus: bool = True             # K81 not 0: COM0 may speak Modbus RTU (the mode decides)
+    frame: Frame = PLAIN            # 8 data bits, K82 parity, 1 stop bit (5.6.1)
 
 
 class WireHook(Protocol):

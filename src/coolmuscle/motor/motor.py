@@ -18,10 +18,11 @@ from typing import TYPE_CHECKING
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
+from ..sim.memo import Key, Memo
 from .context import Context
 from .core import MotorBus
 from .motion.axis import Axis
-from .motion.dynamics import Drive
+from .motion.dynamics import Drive, MotionMemos
 from .motion.planner import ESTOP_DECEL, Limits, limits_from_data
 from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
 from .motion.profile import Profile
@@ -68,14 +69,17 @@ _K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
 class Motor:
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
-    def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus) -> None:
+    def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus,
+                 memos: MotionMemos | None = None) -> None:
+        """``memos``: the plans and solved motions of the chain (shared by its motors);
+        without, the motor keeps its own."""
         self.id = motor_id
         self.kernel = kernel
         self.firmware = firmware
         self.bus = bus
         self.params = ParamTable(firmware)
         #: limits() by (S, A, decel data, params.version): K37/K44/K51/K69/K40 as then
-        self._limits_memo: dict[tuple[int, int, int | None, int], Limits] = {}
+        self._limits_memo: Memo[Key, Limits] = Memo(256)
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
         #: ``k(number)``: the current value of K parameter ``number``; the table's own
@@ -98,7 +102,7 @@ class Motor:
         self.axis = Axis(kernel, drive=sup.drive,
                          in_position_window=lambda: self.params.get(55),
                          on_in_position=self._arrived,
-                         on_passing_point=self._passing_point)
+                         on_passing_point=self._passing_point, memos=memos)
         self.axis.half_range = units.counter_half_range(self._resolution.pulses_per_rev)
         sup.attach()
         self.estopped = False
@@ -112,7 +116,7 @@ class Motor:
         self.analog_control = AnalogControl(self, self.analog_input)
         self.encoder = ExternalEncoder(self, self.timeline)
         self.manual = ManualMotion(self)
-        # -- banks, ladder, input functions (issue 4).  Imported here: the executors
+        # -- banks, ladder, input functions (2.2.2, 2.2.3, K27-K32).  Imported here: the executors
         # use .direct, which imports this module.
         from .programs.banks import BankStore
         from .programs.ladder import LadderRunner
@@ -245,7 +249,7 @@ class Motor:
         """
         if s_value == 0 or a_value == 0 or decel_a == 0:
             return None
-        key = (s_value, a_value, decel_a, self.params.version)
+        key: Key = (s_value, a_value, decel_a, self.params.version)
         found = self._limits_memo.get(key)
         if found is not None:                   # the same data under the same K values
             return found
@@ -254,10 +258,7 @@ class Motor:
         top = self.max_speed_pps()
         if lim.speed > top:            # ch. 3 K40: S above the maximum is limited to it
             lim = replace(lim, speed=top, creep=min(lim.creep, top))
-        if len(self._limits_memo) >= 256:
-            self._limits_memo.clear()
-        self._limits_memo[key] = lim
-        return lim
+        return self._limits_memo.put(key, lim)
 
     def max_speed_pps(self) -> float:
         """K40 (the motor's maximum speed, min⁻¹) in pulses/s of the current K37:
@@ -539,7 +540,7 @@ class Motor:
         self.supervision.arrival()
         self.motion_settled()
 
-    # -- motion completion (issue 4: bank executors wait on these) -----------------
+    # -- motion completion (the bank executors wait on these) ------------------------
     def motion_settled(self) -> None:
         """A motion ended: let waiting bank lines look again (no polling)."""
         self.bus.poke(self.id)
@@ -651,7 +652,7 @@ class Motor:
 
     def answer_baud(self, yes: bool) -> None:
         """The host answered the K20 prompt: ``Y`` applies the new rate, ``N`` keeps the
-        old one (docs/fidelity.md "Issue 17: fidelity decisions")."""
+        old one (docs/fidelity.md "Fidelity decisions: K37 40..70, K20 prompts, ...")."""
         value, self.pending_baud = self.pending_baud, None
         if yes and value is not None:
             self.params.set(20, value)

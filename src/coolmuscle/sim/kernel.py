@@ -64,8 +64,7 @@ class Timer:
 
     def __init__(self, at: int, callback: Callback, name: str = "",
                  cancelled: bool = False) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.at = at
         self.callback = callback
         self.name = name

@@ -27,7 +27,7 @@ from typing import Protocol
 
 from ...sim.kernel import PRIO_MOTION, Kernel, Timer
 from . import planner
-from .dynamics import LOST, Drive, Motion
+from .dynamics import LOST, Drive, Motion, MotionMemos
 from .planner import Limits, Waypoint
 from .profile import Profile, Segment, hold, stops_then_restarts
 
@@ -54,8 +54,11 @@ class Axis:
     def __init__(self, kernel: Kernel, *, drive: Callable[[], Drive] = _default_drive,
                  in_position_window: Callable[[], int] = lambda: 5,
                  on_in_position: Callable[[], None] = lambda: None,
-                 on_passing_point: Callable[[int], None] = lambda index: None) -> None:
+                 on_passing_point: Callable[[int], None] = lambda index: None,
+                 memos: MotionMemos | None = None) -> None:
         self.kernel = kernel
+        #: Plans and solved motions, shared with the other axes of the chain.
+        self.memos = MotionMemos() if memos is None else memos
         self._drive = drive
         self._window = in_position_window
         self._on_in_position = on_in_position
@@ -71,7 +74,7 @@ class Axis:
         #: from rest that the shaft follows from its origin on, while ``profile`` is
         #: still the one planned then.
         self._rest: tuple[Profile, Profile] | None = None
-        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive())
+        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive(), self.memos)
         self.target_raw = 0.0
         self.moving = False
         self.generation = 0
@@ -164,7 +167,7 @@ class Axis:
         plan from rest once it has begun: the shaft follows that plan (the motion is
         solved on it), the stored profile equals it within float noise, and a cycle
         that repeats the reversal then starts each repeat from the same numbers (and
-        finds its plan planned: docs/performance.md "Where the time goes")."""
+        finds its plan remembered: dynamics.MotionMemos)."""
         return self._command_at(t_ns).state_at(t_ns)
 
     def _command_end(self, now: int) -> int | None:
@@ -210,7 +213,7 @@ class Axis:
                 not self.moving or self.profile.origin_ns > now):
             start = start_ns
         state = self._command_state(start) if start > now else self._raw_state()
-        profile = planner.plan_moves(state, raw, start)
+        profile = planner.plan_moves(state, raw, start, self.memos.plans)
         self.target_raw = raw[-1].target
         end = self._command_end(now)
         if (self.restart_at_rest and end is not None and start == now and not self.moving
@@ -222,7 +225,7 @@ class Axis:
             # shaft follows the old command as solved until that end, and the new move
             # is solved from there, from rest (the same numbers for each repeat of a
             # cycle: docs/performance.md "Where the time goes").
-            rest = planner.plan_moves(self._command_state(end), raw, end)
+            rest = planner.plan_moves(self._command_state(end), raw, end, self.memos.plans)
             self.profile = profile
             self._rest = (profile, rest)
             self.moving = True
@@ -324,7 +327,8 @@ class Axis:
         self._cancel()
         self.zero = float(raw)
         self.profile = hold(raw, self.kernel.now)
-        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self._drive())
+        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self._drive(),
+                             self.memos)
         self.target_raw = float(raw)
         self.moving = False
         self._resolve()
@@ -395,7 +399,7 @@ class Axis:
         self.generation += 1
         if motion is None:
             motion = Motion(self.profile, now, self.raw_actual(), self.raw_velocity(),
-                            self._current_drive())
+                            self._current_drive(), self.memos)
         self.motion = motion
         if len(self.motion.pieces) >= 2000:
             # the solver's safety net (dynamics.MAX_PIECES): a model bug, said so

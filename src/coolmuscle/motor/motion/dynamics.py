@@ -39,13 +39,13 @@ import math
 from bisect import bisect_right
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from functools import lru_cache
-from typing import Any, Final
+from typing import Final
 
 from ...sim.kernel import NS_PER_S
+from ...sim.memo import Key, Memo
 from . import expoly as xp
 from .expoly import AnyF, F
-from .profile import Profile
+from .profile import Profile, Segment
 
 # The module's constants are Final: compiled code then has them as C constants instead
 # of looking each up in the module's dictionary at every use (docs/performance.md).
@@ -79,7 +79,7 @@ Conditions = Callable[["Piece"], Sequence[AnyF] | None]
 Exits = list[tuple[str, "list[AnyF] | float"]]
 
 
-@dataclass(init=False, eq=False, slots=True)
+@dataclass(eq=False, slots=True)
 class Drive:
     """What the dynamics need from the motor, the load and the machine.  Immutable by
     convention (``dataclasses.replace`` makes a changed copy)."""
@@ -89,28 +89,11 @@ class Drive:
     a_friction: float               # Coulomb friction as an acceleration
     a_load: float                   # constant load torque as an acceleration (signed)
     v_max: float                    # maximum speed, pulses/s
-    enabled: bool
-    wall_lo: float                  # hard stoppers, raw pulses
-    wall_hi: float
-    percent_per_accel: float        # Ix % per pulses/s² of torque
-    v_free: float                   # back-EMF speed: a driven free shaft goes no faster
-
-    def __init__(self, kp: float, a_limit: float, a_friction: float, a_load: float,
-                 v_max: float, enabled: bool = True, wall_lo: float = -math.inf,
-                 wall_hi: float = math.inf, percent_per_accel: float = 0.0,
-                 v_free: float = math.inf) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
-        self.kp = kp
-        self.a_limit = a_limit
-        self.a_friction = a_friction
-        self.a_load = a_load
-        self.v_max = v_max
-        self.enabled = enabled
-        self.wall_lo = wall_lo
-        self.wall_hi = wall_hi
-        self.percent_per_accel = percent_per_accel
-        self.v_free = v_free
+    enabled: bool = True
+    wall_lo: float = -math.inf      # hard stoppers, raw pulses
+    wall_hi: float = math.inf
+    percent_per_accel: float = 0.0  # Ix % per pulses/s² of torque
+    v_free: float = math.inf        # back-EMF speed: a driven free shaft goes no faster
 
     def _key(self) -> tuple[float, float, float, float, float, bool, float, float, float,
                             float]:
@@ -118,8 +101,9 @@ class Drive:
                 self.enabled, self.wall_lo, self.wall_hi, self.percent_per_accel,
                 self.v_free)
 
-    # Written out, not generated, like __init__: the solved motions are cached by the
-    # drive (_placed), so every move hashes one and a chain of alike motors compares them.
+    # Written out, not generated (docs/architecture.md "Fast code"): the solved motions
+    # are remembered by the drive (_placed), so every move hashes one and a chain of
+    # alike motors compares them.
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Drive):
             return NotImplemented
@@ -238,40 +222,25 @@ def _sign(x: float) -> int:
     return (x > 0.0) - (x < 0.0)
 
 
-def command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
+def command_pieces(profile: Profile, origin_ns: int,
+                   memos: MotionMemos | None = None) -> list[tuple[float, float, F]]:
     """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
 
-    Remembered for a reused plan (the same segment tuple: planner.plan_moves) seen from
-    the same offset: a repeated move builds its command once.  A hold (no segments: csp's
-    command, a new position every cycle) is one constant piece, built faster than looked
-    up, and is not kept.  The table makes room by dropping its oldest entry, one at a
-    time: no cycle pays for emptying it all."""
+    Remembered in ``memos`` for a reused plan (the same segment tuple: planner.plan_moves)
+    seen from the same offset: a repeated move builds its command once.  A hold (no
+    segments: csp's command, a new position every cycle) is one constant piece, built
+    faster than looked up, and is not kept."""
     segments, base = profile.segments, profile.origin_ns
-    if not segments:
+    if memos is None or not segments:
         return _command_pieces(profile, origin_ns)
-    key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
+    key: Key = (id(segments), origin_ns - base, profile.start_state, profile.final_position,
            None if profile.end_ns is None else profile.end_ns - base)
-    found = _COMMANDS.get(key)
+    found = memos.commands.get(key)
     if found is not None and found[0] is segments:
         return list(found[1])
     out = _command_pieces(profile, origin_ns)
-    if len(_COMMANDS) >= _COMMANDS_SIZE:
-        del _COMMANDS[next(iter(_COMMANDS))]
-    _COMMANDS[key] = (segments, tuple(out))
+    memos.commands.put(key, (segments, tuple(out)))     # the segments held: their id stays
     return out
-
-
-_COMMANDS_SIZE = 1024
-_COMMANDS: dict[tuple[object, ...], tuple[object, tuple[tuple[float, float, F], ...]]] = {}
-
-
-#: Motion.continued's splices: (id of the pieces taken from the old motion, their offset
-#: in it, its origin to the new origin, the new origin to the tail's, id of the tail's
-#: pieces) -> (those pieces, the tail's pieces, (pieces, starts, peaks, memo)); the pieces
-#: are kept, so an id is never reused while it is a key.
-_Splice = tuple[Sequence[Piece], list[float], dict[str, float], dict[object, int | None]]
-_SPLICED: dict[tuple[int, int, int, int, int],
-               tuple[Sequence[Piece], Sequence[Piece], _Splice]] = {}
 
 
 def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
@@ -293,28 +262,94 @@ def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float
     return out
 
 
+class Solution:
+    """A motion's pieces where they are, with what watchers read of them: the start of
+    each piece, the peak of each bound (:meth:`Motion.peak`) and the instants asked of it
+    (:meth:`Motion.settled`, :meth:`Motion.within`), remembered.
+
+    Shared by every :class:`Motion` that is the same move at the same place (a chain's
+    :class:`MotionMemos`): nothing changes it but the instants it remembers, which are
+    the same for every motion that asks."""
+
+    __slots__ = ("pieces", "starts", "peaks", "instants")
+
+    def __init__(self, pieces: tuple[Piece, ...]) -> None:
+        self.pieces = pieces
+        self.starts = tuple([p.start for p in pieces])
+        self.peaks = _peaks(pieces)
+        #: Instants found, relative to the motion's origin (:data:`_NEVER`: none).
+        self.instants: Memo[Key, int] = Memo(INSTANTS)
+
+
+#: Instants a :class:`Solution` remembers (a repeated move asks the same few again).
+INSTANTS: Final = 64
+#: A remembered "never in this motion" (an instant is never before the motion's origin).
+_NEVER: Final = -1
+
+
+class MotionMemos:
+    """What one chain's axes remember of their motion, shared by its motors (alike
+    motors on alike moves reuse each other's): the planner's plans (planner.plan_moves),
+    the command pieces of a plan seen from an offset, the solutions relative to the
+    command's start (:func:`_solved`) and placed (:func:`_placed`), and the splices of a
+    reversal (:meth:`Motion.continued`).  A hit gives the numbers a fresh computation
+    gives, to the bit (tests/test_restart_at_rest.py, tests/test_servo_load.py), so the
+    motion never depends on what ran before (docs/performance.md)."""
+
+    def __init__(self, size: int = 1024) -> None:
+        self.plans: Memo[Key, tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = \
+            Memo(size)
+        self.commands: Memo[Key, tuple[object, tuple[tuple[float, float, F], ...]]] = \
+            Memo(size)
+        #: By what a solution depends on: the drive, the shaft's position and speed, the
+        #: command (relative to its start for ``solved``).
+        self.solved: Memo[Key, tuple[Piece, ...]] = Memo(size)
+        self.placed: Memo[Key, Solution] = Memo(size)
+        #: (id of the pieces taken from the old motion, their offset in it, its origin
+        #: to the new origin, the new origin to the tail's, id of the tail's pieces) ->
+        #: (those pieces, the tail's pieces, the splice); the pieces are held, so an id
+        #: is never reused while it is a key.
+        self.splices: Memo[Key, tuple[tuple[Piece, ...], tuple[Piece, ...], Solution]] = \
+            Memo(size)
+
+    def clear(self) -> None:
+        """Forget everything (tests, benchmarks: every move planned and solved afresh)."""
+        for memo in (self.plans, self.commands, self.solved, self.placed, self.splices):
+            memo.clear()
+
+    def reuse(self) -> tuple[int, int]:
+        """(motions that reused a solution, motions solved) since the last clear."""
+        return self.placed.hits + self.solved.hits, self.solved.misses
+
+
 class Motion:
-    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one."""
+    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one.
+
+    ``memos``: where the solution is looked up and kept (the chain's); without, the
+    motion is solved afresh."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
-                 drive: Drive, pieces_of: Motion | None = None) -> None:
+                 drive: Drive, memos: MotionMemos | None = None,
+                 solution: Solution | None = None) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
         self.kp = drive.kp
-        #: The pieces, in order (shared with other motions that are the same move at the
-        #: same place: read only).
-        self.pieces: Sequence[Piece]
-        if pieces_of is None:
-            self.pieces, self._starts, self._peaks, self._memo = _placed(
-                drive, float(position), float(velocity),
-                tuple(command_pieces(profile, self.origin_ns)))
-        else:                               # the same motion, solved already
-            self.pieces, self._starts = pieces_of.pieces, pieces_of._starts
-            self._peaks, self._memo = pieces_of._peaks, pieces_of._memo
+        self.memos = memos
+        if solution is None:
+            solution = _placed(drive, float(position), float(velocity),
+                               tuple(command_pieces(profile, self.origin_ns, memos)), memos)
+        self._use(solution)
         #: The motion the pieces from its origin on come from, in its own coordinates
         #: (:meth:`continued`; ``None``: this one).
         self._tail: Motion | None = None
+
+    def _use(self, solution: Solution) -> None:
+        self._solution = solution
+        #: The pieces, in order (shared with other motions that are the same move at the
+        #: same place).
+        self.pieces = solution.pieces
+        self._starts = solution.starts
 
     @staticmethod
     def continued(old: Motion, origin_ns: int, profile: Profile) -> Motion:
@@ -326,40 +361,39 @@ class Motion:
         part is ``old``'s own pieces.  A reversal that the planner starts from rest at
         the end of a decelerating command (``Axis.move``) is solved this way."""
         at = profile.origin_ns
+        memos = old.memos
         position, velocity = old.exact_state(at)
-        tail = Motion(profile, at, position, velocity, old.drive)
-        motion = Motion(profile, at, position, velocity, old.drive, tail)   # pieces below
+        tail = Motion(profile, at, position, velocity, old.drive, memos)
+        motion = Motion(profile, at, position, velocity, old.drive, memos,
+                        tail._solution)          # its own pieces below
         motion.origin_ns = int(origin_ns)
         motion._tail = tail
         # The spliced pieces depend only on old's pieces from now on, tail's pieces and
-        # the offsets: a repeated cycle splices the same ones again (_SPLICED).  When old
-        # is a splice too and now is on its tail, its pieces from now on are its tail's
+        # the offsets: a repeated cycle splices the same ones again (memos.splices).  When
+        # old is a splice too and now is on its tail, its pieces from now on are its tail's
         # (a solution, kept by _placed) moved by old's own offset.
-        source: Sequence[Piece] | None = old.pieces
+        source: tuple[Piece, ...] | None = old.pieces
         offset = -1
         if old._tail is not None:
             source = None
             if motion.origin_ns >= old._tail.origin_ns:
                 source, offset = old._tail.pieces, old._tail.origin_ns - old.origin_ns
-        key = (id(source), offset, motion.origin_ns - old.origin_ns, at - motion.origin_ns,
+        key: Key = (id(source), offset, motion.origin_ns - old.origin_ns, at - motion.origin_ns,
                id(tail.pieces))
-        if source is not None:
-            found = _SPLICED.get(key)
+        if source is not None and memos is not None:
+            found = memos.splices.get(key)
             if found is not None and found[0] is source and found[1] is tail.pieces:
-                motion.pieces, motion._starts, motion._peaks, motion._memo = found[2]
+                motion._use(found[2])
                 return motion
         shift_old = (motion.origin_ns - old.origin_ns) / NS_PER_S
         cut = (at - motion.origin_ns) / NS_PER_S
         pieces = [piece.moved(shift_old, cut) for piece in old.pieces
                   if piece.end - shift_old > 0.0 and piece.start - shift_old < cut]
         pieces += [piece.moved(-cut, math.inf) for piece in tail.pieces]
-        motion.pieces, motion._starts = pieces, [p.start for p in pieces]
-        motion._peaks, motion._memo = _peaks(pieces), {}
-        if source is not None:
-            if len(_SPLICED) >= 1024:                  # room: the oldest goes
-                del _SPLICED[next(iter(_SPLICED))]
-            _SPLICED[key] = (source, tail.pieces,
-                             (motion.pieces, motion._starts, motion._peaks, motion._memo))
+        spliced = Solution(tuple(pieces))
+        motion._use(spliced)
+        if source is not None and memos is not None:
+            memos.splices.put(key, (source, tail.pieces, spliced))
         return motion
 
     def exact_state(self, t_ns: int) -> tuple[float, float]:
@@ -438,7 +472,7 @@ class Motion:
 
         A watcher whose threshold is at or above it skips every piece, so it can
         answer "never" without walking them."""
-        return self._peaks[what]
+        return self._solution.peaks[_REACH[what]]
 
     def settled(self, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
@@ -446,15 +480,16 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.settled(window, after_ns)
-        key = (window, after_ns - self.origin_ns)
-        found = self._memo.get(key, self)
-        if found is self:
+        key: Key = (window, after_ns - self.origin_ns)
+        instants = self._solution.instants
+        found = instants.get(key)
+        if found is None:
             def inside(piece: Piece) -> list[AnyF]:
                 e = piece.err()
                 return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
-            found = self._memo[key] = None if at is None else at - self.origin_ns
-        return None if found is None else self.origin_ns + found
+            found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
+        return None if found == _NEVER else self.origin_ns + found
 
     def within(self, center: float, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where the actual position is within
@@ -462,15 +497,16 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.within(center, window, after_ns)
-        key = ("within", center, window, after_ns - self.origin_ns)
-        found = self._memo.get(key, self)
-        if found is self:
+        key: Key = ("within", center, window, after_ns - self.origin_ns)
+        instants = self._solution.instants
+        found = instants.get(key)
+        if found is None:
             def inside(piece: Piece) -> list[AnyF]:
                 off = xp.sub(piece.pos, xp.const(center))
                 return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
-            found = self._memo[key] = None if at is None else at - self.origin_ns
-        return None if found is None else self.origin_ns + found
+            found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
+        return None if found == _NEVER else self.origin_ns + found
 
     def span(self, piece: Piece) -> tuple[float, float]:
         """Bounds (lowest, highest) of the actual position over a piece."""
@@ -520,29 +556,41 @@ class Motion:
         return None
 
 
-@lru_cache(maxsize=1024)
 def _solved(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...]) -> tuple[Piece, ...]:
+            cmd: tuple[tuple[float, float, F], ...],
+            memos: MotionMemos | None) -> tuple[Piece, ...]:
     """The pieces of a motion relative to the command's position at its origin.  The
     solution depends on nothing else, so a machine that repeats a cycle solves each of its
-    moves once (docs/performance.md); a hit and a miss give the same numbers."""
+    moves once (``memos``, docs/performance.md); a hit and a miss give the same numbers."""
+    key: Key = (drive, position, velocity, cmd)
+    if memos is not None:
+        found = memos.solved.get(key)
+        if found is not None:
+            return found
     solver = _Solver(drive, list(cmd))
     solver._build(position, velocity)
-    return tuple(solver.pieces)
+    pieces = tuple(solver.pieces)
+    if memos is not None:
+        memos.solved.put(key, pieces)
+    return pieces
 
 
-@lru_cache(maxsize=1024)
 def _placed(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...]
-            ) -> tuple[tuple[Piece, ...], list[float], dict[str, float], dict[Any, Any]]:
+            cmd: tuple[tuple[float, float, F], ...], memos: MotionMemos | None) -> Solution:
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
-    position at the motion's origin (cached too: a cycle repeats its moves in place)."""
+    position at the motion's origin (kept in ``memos`` too: a cycle repeats its moves in
+    place)."""
+    key: Key = (drive, position, velocity, cmd)
+    if memos is not None:
+        found = memos.placed.get(key)
+        if found is not None:
+            return found
     ref = cmd[0][2][0]
     rel_drive = drive
     if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
         rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
     rel_cmd = tuple((a, b, (c[0] - ref, c[1], c[2], c[3], c[4])) for a, b, c in cmd)
-    solved = _solved(rel_drive, position - ref, velocity, rel_cmd)
+    solved = _solved(rel_drive, position - ref, velocity, rel_cmd, memos)
     pieces: list[Piece] = []
     ci = 0
     for piece in solved:
@@ -567,11 +615,15 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif piece.on_cmd:                               # a stepper on its command
             p0 = shown[0]
         pieces.append(piece.placed(p0, shown))
-    return tuple(pieces), [p.start for p in pieces], _peaks(pieces), {}
+    solution = Solution(tuple(pieces))
+    if memos is not None:
+        memos.placed.put(key, solution)
+    return solution
 
 
-def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
-    """:meth:`Motion.peak` of each kind, as max() over the pieces, in one pass."""
+def _peaks(pieces: Sequence[Piece]) -> tuple[float, ...]:
+    """:meth:`Motion.peak` of each kind (in :data:`_REACH`'s order), as max() over the
+    pieces, in one pass."""
     pieces[0].reach("err")
     top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
     for piece in pieces:
@@ -583,20 +635,7 @@ def _peaks(pieces: Sequence[Piece]) -> dict[str, float]:
             top_vel = b_vel
         if b_torque > top_torque:
             top_torque = b_torque
-    return {"err": top_err, "vel": top_vel, "torque": top_torque}
-
-
-def clear_solutions() -> None:
-    """Forget every solved motion (benchmarks: to time every move solved afresh)."""
-    _placed.cache_clear()
-    _solved.cache_clear()
-    _SPLICED.clear()
-
-
-def solution_reuse() -> tuple[int, int]:
-    """(motions that reused a solution, motions solved) since the last clear."""
-    placed, solved = _placed.cache_info(), _solved.cache_info()
-    return placed.hits + solved.hits, solved.misses
+    return (top_err, top_vel, top_torque)
 
 
 class _Solver:

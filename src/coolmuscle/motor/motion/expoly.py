@@ -21,7 +21,7 @@ from typing import Final
 
 #: (c0, c1, c2, c3, d): c0 + c1 τ + c2 τ² + c3 τ³ + d·exp(-k τ), the function of every
 #: piece of motion.  Of fixed size, so that compiled code keeps it unboxed (five C
-#: doubles, no tuple and no float objects: docs/performance.md "Where the time goes").
+#: doubles, no tuple and no float objects; docs/architecture.md "Fast code").
 F = tuple[float, float, float, float, float]
 #: (c0, c1, ..., cn, d) with n >= 3: a function of any degree, as the conditions of
 #: :func:`roots` and :func:`first_true` are (the braking curve of an S-curve command

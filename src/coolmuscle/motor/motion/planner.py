@@ -20,10 +20,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 
+from ...sim.memo import Key, Memo
 from ..state import units
-from .profile import _CHECKED, Profile, Segment, State, _check_chain
+from .profile import Profile, Segment, State, _check_chain
 
 #: K69 value of a pure S-curve (ch. 3 K69, range 0..1024).
 SCURVE_MAX = 1024
@@ -37,7 +37,7 @@ Piece = tuple[float, float, float]  # (duration s, acceleration at its start, je
 _REL_TOL = 1e-12
 
 
-@dataclass(init=False, unsafe_hash=True, slots=True)
+@dataclass(unsafe_hash=True, slots=True)
 class Limits:
     """Speed (pps), acceleration and deceleration (pulses/s²), creep speed (pps, K51)
     and S-curve gain (K69, 0..1024) of one motion.  Immutable by convention."""
@@ -45,20 +45,10 @@ class Limits:
     speed: float
     accel: float
     decel: float
-    creep: float
-    scurve: int
+    creep: float = 0.0
+    scurve: int = 0
 
-    def __init__(self, speed: float, accel: float, decel: float, creep: float = 0.0,
-                 scurve: int = 0) -> None:
-        # Written out (compiled, a generated __init__ runs interpreted; Segment).
-        self.speed = speed
-        self.accel = accel
-        self.decel = decel
-        self.creep = creep
-        self.scurve = scurve
-        self._check()
-
-    def _check(self) -> None:
+    def __post_init__(self) -> None:
         if not (self.speed > 0.0 and self.accel > 0.0 and self.decel > 0.0):
             raise ValueError(f"speed, accel and decel must be > 0: {self!r}")
         if not 0.0 <= self.creep <= self.speed:
@@ -90,7 +80,8 @@ class Waypoint:
     limits: Limits
 
     def __init__(self, target: float, limits: Limits) -> None:
-        self.target = target        # written out: see Segment
+        # written out: built on the hot path (docs/architecture.md "Fast code")
+        self.target = target
         self.limits = limits
 
 
@@ -107,7 +98,6 @@ def scurve_jerk(accel: float, speed: float, scurve: int) -> float:
     return accel * accel * (2.0 - r) / (r * speed)
 
 
-@lru_cache(maxsize=256)
 def limits_from_data(s_value: int, a_value: int, *, k37: int, k44: int, k51: int,
                      k69: int, decel_a_value: int | None = None) -> Limits:
     """Limits from S and A data (2.1, 2.1.1) and K37, K44, K51, K69 (ch. 3).
@@ -273,19 +263,12 @@ def _max_exit(u: float, b: float, dist: float, lim: Limits, cap: float) -> float
     return lo if travel(lo) > dist else _bisect(travel, lo, cap, dist)
 
 
-@dataclass(init=False, slots=True)
+@dataclass(slots=True)
 class _Span:
     dist: float
     direction: float
     limits: Limits
     indices: list[int]
-
-    def __init__(self, dist: float, direction: float, limits: Limits,
-                 indices: list[int]) -> None:
-        self.dist = dist            # written out: see Segment
-        self.direction = direction
-        self.limits = limits
-        self.indices = indices
 
 
 def _run_speeds(run: Sequence[_Span], u0: float, b0: float, creep: float,
@@ -422,31 +405,36 @@ def _path(b: _Builder, waypoints: Sequence[Waypoint]) -> None:
 
 
 # -- public planners ---------------------------------------------------------------
-def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int) -> Profile:
+def plan_moves(start_state: State, waypoints: Sequence[Waypoint], origin_ns: int,
+               plans: Plans | None = None) -> Profile:
     """Point-to-point (one waypoint) or merge motion (several), 4.1.1-4.1.3.
 
     Merge motion passes each point without stopping; a span's S is never exceeded
     between its two points, so a speed increase starts at the passing point and a
     decrease is completed by it.  A reversal stops at the point (4.1.2).  From a
     moving start that cannot make the first point the motor stops, then returns.
+
+    ``plans``: where plans are looked up and kept (a chain's, ``dynamics.MotionMemos``):
+    the segments are relative to the origin and immutable, so a machine cycle that
+    repeats its moves plans each one once (the same numbers: the plan depends on
+    nothing else).
     """
     if not waypoints:
         raise ValueError("plan_moves needs at least one waypoint")
     # Plain numbers as the key: hashing and comparing floats stays in C (the
     # dataclasses' generated __hash__/__eq__ would run interpreted).
-    key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
-    found = _PLANNED.get(key)
+    key: Key = (tuple(start_state), tuple([_waypoint_key(w) for w in waypoints]))
+    found = None if plans is None else plans.get(key)
     if found is None:
         b = _Builder(start_state)
         _path(b, waypoints)
         found = (tuple(b.segments), tuple(b.passing))
-        if len(_PLANNED) >= _PLANNED_MAX:
-            _PLANNED.clear()
         _check_chain(found[0])
-        _CHECKED.add(found[0])
-        _PLANNED[key] = found
+        if plans is not None:
+            plans.put(key, found)
     return Profile(origin_ns, found[0], start_state=start_state,
-                   final_position=float(waypoints[-1].target), passing_times=found[1])
+                   final_position=float(waypoints[-1].target), passing_times=found[1],
+                   checked=True)
 
 
 def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
@@ -454,11 +442,8 @@ def _waypoint_key(w: Waypoint) -> tuple[float, float, float, float, float, int]:
     return (w.target, lim.speed, lim.accel, lim.decel, lim.creep, lim.scurve)
 
 
-#: Planned moves by (start state, waypoints): the segments are relative to the origin
-#: and immutable, so a machine cycle that repeats its moves plans each one once (the
-#: same numbers: the plan depends on nothing else; docs/performance.md).
-_PLANNED: dict[tuple[object, ...], tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = {}
-_PLANNED_MAX = 1024
+#: Plans by (start state, waypoints as plain numbers): the segments and passing times.
+Plans = Memo[Key, tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]]
 
 
 def plan_velocity(start_state: State, velocity_pps: float, limits: Limits,

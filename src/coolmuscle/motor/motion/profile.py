@@ -51,8 +51,7 @@ class Segment:
 
     def __init__(self, start: float, duration: float, p: float, v: float, a: float,
                  j: float) -> None:
-        # Written out, not generated: compiled (coolmuscle/_accel.py), a dataclass's
-        # generated __init__ runs interpreted, 20x slower (docs/performance.md).
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.start = start
         self.duration = duration
         self.p = p
@@ -94,11 +93,13 @@ class Profile:
 
     def __init__(self, origin_ns: int, segments: Sequence[Segment], *,
                  start_state: State | None = None, final_position: float | None = None,
-                 passing_times: Iterable[tuple[float, int]] = ()) -> None:
-        """Build a profile; ``passing_times`` are (seconds from origin, waypoint index)."""
+                 passing_times: Iterable[tuple[float, int]] = (),
+                 checked: bool = False) -> None:
+        """Build a profile; ``passing_times`` are (seconds from origin, waypoint index).
+        ``checked``: the segments are a plan's or a profile's, checked already."""
         self.origin_ns = int(origin_ns)
         self.segments: tuple[Segment, ...] = tuple(segments)
-        if self.segments not in _CHECKED:     # a reused plan's tuple was checked once
+        if not checked:
             _check_chain(self.segments)
         last = self.segments[-1] if self.segments else None
         if start_state is None:
@@ -293,25 +294,6 @@ def hold(position: float, origin_ns: int) -> Profile:
 
 
 # -- helpers ---------------------------------------------------------------
-class _Checked:
-    """Segment tuples already checked (by identity; they are immutable): the planner's
-    reused plans (:func:`coolmuscle.motor.motion.planner.plan_moves`)."""
-
-    def __init__(self) -> None:
-        self._ids: dict[int, tuple[Segment, ...]] = {}
-
-    def __contains__(self, segments: object) -> bool:
-        return self._ids.get(id(segments)) is segments
-
-    def add(self, segments: tuple[Segment, ...]) -> None:
-        if len(self._ids) >= 2048:
-            self._ids.clear()
-        self._ids[id(segments)] = segments        # kept alive: the id stays its own
-
-
-_CHECKED = _Checked()
-
-
 def _check_chain(segments: Sequence[Segment]) -> None:
     """Segments must follow each other in time; only the last may be endless."""
     t = 0.0

@@ -43,8 +43,7 @@ class Piece:
 
     def __init__(self, start: int, profile: Profile, tracking: Any, zero: float,
                  sign: int) -> None:
-        # Written out: compiled (coolmuscle/_accel.py), a dataclass's generated
-        # __init__ runs interpreted, 20x slower (docs/performance.md).
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.start = start
         self.profile = profile
         self.tracking = tracking
@@ -353,22 +352,11 @@ class Timeline:
         self.piece = piece_of(axis)
         self.tracks: list[Track] = []
         self.recording = False
-        #: Every listener that asked (:meth:`listen`), in that order, and whether it is on.
-        self._listening: dict[Callable[[Piece, Piece], None], bool] = {}
-        self._calling: tuple[Callable[[Piece, Piece], None], ...] = ()
+        self.listeners: list[Callable[[Piece, Piece], None]] = []
         axis.trajectory_listeners.append(self._on_trajectory)
 
     def now(self) -> int:
         return self.axis.kernel.now
-
-    def listen(self, listener: Callable[[Piece, Piece], None], on: bool = True) -> None:
-        """Call ``listener(old, new)`` at every change of the piece while ``on``.
-
-        Listeners are called in the order they first asked; one switched off keeps its
-        place.  A listener switches itself off while a change would give it nothing to
-        do: it is then not called at all (what it would do is the same, nothing)."""
-        self._listening[listener] = on
-        self._calling = tuple(each for each, is_on in self._listening.items() if is_on)
 
     def record(self, on: bool = True) -> None:
         """Keep checkpoints so states can be read back for a trace."""
@@ -384,7 +372,7 @@ class Timeline:
         for track in list(self.tracks):
             track.switch(old, new, now)
         self.piece = new
-        for listener in self._calling:      # a new tuple when one is switched on or off
+        for listener in list(self.listeners):
             listener(old, new)
 
     def position(self) -> float:

@@ -39,7 +39,7 @@ class Sleep:
     ns: int
 
     def __init__(self, ns: int) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.ns = ns
 
 
@@ -50,7 +50,7 @@ class MotionWait:
     motors: tuple[MotorCore, ...]
 
     def __init__(self, motors: tuple[MotorCore, ...]) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.motors = motors
 
 
@@ -71,7 +71,7 @@ class Watch:
     timeout_ns: int | None
 
     def __init__(self, holds: Callable[[], bool], timeout_ns: int | None) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.holds = holds
         self.timeout_ns = timeout_ns
 
@@ -277,7 +277,7 @@ def wait_branch(motor: MotorCore, branch: ast.Branch, wait: ast.Wait) -> Watch:
 
 # ---------------------------------------------------------------- units
 
-@dataclass(init=False, unsafe_hash=True, slots=True)
+@dataclass(unsafe_hash=True, slots=True)
 class Unit:
     """What runs as one line: a stored line, or lines joined by ``;`` (2.2.2 ";")."""
 
@@ -285,14 +285,6 @@ class Unit:
     quiet: bool      # ladder: the line ends with ";", results are not displayed
     first: int       # index of its first stored line
     last: int        # index of its last stored line (lines joined to the first)
-
-    def __init__(self, statements: tuple[ast.Statement, ...], quiet: bool,
-                 first: int, last: int | None = None) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
-        self.statements = statements
-        self.quiet = quiet
-        self.first = first
-        self.last = first if last is None else last
 
 
 #: Told when a unit of a bank starts: ``(bank, first, last)``, the indexes of the

@@ -158,7 +158,7 @@ def _shifted(profile: Profile, delay_ns: int) -> Profile:
         return profile
     return Profile(profile.origin_ns + delay_ns, profile.segments,
                    start_state=profile.start_state, final_position=profile.final_position,
-                   passing_times=profile.passing_times)
+                   passing_times=profile.passing_times, checked=True)
 
 
 class PairMotion:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 from ...cml import ast
 from ...errors import MotorError, NoLadderBankError, OutOfRangeError
 from ...sim.kernel import NS_PER_MS, PRIO_LOGIC, Timer
+from ...sim.memo import Key, Memo
 from ..state.memory import VState
 from .bankcheck import expr_steps, statement_steps
 from .bankexec import (
@@ -62,6 +63,8 @@ _GONE = object()
 _PAUSED = object()
 Step = Generator[Request, object, object]
 _Code = tuple[ast.Statement, "Compiled | None", bool]
+#: Banks whose compiled statements a runner keeps (more than a motor has).
+CODES = 64
 
 
 class LadderRunner:
@@ -83,8 +86,8 @@ class LadderRunner:
         self._timer: Timer | None = None
         self._scan_id = 0
         self._running_id = 0
-        self._code_cache: dict[int, list[_Code]] = {}
-        self._code_version = -1
+        #: The compiled statements of each bank, by (number, version of the banks).
+        self._codes: Memo[Key, tuple[_Code, ...]] = Memo(CODES)
         self._line_observer: LineObserver | None = None
         self._period = self.period_ns()
         if not motion:
@@ -160,7 +163,7 @@ class LadderRunner:
     @line_observer.setter
     def line_observer(self, observer: LineObserver | None) -> None:
         self._line_observer = observer
-        self._code_version = -1
+        self._codes.clear()
 
     # -- scheduling -----------------------------------------------------------------
     def _cancel(self) -> None:
@@ -257,24 +260,22 @@ class LadderRunner:
         result = yield from self._bank(self.bank, (), index, flow)
         return _GONE if self._running_id != self._scan_id else result
 
-    def _code(self, number: int) -> list[_Code] | None:
-        """The compiled statements of a bank (cached until the banks change)."""
-        if self._code_version != self.motor.banks.version:
-            self._code_cache.clear()
-            self._code_version = self.motor.banks.version
-        code = self._code_cache.get(number)
+    def _code(self, number: int) -> tuple[_Code, ...] | None:
+        """The compiled statements of a bank (compiled once per version of the banks)."""
+        key: Key = (number, self.motor.banks.version)
+        code = self._codes.get(key)
         if code is None:
             bank = self.motor.banks.get(True, number)
             if bank is None:
                 return None
             observer = self._line_observer
-            code = self._code_cache[number] = [
+            code = self._codes.put(key, tuple([
                 entry for unit in ladder_units(bank, self.motor.firmware.ladder_displays)
                 for entry in ([] if observer is None or not unit.statements
                                else [_reporting(observer, number, unit)])
                 + [(stmt, compile_statement(stmt, self.motor, self.ctx, unit.quiet, self,
                                             _assigned), unit.quiet)
-                   for stmt in unit.statements]]
+                   for stmt in unit.statements]]))
         return code
 
     def _bank(self, number: int, callers: tuple[int, ...], start: int = -1,

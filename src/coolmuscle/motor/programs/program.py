@@ -19,7 +19,7 @@ bank can loop in zero time.  The motion model is in :mod:`.motor` / :mod:`.plann
 from __future__ import annotations
 
 from collections.abc import Generator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from ...cml import ast
@@ -62,27 +62,18 @@ Step = Generator[Request, object, object]
 Steps = Generator[Request, object, None]    # a statement that never ends the line
 
 
-@dataclass(init=False)
+@dataclass(slots=True)
 class Frame:
     """One bank on the call stack: its units, the next unit, open loops, the last run."""
 
     bank: int
     units: list[Unit]
-    pc: int
-    loops: list[list[int]]      # [start, remaining or -1]
-    last: int | None
-
-    def __init__(self, bank: int, units: list[Unit], pc: int = 0,
-                 loops: list[list[int]] | None = None, last: int | None = None) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
-        self.bank = bank
-        self.units = units
-        self.pc = pc
-        self.loops = [] if loops is None else loops
-        self.last = last
+    pc: int = 0
+    loops: list[list[int]] = field(default_factory=list)     # [start, remaining or -1]
+    last: int | None = None
 
 
-@dataclass(init=False)
+@dataclass(init=False, slots=True)
 class _Motion:
     """The motion a line gives one motor: waypoints (merge), push, whether the line waits."""
 
@@ -104,7 +95,7 @@ class _Motion:
                  remaining: list[tuple[float, Limits | None]] | None = None,
                  profile: Profile | None = None, path: PairMotion | None = None,
                  delay: int = 0) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.motor = motor
         self.waypoints = [] if waypoints is None else waypoints
         self.issued_at = issued_at
@@ -117,7 +108,7 @@ class _Motion:
         self.delay = delay
 
 
-@dataclass(init=False)
+@dataclass(init=False, slots=True)
 class _Run:
     """One unit being executed."""
 
@@ -134,7 +125,7 @@ class _Run:
     arrivals: dict[int, int]            # when it reaches each motor
 
     def __init__(self, frame: Frame, index: int, unit: Unit, start: int) -> None:
-        # written out: a generated __init__ runs interpreted (profile.Segment)
+        # written out: built on the hot path (docs/architecture.md "Fast code")
         self.frame = frame
         self.index = index
         self.unit = unit

@@ -44,8 +44,6 @@ MID_LO, MID_HI = volts_to_counts(2.4), volts_to_counts(2.6)  # CW/CCW zero band
 NONE, POSITION, SPEED_CW, SPEED_CCW, SPEED_BOTH = 0, 1, 2, 3, 4
 P_DATA, S_PLUS, S_MINUS, S_BOTH, TORQUE, TORQUE_FEEDBACK = 5, 6, 7, 8, 9, 10
 SPEED_MODES = (SPEED_CW, SPEED_CCW, SPEED_BOTH)
-#: The types that look again when another motion starts (:meth:`AnalogControl.activate`).
-_LOOKS_AGAIN = (*SPEED_MODES, TORQUE)
 
 #: CM1 (cm1-ethernetip-interface-manual.txt Appendix A): K64 selects the analog
 #: function; 9 = "Analog control only (K38)" with K38 0 speed / 1 position.
@@ -131,7 +129,7 @@ class AnalogControl:
         self.ticks = 0                    # loop samples so far (tests, benchmarks)
         self._driven_speed: float | None = None   # the torque feedback's last command
         analog_input.listeners.append(self.wake)
-        motor.timeline.listen(self._trajectory_changed, on=False)   # on in speed, torque
+        motor.timeline.listeners.append(self._trajectory_changed)
         motor.params.on_change(self._param_changed)
 
     # -- activation and the loop ---------------------------------------------------
@@ -140,7 +138,6 @@ class AnalogControl:
         if self._owns() and self.motor.axis.moving:
             self.motor.axis.stop(self._limits().decel)
         self.mode = effective_mode(self.motor)
-        self.motor.timeline.listen(self._trajectory_changed, self.mode in _LOOKS_AGAIN)
         self.filtered = float(self.input.counts())
         self.armed = self._zero_speed_input()
         self.feedback = None
@@ -173,9 +170,8 @@ class AnalogControl:
         self._schedule(self.kernel.now + TICK_NS, sleeping=False)
 
     def _trajectory_changed(self, *_: object) -> None:
-        """Another motion started (or ended a wait): speed and torque control look again
-        (the timeline calls it only in those modes)."""
-        if not self._in_tick and self.mode in _LOOKS_AGAIN and not self._owns():
+        """Another motion started (or ended a wait): speed and torque control look again."""
+        if not self._in_tick and self.mode in (*SPEED_MODES, TORQUE) and not self._owns():
             self.wake()
 
     def _schedule(self, at: int, *, sleeping: bool) -> None:

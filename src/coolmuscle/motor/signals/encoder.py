@@ -148,7 +148,7 @@ class ExternalEncoder:
         self._index_timer: Timer | None = None
         self._config: tuple[object, ...] | None = None
         motor.params.on_change(self._param_changed)
-        timeline.listen(self._trajectory_changed, on=False)   # on while an index runs
+        timeline.listeners.append(self._trajectory_changed)
         self.reconfigure()
 
     # -- configuration ----------------------------------------------------------------
@@ -285,14 +285,8 @@ class ExternalEncoder:
         if self.track is not None and self.scale() < 0:
             raw_dir = -raw_dir
         m.run_continuous(raw_dir * m.axis.sign * abs(s_value), limits)
-        self._set_index(self._target_state(target, up))
+        self._index_state = self._target_state(target, up)
         self._schedule_index()
-
-    def _set_index(self, state: int | None) -> None:
-        """The quantizer state a running index operation stops at (``None``: none runs);
-        the trajectory changes are listened to while one runs."""
-        self._index_state = state
-        self.timeline.listen(self._trajectory_changed, state is not None)
 
     def _schedule_index(self) -> None:
         if self._index_timer is not None:
@@ -313,7 +307,7 @@ class ExternalEncoder:
 
     def _index_reached(self) -> None:
         self._index_timer = None
-        self._set_index(None)
+        self._index_state = None
         self.motor.stop()
 
     def cancel_index(self) -> None:
@@ -321,7 +315,7 @@ class ExternalEncoder:
         if self._index_timer is not None:
             self._index_timer.cancel()
         self._index_timer = None
-        self._set_index(None)
+        self._index_state = None
 
     def _trajectory_changed(self, old: Piece, new: Piece) -> None:
         del old

@@ -2,8 +2,8 @@
 
 An output whose K34 digit is 7 is ON in the first half of every K24 pulses of the
 current position and OFF in the second half; when outputs 1 and 2 are both 7 they
-are a quadrature pair (A on output 1, B on output 2, 90° apart; the issue calls
-this K34 "77").  Each switch happens 1/5000 of a revolution past its boundary in
+are a quadrature pair (A on output 1, B on output 2, 90° apart; K34 "77" for
+short).  Each switch happens 1/5000 of a revolution past its boundary in
 the direction of motion (5.2 "±1/5000ppr hysteresis"), so the switching points
 differ between CW and CCW.
 

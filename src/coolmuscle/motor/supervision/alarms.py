@@ -113,7 +113,7 @@ class OverloadWatch(_AlarmWatch):
     K57 ms (the alarm) or the motion has none left.  The instants are those that one
     kernel event per crossing would find (each search starts 1 ns after the crossing
     before it, as a re-armed watcher does), without the events: a servo that touches
-    the limit on every cycle of a csp stream (issue 12 item 9) costs no event for it.
+    the limit on every cycle of a csp stream (a new target every 1 ms) costs no event for it.
     The stretches found are kept, so that a re-solve in the middle of one carries its
     start on (:meth:`_since_at`)."""
 

@@ -21,6 +21,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+from ...sim.memo import Key, Memo
 from ..motion.dynamics import Drive
 from ..motion.planner import Limits
 from ..status import ALARM_BITS, Ux
@@ -62,8 +63,7 @@ class Supervisor:
         self._motion_listeners: list[MotionListener] = []
         #: The drives made from the plant as it is (:meth:`drive`), by what else they
         #: were made from.
-        self._drives: dict[tuple[int, float, float, float, tuple[float, float], int],
-                           Drive] = {}
+        self._drives: Memo[Key, Drive] = Memo(64)
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
@@ -96,14 +96,12 @@ class Supervisor:
         ppr = m.resolution.pulses_per_rev
         extra = faults.extra_load_percent / 100.0 * plant.rated_torque
         scale, walls, speed_limit = faults.speed_scale(), self.geometry.walls(ppr), m.k(40)
-        key = (ppr, limit, scale, extra, walls, speed_limit)
+        key: Key = (ppr, limit, scale, extra, walls, speed_limit)
         found = self._drives.get(key)
         if found is None:
-            if len(self._drives) >= 64:
-                self._drives.clear()
-            found = self._drives[key] = plant.drive(
+            found = self._drives.put(key, plant.drive(
                 ppr, limit_percent_of_rated=limit, enabled=True, speed_scale=scale,
-                extra_load_nm=extra, walls=walls, speed_limit=speed_limit)
+                extra_load_nm=extra, walls=walls, speed_limit=speed_limit))
         return found
 
     def _plant_changed(self) -> None:

@@ -1,5 +1,5 @@
 """``coolmuscle capture``: a transparent relay that records a real motor's session
-(issue 25; docs/user-guide.md "coolmuscle capture").
+(docs/user-guide.md "coolmuscle capture").
 
 * :mod:`.settings` - baud rate, parity, echo and firmware: given, or asked before the
   session (``?85``, ``K20``, ``K23``);

@@ -106,9 +106,9 @@ class TranscriptEntry:
 
     def __init__(self, time: int, direction: Direction, data: bytes,
                  line_no: int | None = None) -> None:
-        # Written out, not generated: compiled, a dataclass's generated __init__ runs
-        # interpreted, 10x slower (docs/performance.md).  object.__setattr__ as a frozen
-        # dataclass's own __init__ does; mypyc stores the fields directly.
+        # written out: built on the hot path (docs/architecture.md "Fast code");
+        # object.__setattr__ as a frozen dataclass's own __init__ does (mypyc stores the
+        # fields directly)
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "direction", direction)
         object.__setattr__(self, "data", data)
