@@ -166,6 +166,17 @@ def test_a_host_follows_a_k20_change_to_be_answered() -> None:
     chain.close()
 
 
+def test_a_port_set_beyond_any_uart_reads_as_at_the_fastest_one() -> None:
+    """A pty client may set any number (Linux BOTHER): the line takes the host's rate
+    within 50 bit/s .. 12 Mbit/s, so a port at 4 Gbit/s reads what one at 12 Mbit/s
+    reads (garbage either way) and the model is not held up reading it."""
+    chain, _host, heard, plain = _chain_with_host([0xFFFFFFFF])
+    chain.host_line.feed(b"?96.1\r")                 # from a client of no known rate
+    chain.kernel.run(until=seconds(0.1))
+    assert plain and heard == [as_read_at(chunk, 38400, 12_000_000) for chunk in plain]
+    chain.close()
+
+
 def test_k82_frames_the_motors_bytes_a_host_must_match() -> None:
     chain = Chain(pacing=True)
     chain.execute("K82.1=2")                         # ch. 3 K82: odd parity

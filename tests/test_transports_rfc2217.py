@@ -123,6 +123,22 @@ def test_at_another_rate_each_side_reads_garbage_as_a_uart_would(paced: Served) 
         assert b"Px.1" not in ask(port, b"?96.1\r", wait=0.4)
 
 
+def test_a_rate_no_serial_port_has_is_refused_and_the_line_stays_quick(
+        paced: Served) -> None:
+    """A client asking 4 Gbit/s (the field's largest value) is refused: its port keeps
+    the rate it had, and the model does not spend seconds reading at it (the host line
+    takes a host's rate within 50 bit/s .. 12 Mbit/s, docs/fidelity.md)."""
+    with serial.serial_for_url(paced.url, baudrate=38400, timeout=0.05) as port, \
+            serial.serial_for_url(paced.url, baudrate=38400, timeout=0.05) as other:
+        with pytest.raises((serial.SerialException, ValueError)):
+            port.baudrate = 0xFFFFFFFF
+        start = time.monotonic()
+        assert ask(other, b"?96.1\r") == b"?96.1\r\nPx.1=0\r\n"
+        assert time.monotonic() - start < 2.0
+        port.baudrate = 38400
+        assert ask(port, b"\r?96.1\r").endswith(b"?96.1\r\nPx.1=0\r\n")
+
+
 def test_the_motor_does_not_follow_the_clients_rate(paced: Served) -> None:
     with serial.serial_for_url(paced.url, baudrate=115200, timeout=0.05) as port:
         ask(port, b"\r?96.1\r", wait=0.4)

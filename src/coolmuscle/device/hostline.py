@@ -51,7 +51,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..sim.kernel import NS_PER_S, PRIO_IO, PRIO_REPORT, Kernel
-from .uart import PLAIN, Frame, as_read_at
+from .uart import PLAIN, Frame, as_read_at, bounded_host_baud
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +191,8 @@ class HostLine:
 
     def _host_rate(self, source: object) -> int | None:
         baud = self._host_baud.get(source)
-        return baud() if baud is not None else None
+        rate = baud() if baud is not None else None
+        return bounded_host_baud(rate) if rate is not None else None
 
     def _frame_of(self, source: object, motor: Frame) -> Frame:
         frame = self._host_frame.get(source)

@@ -37,6 +37,20 @@ __all__ = ["Frame", "as_read_at", "PARITIES"]
 #: Bits of the motor's frame without parity: start, 8 data, stop (5.6.1).
 FRAME_BITS = 10
 
+#: The rates a host's port may be set to: 50 bit/s (the slowest standard rate) to
+#: 12 Mbit/s (the fastest common USB UART, FTDI's FT232H).  A receiver far faster or
+#: slower than the sender reads a byte of framing errors per few bit times, so what it
+#: reads grows with the ratio: the bounds keep that finite (docs/fidelity.md).
+MIN_HOST_BAUD = 50
+MAX_HOST_BAUD = 12_000_000
+
+
+def bounded_host_baud(baud: int) -> int:
+    """``baud`` within :data:`MIN_HOST_BAUD` .. :data:`MAX_HOST_BAUD` (a port set
+    outside reads as at the nearest bound: garbage either way)."""
+    return min(max(baud, MIN_HOST_BAUD), MAX_HOST_BAUD)
+
+
 #: The parities of a frame: none, even, odd, mark (always 1), space (always 0).
 PARITIES = ("N", "E", "O", "M", "S")
 

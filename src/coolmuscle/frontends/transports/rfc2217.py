@@ -58,7 +58,7 @@ from serial.rfc2217 import (
 )
 
 from ...device.hostline import BAUD_RATES
-from ...device.uart import Frame
+from ...device.uart import MAX_HOST_BAUD, MIN_HOST_BAUD, Frame
 from .base import DEFAULT_MAX_BUFFER, Lane, Port
 from .stream_server import DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_CLIENTS, StreamServer
 from .tcp import DEFAULT_HOST, READ_SIZE, TcpTransport, _Client
@@ -108,8 +108,10 @@ class ComPort:
 
     @baudrate.setter
     def baudrate(self, value: int) -> None:
-        if not isinstance(value, int) or value <= 0:
-            raise ValueError(f"not a baud rate: {value!r}")
+        if not isinstance(value, int) or not MIN_HOST_BAUD <= value <= MAX_HOST_BAUD:
+            # pyserial's PortManager keeps the rate it had and answers with it
+            raise ValueError(f"not a baud rate of a serial port: {value!r} (a port is set "
+                             f"to {MIN_HOST_BAUD} to {MAX_HOST_BAUD} bit/s)")
         self._baudrate = value
 
     def host_baud(self) -> int | None:
