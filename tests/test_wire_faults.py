@@ -215,6 +215,8 @@ def test_clear_ends_a_fault_at_once(wire):
     ('door = "host-line"\nkind = "dead"\ncount = 1', "a lasting fault holds"),
     ('door = "chain"\nkind = "power_off"', "motor must be an integer 1..15"),
     ('door = "host-line"\nkind = "drop"\nat = 2\nuntil = 1', "until must be a number 2..1e+09"),
+    (f'door = "host-line"\nkind = "drop"\nat = {10 ** 400}', "at must be a number 0..1e+09"),
+    (f'door = "host-line"\nkind = "delay"\nms = {10 ** 400}', "ms must be 0..60000"),
 ])
 def test_machine_file_refuses_bad_wire_faults_naming_the_key(table, message):
     with pytest.raises(MachineFileError, match="wire.fault\\[1\\]") as info:
@@ -437,3 +439,18 @@ def test_any_faults_and_any_bytes_never_raise_and_keep_saved_data(faults, lines)
         assert chain.get_register(2, "P", 7) == 321      # saved: back after any power cycle
     finally:
         chain.close()
+
+
+def test_the_pages_panel_refuses_schedule_keys_and_names_as_parameters(chain):
+    """The web page's panel passes ``params`` as keywords: a schedule key or ``door`` /
+    ``kind`` among them is a bad request, not a TypeError (and not a schedule by the
+    back door); a huge number is refused in the model's words."""
+    from coolmuscle.tools.web.actions import RequestError
+    from coolmuscle.tools.web.wirefaults import WirePanel
+    panel = WirePanel(chain, lambda fn, *args: fn(*args))
+    for params in ({"door": "x"}, {"kind": "drop"}, {"at": 1}, {"until": 2}):
+        with pytest.raises(RequestError, match="is no parameter of a fault"):
+            panel.inject({"door": "host-line", "kind": "delay", "params": params})
+    with pytest.raises(ValueError, match="ms must be 0..60000"):
+        panel.inject({"door": "host-line", "kind": "delay", "params": {"ms": 10 ** 400}})
+    assert chain.wire_faults.faults == []

@@ -18,12 +18,11 @@ gives the same bytes.  ``every = N`` hits the N-th, 2N-th ... message of the win
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from ...sim.kernel import PRIO_IO, Kernel, Timer, seconds
-from .vocabulary import FaultKind, Value, kind_of
+from .vocabulary import FaultKind, Value, finite, kind_of
 
 __all__ = ["WireFault", "ActiveFault", "WireRecord", "WireFaults", "Generator",
            "wire_fault", "SCHEDULE_KEYS", "MAX_TIME_S"]
@@ -68,8 +67,10 @@ class WireFault:
 
 
 def _number(value: object, name: str, where: str, lo: float, hi: float) -> float:
+    # compared before any float(): an integer of 400 digits is out of range, not an
+    # OverflowError
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or not lo <= value <= hi:
+            or not lo <= value <= hi or not finite(value):
         raise ValueError(f"{where}: {name} must be a number {lo:g}..{hi:g}, not {value!r}")
     return float(value)
 

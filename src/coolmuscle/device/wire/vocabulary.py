@@ -28,6 +28,14 @@ __all__ = ["Param", "FaultKind", "register", "kind_of", "doors", "kinds", "descr
 Value = int | float | str | bool
 
 
+def finite(value: float) -> bool:
+    """A finite number a float holds (an integer beyond 1.8e308 is not)."""
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 @dataclass(frozen=True)
 class Param:
     """One parameter of a fault kind: its type, default, bounds or choices."""
@@ -52,10 +60,12 @@ class Param:
             raise ValueError(f"{where}: {self.name} must be one of {', '.join(self.choices)}, "
                              f"not {value!r}")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-                self.type is int and not float(value).is_integer()):
+                self.type is int and isinstance(value, float)
+                and not value.is_integer()):
             kind = "an integer" if self.type is int else "a number"
             raise ValueError(f"{where}: {self.name} must be {kind}, not {value!r}")
-        if not (math.isfinite(value) and self.lo <= value <= self.hi):
+        # the range first: an integer of 400 digits is out of it (float() would overflow)
+        if not (self.lo <= value <= self.hi and finite(value)):
             raise ValueError(f"{where}: {self.name} must be {self.lo:g}..{self.hi:g}, "
                              f"not {value!r}")
         return int(value) if self.type is int else float(value)

@@ -75,6 +75,10 @@ class WirePanel:
             raise RequestError("wire_fault: 'door' and 'kind' are names (docs/wire-faults.md)")
         schedule = self._table(request, "schedule", _SCHEDULE)
         params = self._table(request, "params", None)
+        taken = sorted(set(params) & (_SCHEDULE | {"door", "kind"}))
+        if taken:                        # a schedule key or a name is no fault parameter
+            raise RequestError(f"wire_fault: {taken[0]!r} is no parameter of a fault "
+                               "(the schedule's keys go in 'schedule')")
         number = self._call(lambda: self.device.inject_wire_fault(
             door, kind, **schedule, **params))
         return {"fault": number, **self.faults(request)}
