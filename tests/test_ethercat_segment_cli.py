@@ -49,6 +49,7 @@ def coolmuscle(*args: str, timeout: float = 30) -> subprocess.CompletedProcess[s
     (["--bridge", "EB02", "--bridges", "EB02,EB12"], "exclude each other"),
     (["--bridges", "EB02,EB99"], "EB99"),
     (["--bridges", "EB02,,EB12"], "comma-separated"),
+    (["--bridges", ",".join(["EB02"] * 65)], "65 bridges; a segment has at most 64"),
 ])
 def test_bad_bridges_are_one_line_and_exit_2(args: list[str], said: str) -> None:
     done = coolmuscle("sim", "--ethercat", "eth0", *args, "--no-state")

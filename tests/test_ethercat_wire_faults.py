@@ -121,7 +121,7 @@ def test_a_machine_file_schedules_ethercat_faults_and_names_a_wrong_key():
     for text, said in (('kind = "link_down"\nevery = 2\n', "lasting"),
                        ('kind = "lost_frame"\nway = "sideways"\n', "way must be one of"),
                        ('kind = "late_cycle"\nms = -1\n', "ms must be"),
-                       ('kind = "lost_frame"\nbridge = 9\n', "bridge must be 1..8")):
+                       ('kind = "lost_frame"\nbridge = 65\n', "bridge must be 1..64")):
         with pytest.raises(MachineFileError, match=said):
             parse_machine(f'[[wire.fault]]\ndoor = "ethercat"\n{text}')
 

@@ -454,3 +454,13 @@ def test_the_pages_panel_refuses_schedule_keys_and_names_as_parameters(chain):
     with pytest.raises(ValueError, match="ms must be 0..60000"):
         panel.inject({"door": "host-line", "kind": "delay", "params": {"ms": 10 ** 400}})
     assert chain.wire_faults.faults == []
+
+
+def test_an_ethercat_fault_reaches_every_bridge_a_segment_may_have():
+    """The bridge parameter spans a segment's bridges (a machine file allows 64)."""
+    from coolmuscle.device.wire.schedule import wire_fault
+    from coolmuscle.device.wire.vocabulary import MAX_BRIDGES
+    assert wire_fault("ethercat", "link_down", {"until": 1},
+                      {"bridge": MAX_BRIDGES}).params["bridge"] == MAX_BRIDGES
+    with pytest.raises(ValueError, match=f"bridge must be 1..{MAX_BRIDGES}"):
+        wire_fault("ethercat", "link_down", {"until": 1}, {"bridge": MAX_BRIDGES + 1})

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ..device.wire.schedule import SCHEDULE_KEYS, WireFault, wire_fault
+from ..device.wire.vocabulary import MAX_BRIDGES
 from ..errors import CoolMuscleError
 from ..motor.signals.analog import source_from_config
 from ..motor.signals.encoder import gearing_from_config
@@ -78,8 +79,6 @@ _NAMED_SENSORS = ("origin_sensor", "cw_limit", "ccw_limit")
 _AXIS_KEYS = frozenset({"motor", "bridge", "ppr", "start", "params", "load", "drive", "thermal",
                         "stoppers", "sensor", "input", "fault", "analog", "encoder",
                         *_NAMED_SENSORS})
-#: Bridges a segment may have (``[ethercat] bridges``): 8 carry a 32-axis line.
-MAX_BRIDGES = 64
 #: Lasting faults an ``until`` can clear, and the parameters their clearing needs.
 _CLEARABLE = {"overload": (), "supply_voltage": (), "stuck_input": ("input",),
               "broken_cable": ("cable",)}

@@ -306,7 +306,11 @@ register("enip", "the CM1 EtherNet/IP module (cm1-ethernetip-interface-manual.tx
 ])
 
 #: The bridge an ``ethercat`` fault acts at (1 = next to the master, line order).
-_BRIDGE = Param("bridge", int, 1, "the bridge, in line order (1: next to the master)", 1, 8)
+#: Bridges an EtherCAT segment may have (``[ethercat] bridges``, ``--bridges``): 8 carry
+#: a 32-axis line; the bound keeps a typo from building thousands.
+MAX_BRIDGES = 64
+_BRIDGE = Param("bridge", int, 1, "the bridge, in line order (1: next to the master)", 1,
+                MAX_BRIDGES)
 
 register("ethercat", "the EtherCAT bridges' segment (ethercat-bridge-users-guide.txt; "
          "ETG.1000.4): a message is one frame from the master, or one bridge cycle", [

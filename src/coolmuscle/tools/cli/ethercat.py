@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Literal, NoReturn, overload
 
 import typer
 
+from ...device.wire.vocabulary import MAX_BRIDGES
 from ...errors import CoolMuscleError
 from ...frontends.ethercat.bridge import identity as ident
 
@@ -67,6 +68,9 @@ def segment_codes(bridge: str | None, bridges: str | None,
     if not names or not all(names):
         raise EthercatUsageError(f"{where}: a comma-separated list of bridges, "
                                  "e.g. EB02,EB02,EB12")
+    if len(names) > MAX_BRIDGES:
+        raise EthercatUsageError(f"{where}: {len(names)} bridges; a segment has at most "
+                                 f"{MAX_BRIDGES}")
     try:
         codes = tuple(ident.variant(name).code for name in names)
     except ValueError as exc:

@@ -29,6 +29,7 @@ the next :meth:`Segment.process` or :meth:`Segment.tick`, in the frame thread.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 
 from .esc import Esc, is_ethercat
@@ -50,6 +51,7 @@ class Segment:
         #: The cable into each ESC's port 0 is plugged (what the frame thread applied).
         self._plugged = (True,) * len(self.escs)
         self._wanted = self._plugged
+        self._cables = threading.Lock()
         self.tap: Tap | None = None
         #: Frames processed, and how many ESCs the last one passed.
         self.frames = 0
@@ -73,9 +75,10 @@ class Segment:
     def _set(self, position: int, up: bool) -> None:
         if not 0 <= position < len(self.escs):
             raise IndexError(f"no slave at position {position} (0..{len(self.escs) - 1})")
-        wanted = list(self._wanted)
-        wanted[position] = up
-        self._wanted = tuple(wanted)       # one reference swap: safe from any thread
+        with self._cables:                 # two threads may pull two cables at once
+            wanted = list(self._wanted)
+            wanted[position] = up
+            self._wanted = tuple(wanted)   # readers see the old tuple or the new one
 
     def _apply_links(self) -> None:
         """DL status of every ESC from the cables: port 0 has a link when its own cable
