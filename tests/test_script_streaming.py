@@ -188,3 +188,15 @@ def test_a_run_that_does_not_end_leaves_the_record_as_it_was(tmp_path: Path) -> 
         run_command(script, record=record)
     assert record.read_text(encoding="utf-8") == "?96.1\n<< Ux.1=8\\r\\n\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.cml", "golden.cml"]
+
+
+@pytest.mark.parametrize("where", ["/", "."])
+def test_record_into_a_directory_is_refused_before_the_run(tmp_path: Path, where: str) -> None:
+    """``--record /`` or a directory: one ScriptError at once (exit 2), not a traceback
+    and not after the whole run."""
+    script = tmp_path / "s.cml"
+    script.write_text("?96.1\n", encoding="utf-8")
+    target = Path(where) if where == "/" else tmp_path
+    with pytest.raises(ScriptError, match="it is a directory"):
+        run_command(script, record=target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.cml"]

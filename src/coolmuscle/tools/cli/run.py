@@ -300,6 +300,9 @@ class _Recording:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        if not path.name or path.is_dir():      # checked before the run, not after it
+            raise ScriptError(f"cannot write {path}: it is a directory (--record names "
+                              "a file)")
         self.part = path.with_name(f".{path.name}.part")
         try:
             self.file = self.part.open("w", encoding="utf-8")
