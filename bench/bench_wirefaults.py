@@ -40,7 +40,7 @@ def main() -> None:
     print(f"RSS start {start:.1f} MiB, middle {middle:.1f} MiB, end {end:.1f} MiB "
           f"(end - middle {end - middle:+.1f} MiB)")
     print(report.summary())
-    for line in report.unexpected[:5] + report.tracebacks[:5] + report.lost_saves[:5]:
+    for line in report.problems():
         print("  !", line)
     print("clean" if report.clean else "NOT CLEAN")
     sys.exit(0 if report.clean else 1)

@@ -72,6 +72,21 @@ class HostLine:
                 raise AssertionError("host line closed")
             self.buf += chunk
 
+    def lines_within(self, seconds: float) -> list[str]:
+        """Every line received from now for ``seconds`` (a fixed window: for silence)."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            self.sock.settimeout(left)
+            try:
+                chunk = self.sock.recv(4096)
+            except TimeoutError:
+                break
+            if not chunk:
+                raise AssertionError("host line closed")
+            self.buf += chunk
+        *lines, self.buf = re.split(rb"\r\n|\r|\n", self.buf)
+        return [line.decode("latin-1") for line in lines if line]
+
     def close(self) -> None:
         self.sock.close()
 
