@@ -254,16 +254,19 @@ def test_the_link_down_takes_the_bridges_behind_it_to_safeop_001b_and_back_to_op
                      "is back"]
 
 
-def test_a_late_cycle_skips_the_cycles_due_meanwhile():
+@pytest.mark.parametrize(("ms", "skipped"), [(2.5, 2), (3.0, 3)])
+def test_a_late_cycle_skips_the_cycles_due_meanwhile(ms: float, skipped: int) -> None:
+    """Late by 2.5 ms: the two cycles due meanwhile are skipped; by 3 ms, the one due at
+    the instant the late one runs too (one cycle an instant)."""
     m = Master()
     m.to_op()
     drive = m.seg.apps[0].drive
     assert drive is not None
     start = drive.cycles
-    m.chains[0].inject_wire_fault("ethercat", "late_cycle", ms=2.5, every=10, count=2)
+    m.chains[0].inject_wire_fault("ethercat", "late_cycle", ms=ms, every=10, count=2)
     m.ms(40)
-    assert m.seg.faults is not None and m.seg.faults.skipped == 4   # 2 x (2 due in 2.5 ms)
-    assert drive.cycles - start == 40 - 4
+    assert m.seg.faults is not None and m.seg.faults.skipped == 2 * skipped
+    assert drive.cycles - start == 40 - 2 * skipped
     assert sum("ms late" in e for e in m.events) == 2
 
 

@@ -144,10 +144,11 @@ class EthercatFaults:
 
     def late_cycle(self) -> int | None:
         """The instant (ns) this cycle runs at instead of now, or None: run it now.
-        A cycle due while a late one waits is skipped (``0``)."""
+        A cycle due while a late one waits, or at the very instant it runs, is skipped
+        (``0``): one cycle an instant."""
         now = self.wire.kernel.now
         if self._late_until is not None:
-            if now < self._late_until:
+            if now <= self._late_until:
                 self.skipped += 1
                 return 0
             self._late_until = None
