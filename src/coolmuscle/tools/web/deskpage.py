@@ -44,6 +44,7 @@ from ..desk.backupfile import parse_backup, render_backup
 from ..desk.errors import DeskError
 from ..desk.image import ChainImage, MotorImage
 from ..desk.restorer import LineControl, RestoreReport, check_restorable, plan_restore, run_restore
+from .actions import RequestError
 from .banks import DeviceLink, firmware_of
 from .hub import Note
 from .pageops import (
@@ -71,10 +72,6 @@ MAX_BACKUP_TEXT = 200 * 1024
 MAX_JOG = 2**31 - 1
 #: Run: drives one client operation to its end, in the caller's thread.
 Run = Callable[[Op[Any]], Any]
-
-
-class RequestError(CoolMuscleError, ValueError):
-    """A request the page should not have sent; its text is shown to the user."""
 
 
 class Runner(Protocol):
