@@ -56,6 +56,20 @@ class RequestError(CoolMuscleError, ValueError):
     """A request the page should not have sent; its text is shown to the user."""
 
 
+def console_line(request: dict[str, Any]) -> str:
+    """The console's ``line`` of a request: text, one line, no longer than the motor
+    keeps (:data:`MAX_LINE`); else a :class:`RequestError` the page shows."""
+    line = request.get("line")
+    if not isinstance(line, str):
+        raise RequestError("cml: 'line' must be text")
+    if len(line) > MAX_LINE:
+        raise RequestError(f"line too long ({len(line)} characters; the motor keeps "
+                           f"{MAX_LINE})")
+    if any(ch in line for ch in "\r\n"):
+        raise RequestError("one line at a time (no CR/LF inside)")
+    return line
+
+
 class Actions:
     """Handlers of page requests; ``call`` runs a model call at the current instant."""
 
@@ -109,14 +123,7 @@ class Actions:
     # -- handlers -----------------------------------------------------------------
     def cml(self, request: dict[str, Any]) -> dict[str, Any]:
         """One console line, run as the host line would run it (origin ``web``)."""
-        line = request.get("line")
-        if not isinstance(line, str):
-            raise RequestError("cml: 'line' must be text")
-        if len(line) > MAX_LINE:
-            raise RequestError(f"line too long ({len(line)} characters; the motor keeps "
-                               f"{MAX_LINE})")
-        if any(ch in line for ch in "\r\n"):
-            raise RequestError("one line at a time (no CR/LF inside)")
+        line = console_line(request)
         motor = self._motor(request)
         self._note([self.device.kernel.now, ">", line, motor, "web"])
         replies = self._call(lambda: self.device.execute(line, origin="web", motor=motor))

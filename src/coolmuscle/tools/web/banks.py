@@ -192,16 +192,21 @@ class DeviceLink:
             if isinstance(request, Exchange):
                 yield
 
+    #: Feed each line's echo in front of its replies, as a host line prints them.
+    echo = False
+
     def send(self, line: str, *, session: object = ...) -> None:
-        """One line to the motor, as the page's console sends it; its replies to the
-        protocol.  ``session``: the sender (default: this link's own)."""
+        """One line to the motor, as the page's console sends it; its replies (after
+        its echo, with :attr:`echo`) to the protocol.  ``session``: the sender (default:
+        this link's own)."""
         if line:
             self.note([self.device.kernel.now, ">", line, self.motor, "web"])
         replies = self.device.execute(line, origin="web", motor=self.motor,
                                       session=self if session is ... else session)
         self.lines_sent += 1
+        received = [line, *replies] if self.echo else replies
         self.session.protocol.receive(
-            b"".join(reply.encode("latin-1", "replace") + b"\r\n" for reply in replies))
+            b"".join(text.encode("latin-1", "replace") + b"\r\n" for text in received))
 
     def _do(self, request: object) -> object:
         if isinstance(request, Exchange):

@@ -118,15 +118,7 @@ class EchoLink(DeviceLink):
     protocol never takes a reply equal to a line sent (``K24.1=2000`` after
     ``K24.1=2000``, ``K24.1``) for that line's echo."""
 
-    def send(self, line: str, *, session: object = ...) -> None:
-        if line:
-            self.note([self.device.kernel.now, ">", line, self.motor, "web"])
-        replies = self.device.execute(line, origin="web", motor=self.motor,
-                                      session=self if session is ... else session)
-        self.lines_sent += 1
-        self.session.protocol.receive(
-            line.encode("latin-1", "replace") + b"\r\n"
-            + b"".join(reply.encode("latin-1", "replace") + b"\r\n" for reply in replies))
+    echo = True
 
 
 class ChainRunner:

@@ -34,7 +34,7 @@ from ...frontends.transports.base import Port
 from ...motor.state.firmware import get_firmware
 from ..check.lint import check_program
 from .access import DEFAULT_HOST, DEFAULT_PORT
-from .actions import MAX_BANK_TEXT, MAX_LINE
+from .actions import MAX_BANK_TEXT, console_line
 from .deskpage import Desk
 from .hub import SNAP_FIELDS, Hub
 from .line import LineDevice
@@ -180,15 +180,7 @@ class LinePage(WebTransport):
         return motor
 
     async def _cml(self, request: dict[str, Any]) -> dict[str, Any]:
-        line = request.get("line")
-        if not isinstance(line, str):
-            raise ValueError("cml: 'line' must be text")
-        if len(line) > MAX_LINE:
-            raise ValueError(f"line too long ({len(line)} characters; the motor keeps "
-                             f"{MAX_LINE})")
-        if any(ch in line for ch in "\r\n"):
-            raise ValueError("one line at a time (no CR/LF inside)")
-        replies = await self.line.console(line, self._motor(request))
+        replies = await self.line.console(console_line(request), self._motor(request))
         return {"replies": replies}
 
     async def _banks(self, request: dict[str, Any]) -> dict[str, Any]:
