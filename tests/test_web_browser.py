@@ -19,13 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from web_support import CHROMIUM, CHROMIUM_ARGS, ROOT, HostLine, output_dir, serve
+from web_support import CHROMIUM, CHROMIUM_ARGS, ROOT, HostLine, output_dir, require_browser, serve
 
-playwright = pytest.importorskip("playwright.sync_api")
-if not os.path.exists(CHROMIUM):
-    if os.environ.get("CI"):
-        raise RuntimeError(f"{CHROMIUM} is missing: scripts/test installs Debian's chromium")
-    pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)", allow_module_level=True)
+playwright = require_browser()
 
 expect = playwright.expect
 

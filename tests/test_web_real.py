@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import os
 import re
 import signal
 from collections.abc import Callable, Iterator
@@ -31,13 +30,9 @@ from typing import Any
 import pytest
 
 from fixtures import Program, SimFactory, run_coolmuscle
-from web_support import CHROMIUM, CHROMIUM_ARGS, HostLine, output_dir
+from web_support import CHROMIUM, CHROMIUM_ARGS, HostLine, output_dir, require_browser
 
-playwright = pytest.importorskip("playwright.sync_api")
-if not os.path.exists(CHROMIUM):
-    if os.environ.get("CI"):
-        raise RuntimeError(f"{CHROMIUM} is missing: scripts/test installs Debian's chromium")
-    pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)", allow_module_level=True)
+playwright = require_browser()
 
 expect = playwright.expect
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]

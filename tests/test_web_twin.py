@@ -23,7 +23,6 @@ pty is tests/test_web_real.py's).
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import subprocess
@@ -36,13 +35,9 @@ from typing import Any
 import pytest
 
 from fixtures import Program, SimFactory, run_coolmuscle
-from web_support import CHROMIUM, CHROMIUM_ARGS, output_dir
+from web_support import CHROMIUM, CHROMIUM_ARGS, output_dir, require_browser
 
-playwright = pytest.importorskip("playwright.sync_api")
-if not os.path.exists(CHROMIUM):
-    if os.environ.get("CI"):
-        raise RuntimeError(f"{CHROMIUM} is missing: scripts/test installs Debian's chromium")
-    pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)", allow_module_level=True)
+playwright = require_browser()
 
 expect = playwright.expect
 pytestmark = [pytest.mark.slow, pytest.mark.realtime, pytest.mark.timeout(900)]

@@ -14,7 +14,10 @@ import socket
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 from typing import Any
+
+import pytest
 
 from coolmuscle.chain import Chain
 from coolmuscle.frontends.transports import create
@@ -27,6 +30,18 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
                  "--no-first-run", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync"]
+
+
+def require_browser() -> ModuleType:
+    """``playwright.sync_api`` with Debian's Chromium, or the calling test module is
+    skipped where they are missing (an error in CI: scripts/test installs them)."""
+    api = pytest.importorskip("playwright.sync_api")
+    if not os.path.exists(CHROMIUM):
+        if os.environ.get("CI"):
+            raise RuntimeError(f"{CHROMIUM} is missing: scripts/test installs Debian's chromium")
+        pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)",
+                    allow_module_level=True)
+    return api
 
 
 def output_dir() -> Path:
