@@ -79,6 +79,9 @@ class Axis:
         #: The command of a stream (:meth:`follow`) and when its next target is due:
         #: while it is followed, the motion is solved that far only (dynamics.Motion).
         self._stream: tuple[Profile, int] | None = None
+        #: Solve every motion to its end at once, a stream's too (the same numbers and
+        #: instants, only slower: tests compare the two).
+        self.solve_in_full = False
         self.moving = False
         self.generation = 0
         self.watchers: list[Watcher] = []
@@ -407,7 +410,8 @@ class Axis:
         self.generation += 1
         if motion is None:
             stream, horizon = self._stream, None
-            if stream is not None and stream[0] is self.profile and stream[1] > now:
+            if stream is not None and stream[0] is self.profile and stream[1] > now \
+                    and not self.solve_in_full:
                 horizon = stream[1]
             motion = Motion(self.profile, now, self.raw_actual(), self.raw_velocity(),
                             self._current_drive(), self.memos, horizon_ns=horizon)
