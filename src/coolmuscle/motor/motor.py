@@ -13,9 +13,10 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ..cml import ast
+from ..device.api import CyclicState
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from ..sim.memo import Key, Memo
@@ -59,7 +60,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-_IN_POSITION = int(Ux.IN_POSITION)
+_IN_POSITION: Final = int(Ux.IN_POSITION)
 
 
 #: The K20 table (ch. 3 K20) as the confirmation message writes the rate.
@@ -180,6 +181,14 @@ class Motor:
     def position(self) -> int:
         """Px (?96), whole pulses."""
         return round(self.axis.position())
+
+    def cyclic_state(self, now: int) -> CyclicState:
+        """What a fieldbus cycle reads of the motor at ``now`` (the device API's
+        ``cyclic_state``: every axis of an EtherCAT segment every millisecond)."""
+        axis, io = self.axis, self.io
+        return CyclicState(       # by position
+            self.id, now, self.position(), axis.velocity(), self.status, io.input_word(),
+            io.output_word(), axis.enabled, bool(self.origin.active), bool(self.origin_done))
 
     def speed_units(self) -> int:
         """Sx (?97): actual speed in K37 speed units, to the nearest unit."""
@@ -556,7 +565,7 @@ class Motor:
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
         if function == OUT_IN_POSITION:
-            return self.status & Ux.IN_POSITION != 0
+            return self.status & _IN_POSITION != 0          # int & int: no enum
         if function == OUT_ALARM:
             return self.alarm != 0 or self.supervision.push_error
         if function == OUT_ORIGIN_DONE:

@@ -214,10 +214,22 @@ class Piece:
             bounds = self._bounds = (xp.abs_bound(self.err(), dur),
                                      xp.abs_bound(self.vel(), dur),
                                      xp.abs_bound(self.torque, dur))
-        return bounds[_REACH[what]]
+        return bounds[_reach_index(what)]
 
 
 _REACH: Final = {"err": 0, "vel": 1, "torque": 2}
+
+
+def _reach_index(what: str) -> int:
+    """:data:`_REACH`'s index of ``what`` (compared, not hashed: asked by every watcher
+    of every motion)."""
+    if what == "err":
+        return 0
+    if what == "vel":
+        return 1
+    if what == "torque":
+        return 2
+    raise KeyError(what)
 
 
 def _sign(x: float) -> int:
@@ -279,8 +291,9 @@ class Solution:
         self.pieces = pieces
         self.starts = tuple([p.start for p in pieces])
         self.peaks = _peaks(pieces) if pieces else (0.0, 0.0, 0.0)
-        #: Instants found, relative to the motion's origin (:data:`_NEVER`: none).
-        self.instants: Memo[Key, int] = Memo(INSTANTS)
+        #: Instants found, relative to the motion's origin (:data:`_NEVER`: none);
+        #: made at the first one.
+        self.instants: Memo[Key, int] | None = None
         #: What is still to solve (``None``: solved to the end).  The pieces and the
         #: peaks are then those of the part solved, and an instant not found in it is
         #: "not before the frontier" (:meth:`Motion.first_of`).
@@ -303,7 +316,7 @@ class Solution:
         self.pieces = self.pieces + rest.place_new()
         self.starts = tuple([p.start for p in self.pieces])
         self.peaks = _peaks(self.pieces)
-        self.instants = Memo(INSTANTS)          # "never" was only "not yet solved"
+        self.instants = None                    # "never" was only "not yet solved"
         if rest.solver.done:
             self.unsolved = None
 
@@ -548,7 +561,7 @@ class Motion:
 
         A watcher whose threshold is at or above it skips every piece, so it can
         answer "never" without walking them."""
-        return self._solution.peaks[_REACH[what]]
+        return self._solution.peaks[_reach_index(what)]
 
     def settled(self, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
@@ -556,16 +569,10 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.settled(window, after_ns)
-        key: Key = (window, after_ns - self.origin_ns)
-        instants = self._solution.instants
-        found = instants.get(key)
-        if found is None:
-            def inside(piece: Piece) -> list[AnyF]:
-                e = piece.err()
-                return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
-            at = self.first_of(after_ns, (inside,))
-            found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
-        return None if found == _NEVER else self.origin_ns + found
+        def inside(piece: Piece) -> list[AnyF]:
+            e = piece.err()
+            return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
+        return self._instant((window, after_ns - self.origin_ns), after_ns, inside)
 
     def within(self, center: float, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where the actual position is within
@@ -573,13 +580,24 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.within(center, window, after_ns)
-        key: Key = ("within", center, window, after_ns - self.origin_ns)
-        instants = self._solution.instants
+        def inside(piece: Piece) -> list[AnyF]:
+            off = xp.sub(piece.pos, xp.const(center))
+            return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
+        return self._instant(("within", center, window, after_ns - self.origin_ns),
+                             after_ns, inside)
+
+    def _instant(self, key: Key, after_ns: int, inside: Conditions) -> int | None:
+        """The first instant >= ``after_ns`` where ``inside`` holds, remembered with the
+        solution under ``key``.  A motion solved in part is not shared and is replaced
+        soon (a stream's next target): its instants are sought, not remembered."""
+        solution = self._solution
+        if solution.unsolved is not None:
+            return self.first_of(after_ns, (inside,))
+        instants = solution.instants
+        if instants is None:
+            instants = solution.instants = Memo(INSTANTS)
         found = instants.get(key)
         if found is None:
-            def inside(piece: Piece) -> list[AnyF]:
-                off = xp.sub(piece.pos, xp.const(center))
-                return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
             found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
         return None if found == _NEVER else self.origin_ns + found
