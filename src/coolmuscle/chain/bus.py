@@ -124,7 +124,9 @@ class ChainBus:
     def cyclic_state(self, motor: int) -> CyclicState:
         """What a fieldbus cycle reads of ``motor`` (the device API's ``cyclic_state``:
         every axis of an EtherCAT segment every millisecond, so compiled here)."""
-        return self.require(motor).cyclic_state(self.kernel.now)
+        # tuple.__new__ is what the named tuple's own __new__ calls; called here, the
+        # compiled code builds it without that Python-level function
+        return tuple.__new__(CyclicState, self.require(motor).cyclic_values(self.kernel.now))
 
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:

@@ -16,7 +16,6 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Final
 
 from ..cml import ast
-from ..device.api import CyclicState
 from ..errors import MotorError, OutOfRangeError
 from ..sim.kernel import Kernel
 from ..sim.memo import Key, Memo
@@ -182,13 +181,14 @@ class Motor:
         """Px (?96), whole pulses."""
         return round(self.axis.position())
 
-    def cyclic_state(self, now: int) -> CyclicState:
-        """What a fieldbus cycle reads of the motor at ``now`` (the device API's
-        ``cyclic_state``: every axis of an EtherCAT segment every millisecond)."""
+    def cyclic_values(self, now: int) -> tuple[int, int, int, float, int, int, int, bool,
+                                                bool, bool]:
+        """What a fieldbus cycle reads of the motor at ``now``, in the order of the device
+        API's ``CyclicState`` (every axis of an EtherCAT segment every millisecond)."""
         axis, io = self.axis, self.io
-        return CyclicState(       # by position
-            self.id, now, self.position(), axis.velocity(), self.status, io.input_word(),
-            io.output_word(), axis.enabled, bool(self.origin.active), bool(self.origin_done))
+        return (self.id, now, self.position(), axis.velocity(), self.status, io.input_word(),
+                io.output_word(), axis.enabled, bool(self.origin.active),
+                bool(self.origin_done))
 
     def speed_units(self) -> int:
         """Sx (?97): actual speed in K37 speed units, to the nearest unit."""

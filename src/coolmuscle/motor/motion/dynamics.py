@@ -363,7 +363,8 @@ class MotionMemos:
 
 
 class Motion:
-    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one.
+    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one
+    (or up to a horizon, below).
 
     ``memos``: where the solution is looked up and kept (the chain's); without, the
     motion is solved afresh.
@@ -624,7 +625,9 @@ class Motion:
                  accept: Callable[[Piece], bool] | None = None) -> int | None:
         """:meth:`first` with the alternatives as one sequence and no keywords: compiled
         code calls it directly (a call with ``*`` and keywords goes through the generic
-        call protocol: 1 % of a csp axis-cycle, docs/performance.md)."""
+        call protocol: 1 % of a csp axis-cycle, docs/performance.md).  On a motion solved
+        in part, ``None`` means not before :meth:`frontier_ns` (the axis asks again
+        there)."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:

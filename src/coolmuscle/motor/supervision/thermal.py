@@ -67,7 +67,8 @@ class Thermal:
         return temp
 
     def first_above(self, motion: Motion, after_ns: int, limit: float) -> int | None:
-        """First instant >= ``after_ns`` at which the temperature exceeds ``limit``."""
+        """First instant >= ``after_ns`` at which the temperature exceeds ``limit`` (on a
+        motion solved in part, within the part solved: the axis asks again after it)."""
         temp = self.temperature_at(motion, after_ns)
         if temp > limit:
             return after_ns
