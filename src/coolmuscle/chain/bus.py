@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Final, Protocol
 
 from ..cml import ast
-from ..device.api import Event, EventListener
+from ..device.api import CyclicState, Event, EventListener
 from ..device.hostline import BAUD_RATES, PARITY_OF_K82, HostLine, LineSettings
 from ..device.uart import PLAIN, Frame
 from ..errors import NoSuchMotorError
@@ -120,6 +120,13 @@ class ChainBus:
     def get_param(self, motor: int, k: int) -> int:
         """K parameter ``k`` of ``motor`` (the device API's ``get_param``)."""
         return self.require(motor).k(k)
+
+    def cyclic_state(self, motor: int) -> CyclicState:
+        """What a fieldbus cycle reads of ``motor`` (the device API's ``cyclic_state``:
+        every axis of an EtherCAT segment every millisecond, so compiled here)."""
+        # tuple.__new__ is what the named tuple's own __new__ calls; called here, the
+        # compiled code builds it without that Python-level function
+        return tuple.__new__(CyclicState, self.require(motor).cyclic_values(self.kernel.now))
 
     # -- the host line ----------------------------------------------------
     def _line_settings(self) -> LineSettings:
@@ -241,3 +248,20 @@ class ChainBus:
 
     def beyond_chain(self, motor_id: int, stmt: ast.Statement, ctx: Context) -> bool:
         return self.commands.beyond_chain(motor_id, stmt, ctx)
+
+
+class MotorStream:
+    """Cyclic position mode for one motor (the device API's ``target_stream``): each
+    target pushed goes to the motor's :meth:`~coolmuscle.motor.motor.Motor.follow`."""
+
+    def __init__(self, motor: Motor, period_ns: int = 0) -> None:
+        self._motor = motor
+        self._period = period_ns
+        self.closed = False
+
+    def push(self, target: int) -> None:
+        if not self.closed:
+            self._motor.follow(float(target), self._period)
+
+    def close(self) -> None:
+        self.closed = True

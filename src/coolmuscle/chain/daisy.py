@@ -51,7 +51,7 @@ from ..motor.state.store import Store, bad_state_message, snapshot_problem
 from ..motor.status import Report
 from ..sim.kernel import PRIO_IO, Kernel
 from ..sim.memo import Memo
-from .bus import ChainBus, ChainCommands
+from .bus import ChainBus, ChainCommands, MotorStream
 from .power import power_off, power_on_again
 
 if TYPE_CHECKING:
@@ -67,22 +67,6 @@ log = logging.getLogger(__name__)
 #: Origins whose lines travel the chain from ID1 (the host line, a bank or ladder line
 #: of a motor for another): a motor powered off or beyond a broken link never gets them.
 _THROUGH_ID1 = frozenset({"host", "bank", "ladder"})
-
-
-class _Stream:
-    """Cyclic position mode for one motor (device API ``target_stream``)."""
-
-    def __init__(self, motor: Motor, period_ns: int = 0) -> None:
-        self._motor = motor
-        self._period = period_ns
-        self.closed = False
-
-    def push(self, target: int) -> None:
-        if not self.closed:
-            self._motor.follow(float(target), self._period)
-
-    def close(self) -> None:
-        self.closed = True
 
 
 class Chain:
@@ -522,11 +506,7 @@ class Chain:
                    "origin_done": int(m.origin_done)})     # 5.3 completed since the last |
 
     def cyclic_state(self, motor: int) -> CyclicState:
-        m = self.bus.require(motor)
-        axis, io = m.axis, m.io
-        return CyclicState(       # by position: called every cycle for every axis
-            m.id, self.kernel.now, m.position(), axis.velocity(), m.status, io.input_word(),
-            io.output_word(), axis.enabled, bool(m.origin.active), bool(m.origin_done))
+        return self.bus.cyclic_state(motor)
 
     def machine_data(self, motor: int) -> dict[str, float]:
         """The load and drive data ``motor`` runs with, by machine-file key."""
@@ -546,7 +526,7 @@ class Chain:
         self.bus.require(motor).analog = counts
 
     def target_stream(self, motor: int, period_ns: int = 0) -> TargetStream:
-        return _Stream(self.bus.require(motor), period_ns)
+        return MotorStream(self.bus.require(motor), period_ns)
 
     def inject_fault(self, motor: int, fault: str, **params: object) -> None:
         self.bus.require(motor).inject_fault(fault, **params)

@@ -13,7 +13,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
@@ -59,7 +59,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-_IN_POSITION = int(Ux.IN_POSITION)
+_IN_POSITION: Final = int(Ux.IN_POSITION)
 
 
 #: The K20 table (ch. 3 K20) as the confirmation message writes the rate.
@@ -180,6 +180,15 @@ class Motor:
     def position(self) -> int:
         """Px (?96), whole pulses."""
         return round(self.axis.position())
+
+    def cyclic_values(self, now: int) -> tuple[int, int, int, float, int, int, int, bool,
+                                                bool, bool]:
+        """What a fieldbus cycle reads of the motor at ``now``, in the order of the device
+        API's ``CyclicState`` (every axis of an EtherCAT segment every millisecond)."""
+        axis, io = self.axis, self.io
+        return (self.id, now, self.position(), axis.velocity(), self.status, io.input_word(),
+                io.output_word(), axis.enabled, bool(self.origin.active),
+                bool(self.origin_done))
 
     def speed_units(self) -> int:
         """Sx (?97): actual speed in K37 speed units, to the nearest unit."""
@@ -556,7 +565,7 @@ class Motor:
     # -- outputs ----------------------------------------------------------------
     def _output_function_signal(self, function: int, number: int) -> bool:
         if function == OUT_IN_POSITION:
-            return self.status & Ux.IN_POSITION != 0
+            return self.status & _IN_POSITION != 0          # int & int: no enum
         if function == OUT_ALARM:
             return self.alarm != 0 or self.supervision.push_error
         if function == OUT_ORIGIN_DONE:

@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from typing import Protocol
 
-from ...sim.kernel import PRIO_MOTION, Kernel, Timer
+from ...sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel, Timer
 from . import planner
 from .dynamics import LOST, Drive, Motion, MotionMemos
 from .planner import Limits, Waypoint
@@ -76,6 +76,12 @@ class Axis:
         self._rest: tuple[Profile, Profile] | None = None
         self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive(), self.memos)
         self.target_raw = 0.0
+        #: The command of a stream (:meth:`follow`) and when its next target is due:
+        #: while it is followed, the motion is solved that far only (dynamics.Motion).
+        self._stream: tuple[Profile, int] | None = None
+        #: Solve every motion to its end at once, a stream's too (the same numbers and
+        #: instants, only slower: tests compare the two).
+        self.solve_in_full = False
         self.moving = False
         self.generation = 0
         self.watchers: list[Watcher] = []
@@ -274,22 +280,27 @@ class Axis:
         self._resolve()
 
     def follow(self, user_target: float, period_ns: int = 0) -> None:
-        """Step the command to a new target; the servo follows with its lag (csp, Dx).
+        """Move the command to a new target; the shaft follows (csp, Dx).
 
-        A stepper given the period of the targets' stream (csp: one target a cycle)
-        takes the step as a ramp at constant speed over that period instead: it has no
-        position loop that smooths a step, and a step would ask an infinite
-        acceleration of it, so it would lose its steps (docs/fidelity.md "csp on a
-        stepper")."""
+        Given the period of the targets' stream (csp: one target a cycle), the command
+        ramps to the target at constant speed over that period, as a drive interpolates
+        between the targets of a cyclic mode: a stepper has no position loop that would
+        smooth a step (it would lose its steps), and a servo's loop would meet each
+        step at its torque limit (docs/fidelity.md "csp between two targets").  The
+        motion is then solved as far as the next target only (:class:`.dynamics.Motion`
+        ``horizon_ns``).  Without a period (``Dx``, a stream of unknown period) the
+        command steps to the target and the servo follows with its lag."""
         raw = self.to_raw(user_target)
         self.target_raw = raw
         now = self.kernel.now
-        if period_ns > 0 and self._drive().stepper:
+        if period_ns > 0:
             start = self.profile.position_at(now)
             if start != raw:
                 span = period_ns / 1e9
                 ramp = Segment(0.0, span, start, (raw - start) / span, 0.0, 0.0)
-                self._start(Profile(now, (ramp,), final_position=raw))
+                profile = Profile(now, (ramp,), final_position=raw)
+                self._stream = (profile, now + period_ns)
+                self._start(profile)
                 return
         self._start(hold(raw, now))
 
@@ -398,8 +409,12 @@ class Axis:
         self._cancel()
         self.generation += 1
         if motion is None:
+            stream, horizon = self._stream, None
+            if stream is not None and stream[0] is self.profile and stream[1] > now \
+                    and not self.solve_in_full:
+                horizon = stream[1]
             motion = Motion(self.profile, now, self.raw_actual(), self.raw_velocity(),
-                            self._current_drive(), self.memos)
+                            self._current_drive(), self.memos, horizon_ns=horizon)
         self.motion = motion
         if len(self.motion.pieces) >= 2000:
             # the solver's safety net (dynamics.MAX_PIECES): a model bug, said so
@@ -407,8 +422,19 @@ class Axis:
                         "the shaft holds still from there; please report the script or "
                         "commands that led here", now / 1e9)
         self._remember()
+        self._arm_all(now)
+
+    def _arm_all(self, now: int) -> None:
+        """Milestones and watchers on the motion from ``now``; on a motion solved in part,
+        a look again where the part ends, unless a new motion comes first."""
+        motion = self.motion
         if self.moving:
             self._schedule_milestones()
+        frontier = motion.frontier_ns()
+        if frontier is not None:
+            self._timers.append(self.kernel.schedule_at(
+                max(frontier, now), self._at_frontier, priority=PRIO_HORIZON,
+                name="motion-frontier"))
         timers, schedule_at = self._watch_timers, self.kernel.schedule_at
         for watcher in list(self.watchers):      # _arm written out: the hot path of a move
             old = timers.pop(id(watcher), None)
@@ -419,6 +445,13 @@ class Axis:
                 timers[id(watcher)] = schedule_at(
                     at, partial(self._fire, watcher), priority=PRIO_MOTION,
                     name=type(watcher).__name__)
+
+    def _at_frontier(self) -> None:
+        """No new motion came by the end of the part solved (a stream stopped): solve
+        the rest, and look for the milestones and alarms on it from now."""
+        self._cancel()
+        self.motion.complete()
+        self._arm_all(self.kernel.now)
 
     def _current_drive(self) -> Drive:
         drive = self._drive()

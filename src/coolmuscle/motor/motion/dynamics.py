@@ -72,6 +72,8 @@ SLIDE: Final = 1e-4
 REL_TOL: Final = 1e-9
 #: Pieces one motion may hold before the model gives up saturating (a safety net).
 MAX_PIECES: Final = 2000
+#: The exit of a piece chosen but not yet ended (the first piece after a horizon).
+OPEN: Final = "open"
 
 Conditions = Callable[["Piece"], Sequence[AnyF] | None]
 #: How a piece may end: (exit name, the functions whose first root ends it, or the
@@ -212,10 +214,22 @@ class Piece:
             bounds = self._bounds = (xp.abs_bound(self.err(), dur),
                                      xp.abs_bound(self.vel(), dur),
                                      xp.abs_bound(self.torque, dur))
-        return bounds[_REACH[what]]
+        return bounds[_reach_index(what)]
 
 
 _REACH: Final = {"err": 0, "vel": 1, "torque": 2}
+
+
+def _reach_index(what: str) -> int:
+    """:data:`_REACH`'s index of ``what`` (compared, not hashed: asked by every watcher
+    of every motion)."""
+    if what == "err":
+        return 0
+    if what == "vel":
+        return 1
+    if what == "torque":
+        return 2
+    raise KeyError(what)
 
 
 def _sign(x: float) -> int:
@@ -271,14 +285,40 @@ class Solution:
     :class:`MotionMemos`): nothing changes it but the instants it remembers, which are
     the same for every motion that asks."""
 
-    __slots__ = ("pieces", "starts", "peaks", "instants")
+    __slots__ = ("pieces", "starts", "peaks", "instants", "unsolved")
 
-    def __init__(self, pieces: tuple[Piece, ...]) -> None:
+    def __init__(self, pieces: tuple[Piece, ...], unsolved: _Unsolved | None = None) -> None:
         self.pieces = pieces
         self.starts = tuple([p.start for p in pieces])
-        self.peaks = _peaks(pieces)
-        #: Instants found, relative to the motion's origin (:data:`_NEVER`: none).
-        self.instants: Memo[Key, int] = Memo(INSTANTS)
+        self.peaks = _peaks(pieces) if pieces else (0.0, 0.0, 0.0)
+        #: Instants found, relative to the motion's origin (:data:`_NEVER`: none);
+        #: made at the first one.
+        self.instants: Memo[Key, int] | None = None
+        #: What is still to solve (``None``: solved to the end).  The pieces and the
+        #: peaks are then those of the part solved, and an instant not found in it is
+        #: "not before the frontier" (:meth:`Motion.first_of`).
+        self.unsolved = unsolved
+
+    @property
+    def frontier(self) -> float:
+        """Where the solved part ends (s from the origin; ∞: solved to the end)."""
+        if self.unsolved is None:
+            return math.inf
+        return self.pieces[-1].end if self.pieces else 0.0
+
+    def extend(self, until: float) -> None:
+        """Solve on until every piece that starts before ``until`` (s) is solved
+        (∞: to the end).  The pieces are those one pass gives, to the bit."""
+        rest = self.unsolved
+        if rest is None:
+            return
+        rest.solver.resume(until)
+        self.pieces = self.pieces + rest.place_new()
+        self.starts = tuple([p.start for p in self.pieces])
+        self.peaks = _peaks(self.pieces)
+        self.instants = None                    # "never" was only "not yet solved"
+        if rest.solver.done:
+            self.unsolved = None
 
 
 #: Instants a :class:`Solution` remembers (a repeated move asks the same few again).
@@ -323,22 +363,38 @@ class MotionMemos:
 
 
 class Motion:
-    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one.
+    """The shaft's motion from ``origin_ns``: pieces built at once up to an endless one
+    (or up to a horizon, below).
 
     ``memos``: where the solution is looked up and kept (the chain's); without, the
-    motion is solved afresh."""
+    motion is solved afresh.
+
+    ``horizon_ns``: the motion will most likely be replaced then (the next target of a
+    stream, :meth:`.axis.Axis.follow`): it is solved only as far as the pieces that
+    begin before it, the rest when something asks for it (an instant beyond, evaluated;
+    :meth:`complete`).  The pieces are the same to the bit either way.  Until then the
+    searches (:meth:`first_of`, :meth:`peak`) answer for the part solved, up to
+    :meth:`frontier_ns`; the axis asks again there if the motion is still its own."""
 
     def __init__(self, profile: Profile, origin_ns: int, position: float, velocity: float,
                  drive: Drive, memos: MotionMemos | None = None,
-                 solution: Solution | None = None) -> None:
+                 solution: Solution | None = None, horizon_ns: int | None = None) -> None:
         self.profile = profile
         self.origin_ns = int(origin_ns)
         self.drive = drive
         self.kp = drive.kp
         self.memos = memos
         if solution is None:
-            solution = _placed(drive, float(position), float(velocity),
-                               tuple(command_pieces(profile, self.origin_ns, memos)), memos)
+            if horizon_ns is not None and horizon_ns > self.origin_ns:
+                # solved in part, never shared: a stream's targets do not repeat
+                until = (horizon_ns - self.origin_ns) / NS_PER_S
+                solution = _placed(drive, float(position), float(velocity),
+                                   tuple(command_pieces(profile, self.origin_ns, None)),
+                                   None, until)
+            else:
+                solution = _placed(drive, float(position), float(velocity),
+                                   tuple(command_pieces(profile, self.origin_ns, memos)),
+                                   memos)
         self._use(solution)
         #: The motion the pieces from its origin on come from, in its own coordinates
         #: (:meth:`continued`; ``None``: this one).
@@ -347,9 +403,36 @@ class Motion:
     def _use(self, solution: Solution) -> None:
         self._solution = solution
         #: The pieces, in order (shared with other motions that are the same move at the
-        #: same place).
+        #: same place); those solved so far while the motion is :attr:`open`.
         self.pieces = solution.pieces
         self._starts = solution.starts
+        #: Where the solved part ends (s from the origin; ∞: solved to the end).
+        self._frontier = solution.frontier
+
+    @property
+    def open(self) -> bool:
+        """Solved only in part so far (a ``horizon_ns`` was given)."""
+        return self._solution.unsolved is not None
+
+    def frontier_ns(self) -> int | None:
+        """The instant the solved part ends (``None``: solved to the end)."""
+        if self._solution.unsolved is None:
+            return None
+        return self.origin_ns + round(self._frontier * NS_PER_S)
+
+    def complete(self) -> None:
+        """Solve the rest of the motion now."""
+        self.cover(math.inf)
+
+    def cover(self, rel: float) -> None:
+        """Solve on until the pieces reach ``rel`` (s from the origin) at least."""
+        if rel > self._frontier and self._solution.unsolved is not None:
+            self._solution.extend(math.nextafter(rel, math.inf) if rel < math.inf else rel)
+            self._use(self._solution)
+
+    def cover_ns(self, t_ns: int) -> None:
+        """:meth:`cover` up to the kernel time ``t_ns``."""
+        self.cover((t_ns - self.origin_ns) / NS_PER_S)
 
     @staticmethod
     def continued(old: Motion, origin_ns: int, profile: Profile) -> Motion:
@@ -362,6 +445,7 @@ class Motion:
         the end of a decelerating command (``Axis.move``) is solved this way."""
         at = profile.origin_ns
         memos = old.memos
+        old.complete()
         position, velocity = old.exact_state(at)
         tail = Motion(profile, at, position, velocity, old.drive, memos)
         motion = Motion(profile, at, position, velocity, old.drive, memos,
@@ -413,6 +497,12 @@ class Motion:
         rel = (t_ns - self.origin_ns) / NS_PER_S
         if rel < 0.0:
             rel = 0.0
+        if rel >= self._frontier:
+            nxt = self._solution.unsolved.next if self._solution.unsolved is not None \
+                else None
+            if rel == self._frontier and nxt is not None:
+                return nxt, 0.0                 # where the next piece begins: known
+            self.cover(rel)
         i = bisect_right(self._starts, rel) - 1
         piece = self.pieces[i if i > 0 else 0]
         return piece, rel - piece.start
@@ -472,7 +562,7 @@ class Motion:
 
         A watcher whose threshold is at or above it skips every piece, so it can
         answer "never" without walking them."""
-        return self._solution.peaks[_REACH[what]]
+        return self._solution.peaks[_reach_index(what)]
 
     def settled(self, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
@@ -480,16 +570,10 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.settled(window, after_ns)
-        key: Key = (window, after_ns - self.origin_ns)
-        instants = self._solution.instants
-        found = instants.get(key)
-        if found is None:
-            def inside(piece: Piece) -> list[AnyF]:
-                e = piece.err()
-                return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
-            at = self.first_of(after_ns, (inside,))
-            found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
-        return None if found == _NEVER else self.origin_ns + found
+        def inside(piece: Piece) -> list[AnyF]:
+            e = piece.err()
+            return [xp.sub(xp.const(window), e), xp.sub(e, xp.const(-window))]
+        return self._instant((window, after_ns - self.origin_ns), after_ns, inside)
 
     def within(self, center: float, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where the actual position is within
@@ -497,13 +581,24 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.within(center, window, after_ns)
-        key: Key = ("within", center, window, after_ns - self.origin_ns)
-        instants = self._solution.instants
+        def inside(piece: Piece) -> list[AnyF]:
+            off = xp.sub(piece.pos, xp.const(center))
+            return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
+        return self._instant(("within", center, window, after_ns - self.origin_ns),
+                             after_ns, inside)
+
+    def _instant(self, key: Key, after_ns: int, inside: Conditions) -> int | None:
+        """The first instant >= ``after_ns`` where ``inside`` holds, remembered with the
+        solution under ``key``.  A motion solved in part is not shared and is replaced
+        soon (a stream's next target): its instants are sought, not remembered."""
+        solution = self._solution
+        if solution.unsolved is not None:
+            return self.first_of(after_ns, (inside,))
+        instants = solution.instants
+        if instants is None:
+            instants = solution.instants = Memo(INSTANTS)
         found = instants.get(key)
         if found is None:
-            def inside(piece: Piece) -> list[AnyF]:
-                off = xp.sub(piece.pos, xp.const(center))
-                return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
             at = self.first_of(after_ns, (inside,))
             found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
         return None if found == _NEVER else self.origin_ns + found
@@ -530,7 +625,9 @@ class Motion:
                  accept: Callable[[Piece], bool] | None = None) -> int | None:
         """:meth:`first` with the alternatives as one sequence and no keywords: compiled
         code calls it directly (a call with ``*`` and keywords goes through the generic
-        call protocol: 1 % of a csp axis-cycle, docs/performance.md)."""
+        call protocol: 1 % of a csp axis-cycle, docs/performance.md).  On a motion solved
+        in part, ``None`` means not before :meth:`frontier_ns` (the axis asks again
+        there)."""
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -576,27 +673,58 @@ def _solved(drive: Drive, position: float, velocity: float,
 
 
 def _placed(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...], memos: MotionMemos | None) -> Solution:
+            cmd: tuple[tuple[float, float, F], ...], memos: MotionMemos | None,
+            until: float = math.inf) -> Solution:
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (kept in ``memos`` too: a cycle repeats its moves in
-    place)."""
+    place).  With ``until`` (s), only the pieces that start before it are solved, the
+    rest when asked for (:meth:`Solution.extend`); such a solution is not kept."""
     key: Key = (drive, position, velocity, cmd)
-    if memos is not None:
+    lazy = until != math.inf
+    if memos is not None and not lazy:
         found = memos.placed.get(key)
         if found is not None:
             return found
-    ref = cmd[0][2][0]
-    rel_drive = drive
-    if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
-        rel_drive = replace(drive, wall_lo=drive.wall_lo - ref, wall_hi=drive.wall_hi - ref)
+    placement = _Placement(drive, cmd)
+    ref = placement.ref
     rel_cmd = tuple((a, b, (c[0] - ref, c[1], c[2], c[3], c[4])) for a, b, c in cmd)
-    solved = _solved(rel_drive, position - ref, velocity, rel_cmd, memos)
-    pieces: list[Piece] = []
-    ci = 0
-    for piece in solved:
+    if lazy:
+        solver = _Solver(placement.rel_drive, list(rel_cmd))
+        solver._build(position - ref, velocity, until)
+        rest = _Unsolved(solver, placement)
+        solution = Solution(rest.place_new(), rest)
+        return solution
+    solved = _solved(placement.rel_drive, position - ref, velocity, rel_cmd, memos)
+    solution = Solution(tuple([placement.place(piece) for piece in solved]))
+    if memos is not None:
+        memos.placed.put(key, solution)
+    return solution
+
+
+class _Placement:
+    """How the pieces solved relative to the command's position at the motion's origin
+    are put where the shaft is (:func:`_placed`), one after another."""
+
+    __slots__ = ("drive", "cmd", "ref", "rel_drive", "_ci")
+
+    def __init__(self, drive: Drive, cmd: tuple[tuple[float, float, F], ...]) -> None:
+        self.drive = drive
+        self.cmd = cmd
+        self.ref = ref = cmd[0][2][0]
+        self.rel_drive = drive
+        if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
+            self.rel_drive = replace(drive, wall_lo=drive.wall_lo - ref,
+                                     wall_hi=drive.wall_hi - ref)
+        self._ci = 0
+
+    def place(self, piece: Piece) -> Piece:
+        """``piece`` where it is: pieces are placed in order of their start."""
+        cmd, drive, rel_drive = self.cmd, self.drive, self.rel_drive
         t = piece.start
+        ci = self._ci
         while ci < len(cmd) - 1 and cmd[ci][1] <= t:     # the command piece it began in
             ci += 1
+        self._ci = ci
         c_start, _, c_poly = cmd[ci]
         p0 = piece.pos[0]
         if p0 == rel_drive.wall_hi:                      # at a stopper: exactly there
@@ -604,7 +732,7 @@ def _placed(drive: Drive, position: float, velocity: float,
         elif p0 == rel_drive.wall_lo:
             p0 = drive.wall_lo
         else:
-            p0 += ref
+            p0 += self.ref
         if piece.exit == "" and piece.mode == STALL:     # the safety net's hold
             shown = cmd[-1][2]
         else:
@@ -614,11 +742,30 @@ def _placed(drive: Drive, position: float, velocity: float,
             shown = (p0, c[1], c[2], c[3], c[4])
         elif piece.on_cmd:                               # a stepper on its command
             p0 = shown[0]
-        pieces.append(piece.placed(p0, shown))
-    solution = Solution(tuple(pieces))
-    if memos is not None:
-        memos.placed.put(key, solution)
-    return solution
+        return piece.placed(p0, shown)
+
+
+class _Unsolved:
+    """The part of a motion not solved yet: the solver where it stopped, and the next
+    piece (chosen, placed, its end not yet sought: what the motion is at the instant it
+    begins)."""
+
+    __slots__ = ("solver", "placement", "placed", "next")
+
+    def __init__(self, solver: _Solver, placement: _Placement) -> None:
+        self.solver = solver
+        self.placement = placement
+        self.placed = 0                 # the solver's pieces placed so far
+        self.next: Piece | None = None
+
+    def place_new(self) -> tuple[Piece, ...]:
+        """The pieces the solver finished since the last call, placed; and the next."""
+        solver, placement = self.solver, self.placement
+        new = tuple([placement.place(piece) for piece in solver.pieces[self.placed:]])
+        self.placed = len(solver.pieces)
+        chosen = solver.next
+        self.next = None if chosen is None else placement.place(chosen[0])
+        return new
 
 
 def _peaks(pieces: Sequence[Piece]) -> tuple[float, ...]:
@@ -649,45 +796,88 @@ class _Solver:
         self._is_stepper = drive.stepper
         self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = cmd
+        #: Where the next piece starts: time (s), state, command piece, how the last
+        #: one ended, and how many tiny pieces came in a row (no chattering).
+        self._t, self._p, self._v, self._ci = 0.0, 0.0, 0.0, 0
+        self._kind_prev, self._mode_prev, self._s_prev, self._tiny = "", "", 0, 0
+        #: The next piece chosen, not yet ended: (piece, its exits, the longest it may
+        #: last, why it would end then).
+        self.next: tuple[Piece, Exits, float, str] | None = None
+        #: Solved to the end (the last piece is endless, or the safety net's).
+        self.done = False
 
     # -- building ---------------------------------------------------------------
-    def _build(self, p: float, v: float) -> None:
-        t, ci = 0.0, 0
-        kind_prev, mode_prev, s_prev, tiny = "", "", 0, 0
-        while len(self.pieces) < MAX_PIECES:
-            while self._cmd[ci][1] <= t:
-                ci += 1
-            c_start, c_end, c_poly = self._cmd[ci]
-            cmd = xp.shift(c_poly, 0.0, t - c_start)
-            end, kind = c_end - t, "command"
-            if tiny >= CHATTER and self.drive.enabled and not self.drive.stepper:
-                # a sliding edge between tracking and the limit: track through it
-                piece, exits = self._track(t, p, cmd, end)
-                exits = [x for x in exits if x[0] != "limit"]
-                end, kind, tiny = min(end, SLIDE), "slide", 0
-            elif kind_prev == "brake" or (kind_prev == "vzero" and mode_prev == BRAKE):
-                # braking onto the command's speed goes on through zero speed (only the
-                # friction turns round): the command may be running the other way
-                piece, exits = self._brake(t, p, v, cmd, s_prev)
-            else:
-                piece, exits = self._choose(t, p, v, cmd, c_end - t)
-            for name, conds in exits:
-                if isinstance(conds, float):
-                    tau: float | None = max(conds, min(TAU_MIN, end / 2.0))
-                else:
-                    conds = [_strict(c) for c in conds]
-                    tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
-                if tau is not None and tau < end:
-                    end, kind = tau, name
-            piece.end, piece.exit = t + end, kind     # a fresh piece: finished in place
-            self._append(piece)
-            if math.isinf(end):
+    def _build(self, p: float, v: float, until: float = math.inf) -> None:
+        """Solve from the state (``p``, ``v``) at the command's start: every piece that
+        starts before ``until`` (s; all of them by default), and the one after them
+        chosen (:attr:`next`: its functions, not yet its end)."""
+        self._p, self._v = p, v
+        self.resume(until)
+
+    def resume(self, until: float = math.inf) -> None:
+        """Go on solving: finish the pieces that start before ``until``.  The pieces are
+        those one pass to the end gives, to the bit: each is chosen and ended by the
+        same steps, whenever the next one is asked for."""
+        while not self.done:
+            if self.next is None:
+                if len(self.pieces) >= MAX_PIECES:
+                    self._append(_rest_piece(self._t, self._p, self._cmd[-1][2], self.drive))
+                    self.done = True
+                    return
+                self._open()
+            if self._t >= until:
                 return
-            tiny = tiny + 1 if end < 1e-7 else 0
-            p, v = self._after(piece, end, kind)
-            t = piece.end
-            kind_prev, mode_prev, s_prev = kind, piece.mode, piece.s
-        self._append(_rest_piece(t, p, self._cmd[-1][2], self.drive))
+            self._close()
+
+    def _open(self) -> None:
+        """Choose the next piece: its mode and functions from the state where the last
+        ended (:attr:`next`)."""
+        t, p, v = self._t, self._p, self._v
+        ci = self._ci
+        while self._cmd[ci][1] <= t:
+            ci += 1
+        self._ci = ci
+        c_start, c_end, c_poly = self._cmd[ci]
+        cmd = xp.shift(c_poly, 0.0, t - c_start)
+        end, kind = c_end - t, "command"
+        if self._tiny >= CHATTER and self.drive.enabled and not self.drive.stepper:
+            # a sliding edge between tracking and the limit: track through it
+            piece, exits = self._track(t, p, cmd, end)
+            exits = [x for x in exits if x[0] != "limit"]
+            end, kind, self._tiny = min(end, SLIDE), "slide", 0
+        elif self._kind_prev == "brake" or (self._kind_prev == "vzero"
+                                           and self._mode_prev == BRAKE):
+            # braking onto the command's speed goes on through zero speed (only the
+            # friction turns round): the command may be running the other way
+            piece, exits = self._brake(t, p, v, cmd, self._s_prev)
+        else:
+            piece, exits = self._choose(t, p, v, cmd, c_end - t)
+        piece.exit = OPEN
+        self.next = (piece, exits, end, kind)
+
+    def _close(self) -> None:
+        """Find where the chosen piece ends (the first of its exits) and take it."""
+        assert self.next is not None
+        piece, exits, end, kind = self.next
+        self.next = None
+        for name, conds in exits:
+            if isinstance(conds, float):
+                tau: float | None = max(conds, min(TAU_MIN, end / 2.0))
+            else:
+                conds = [_strict(c) for c in conds]
+                tau = xp.first_true(conds, piece.k, min(TAU_MIN, end / 2.0), end)
+            if tau is not None and tau < end:
+                end, kind = tau, name
+        t = self._t
+        piece.end, piece.exit = t + end, kind     # a fresh piece: finished in place
+        self._append(piece)
+        if math.isinf(end):
+            self.done = True
+            return
+        self._tiny = self._tiny + 1 if end < 1e-7 else 0
+        self._p, self._v = self._after(piece, end, kind)
+        self._t = piece.end
+        self._kind_prev, self._mode_prev, self._s_prev = kind, piece.mode, piece.s
 
     def _append(self, piece: Piece) -> None:
         self.pieces.append(piece)

@@ -111,6 +111,8 @@ def _piecewise_turns(motion: Any, t0: int, t1: int) -> list[int]:
     from . import expoly  # noqa: PLC0415  (the load model's closed forms)
     rel0 = (t0 - motion.origin_ns) / NS_PER_S
     rel1 = (t1 - motion.origin_ns) / NS_PER_S
+    if hasattr(motion, "cover"):
+        motion.cover(rel1)                # a motion solved in part: on to t1
     out: list[int] = []
     for p in motion.pieces:
         a, b = max(rel0, p.start), min(rel1, p.end)

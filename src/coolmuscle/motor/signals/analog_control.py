@@ -171,7 +171,8 @@ class AnalogControl:
 
     def _trajectory_changed(self, *_: object) -> None:
         """Another motion started (or ended a wait): speed and torque control look again."""
-        if not self._in_tick and self.mode in (*SPEED_MODES, TORQUE) and not self._owns():
+        if not self._in_tick and (self.mode in SPEED_MODES or self.mode == TORQUE) \
+                and not self._owns():
             self.wake()
 
     def _schedule(self, at: int, *, sleeping: bool) -> None:

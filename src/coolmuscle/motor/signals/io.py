@@ -41,6 +41,17 @@ def digit(value: int, position: int) -> int:
     return (value // power) % 10
 
 
+def _follows(fn: int, number: int) -> int | None:
+    """The ``O#``/``F#`` number an output of function ``fn`` follows, or ``None``."""
+    if fn == OUT_GENERAL:
+        return number
+    if fn == OUT_FOLLOWS_O1:
+        return 1
+    if fn == OUT_FOLLOWS_O2:
+        return 2
+    return None
+
+
 class DigitalIO:
     """Input levels, general output states, and the words reported by ?70 / ?50."""
 
@@ -99,14 +110,7 @@ class DigitalIO:
     def command_of(self, number: int, k34: int | None = None) -> int | None:
         """The ``O#``/``F#`` number output ``number`` follows by K34 (now, or the value
         ``k34``), or ``None``."""
-        fn = self.output_function(number, k34)
-        if fn == OUT_GENERAL:
-            return number
-        if fn == OUT_FOLLOWS_O1:
-            return 1
-        if fn == OUT_FOLLOWS_O2:
-            return 2
-        return None
+        return _follows(self.output_function(number, k34), number)
 
     def set_general(self, number: int, on: bool) -> bool:
         """``O#``/``F#``: only outputs whose K34 digit follows command ``number`` change
@@ -125,12 +129,10 @@ class DigitalIO:
 
     def output_signal(self, number: int, k34: int | None = None) -> bool:
         """The signal of output ``number`` by K34 (now, or the value ``k34``)."""
-        if k34 is None:
-            k34 = self._param(34)
-        follows = self.command_of(number, k34)
+        fn = self.output_function(number, k34)
+        follows = _follows(fn, number)
         if follows is not None:
             return self.general[follows]
-        fn = self.output_function(number, k34)
         if fn == OUT_NONE or fn == OUT_ANALOG:      # the analog output: no digital signal
             return False
         return self._function_signal(fn, number)

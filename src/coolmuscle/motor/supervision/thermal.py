@@ -58,6 +58,7 @@ class Thermal:
         """The temperature at ``t_ns`` >= the state's time."""
         if t_ns <= self.at_ns:
             return self.temp
+        motion.cover_ns(t_ns)             # a motion solved in part: on to t_ns
         if self.rise_at_rated * _peak_square(motion) < NEGLIGIBLE:
             return self._after(self.temp, 0.0, (t_ns - self.at_ns) / NS_PER_S)
         temp = self.temp
@@ -66,7 +67,8 @@ class Thermal:
         return temp
 
     def first_above(self, motion: Motion, after_ns: int, limit: float) -> int | None:
-        """First instant >= ``after_ns`` at which the temperature exceeds ``limit``."""
+        """First instant >= ``after_ns`` at which the temperature exceeds ``limit`` (on a
+        motion solved in part, within the part solved: the axis asks again after it)."""
         temp = self.temperature_at(motion, after_ns)
         if temp > limit:
             return after_ns

@@ -94,7 +94,9 @@ def next_state(state: State, cw: int, previous_cw: int, alarm: bool) -> State:
 
 def statusword(state: State, *, csp: bool, alarm: bool, free: bool) -> int:
     """6041h: bits 0-6 of the state, remote, csp following, motor error, motor free."""
-    word = _BITS[state] | REMOTE
+    # Operation enabled tested first, by identity: every cycle of a moving axis asks,
+    # and a lookup in _BITS hashes the member in Python (Enum.__hash__).
+    word = (0x0027 if state is State.OPERATION_ENABLED else _BITS[state]) | REMOTE
     if csp and state is State.OPERATION_ENABLED:
         word |= FOLLOWING
     if alarm:

@@ -12,6 +12,7 @@ figures of the intervals between received RxPDO images.
 from __future__ import annotations
 
 import threading
+from _thread import LockType
 from dataclasses import dataclass, field
 
 #: 7.3 F511h.2 "6: 176,800bps" and F511h.3 "1: 1 msec" (the codes the objects read).
@@ -63,7 +64,9 @@ class PdoCycleStats:
     over_1300: int = 0
     under_700: int = 0
     _last_ns: int | None = None
-    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    # _thread.LockType: the lock's class (threading.Lock is a function; compiled code
+    # checks the attribute's class)
+    _lock: LockType = field(default_factory=threading.Lock, repr=False)
 
     def received(self, t_ns: int) -> None:
         with self._lock:
