@@ -8,8 +8,19 @@ push motion (9) belong to other models.
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bank_support import Rig, rig
+from coolmuscle.motor.signals.io import DigitalIO, digit
+from coolmuscle.motor.state.output_functions import (
+    CML_OUTPUT_FUNCTIONS,
+    OUT_ANALOG,
+    OUT_FOLLOWS_O1,
+    OUT_FOLLOWS_O2,
+    OUT_GENERAL,
+    OUT_NONE,
+)
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
 from fixtures import ChainFactory, collect_events
@@ -226,3 +237,34 @@ def test_ch3_k55_in_position_is_detected_before_reaching_the_target(
     assert chain2.execute("?51.1") == ["OUT1.1=0"] and chain2.execute("?99.1") == ["Ux.1=0"]
     chain2.kernel.run(until=at)
     assert chain2.execute("?51.1") == ["OUT1.1=1"] and chain2.execute("?99.1") == ["Ux.1=8"]
+
+
+@settings(max_examples=200, deadline=None)
+@given(k26=st.integers(0, 999_999), k33=st.integers(0, 9999), k34=st.integers(0, 9999),
+       later=st.tuples(st.integers(0, 999_999), st.integers(0, 9999), st.integers(0, 9999)),
+       levels=st.lists(st.booleans(), min_size=6, max_size=6),
+       general=st.lists(st.booleans(), min_size=4, max_size=4))
+def test_ch3_k26_k33_k34_words_are_the_digits_read_afresh(
+        k26: int, k33: int, k34: int, later: tuple[int, int, int], levels: list[bool],
+        general: list[bool]) -> None:
+    """?70 and ?50 read K26/K33/K34 digit by digit (ch. 3), whatever values came before
+    (DigitalIO keeps the digits of the values it decoded last)."""
+    params = {26: k26, 33: k33, 34: k34}
+    io = DigitalIO(6, 4, params.__getitem__, lambda fn, n: (fn + n) % 2 == 0,
+                   CML_OUTPUT_FUNCTIONS)
+    io.levels[1:] = levels
+    io.general[1:] = general
+    for values in ((k26, k33, k34), later, (k26, k33, k34)):
+        params[26], params[33], params[34] = values
+        inputs = sum(1 << (n - 1) for n in range(1, 7)
+                     if levels[n - 1] != (digit(values[0], n) % 2 == 1))
+        outputs = 0
+        for n in range(1, 5):
+            fn = CML_OUTPUT_FUNCTIONS[digit(values[2], n)]
+            follows = {OUT_GENERAL: n, OUT_FOLLOWS_O1: 1, OUT_FOLLOWS_O2: 2}.get(fn)
+            signal = general[follows - 1] if follows is not None else (
+                False if fn in (OUT_NONE, OUT_ANALOG) else (fn + n) % 2 == 0)
+            if signal != (digit(values[1], n) == 0):
+                outputs |= 1 << (n - 1)
+        assert io.input_word() == inputs
+        assert io.output_word() == outputs

@@ -73,6 +73,29 @@ class DigitalIO:
         self._inverting_logic = inverting_logic
         self.levels = [False] * (inputs + 1)        # index 1..inputs (electrical)
         self.general = [False] * (outputs + 1)      # O/F state, index 1..outputs
+        # K26, K33 and K34 as last decoded, and what they say for each input / output
+        # (index 1..): a fieldbus reads the words every cycle, the values seldom change
+        self._k26, self._inputs_inverted = -1, [False] * (inputs + 1)
+        self._k33, self._outputs_inverted = -1, [False] * (outputs + 1)
+        self._k34, self._output_functions = -1, [0] * (outputs + 1)
+        self._decode(0, 0, 0)
+
+    def _decode(self, k26: int, k33: int, k34: int) -> None:
+        """Decode the digits of K26, K33 and K34 where a value changed (ch. 3)."""
+        one = self._one_logic
+        if k26 != self._k26:
+            self._inputs_inverted = [False] + [
+                digit(k26, 1 if one else n) % 2 == 1 for n in range(1, self.input_count + 1)]
+            self._k26 = k26
+        if k33 != self._k33:
+            self._outputs_inverted = [False] + [
+                digit(k33, 1 if one else n) == self._inverting_logic
+                for n in range(1, self.output_count + 1)]
+            self._k33 = k33
+        if k34 != self._k34:
+            self._output_functions = [0] + [self._functions[digit(k34, n)]
+                                            for n in range(1, self.output_count + 1)]
+            self._k34 = k34
 
     # -- inputs -------------------------------------------------------------
     def set_level(self, number: int, on: bool) -> bool:
@@ -89,15 +112,19 @@ class DigitalIO:
         if not 1 <= number <= self.input_count:
             return False
         value = self._param(26) if k26 is None else k26
-        inverted = digit(value, 1 if self._one_logic else number) % 2 == 1
-        return self.levels[number] != inverted
+        if value != self._k26:
+            self._decode(value, self._k33, self._k34)
+        return self.levels[number] != self._inputs_inverted[number]
 
     def input_word(self) -> int:
         """?70: bit 0 = input 1 (K26 read once: a fieldbus reads the word every cycle)."""
         k26 = self._param(26)
+        if k26 != self._k26:
+            self._decode(k26, self._k33, self._k34)
+        levels, inverted = self.levels, self._inputs_inverted
         word = 0
         for n in range(1, self.input_count + 1):      # a loop: compiled, no generator
-            if self.input_signal(n, k26):
+            if levels[n] != inverted[n]:
                 word |= 1 << (n - 1)
         return word
 
@@ -105,7 +132,12 @@ class DigitalIO:
     def output_function(self, number: int, k34: int | None = None) -> int:
         """The function (``OUT_*``) of output ``number`` by K34 now, or by the K34
         value ``k34`` (a trace's past instant)."""
-        return self._functions[digit(self._param(34) if k34 is None else k34, number)]
+        value = self._param(34) if k34 is None else k34
+        if not 1 <= number <= self.output_count:
+            return self._functions[digit(value, number)]
+        if value != self._k34:
+            self._decode(self._k26, self._k33, value)
+        return self._output_functions[number]
 
     def command_of(self, number: int, k34: int | None = None) -> int | None:
         """The ``O#``/``F#`` number output ``number`` follows by K34 (now, or the value
@@ -146,8 +178,12 @@ class DigitalIO:
         high active, 0 low active (ch. 3 K33); CM1 0 normally open, 1 normally closed
         (Appendix A K33)."""
         value = self._param(33) if k33 is None else k33
-        inverted = digit(value, 1 if self._one_logic else number) == self._inverting_logic
-        return signal != inverted
+        if not 1 <= number <= self.output_count:
+            return signal != (digit(value, 1 if self._one_logic else number)
+                              == self._inverting_logic)
+        if value != self._k33:
+            self._decode(self._k26, value, self._k34)
+        return signal != self._outputs_inverted[number]
 
     def output_word(self) -> int:
         """?50: bit 0 = output 1 (K33 and K34 read once: a fieldbus reads the word every
