@@ -679,9 +679,10 @@ def _placed(drive: Drive, position: float, velocity: float,
     position at the motion's origin (kept in ``memos`` too: a cycle repeats its moves in
     place).  With ``until`` (s), only the pieces that start before it are solved, the
     rest when asked for (:meth:`Solution.extend`); such a solution is not kept."""
-    key: Key = (drive, position, velocity, cmd)
     lazy = until != math.inf
+    key: Key = ()
     if memos is not None and not lazy:
+        key = (drive, position, velocity, cmd)
         found = memos.placed.get(key)
         if found is not None:
             return found
@@ -692,8 +693,7 @@ def _placed(drive: Drive, position: float, velocity: float,
         solver = _Solver(placement.rel_drive, list(rel_cmd))
         solver._build(position - ref, velocity, until)
         rest = _Unsolved(solver, placement)
-        solution = Solution(rest.place_new(), rest)
-        return solution
+        return Solution(rest.place_new(), rest)
     solved = _solved(placement.rel_drive, position - ref, velocity, rel_cmd, memos)
     solution = Solution(tuple([placement.place(piece) for piece in solved]))
     if memos is not None:
