@@ -20,7 +20,7 @@ and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Final
 
 from mypy_extensions import mypyc_attr
 
@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..motion.dynamics import Conditions
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
-OVER_SPEED_FACTOR = 1.2
+OVER_SPEED_FACTOR: Final = 1.2
 
 
 def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple[Conditions, Conditions]:
