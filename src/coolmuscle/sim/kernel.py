@@ -30,11 +30,11 @@ NS_PER_MS: Final = 1_000_000
 NS_PER_US: Final = 1_000
 
 #: Priorities for events that fall on the same instant (lower runs first).
-PRIO_IO = 0        # input edges, bytes arriving on a line
-PRIO_HORIZON = 5   # a motion solved in part reaches its frontier (after the new target)
-PRIO_MOTION = 10   # motion milestones (end of move, passing points, alarms)
-PRIO_LOGIC = 20    # program bank steps, ladder scans
-PRIO_REPORT = 30   # output delivery
+PRIO_IO: Final = 0        # input edges, bytes arriving on a line
+PRIO_HORIZON: Final = 5   # a motion solved in part reaches its frontier (after the new target)
+PRIO_MOTION: Final = 10   # motion milestones (end of move, passing points, alarms)
+PRIO_LOGIC: Final = 20    # program bank steps, ladder scans
+PRIO_REPORT: Final = 30   # output delivery
 
 Callback = Callable[[], None]
 

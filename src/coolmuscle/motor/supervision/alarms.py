@@ -20,7 +20,7 @@ and how it clears is :meth:`Motor.raise_alarm` / :meth:`Motor.enable`
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Final
 
 from mypy_extensions import mypyc_attr
 
@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..motion.dynamics import Conditions
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
-OVER_SPEED_FACTOR = 1.2
+OVER_SPEED_FACTOR: Final = 1.2
 
 
 def _beyond(f: Callable[[Piece], xp.F], limit: float) -> tuple[Conditions, Conditions]:
@@ -58,9 +58,12 @@ class _AlarmWatch:
 
     def __init__(self, motor: MotorCore) -> None:
         self.motor = motor
+        #: :attr:`mask` as an attribute of the watcher (asked at every motion: compiled,
+        #: a class variable is looked up by name)
+        self._mask = int(type(self).mask)
 
     def active(self, axis: Axis) -> bool:
-        return axis.enabled and not self.motor.alarm & self.mask   # int & int: no enum
+        return axis.enabled and not self.motor.alarm & self._mask   # int & int: no enum
 
     def fire(self, axis: Axis) -> None:
         del axis
@@ -181,7 +184,7 @@ class TemperatureWatch(_AlarmWatch):
     mask: ClassVar[int] = int(Ux.TEMPERATURE)
 
     def active(self, axis: Axis) -> bool:
-        return not self.motor.alarm & self.mask
+        return not self.motor.alarm & self._mask
 
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ..status import Ux
 
@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from ..core import MotorCore
 
 #: Nominal supply, ?72 units of 0.1 V (docs/fidelity.md).
-NOMINAL_VSEN = 240
+NOMINAL_VSEN: Final = 240
 #: Bounds of the injected values: ten times the rated torque either way (a jam, a load
 #: driving the shaft); a driver case between a freezer and far past its alarm.  Beyond
 #: them a value means nothing physical and would overflow the load model's numbers.

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ...sim.memo import Key, Memo
 from ..motion.dynamics import Drive
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 MotionListener = Callable[[str], None]
 
 #: K parameters whose change re-solves the motion (limits, thresholds, resolution).
-_RESOLVE_ON = frozenset({37, 40, 47, 55, 56, 57, 60, 61})
+_RESOLVE_ON: Final = frozenset({37, 40, 47, 55, 56, 57, 60, 61})
 
 #: CM2 driver temperature alarm (°C); CM1 uses K71 (Appendix A "Temperature limit").
 CM2_TEMPERATURE_ALARM = 85.0

@@ -15,21 +15,23 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Final
 
 from ...sim.kernel import NS_PER_S
 from ..motion import expoly as xp
 from ..motion.dynamics import Motion, Piece
 
+# (not Final: a Final tuple here is left unset by the compiled module's start-up)
 _NODES = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
           0.9061798459386640)
 _WEIGHTS = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
             0.4786286704993665, 0.2369268850561891)
 
 #: A motion that cannot heat the case by more than this (°C) only lets it cool.
-NEGLIGIBLE = 0.1
+NEGLIGIBLE: Final = 0.1
 
 #: Beyond this many time constants of the tracking loop its transient is gone.
-_SETTLED = 20.0
+_SETTLED: Final = 20.0
 
 
 @dataclass

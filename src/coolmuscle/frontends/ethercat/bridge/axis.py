@@ -36,7 +36,7 @@ from .cia402 import State
 
 log = logging.getLogger(__name__)
 
-AXIS_OFFSET = 0x800
+AXIS_OFFSET: Final = 0x800
 #: Final, these and the masks: compiled, a static each, not a module dictionary lookup
 #: (read every cycle).
 INT32_MIN: Final = -(1 << 31)

@@ -14,6 +14,7 @@ enable, C ready for operation) is :func:`motor_state`.  Quick stop is not suppor
 from __future__ import annotations
 
 import enum
+from typing import Final
 
 
 class State(enum.Enum):
@@ -27,7 +28,7 @@ class State(enum.Enum):
 
 
 #: 6.1.3 table A, bits 0-6 (quick stop bit 5 reads 1 = "not active": it never happens).
-_BITS = {State.NOT_READY: 0x0000, State.SWITCH_ON_DISABLED: 0x0040, State.READY: 0x0021,
+_BITS: Final = {State.NOT_READY: 0x0000, State.SWITCH_ON_DISABLED: 0x0040, State.READY: 0x0021,
          State.SWITCHED_ON: 0x0023, State.OPERATION_ENABLED: 0x0027,
          State.FAULT_REACTION: 0x000F, State.FAULT: 0x0008}
 
@@ -36,10 +37,10 @@ _MOTOR = {State.NOT_READY: "A", State.SWITCH_ON_DISABLED: "A", State.READY: "A",
           State.SWITCHED_ON: "B", State.OPERATION_ENABLED: "C", State.FAULT_REACTION: "C",
           State.FAULT: "A"}
 
-REMOTE = 0x0200            # bit 9: fixed 1
-FOLLOWING = 0x1000         # bit 12 in csp: follows the target position
-MOTOR_ERROR = 0x4000       # bit 14
-MOTOR_FREE = 0x8000        # bit 15
+REMOTE: Final = 0x0200            # bit 9: fixed 1
+FOLLOWING: Final = 0x1000         # bit 12 in csp: follows the target position
+MOTOR_ERROR: Final = 0x4000       # bit 14
+MOTOR_FREE: Final = 0x8000        # bit 15
 
 
 def motor_state(state: State) -> str:

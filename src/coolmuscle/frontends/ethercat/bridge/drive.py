@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from typing import Final
 
 from ....device import Device, Event
 from ..engine.dictionary import Dictionary
@@ -26,11 +27,11 @@ log = logging.getLogger(__name__)
 
 #: Bytes of the cyclic exchange on the CM port (the manual does not give its frame):
 #: a position command out, a status back (docs/fidelity.md "EtherCAT drive").
-COMMAND_BYTES = 8
-STATUS_BYTES = 8
+COMMAND_BYTES: Final = 8
+STATUS_BYTES: Final = 8
 #: K parameters re-read from each motor per cycle (the cache of the 60F6h reads).
-K_REFRESH_PER_CYCLE = 1
-LATE_NS = 1_500_000
+K_REFRESH_PER_CYCLE: Final = 1
+LATE_NS: Final = 1_500_000
 
 
 def _k_entries(od: Dictionary, motor: int) -> tuple[Entry, ...]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import threading
 from _thread import LockType
 from dataclasses import dataclass, field
+from typing import Final
 
 #: 7.3 F511h.2 "6: 176,800bps" and F511h.3 "1: 1 msec" (the codes the objects read).
 BAUD = 176_800
@@ -21,7 +22,7 @@ BAUD_CODE = 6
 CYCLE_CODE = 1
 CYCLE_NS = 1_000_000
 BITS_PER_BYTE = 10                    # start, 8 data, stop
-BYTE_NS = BITS_PER_BYTE * 1_000_000_000 // BAUD      # 56,561 ns
+BYTE_NS: Final = BITS_PER_BYTE * 1_000_000_000 // BAUD      # 56,561 ns
 
 
 @dataclass
