@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from web_support import CHROMIUM, CHROMIUM_ARGS, ROOT, HostLine, output_dir, require_browser, serve
+from web_support import ROOT, HostLine, chromium, output_dir, require_browser, serve
 
 playwright = require_browser()
 
@@ -28,10 +28,7 @@ expect = playwright.expect
 
 @pytest.fixture(scope="module")
 def browser():
-    with playwright.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+    yield from chromium(playwright)
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ from typing import Any
 import pytest
 
 from fixtures import Program, SimFactory, run_coolmuscle
-from web_support import CHROMIUM, CHROMIUM_ARGS, HostLine, output_dir, require_browser
+from web_support import HostLine, chromium, output_dir, require_browser
 
 playwright = require_browser()
 
@@ -42,10 +42,7 @@ TITLE = "ID1 : CM2v3.10R.1 #0802A12345"
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
-    with playwright.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+    yield from chromium(playwright)
 
 
 @pytest.fixture

@@ -35,7 +35,7 @@ from typing import Any
 import pytest
 
 from fixtures import Program, SimFactory, run_coolmuscle
-from web_support import CHROMIUM, CHROMIUM_ARGS, output_dir, require_browser
+from web_support import chromium, output_dir, require_browser
 
 playwright = require_browser()
 
@@ -58,10 +58,7 @@ def _realtime() -> list[str]:
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
-    with playwright.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+    yield from chromium(playwright)
 
 
 def _session(browser: Any, served_sim: SimFactory, folder: Path, twin: list[str],

@@ -12,15 +12,12 @@ import pytest
 
 from coolmuscle.device.wire import describe
 from test_web_browser import Page, expect, playwright
-from web_support import CHROMIUM, CHROMIUM_ARGS, HostLine, serve
+from web_support import HostLine, chromium, serve
 
 
 @pytest.fixture(scope="module")
 def browser():
-    with playwright.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        yield b
-        b.close()
+    yield from chromium(playwright)
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import os
 import re
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -42,6 +42,15 @@ def require_browser() -> ModuleType:
         pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)",
                     allow_module_level=True)
     return api
+
+
+def chromium(api: ModuleType) -> Iterator[Any]:
+    """A headless Debian Chromium from ``api`` (:func:`require_browser`), closed after:
+    the body of each browser test module's ``browser`` fixture."""
+    with api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
 
 
 def output_dir() -> Path:
