@@ -19,31 +19,7 @@ from coolmuscle.frontends.ethercat.engine import esc as E
 from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.engine.coe import CoeServer
 from coolmuscle.frontends.ethercat.engine.dictionary import Dictionary
-
-MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"
-
-
-def frame(*datagrams: tuple[int, int, int, bytes]) -> bytes:
-    """An EtherCAT frame of (cmd, adp, ado, data) datagrams (logical: adp<<16|ado)."""
-    body = b""
-    for n, (cmd, adp, ado, data) in enumerate(datagrams):
-        more = 0x8000 if n < len(datagrams) - 1 else 0
-        body += struct.pack("<BBHHHH", cmd, n, adp, ado, len(data) | more, 0) + data + b"\0\0"
-    return MAC + struct.pack("<H", len(body) | 0x1000) + body
-
-
-def datagrams(buf: bytes) -> list[tuple[int, int, bytes, int]]:
-    """(cmd, adp, data, wkc) of every datagram of a returned frame."""
-    out, pos = [], 16
-    while True:
-        cmd, _idx, adp, _ado, ln, _irq = struct.unpack_from("<BBHHHH", buf, pos)
-        n = ln & 0x7FF
-        data = bytes(buf[pos + 10:pos + 10 + n])
-        wkc, = struct.unpack_from("<H", buf, pos + 10 + n)
-        out.append((cmd, adp, data, wkc))
-        pos += 12 + n
-        if not ln & 0x8000:
-            return out
+from ethercat_support import MAC, datagrams, frame
 
 
 @pytest.fixture
