@@ -18,6 +18,7 @@ import pytest
 from coolmuscle.frontends.enip.cm1 import objects
 from coolmuscle.frontends.enip.cm1.eds import generate
 from enip_support import KernelStamps, enip_process, enip_service, ports
+from fixtures import wait_until
 
 pycomm3 = pytest.importorskip("pycomm3")
 from pycomm3 import CIPDriver  # noqa: E402
@@ -226,15 +227,6 @@ class _Scanner:
         self.enip.stopIO()
 
 
-def _wait(predicate, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
-
-
 def _owned(tcp_port: int) -> bool:
     with CIPDriver(f"127.0.0.1:{tcp_port}") as d:
         status = struct.unpack("<H", get(d, 1, 1, 5).value)[0]
@@ -270,7 +262,7 @@ def test_ch4_ethernetip_class1_io_moves_motor_and_times_out(monkeypatch):
             assert (scanner.conn.otapi, scanner.conn.toapi) == (10, 10)
             scanner.set_output(struct.pack("<HiihBB", 1, 4000, 100, 100, 1, 0))
             scanner.conn.produce()
-            assert _wait(lambda: scanner.input() == (0, 8, 4000), 5), scanner.input()
+            assert wait_until(lambda: scanner.input() == (0, 8, 4000), 5), scanner.input()
             assert _owned(tcp_port)
             time.sleep(max(0.0, 3.0 - (scanner.times[-1] - scanner.times[0])))
             late = _grid_lateness(scanner.times, 0.010)
@@ -278,13 +270,13 @@ def test_ch4_ethernetip_class1_io_moves_motor_and_times_out(monkeypatch):
             assert len(late) > 250 and good >= 0.95 * len(late), \
                 (good, len(late), max(late))
             scanner.conn.stopProduce()                  # silent originator
-            assert _wait(lambda: not _owned(tcp_port), 2)   # 16 x 10 ms timeout
+            assert wait_until(lambda: not _owned(tcp_port), 2)   # 16 x 10 ms timeout
             count = len(scanner.times)
             time.sleep(0.2)
             assert len(scanner.times) == count           # production stopped
             assert scanner.forward_open() == 0           # a new connection, then closed
             scanner.conn.produce()
-            assert _wait(lambda: len(scanner.times) > count + 5, 2)
+            assert wait_until(lambda: len(scanner.times) > count + 5, 2)
             scanner.conn.stopProduce()
             assert scanner.conn.sendFwdCloseReq(101, 102, 128) == 0
             count = len(scanner.times)
@@ -430,7 +422,7 @@ def test_class1_model_work_runs_outside_the_producer_lock(monkeypatch):
                                struct.pack("<HiihBB", 1, 100 * count, 100, 100, 0, 0)),
                            ("127.0.0.1", io_port))
                 time.sleep(0.02)
-            assert _wait(lambda: len(held["write_output"]) >= 5
+            assert wait_until(lambda: len(held["write_output"]) >= 5
                          and len(held["input_image"]) >= 20, 3), held
     assert abs(sys.getswitchinterval() - before) <= 2e-6
     # the first image is read by Forward_Open itself, before the connection produces
@@ -452,7 +444,7 @@ def test_adapter_closes_completely_with_class1_running(caplog):
                               handle).encode())
             assert enc.parse_cpf(decode(tcp.recv(1024)).data[6:])[1].data[2] == 0
             producer = transport.producer
-            assert _wait(lambda: producer.sent > 10, 2)
+            assert wait_until(lambda: producer.sent > 10, 2)
     assert not producer.is_alive() and transport.producer is None
     assert transport.table.by_triad == {}
     assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")]
@@ -529,7 +521,7 @@ def test_idle_class3_connections_never_keep_the_plcs_class1_out(monkeypatch):
             scanner = _Scanner(monkeypatch, tcp_port, io_port)
             try:
                 assert scanner.forward_open() == 0
-                assert _wait(lambda: len(scanner.times) > 5, 2)        # T->O flows
+                assert wait_until(lambda: len(scanner.times) > 5, 2)        # T->O flows
                 assert opened == [True, True, True, False]
                 assert _raw_open(tcp_port, class3_open(21)) == (0x01, (0x0113,))
                 assert _raw_open(tcp_port, forward_open(serial=22)) == (0x01, (0x0106,))
@@ -589,7 +581,7 @@ def test_encapsulation_inactivity_timeout_closes_silent_connections_cip_vol2_5_3
                 else:
                     time.sleep(0.25)
             assert closed is not None and 0.7 <= closed <= 2.0, closed
-            assert _wait(lambda: table.count(io=False) == 0, 1)        # holder's place
+            assert wait_until(lambda: table.count(io=False) == 0, 1)        # holder's place
             talker.sendall(frame(enc.LIST_IDENTITY, b"").encode())
             assert decode(talker.recv(1024)).status == 0                 # talker stays
             assert st.transports[0].idle_closed == 2

@@ -18,6 +18,7 @@ import pytest
 from coolmuscle.frontends.enip.cm1.adapter import Cm1Module
 from coolmuscle.sim.kernel import Kernel
 from enip_support import enip_service, ports
+from fixtures import wait_until
 
 pycomm3 = pytest.importorskip("pycomm3")
 from pycomm3 import CIPDriver  # noqa: E402
@@ -76,15 +77,6 @@ class _Socket:
         self.sock.close()
 
 
-def wait(predicate, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
-
-
 def identity_status(tcp_port: int) -> int:
     with CIPDriver(f"127.0.0.1:{tcp_port}") as d:
         tag = d.generic_message(service=0x0E, class_code=1, instance=1, attribute=5,
@@ -131,19 +123,19 @@ def test_o2t_loss_times_the_connection_out_at_rpi_x_multiplier(service, monkeypa
         assert scanner.forward_open(rpi_ms=10, multiplier=2) == 0
         scanner.set_output(struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0))
         scanner.conn.produce()
-        assert wait(lambda: identity_status(tcp) & 0x00F1 == 0x61, 2)   # owned, run
+        assert wait_until(lambda: identity_status(tcp) & 0x00F1 == 0x61, 2)   # owned, run
         inject(service, "class1_loss", direction="o2t", until=1.0)
-        assert wait(lambda: identity_status(tcp) & 0x00F1 == 0x20, 1.0)  # faulted I/O
+        assert wait_until(lambda: identity_status(tcp) & 0x00F1 == 0x20, 1.0)  # faulted I/O
         texts = wire_texts(service)
         assert any("timed out after 160 ms without O->T packets" in t for t in texts), texts
         count = scanner.received
         time.sleep(0.2)
         assert scanner.received <= count + 1                 # production stopped
-        assert wait(lambda: faults_over(service), 10)         # the fault is over
+        assert wait_until(lambda: faults_over(service), 10)         # the fault is over
         scanner.conn.stopProduce()
         assert scanner.forward_open() == 0                    # a new connection works
         scanner.conn.produce()
-        assert wait(lambda: scanner.received > count + 10, 2)
+        assert wait_until(lambda: scanner.received > count + 10, 2)
         assert identity_status(tcp) & 0x00F1 == 0x61
     finally:
         scanner.close()
@@ -155,14 +147,14 @@ def test_t2o_loss_starves_the_scanner_while_the_module_stays_owned(service, monk
     try:
         assert scanner.forward_open(rpi_ms=10, multiplier=2) == 0
         scanner.conn.produce()
-        assert wait(lambda: scanner.received > 20, 2)
+        assert wait_until(lambda: scanner.received > 20, 2)
         inject(service, "class1_loss", direction="t2o", until=0.5)
         time.sleep(0.1)
         count = scanner.received
         time.sleep(0.3)
         assert scanner.received <= count + 1                  # nothing reaches the scanner
         assert identity_status(tcp) & 0x0001                  # the module still owned
-        assert wait(lambda: scanner.received > count + 10, 2)  # back after until
+        assert wait_until(lambda: scanner.received > count + 10, 2)  # back after until
         assert any("T->O packet" in t and "lost" in t for t in wire_texts(service))
     finally:
         scanner.close()
@@ -193,12 +185,12 @@ def test_serial_link_sets_the_3_1_1_bit_and_clears_when_it_ends(service):
     assert comm_error(tcp) == (0, 0)
     inject(service, "serial_link", state="absent", until=1.0)
     assert comm_error(tcp) == (0x0004, 0x0004)
-    assert wait(lambda: faults_over(service), 10)            # its window is over
+    assert wait_until(lambda: faults_over(service), 10)            # its window is over
     assert comm_error(tcp) == (0, 0)
     service.call(lambda: service.chain.inject_wire_fault("chain", "power_off", motor=1,
                                                          until=1.0))
     assert comm_error(tcp) == (0x0002, 0x0002)               # the motor off: timed out
-    assert wait(lambda: faults_over(service), 10)
+    assert wait_until(lambda: faults_over(service), 10)
     assert comm_error(tcp) == (0, 0)
 
 
