@@ -11,6 +11,7 @@ import contextlib
 import json
 import os
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -62,6 +63,17 @@ def serving(esc: Any, iface: str) -> Iterator[FrameThread]:
         yield frames
     finally:
         frames.close()
+
+
+def stop_sim(sim: subprocess.Popen[str], timeout: float = 20) -> str:
+    """SIGTERM to a ``coolmuscle sim`` a test started, and what it wrote on stderr (killed
+    when it has not ended within ``timeout`` seconds)."""
+    sim.send_signal(signal.SIGTERM)
+    try:
+        return sim.communicate(timeout=timeout)[1]
+    except subprocess.TimeoutExpired:
+        sim.kill()
+        return sim.communicate()[1]
 
 
 MAC = b"\xff" * 6 + b"\x01" * 6 + b"\x88\xa4"

@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import os
 import select
-import signal
 import subprocess
 import sys
 import time
 import xml.etree.ElementTree as ET
 
 from coolmuscle.frontends.ethercat.lab import ip
-from ethercat_support import needs_net_admin
+from ethercat_support import needs_net_admin, stop_sim
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
 LAB = ["--namespace", "cmecatclins", "--master-if", "cmecatclim", "--slave-if", "cmecatclis"]
@@ -111,12 +110,7 @@ def test_lab_up_sim_in_the_namespace_soem_scans_lab_down():
     finally:
         err = ""
         if sim is not None:
-            sim.send_signal(signal.SIGTERM)
-            try:
-                _out, err = sim.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                sim.kill()
-                _out, err = sim.communicate()
+            err = stop_sim(sim, 10)
             err = banner + err
         down = coolmuscle("ethercat", "lab", "down", *LAB)   # before any assertion here
     assert "Traceback" not in err

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import textwrap
@@ -20,7 +19,7 @@ import pytest
 from coolmuscle.chain import Chain
 from coolmuscle.chain.machine import MachineFileError, parse_machine
 from coolmuscle.sim.kernel import Kernel
-from ethercat_support import link, needs_net_admin
+from ethercat_support import link, needs_net_admin, stop_sim
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
 
@@ -113,12 +112,7 @@ def test_sim_serves_the_bridges_of_a_machine_file_and_soem_finds_them(tmp_path: 
                                    script, lab.master_if], capture_output=True, text=True,
                                   timeout=60)
         finally:
-            sim.send_signal(signal.SIGTERM)
-            try:
-                _out, err = sim.communicate(timeout=20)
-            except subprocess.TimeoutExpired:
-                sim.kill()
-                _out, err = sim.communicate()
+            err = stop_sim(sim)
     assert "virtual 3 bridges EB01/EB02/EB02, each ID1-ID4 ready" in banner, banner + err
     assert "EB01, EB02, EB02: 3 EtherCAT slaves in a line" in banner
     assert "Traceback" not in err

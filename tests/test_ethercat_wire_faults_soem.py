@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import textwrap
@@ -28,7 +27,7 @@ from coolmuscle.frontends.ethercat.engine import esm
 from coolmuscle.frontends.ethercat.transport import EthercatTransport
 from coolmuscle.frontends.transports.service import ServiceThread
 from coolmuscle.sim.kernel import Kernel
-from ethercat_support import link, master_command, needs_net_admin
+from ethercat_support import link, master_command, needs_net_admin, stop_sim
 
 pytestmark = [needs_net_admin, pytest.mark.realtime]
 
@@ -173,12 +172,7 @@ def test_sim_takes_the_ethercat_faults_of_a_machine_file(tmp_path: Path) -> None
                                    SCAN, lab.master_if], capture_output=True, text=True,
                                   timeout=60)
         finally:
-            sim.send_signal(signal.SIGTERM)
-            try:
-                _out, err = sim.communicate(timeout=20)
-            except subprocess.TimeoutExpired:
-                sim.kill()
-                _out, err = sim.communicate()
+            err = stop_sim(sim)
     assert "2 EtherCAT slaves in a line" in banner, banner + err
     assert "Traceback" not in err
     r = json.loads(scan.stdout.strip().splitlines()[-1]) if scan.stdout.strip() else scan.stderr
