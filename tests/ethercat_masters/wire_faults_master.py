@@ -36,6 +36,11 @@ def cycle(master, n: int) -> list[int]:
 def to_op(master) -> int:
     master.config_map()
     master.state_check(pysoem.SAFEOP_STATE, 500_000)
+    return request_op(master)
+
+
+def request_op(master) -> int:
+    """Ask for OP and run cycles until every slave is there (300 at most)."""
     master.state = pysoem.OP_STATE
     master.write_state()
     for _ in range(300):
@@ -61,12 +66,7 @@ def link_phase(master) -> dict:
             s.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
             s.write_state()
     cycle(master, 20)
-    master.state = pysoem.OP_STATE
-    master.write_state()
-    for _ in range(300):
-        cycle(master, 1)
-        if master.state_check(pysoem.OP_STATE, 5000) == pysoem.OP_STATE:
-            break
+    request_op(master)
     out["recovered"] = states(master)
     out["wkcs_again"] = cycle(master, 100)
     return out
