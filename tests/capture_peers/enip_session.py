@@ -22,7 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import ethernetip.ethernetip as E  # type: ignore[import-untyped]
 from pycomm3 import CIPDriver
 
-from test_enip_peers import _Scanner, _wait, generic_status, get, set_
+from fixtures import wait_until
+from test_enip_peers import _Scanner, generic_status, get, set_
 
 HOST = "127.0.0.1"
 IDLE = struct.pack("<HiihBB", 1, 0, 100, 100, 0, 0)
@@ -71,7 +72,7 @@ def class1() -> dict[str, Any]:
                    originator_port=scanner.enip.originator_udp_port)
         scanner.set_output(MOVE)
         scanner.conn.produce()
-        out["moved"] = _wait(lambda: scanner.input() == (0, 8, 4000), 10)
+        out["moved"] = wait_until(lambda: scanner.input() == (0, 8, 4000), 10)
         out["input"] = list(scanner.input())
         time.sleep(0.3)                                    # some cycles at rest
         scanner.conn.stopProduce()
