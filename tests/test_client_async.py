@@ -9,10 +9,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import serial
 
 from client_targets import TARGETS, Target, target_fixture
 from coolmuscle import connect_async
 from coolmuscle.client import AsyncCoolMuscle, AsyncMotor, CoolMuscle, Motor, MotorEvent
+from coolmuscle.client.aio_driver import AsyncDriver
+from coolmuscle.client.ops import Op, Pause, Session
 from coolmuscle.errors import AlarmError, CmlSyntaxError, CoolMuscleTimeout, OutOfRangeError
 
 
@@ -91,3 +94,31 @@ def test_the_async_api_mirrors_the_sync_api() -> None:
     assert sync_methods - {"poll"} <= async_methods | {"poll"}
     for name in public(Motor):
         assert inspect.iscoroutinefunction(getattr(AsyncMotor, name)), name
+
+
+def _pause(seconds: float) -> Op[None]:
+    yield Pause(seconds)
+
+
+def test_a_request_cancelled_as_bytes_arrive_ends() -> None:
+    """A cancelled request ends, even when the motor's bytes wake it in the same
+    instant.  (asyncio.wait_for on Python 3.11 returns instead of raising there: the
+    page of a real motor, whose poll is cancelled on Ctrl-C, went on polling.)"""
+    async def main() -> None:
+        port = serial.serial_for_url("loop://", timeout=0.05)
+        driver = AsyncDriver(port, Session())
+        driver.start()
+        try:
+            for turns in range(8):                  # each step of the wake-up in turn
+                task = asyncio.create_task(driver.run(_pause(30.0)))
+                await asyncio.sleep(0.01)           # the request waits for bytes
+                driver._received(b"x")              # ... and they come
+                for _ in range(turns):
+                    await asyncio.sleep(0)
+                task.cancel()
+                await asyncio.wait({task}, timeout=5)
+                assert task.cancelled(), f"the request went on ({turns} steps)"
+        finally:
+            driver.close()
+            port.close()
+    asyncio.run(main())

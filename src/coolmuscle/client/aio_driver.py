@@ -212,8 +212,12 @@ class AsyncDriver:
                 remaining = deadline.remaining()
                 if remaining <= 0:
                     return False
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a
+                # cancellation that comes as the condition is notified, and a cancelled
+                # poll went on polling (a page that never stopped on Ctrl-C).
                 try:
-                    await asyncio.wait_for(self._changed.wait(), remaining)
+                    async with asyncio.timeout(remaining):
+                        await self._changed.wait()
                 except TimeoutError:
                     pass
         return True

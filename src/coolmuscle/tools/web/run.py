@@ -152,6 +152,7 @@ async def _serve_run(script: Script, chain: Device, web: WebTransport, until: fl
 
 async def _sleep_or_stop(delay: float, stop: asyncio.Event) -> None:
     try:
-        await asyncio.wait_for(stop.wait(), delay)
+        async with asyncio.timeout(delay):
+            await stop.wait()
     except TimeoutError:
         pass
