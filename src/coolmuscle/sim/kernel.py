@@ -80,6 +80,23 @@ class Timer:
         return not self.cancelled
 
 
+class _Shared:
+    """The callbacks given for one instant and priority (:meth:`Kernel.schedule_shared`),
+    run by one event in the order they were given."""
+
+    __slots__ = ("kernel", "key", "calls")
+
+    def __init__(self, kernel: Kernel, key: tuple[int, int]) -> None:
+        self.kernel = kernel
+        self.key = key
+        self.calls: list[Callback] = []
+
+    def __call__(self) -> None:
+        del self.kernel._shared[self.key]      # one given from here on gets an event of its own
+        for call in self.calls:
+            call()
+
+
 @mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py); subclassable
 class Kernel:
     """Virtual-time event kernel: ``now``, ``schedule``, ``peek``, ``step``, ``run``."""
@@ -92,6 +109,7 @@ class Kernel:
         self._scheduled = 0             # events scheduled so far: ties run in that order
         self._events_run = 0
         self._observers: list[Callback] = []
+        self._shared: dict[tuple[int, int], _Shared] = {}
 
     # -- time -----------------------------------------------------------
     @property
@@ -120,6 +138,20 @@ class Kernel:
         self._scheduled += 1
         heappush(self._queue, (when, priority, self._scheduled, timer))
         return timer
+
+    def schedule_shared(self, at: int, callback: Callback, *, priority: int,
+                        name: str = "") -> None:
+        """Run ``callback`` at ``at`` (not before now) in one event with every other
+        callback given for that instant and priority, in the order they were given.
+        It cannot be cancelled: the callback looks whether it is still due.  Many
+        objects waiting for the same instant (the axes of a fieldbus cycle) cost one
+        event, not one each."""
+        key = (max(int(at), self.now), priority)
+        shared = self._shared.get(key)
+        if shared is None:
+            shared = self._shared[key] = _Shared(self, key)
+            self.schedule_at(key[0], shared, priority=priority, name=name)
+        shared.calls.append(callback)
 
     def call_soon(self, callback: Callback, *, priority: int = PRIO_LOGIC, name: str = "") -> Timer:
         """Run ``callback`` at the current instant, after what is already due now."""

@@ -92,6 +92,9 @@ class Axis:
         #: (:meth:`move`; False: from the decelerating command now, the exact oracle).
         self.restart_at_rest = True
         self._watch_timers: dict[int, Timer] = {}
+        #: Where the part of the motion solved ends, while the axis waits there
+        #: (:meth:`_arm_all`; ``None``: solved to its end, or a new motion came).
+        self._frontier_at: int | None = None
         #: (time_ns, profile, motion, zero, sign) kept while a trace records.
         self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
         #: Called after every trajectory change (rotation pulses, external encoder:
@@ -393,6 +396,7 @@ class Axis:
 
     # -- internals ----------------------------------------------------------
     def _cancel(self) -> None:
+        self._frontier_at = None
         for timer in self._timers:
             timer.cancel()
         self._timers.clear()
@@ -432,9 +436,10 @@ class Axis:
             self._schedule_milestones()
         frontier = motion.frontier_ns()
         if frontier is not None:
-            self._timers.append(self.kernel.schedule_at(
-                max(frontier, now), self._at_frontier, priority=PRIO_HORIZON,
-                name="motion-frontier"))
+            # one event for every axis whose stream is due then (a fieldbus cycle)
+            self._frontier_at = due = max(frontier, now)
+            self.kernel.schedule_shared(due, self._frontier_due, priority=PRIO_HORIZON,
+                                        name="motion-frontier")
         timers, schedule_at = self._watch_timers, self.kernel.schedule_at
         for watcher in list(self.watchers):      # _arm written out: the hot path of a move
             old = timers.pop(id(watcher), None)
@@ -445,6 +450,10 @@ class Axis:
                 timers[id(watcher)] = schedule_at(
                     at, partial(self._fire, watcher), priority=PRIO_MOTION,
                     name=type(watcher).__name__)
+
+    def _frontier_due(self) -> None:
+        if self._frontier_at == self.kernel.now:    # else a new motion came since
+            self._at_frontier()
 
     def _at_frontier(self) -> None:
         """No new motion came by the end of the part solved (a stream stopped): solve

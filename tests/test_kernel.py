@@ -1,0 +1,51 @@
+"""The simulation kernel's shared events (:meth:`Kernel.schedule_shared`): the axes of a
+fieldbus cycle waiting for the same instant cost one event (docs/performance.md)."""
+
+from __future__ import annotations
+
+from coolmuscle.sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel
+
+
+def test_callbacks_shared_by_an_instant_run_in_one_event_in_the_order_given() -> None:
+    kernel = Kernel()
+    ran: list[tuple[str, int]] = []
+    for name in "abc":
+        kernel.schedule_shared(1_000, lambda n=name: ran.append((n, kernel.now)),
+                               priority=PRIO_HORIZON)
+    assert kernel.run(until=2_000) == 1
+    assert ran == [("a", 1_000), ("b", 1_000), ("c", 1_000)]
+
+
+def test_shared_callbacks_keep_their_place_among_the_priorities_of_their_instant() -> None:
+    kernel = Kernel()
+    ran: list[str] = []
+    kernel.schedule_at(500, lambda: ran.append("motion"), priority=PRIO_MOTION)
+    kernel.schedule_shared(500, lambda: ran.append("horizon 1"), priority=PRIO_HORIZON)
+    kernel.schedule_at(500, lambda: ran.append("io"), priority=0)
+    kernel.schedule_shared(500, lambda: ran.append("horizon 2"), priority=PRIO_HORIZON)
+    kernel.schedule_shared(500, lambda: ran.append("motion shared"), priority=PRIO_MOTION)
+    kernel.run(until=500)
+    assert ran == ["io", "horizon 1", "horizon 2", "motion", "motion shared"]
+
+
+def test_one_given_while_its_instant_runs_gets_an_event_of_its_own_after_it() -> None:
+    kernel = Kernel()
+    ran: list[str] = []
+
+    def first() -> None:
+        ran.append("first")
+        kernel.schedule_shared(kernel.now, lambda: ran.append("again"),
+                               priority=PRIO_HORIZON)
+    kernel.schedule_shared(100, first, priority=PRIO_HORIZON)
+    kernel.schedule_shared(100, lambda: ran.append("second"), priority=PRIO_HORIZON)
+    assert kernel.run(until=100) == 2
+    assert ran == ["first", "second", "again"]
+
+
+def test_an_instant_in_the_past_is_now() -> None:
+    kernel = Kernel(start=5_000)
+    ran: list[int] = []
+    kernel.schedule_shared(10, lambda: ran.append(kernel.now), priority=PRIO_HORIZON)
+    kernel.schedule_shared(5_000, lambda: ran.append(kernel.now), priority=PRIO_HORIZON)
+    assert kernel.run(until=5_000) == 1
+    assert ran == [5_000, 5_000]
