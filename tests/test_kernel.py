@@ -3,6 +3,8 @@ fieldbus cycle waiting for the same instant cost one event (docs/performance.md)
 
 from __future__ import annotations
 
+import pytest
+
 from coolmuscle.sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel
 
 
@@ -49,3 +51,22 @@ def test_an_instant_in_the_past_is_now() -> None:
     kernel.schedule_shared(5_000, lambda: ran.append(kernel.now), priority=PRIO_HORIZON)
     assert kernel.run(until=5_000) == 1
     assert ran == [5_000, 5_000]
+
+
+def test_a_callback_that_fails_leaves_the_others_of_its_instant_to_run() -> None:
+    """A failure propagates out of the run, as any event's; the callbacks after it in
+    the shared event run when the kernel runs again, as they would with an event each."""
+    kernel = Kernel()
+    ran: list[str] = []
+
+    def fails() -> None:
+        raise RuntimeError("model bug")
+    kernel.schedule_shared(100, lambda: ran.append("before"), priority=PRIO_HORIZON)
+    kernel.schedule_shared(100, fails, priority=PRIO_HORIZON)
+    kernel.schedule_shared(100, lambda: ran.append("after 1"), priority=PRIO_HORIZON)
+    kernel.schedule_shared(100, lambda: ran.append("after 2"), priority=PRIO_HORIZON)
+    with pytest.raises(RuntimeError):
+        kernel.run(until=200)
+    assert ran == ["before"] and kernel.now == 100
+    kernel.run(until=200)
+    assert ran == ["before", "after 1", "after 2"] and kernel.now == 200

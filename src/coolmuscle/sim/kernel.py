@@ -92,9 +92,17 @@ class _Shared:
         self.calls: list[Callback] = []
 
     def __call__(self) -> None:
-        del self.kernel._shared[self.key]      # one given from here on gets an event of its own
-        for call in self.calls:
-            call()
+        kernel, (at, priority) = self.kernel, self.key
+        del kernel._shared[self.key]           # one given from here on gets an event of its own
+        calls = self.calls
+        for i, call in enumerate(calls):
+            try:
+                call()
+            except BaseException:
+                # the others still run, as they would have with an event each
+                for rest in calls[i + 1:]:
+                    kernel.schedule_shared(at, rest, priority=priority)
+                raise
 
 
 @mypyc_attr(allow_interpreted_subclasses=True)   # compiled (coolmuscle/_accel.py); subclassable
