@@ -622,3 +622,37 @@ def test_downloads_asked_by_another_site_are_refused(path, headers):
         assert web.cross_site_refused == 1
     finally:
         st.stop()
+
+
+def test_run_web_stops_at_its_signal_while_the_script_plays() -> None:
+    """``coolmuscle run FILE --web`` (docs/web.md "coolmuscle run script.cml --web"): a
+    stop signal while the script plays (here in its ``@wait 30``) ends the run within
+    a second or two, not when the script's waits are over."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.tools.script.runner import TranscriptEntry, parse_script
+    from coolmuscle.tools.web.run import _serve_run, web_transport
+    from fixtures import wait_until_async
+
+    shown: list[TranscriptEntry] = []
+
+    async def body() -> float:
+        chain = Chain()
+        try:
+            web = web_transport("127.0.0.1:0")
+            stop = asyncio.Event()
+            script = parse_script("?96.1\n@wait 30\n?96.1\n")
+            run = asyncio.create_task(_serve_run(script, chain, web, None, shown.append,
+                                                 lambda _text: None, stop))
+            assert await wait_until_async(lambda: web.bound is not None or run.done())
+            async with aiohttp.ClientSession() as session:
+                async with session.ws_connect(web.url + "ws"):
+                    assert await wait_until_async(lambda: any(e.direction == "<"
+                                                              for e in shown))
+                    stop.set()                   # the handler of run_served's signals
+                    started = time.monotonic()
+                    async with asyncio.timeout(5):
+                        await run
+                    return time.monotonic() - started
+        finally:
+            chain.close()
+    assert _run(body()) < 3.0
