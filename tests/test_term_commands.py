@@ -5,7 +5,10 @@ why it refuses another; a lost connection is said at once and ends the terminal.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
 import socket
+import sys
 import threading
 from typing import Any
 
@@ -14,6 +17,7 @@ import pytest
 from coolmuscle import connect_async
 from coolmuscle.errors import TransportError
 from coolmuscle.tools.term import terminal as term
+from fixtures import wait_until_async
 
 
 @pytest.mark.parametrize("motors, arg, motor, style", [
@@ -78,3 +82,51 @@ def test_a_closed_connection_is_noticed_before_the_next_line(monkeypatch: Any) -
     assert going_on is False and isinstance(lost, TransportError)
     assert shown == [("connection lost: cannot read from the port: read failed: socket "
                       "disconnected; the terminal ends", "error")]
+
+
+class _WatchedInput:
+    """Standard input from a pipe that says when the terminal reads it."""
+
+    def __init__(self, stream: Any) -> None:
+        self.stream = stream
+        self.reading = threading.Event()
+
+    def readline(self) -> str:
+        self.reading.set()
+        return str(self.stream.readline())
+
+    def isatty(self) -> bool:
+        return False
+
+
+def test_a_stopped_plain_session_ends_while_its_input_is_silent(monkeypatch: Any) -> None:
+    """``coolmuscle term URL`` reading a pipe that stays open and silent (module
+    docstring of :mod:`coolmuscle.tools.term.terminal`): Ctrl-C (asyncio cancels the
+    session) ends the terminal at once.  Its read of standard input waited in asyncio's
+    default executor, and closing the loop waits for that executor with no bound: the
+    terminal stayed until a line or the end of the input came."""
+    read_fd, write_fd = os.pipe()
+    stdin = _WatchedInput(os.fdopen(read_fd, "r"))
+    monkeypatch.setattr(sys, "stdin", stdin)
+    ended = threading.Event()
+
+    async def main() -> None:
+        session = asyncio.create_task(term.run_term("coolmuscle://?mode=fast",
+                                                    interactive=False))
+        assert await wait_until_async(stdin.reading.is_set)
+        session.cancel()                       # what asyncio.run does at Ctrl-C
+        with contextlib.suppress(asyncio.CancelledError):
+            await session
+
+    def run() -> None:
+        with asyncio.Runner() as runner:     # its close waits for the default executor
+            runner.run(main())
+        ended.set()
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        assert ended.wait(3), "the terminal did not end while its input was silent"
+    finally:
+        os.close(write_fd)                     # the end of the input: the read returns
+        thread.join(5)
+        stdin.stream.close()

@@ -622,3 +622,74 @@ def test_downloads_asked_by_another_site_are_refused(path, headers):
         assert web.cross_site_refused == 1
     finally:
         st.stop()
+
+
+def test_run_web_stops_at_its_signal_while_the_script_plays() -> None:
+    """``coolmuscle run FILE --web`` (docs/web.md "coolmuscle run script.cml --web"): a
+    stop signal while the script plays (here in its ``@wait 30``) ends the run within
+    a second or two, not when the script's waits are over."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.tools.script.runner import TranscriptEntry, parse_script
+    from coolmuscle.tools.web.run import _serve_run, web_transport
+    from fixtures import wait_until_async
+
+    shown: list[TranscriptEntry] = []
+
+    async def body() -> float:
+        chain = Chain()
+        try:
+            web = web_transport("127.0.0.1:0")
+            stop = asyncio.Event()
+            script = parse_script("?96.1\n@wait 30\n?96.1\n")
+            run = asyncio.create_task(_serve_run(script, chain, web, None, shown.append,
+                                                 lambda _text: None, stop))
+            assert await wait_until_async(lambda: web.bound is not None or run.done())
+            async with aiohttp.ClientSession() as session:
+                async with session.ws_connect(web.url + "ws"):
+                    assert await wait_until_async(lambda: any(e.direction == "<"
+                                                              for e in shown))
+                    stop.set()                   # the handler of run_served's signals
+                    started = time.monotonic()
+                    async with asyncio.timeout(5):
+                        await run
+                    return time.monotonic() - started
+        finally:
+            chain.close()
+    assert _run(body()) < 3.0
+
+
+def test_closing_ends_with_a_page_that_does_not_read() -> None:
+    """The simulator stops (Ctrl-C, docs/reliability.md "Signals") while a page has
+    stopped reading (a frozen tab, a laptop asleep on the LAN): its socket takes no
+    more bytes and asyncio paused writing to it, as it does when a transport's buffer
+    passes its high-water mark (forced here on the page's connection).  Closing the
+    dashboard drops that page within its close timeout; it waited for the page to read
+    again (the close frame's drain), so the simulator never stopped."""
+    from coolmuscle.chain import Chain
+    from coolmuscle.frontends.transports.service import Service
+    from coolmuscle.tools.web.server import CLOSE_TIMEOUT, WebTransport
+    from fixtures import wait_until_async
+
+    async def body() -> tuple[float, bool]:
+        chain = Chain()
+        web = WebTransport(port=0)
+        service = Service(chain, [web])
+        await service.start()
+        try:
+            async with aiohttp.ClientSession() as session:
+                async with session.ws_connect(web.url + "ws") as page:
+                    await ws_frames(page, lambda f: f["t"] == "hello")
+                    assert await wait_until_async(lambda: web.hub is not None
+                                                  and len(web.hub.clients) == 1)
+                    assert web._runner is not None
+                    (connection,) = web._runner.server.connections   # the page's
+                    connection.pause_writing()
+                    started = time.monotonic()
+                    async with asyncio.timeout(5 * CLOSE_TIMEOUT):
+                        await service.close()
+                    return time.monotonic() - started, connection.transport is None \
+                        or connection.transport.is_closing()
+        finally:
+            chain.close()
+    took, dropped = _run(body())
+    assert took < 3 * CLOSE_TIMEOUT and dropped

@@ -36,6 +36,7 @@ import os
 import re
 import shlex
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -297,6 +298,50 @@ async def _session(client: AsyncCoolMuscle, url: str, history: History,
     return term
 
 
+class _InputLines:
+    """Lines of standard input, one asked at a time, read by a daemon thread of its own.
+
+    Not ``asyncio.to_thread``: that read blocks until a line or the end of the input
+    comes, and closing the event loop (Ctrl-C, SIGTERM) waits for the default
+    executor's threads with no bound, so a pipe kept open and silent held the terminal
+    open.  A daemon thread is left behind at exit; a line it reads after the session
+    stopped is dropped."""
+
+    def __init__(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._asked = threading.Semaphore(0)
+        self._waiter: asyncio.Future[str] | None = None
+        self._thread: threading.Thread | None = None
+
+    async def readline(self) -> str:
+        """The next line with its line end (``""``: the end of the input)."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._read, name="coolmuscle-term-input",
+                                            daemon=True)
+            self._thread.start()
+        self._waiter = self._loop.create_future()
+        self._asked.release()
+        return await self._waiter
+
+    def _read(self) -> None:
+        while True:
+            self._asked.acquire()
+            try:
+                line = sys.stdin.readline()
+            except (OSError, ValueError):       # closed or unreadable: the end of it
+                line = ""
+            try:
+                self._loop.call_soon_threadsafe(self._hand, line)
+            except RuntimeError:                # the loop is closed: the terminal ended
+                return
+            if not line:
+                return
+
+    def _hand(self, line: str) -> None:
+        if self._waiter is not None and not self._waiter.done():
+            self._waiter.set_result(line)
+
+
 async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Terminal:
     """Input from a file or a pipe: each line sent as it is read; at the end of the input
     (or ``:quit``) wait until the motor has said nothing for ``quiet`` seconds and every
@@ -306,9 +351,10 @@ async def _plain_session(client: AsyncCoolMuscle, url: str, quiet: float) -> Ter
     client.add_failure_listener(term.connection_lost)
     loop = asyncio.get_running_loop()
     term.last_activity = loop.time()
+    lines = _InputLines()
     try:
         while term.lost is None:
-            line = await asyncio.to_thread(sys.stdin.readline)
+            line = await lines.readline()
             if not line or not await term.handle(line.rstrip("\r\n")):
                 break
         while term.lost is None and ((left := term.last_activity + quiet - loop.time()) > 0

@@ -138,7 +138,10 @@ async def _serve_run(script: Script, chain: Device, web: WebTransport, until: fl
             if stop.is_set():
                 return
             await asyncio.sleep(0.05)
-        why = await play(script, service, show)
+        played = asyncio.ensure_future(play(script, service, show))
+        if not await _done_before_stop(played, stop):
+            return                     # stopped while the script played: no more of it
+        why = played.result()
         if why is None and until is not None:
             rest = seconds(until) - chain.kernel.now
             if rest > 0:
@@ -148,6 +151,21 @@ async def _serve_run(script: Script, chain: Device, web: WebTransport, until: fl
     finally:
         ignore_stop_signals()          # a second signal must not cut the clean-up short
         await service.close()
+
+
+async def _done_before_stop(work: asyncio.Future[str | None], stop: asyncio.Event) -> bool:
+    """Wait for ``work`` or ``stop``, whichever comes first; on ``stop`` ``work`` is
+    cancelled (a script in an ``@wait`` or ``@until`` of many seconds must not hold a
+    stop signal until it ends) and ``False`` is returned."""
+    stopping = asyncio.ensure_future(stop.wait())
+    try:
+        await asyncio.wait((work, stopping), return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        stopping.cancel()
+        if not work.done():
+            work.cancel()
+            await asyncio.gather(work, return_exceptions=True)
+    return not work.cancelled()
 
 
 async def _sleep_or_stop(delay: float, stop: asyncio.Event) -> None:

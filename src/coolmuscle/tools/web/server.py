@@ -105,7 +105,8 @@ class WebTransport(Transport):
         self.actions: Actions | None = None
         self.desk: Desk | None = None
         self._runner: web.AppRunner | None = None
-        self._sockets: set[web.WebSocketResponse] = set()
+        #: the open pages: each socket and the request that opened it (its connection)
+        self._sockets: dict[web.WebSocketResponse, web.Request] = {}
         self._recorder: TraceRecorder | None = None
         self._device: Device | None = None
         self.turns: Turns | None = None
@@ -197,8 +198,9 @@ class WebTransport(Transport):
         return {"host": host, "port": port, "url": self.url, "token": self.access.token}
 
     async def close(self) -> None:
-        await asyncio.gather(*(ws.close(code=1001, message=b"simulator stopping")
-                               for ws in list(self._sockets)), return_exceptions=True)
+        await asyncio.gather(*(_close_page(ws, request)
+                               for ws, request in list(self._sockets.items())),
+                             return_exceptions=True)
         if self._trimmer is not None:
             self._trimmer.cancel()
             await asyncio.gather(self._trimmer, return_exceptions=True)
@@ -292,7 +294,7 @@ class WebTransport(Transport):
                                    compress=False, timeout=CLOSE_TIMEOUT)
         await ws.prepare(request)
         assert self.hub is not None
-        self._sockets.add(ws)
+        self._sockets[ws] = request
         client = Client(ws.send_str)
         try:
             hello, seen = self._hello(), self.hub.pending()     # one instant: no await
@@ -303,7 +305,7 @@ class WebTransport(Transport):
             pass
         finally:
             self.hub.remove(client)
-            self._sockets.discard(ws)
+            self._sockets.pop(ws, None)
         return ws
 
     async def _receive(self, ws: web.WebSocketResponse, client: Client,
@@ -345,6 +347,21 @@ class WebTransport(Transport):
         assert self.hub is not None
         client.queue_direct(json.dumps(answer, separators=(",", ":")))
         self.hub.changed()
+
+
+async def _close_page(ws: web.WebSocketResponse, request: web.Request) -> None:
+    """Close a page's socket (1001, going away) within ``CLOSE_TIMEOUT`` in all.
+
+    The close frame is written with a drain, and a page that does not read (a frozen
+    tab, a peer gone without a FIN) never lets the drain end: ``ws.close`` bounds only
+    its wait for the page's answer.  Past the bound the connection is aborted, so a
+    stop never waits for a page."""
+    try:
+        async with asyncio.timeout(CLOSE_TIMEOUT):
+            await ws.close(code=1001, message=b"simulator stopping")
+    except TimeoutError:
+        if request.transport is not None:
+            request.transport.abort()
 
 
 def _busy(request: Any, bound: int) -> dict[str, Any]:
