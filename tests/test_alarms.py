@@ -58,6 +58,21 @@ def test_ch3_k56_position_error_overflow_at_a_stopper(make_chain: ChainFactory) 
     _free_and_recover(chain, 1)
 
 
+@pytest.mark.parametrize("k56, ux", [(1, 1), (2, 0)])
+def test_ch3_k56_changed_during_a_move_applies_at_once(make_chain: ChainFactory, k56: int,
+                                                       ux: int) -> None:
+    """The lag of a move at 50 000 pps is about 167 pulses (speed / kp): K56=1 (100
+    pulses) set during the move raises the overflow at once, K56=2 (200 pulses) does not
+    (the watcher reads K56 again when a K value changes)."""
+    chain = make_chain(1)
+    chain.execute("K56.1=32767, S.1=500, A.1=1000, P.1=1000000, ^.1")
+    chain.kernel.advance(seconds(0.2))
+    assert chain.execute("?95.1") == ["Pe.1=167"] and chain.execute("?99.1") == ["Ux.1=0"]
+    chain.execute(f"K56.1={k56}")
+    chain.kernel.advance(seconds(0.001))
+    assert chain.execute("?99.1") == [f"Ux.1={ux}"]
+
+
 def test_ch3_k57_overload_after_k57_ms_beyond_rated_torque(make_chain: ChainFactory) -> None:
     chain = make_chain(setup=ALARM_OUTPUT)
     events = collect_events(chain)

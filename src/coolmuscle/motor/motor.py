@@ -569,7 +569,7 @@ class Motor:
         if function == OUT_ALARM:
             return self.alarm != 0 or self.supervision.push_error
         if function == OUT_ORIGIN_DONE:
-            return self.origin_done and self.status == Ux.IN_POSITION
+            return self.origin_done and self.status == _IN_POSITION
         if function == OUT_MERGE_PULSE:
             return self.kernel.now < self.merge_pulse_until
         if function == OUT_ROTATION_PULSE:

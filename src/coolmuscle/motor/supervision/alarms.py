@@ -61,6 +61,23 @@ class _AlarmWatch:
         #: :attr:`mask` as an attribute of the watcher (asked at every motion: compiled,
         #: a class variable is looked up by name)
         self._mask = int(type(self).mask)
+        #: The motor's K table, whose version says when :meth:`limit` is read again
+        #: (:meth:`threshold`: every motion of a stream asks for it).
+        self._params = motor.params
+        self._version = -1
+        self._limit = 0.0
+
+    def limit(self) -> float:
+        """The threshold of the alarm, from the K parameters."""
+        return 0.0
+
+    def threshold(self) -> float:
+        """:meth:`limit`, read again only when a K value changed."""
+        version = self._params.version
+        if version != self._version:
+            self._limit = self.limit()
+            self._version = version
+        return self._limit
 
     def active(self, axis: Axis) -> bool:
         return axis.enabled and not self.motor.alarm & self._mask   # int & int: no enum
@@ -83,7 +100,7 @@ class PositionErrorWatch(_AlarmWatch):
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis) or self.motor.position_error_exempt():
             return None
-        limit, motion = self.limit(), axis.motion
+        limit, motion = self.threshold(), axis.motion
         if motion.peak("err") <= limit:       # every piece would be skipped
             return None
         return motion.first_of(after_ns, _beyond(Piece.err, limit), None,
@@ -96,11 +113,15 @@ class OverSpeedWatch(_AlarmWatch):
     bit: ClassVar[Ux] = Ux.OVER_SPEED
     mask: ClassVar[int] = int(Ux.OVER_SPEED)
 
+    def limit(self) -> float:
+        """1.2 × K40 min⁻¹, in pulses/s of the current resolution (K37)."""
+        ppr = self.motor.resolution.pulses_per_rev
+        return OVER_SPEED_FACTOR * self.motor.k(40) * ppr / 60.0
+
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             return None
-        ppr = self.motor.resolution.pulses_per_rev
-        limit = OVER_SPEED_FACTOR * self.motor.k(40) * ppr / 60.0
+        limit = self.threshold()
         motion = axis.motion
         if motion.peak("vel") <= limit:       # every piece would be skipped
             return None
@@ -147,9 +168,11 @@ class OverloadWatch(_AlarmWatch):
         since = self.since = self._since_at(after_ns)
         rated = self._rated(axis)
         motion = axis.motion
-        hold = self.motor.k(57) * 1_000_000 + 1
         walk: list[list[int | None]] = [[since, None]] if since is not None else []
         self._walk = walk
+        if since is None and motion.peak("torque") <= rated:   # the walk's first answer
+            return None
+        hold = self.motor.k(57) * 1_000_000 + 1
         t = after_ns
         while True:
             if since is None:

@@ -16,7 +16,7 @@ The push state is also what a program bank waits on: :meth:`Motor.motion_done`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ...sim.kernel import PRIO_MOTION, Timer
 from ..motion import expoly as xp
@@ -27,7 +27,10 @@ if TYPE_CHECKING:
     from ..core import MotorCore
     from ..motion.axis import Axis
 
-APPROACH, PUSHING, COMPLETE, ERROR = "approach", "pushing", "complete", "error"
+APPROACH: Final = "approach"
+PUSHING: Final = "pushing"
+COMPLETE: Final = "complete"
+ERROR: Final = "error"
 
 #: Ux per push state (plain ints: read at every status report).
 _STATUS_BITS = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),

@@ -29,7 +29,7 @@ from .alarms import alarm_watchers
 from .faults import Faults
 from .limits import TravelLimits
 from .origin import OriginSearch, auto_start
-from .push import Push
+from .push import ERROR, Push
 from .sensors import Geometry
 from .thermal import Thermal
 
@@ -119,7 +119,7 @@ class Supervisor:
     @property
     def push_error(self) -> bool:
         """The push error (Ux=256) is latched (4.1.4 "alarm state")."""
-        return self.push.status_bits() == int(Ux.PUSH_ERROR)
+        return self.push.state == ERROR
 
     def param_changed(self, k: int) -> None:
         """K``k`` changed: K45 direction, CM1 K71 temperature alarm, re-solve on limits."""
