@@ -581,27 +581,58 @@ class Motion:
         tail = self._tail
         if tail is not None and after_ns >= tail.origin_ns:
             return tail.within(center, window, after_ns)
-        def inside(piece: Piece) -> list[AnyF]:
-            off = xp.sub(piece.pos, xp.const(center))
-            return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
-        return self._instant(("within", center, window, after_ns - self.origin_ns),
-                             after_ns, inside)
+        solution = self._solution
+        if solution.unsolved is not None:           # sought, not remembered (_instant)
+            return self._first_within(center, window, after_ns)
+        key: Key = ("within", center, window, after_ns - self.origin_ns)
+        found = self._recalled(key)
+        if found is None:
+            found = self._remember(key, self._first_within(center, window, after_ns))
+        return None if found == _NEVER else self.origin_ns + found
+
+    def _first_within(self, center: float, window: float, after_ns: int) -> int | None:
+        """:meth:`first_of` for :meth:`within`, written out (every target of a stream
+        asks it): a piece whose position stays ``window`` or more from ``center`` by its
+        bound (:func:`xp.spread`) is passed without seeking roots, where none would be
+        found; the others are searched with the same conditions."""
+        rel = max(0.0, self._rel(after_ns))
+        i = max(0, bisect_right(self._starts, rel) - 1)
+        for piece in self.pieces[i:]:
+            pos = piece.pos
+            duration = piece.duration
+            if abs(pos[0] - center) - xp.spread(pos, duration) >= window:
+                continue
+            off = xp.sub(pos, xp.const(center))
+            tau = xp.first_true([xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))],
+                                piece.k, max(0.0, rel - piece.start), duration)
+            if tau is not None:
+                at = self.origin_ns + math.ceil((piece.start + tau) * NS_PER_S)
+                return max(after_ns, at)
+        return None
 
     def _instant(self, key: Key, after_ns: int, inside: Conditions) -> int | None:
         """The first instant >= ``after_ns`` where ``inside`` holds, remembered with the
         solution under ``key``.  A motion solved in part is not shared and is replaced
         soon (a stream's next target): its instants are sought, not remembered."""
-        solution = self._solution
-        if solution.unsolved is not None:
+        if self._solution.unsolved is not None:
             return self.first_of(after_ns, (inside,))
+        found = self._recalled(key)
+        if found is None:
+            found = self._remember(key, self.first_of(after_ns, (inside,)))
+        return None if found == _NEVER else self.origin_ns + found
+
+    def _recalled(self, key: Key) -> int | None:
+        """The instant remembered under ``key`` (relative, or :data:`_NEVER`), if any."""
+        instants = self._solution.instants
+        return None if instants is None else instants.get(key)
+
+    def _remember(self, key: Key, at: int | None) -> int:
+        """Keep the instant ``at`` found for ``key``; the value :meth:`_recalled` gives."""
+        solution = self._solution
         instants = solution.instants
         if instants is None:
             instants = solution.instants = Memo(INSTANTS)
-        found = instants.get(key)
-        if found is None:
-            at = self.first_of(after_ns, (inside,))
-            found = instants.put(key, _NEVER if at is None else at - self.origin_ns)
-        return None if found == _NEVER else self.origin_ns + found
+        return instants.put(key, _NEVER if at is None else at - self.origin_ns)
 
     def span(self, piece: Piece) -> tuple[float, float]:
         """Bounds (lowest, highest) of the actual position over a piece."""
