@@ -68,7 +68,8 @@ class _AlarmWatch:
         self._limit = 0.0
 
     def limit(self) -> float:
-        """The threshold of the alarm, from the K parameters."""
+        """The threshold of the alarm, from the K parameters (the watchers of a K
+        threshold give theirs; the others do not ask for one)."""
         return 0.0
 
     def threshold(self) -> float:
