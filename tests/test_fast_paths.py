@@ -81,8 +81,7 @@ def twin(exact: bool, setup: str) -> tuple[Chain, list[tuple[int, str]]]:
                 index = axis.watchers.index(watcher)
                 axis.remove_watcher(watcher)
                 reference = EventOverload(chain.motors[1])
-                axis.watchers.insert(index, reference)
-                axis.rearm(reference)
+                axis.add_watcher(reference, index)
     events: list[tuple[int, str]] = []
     chain.subscribe(lambda e: events.append((e.time, e.text)))
     chain.execute("K23.1=1")

@@ -23,7 +23,8 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Protocol
+
+from mypy_extensions import mypyc_attr
 
 from ...sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel, Timer
 from . import planner
@@ -34,14 +35,22 @@ from .profile import Profile, Segment, hold, stops_then_restarts
 log = logging.getLogger(__name__)
 
 
-class Watcher(Protocol):
-    """Something that wants a kernel event when the motion reaches a condition."""
+# compiled (coolmuscle/_accel.py): a base class, not a protocol, so that the axis calls
+# its methods directly at every motion; subclassable by interpreted code (tests)
+@mypyc_attr(allow_interpreted_subclasses=True)
+class Watcher:
+    """Something that wants a kernel event when the motion reaches a condition (the
+    alarms, the push, the origin search, position sensors subclass it)."""
 
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
-        """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never)."""
+        """The next instant >= ``after_ns`` to call :meth:`fire` (``None``: never).  It
+        only looks: it adds or removes no watcher."""
+        del axis, after_ns
+        return None
 
     def fire(self, axis: Axis) -> None:
         """The instant has come (it may change the command or the drive)."""
+        del axis
 
 
 def _default_drive() -> Drive:
@@ -84,14 +93,16 @@ class Axis:
         self.solve_in_full = False
         self.moving = False
         self.generation = 0
-        self.watchers: list[Watcher] = []
+        self._watchers: list[Watcher] = []
         #: Called with (the motion ending, now) before each re-solve (thermal model).
         self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
         #: A reversal after an early in-position is solved from the command's end
         #: (:meth:`move`; False: from the decelerating command now, the exact oracle).
         self.restart_at_rest = True
-        self._watch_timers: dict[int, Timer] = {}
+        #: The kernel event of each watcher, by its place in :attr:`watchers` (``None``:
+        #: it asked for none).
+        self._watch_timers: list[Timer | None] = []
         #: Where the part of the motion solved ends, while the axis waits there
         #: (:meth:`_arm_all`; ``None``: solved to its end, or a new motion came).
         self._frontier_at: int | None = None
@@ -100,6 +111,12 @@ class Axis:
         #: Called after every trajectory change (rotation pulses, external encoder:
         #: :class:`coolmuscle.motor.motion.trajectory.Timeline`).
         self.trajectory_listeners: list[Callable[[], None]] = []
+
+    @property
+    def watchers(self) -> tuple[Watcher, ...]:
+        """The watchers, in the order those due at one instant fire (:meth:`add_watcher`,
+        :meth:`remove_watcher`)."""
+        return tuple(self._watchers)
 
     @property
     def tracking(self) -> Motion:
@@ -348,38 +365,60 @@ class Axis:
         self._resolve()
 
     # -- watchers -------------------------------------------------------------
-    def add_watcher(self, watcher: Watcher) -> None:
-        self.watchers.append(watcher)
-        self._arm(watcher, self.kernel.now)
+    def add_watcher(self, watcher: Watcher, index: int | None = None) -> None:
+        """Watch with ``watcher`` too: last, or at ``index`` in :attr:`watchers` (the
+        order in which watchers due at one instant fire)."""
+        i = len(self._watchers) if index is None else max(0, min(index, len(self._watchers)))
+        self._watchers.insert(i, watcher)
+        self._watch_timers.insert(i, None)
+        self._arm(i, self.kernel.now)
 
     def remove_watcher(self, watcher: Watcher) -> None:
-        if watcher in self.watchers:
-            self.watchers.remove(watcher)
-        timer = self._watch_timers.pop(id(watcher), None)
+        i = self._place_of(watcher)
+        if i is None:
+            return
+        timer = self._watch_timers.pop(i)
+        del self._watchers[i]
         if timer is not None:
             timer.cancel()
 
     def rearm(self, watcher: Watcher) -> None:
         """Ask ``watcher`` again for its next instant (its own state changed)."""
-        if watcher in self.watchers:
-            self._arm(watcher, self.kernel.now)
+        i = self._place_of(watcher)
+        if i is not None:
+            self._arm(i, self.kernel.now)
 
-    def _arm(self, watcher: Watcher, after_ns: int) -> None:
-        old = self._watch_timers.pop(id(watcher), None)
+    def _place_of(self, watcher: Watcher) -> int | None:
+        for i, w in enumerate(self._watchers):
+            if w is watcher:
+                return i
+        return None
+
+    def _arm(self, i: int, after_ns: int) -> None:
+        """Watcher ``i``'s event: cancelled, then asked again from ``after_ns``."""
+        timers = self._watch_timers
+        old = timers[i]
         if old is not None:
             old.cancel()
+        timers[i] = self._watch(self._watchers[i], after_ns)
+
+    def _watch(self, watcher: Watcher, after_ns: int) -> Timer | None:
         at = watcher.next_time(self, after_ns)
-        if at is not None:
-            self._watch_timers[id(watcher)] = self.kernel.schedule_at(
-                at, partial(self._fire, watcher), priority=PRIO_MOTION,
-                name=type(watcher).__name__)
+        if at is None:
+            return None
+        return self.kernel.schedule_at(at, partial(self._fire, watcher), priority=PRIO_MOTION,
+                                       name=type(watcher).__name__)
 
     def _fire(self, watcher: Watcher) -> None:
-        self._watch_timers.pop(id(watcher), None)
+        i = self._place_of(watcher)
+        if i is not None:
+            self._watch_timers[i] = None
         generation = self.generation
         watcher.fire(self)
-        if generation == self.generation and watcher in self.watchers:
-            self._arm(watcher, self.kernel.now + 1)
+        if generation == self.generation:
+            i = self._place_of(watcher)
+            if i is not None:
+                self._arm(i, self.kernel.now + 1)
 
     # -- history (trace) ------------------------------------------------------
     def record_history(self, on: bool = True) -> None:
@@ -400,9 +439,11 @@ class Axis:
         for timer in self._timers:
             timer.cancel()
         self._timers.clear()
-        for timer in self._watch_timers.values():
-            timer.cancel()
-        self._watch_timers.clear()
+        timers = self._watch_timers
+        for i, watching in enumerate(timers):
+            if watching is not None:
+                watching.cancel()
+                timers[i] = None
 
     def _resolve(self, motion: Motion | None = None) -> None:
         """Re-solve the shaft motion from the actual state now (or take ``motion``,
@@ -440,16 +481,10 @@ class Axis:
             self._frontier_at = due = max(frontier, now)
             self.kernel.schedule_shared(due, self._frontier_due, priority=PRIO_HORIZON,
                                         name="motion-frontier")
-        timers, schedule_at = self._watch_timers, self.kernel.schedule_at
-        for watcher in list(self.watchers):      # _arm written out: the hot path of a move
-            old = timers.pop(id(watcher), None)
-            if old is not None:
-                old.cancel()
-            at = watcher.next_time(self, now)
-            if at is not None:
-                timers[id(watcher)] = schedule_at(
-                    at, partial(self._fire, watcher), priority=PRIO_MOTION,
-                    name=type(watcher).__name__)
+        # every watcher's event was cancelled (_cancel): asked again, each in its place
+        timers = self._watch_timers
+        for i, watcher in enumerate(self._watchers):
+            timers[i] = self._watch(watcher, now)
 
     def _frontier_due(self) -> None:
         if self._frontier_at == self.kernel.now:    # else a new motion came since

@@ -25,12 +25,13 @@ from typing import TYPE_CHECKING, ClassVar, Final
 from mypy_extensions import mypyc_attr
 
 from ..motion import expoly as xp
+from ..motion.axis import Watcher
 from ..motion.dynamics import Piece
 from ..status import Ux
 
 if TYPE_CHECKING:
     from ..core import MotorCore
-    from ..motion.axis import Axis, Watcher
+    from ..motion.axis import Axis
     from ..motion.dynamics import Conditions
 
 #: Over speed threshold as a multiple of K40 (docs/fidelity.md).
@@ -50,7 +51,7 @@ def _constant_beyond(f: xp.F, limit: float) -> bool:
 
 # compiled (coolmuscle/_accel.py): tests subclass it
 @mypyc_attr(allow_interpreted_subclasses=True)
-class _AlarmWatch:
+class _AlarmWatch(Watcher):
     """Base: watches only while the servo is on and this alarm is not latched."""
 
     bit: ClassVar[Ux] = Ux(0)

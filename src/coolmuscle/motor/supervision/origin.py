@@ -28,6 +28,7 @@ import math
 from typing import TYPE_CHECKING
 
 from ..motion import expoly as xp
+from ..motion.axis import Watcher
 from ..signals.io import digit
 from ..status import Report
 
@@ -56,7 +57,7 @@ def auto_start(k46: int) -> bool:
     return k46 < 16 and k46 % 2 == 1
 
 
-class OriginSearch:
+class OriginSearch(Watcher):
     """The origin search of one motor (a watcher on its axis)."""
 
     def __init__(self, motor: MotorCore) -> None:

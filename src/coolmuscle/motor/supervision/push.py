@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Final
 
 from ...sim.kernel import PRIO_MOTION, Timer
 from ..motion import expoly as xp
+from ..motion.axis import Watcher
 from ..motion.planner import Limits
 from ..status import Ux
 
@@ -40,7 +41,7 @@ _STATUS_BITS = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
 _AT_LEVEL = 1.0 - 1e-6
 
 
-class Push:
+class Push(Watcher):
     """The push motion of one motor (a watcher on its axis)."""
 
     def __init__(self, motor: MotorCore) -> None:

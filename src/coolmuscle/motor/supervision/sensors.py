@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from ..motion import expoly as xp
+from ..motion.axis import Watcher
 
 #: An edge counts as crossed this far past it (pulses): no chatter from float noise.
 EDGE_MARGIN = 1e-6
@@ -25,7 +26,7 @@ if TYPE_CHECKING:
 
 
 @dataclass
-class PositionSensor:
+class PositionSensor(Watcher):
     """A switch that is on while the shaft is within [lo, hi] (machine pulses at ``ppr``)."""
 
     name: str
