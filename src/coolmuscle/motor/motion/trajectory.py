@@ -364,15 +364,16 @@ class Timeline:
         """Keep checkpoints so states can be read back for a trace."""
         self.recording = on
 
-    def _on_trajectory(self, *_: object) -> None:
-        new = piece_of(self.axis)
-        old = self.piece
-        if new.profile is old.profile and new.tracking is old.tracking \
-                and new.zero == old.zero and new.sign == old.sign:
+    def _on_trajectory(self) -> None:
+        axis, old = self.axis, self.piece
+        if axis.profile is old.profile and axis.motion is old.tracking \
+                and axis.zero == old.zero and axis.sign == old.sign:
             return
-        now = self.now()
-        for track in list(self.tracks):
-            track.switch(old, new, now)
+        now = axis.kernel.now
+        new = Piece(now, axis.profile, axis.motion, axis.zero, axis.sign)
+        if self.tracks:
+            for track in list(self.tracks):
+                track.switch(old, new, now)
         self.piece = new
         for listener in list(self.listeners):
             listener(old, new)

@@ -169,8 +169,11 @@ class AnalogControl:
         self._cancel()
         self._schedule(self.kernel.now + TICK_NS, sleeping=False)
 
-    def _trajectory_changed(self, *_: object) -> None:
-        """Another motion started (or ended a wait): speed and torque control look again."""
+    def _trajectory_changed(self, old: object, new: object) -> None:
+        """Another motion started (or ended a wait): speed and torque control look again
+        (a timeline listener: called at every motion, so with its two arguments named,
+        not gathered)."""
+        del old, new
         if not self._in_tick and (self.mode in SPEED_MODES or self.mode == TORQUE) \
                 and not self._owns():
             self.wake()

@@ -64,6 +64,11 @@ class Supervisor:
         #: The drives made from the plant as it is (:meth:`drive`), by what else they
         #: were made from.
         self._drives: Memo[Key, Drive] = Memo(64)
+        #: The drive :meth:`drive` gave last and what it was made from (a stream asks at
+        #: every target: the same values give it back without a key or a lookup).
+        self._last_drive: Drive | None = None
+        self._ppr, self._speed_limit = 0, 0
+        self._limit = self._scale = self._extra = self._lo = self._hi = 0.0
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search; heat before each re-solve."""
@@ -95,18 +100,28 @@ class Supervisor:
             limit = self.torque_limit * plant.peak_torque / 100.0
         ppr = m.resolution.pulses_per_rev
         extra = faults.extra_load_percent / 100.0 * plant.rated_torque
-        scale, walls, speed_limit = faults.speed_scale(), self.geometry.walls(ppr), m.k(40)
-        key: Key = (ppr, limit, scale, extra, walls, speed_limit)
+        scale, speed_limit = faults.speed_scale(), m.k(40)
+        lo, hi = self.geometry.walls(ppr)
+        last = self._last_drive
+        if last is not None and ppr == self._ppr and limit == self._limit \
+                and scale == self._scale and extra == self._extra and lo == self._lo \
+                and hi == self._hi and speed_limit == self._speed_limit:
+            return last
+        key: Key = (ppr, limit, scale, extra, (lo, hi), speed_limit)
         found = self._drives.get(key)
         if found is None:
             found = self._drives.put(key, plant.drive(
                 ppr, limit_percent_of_rated=limit, enabled=True, speed_scale=scale,
-                extra_load_nm=extra, walls=walls, speed_limit=speed_limit))
+                extra_load_nm=extra, walls=(lo, hi), speed_limit=speed_limit))
+        self._last_drive = found
+        self._ppr, self._limit, self._scale, self._extra = ppr, limit, scale, extra
+        self._lo, self._hi, self._speed_limit = lo, hi, speed_limit
         return found
 
     def _plant_changed(self) -> None:
         """A field of the plant changed: new drives, and the motion re-solved at once."""
         self._drives.clear()
+        self._last_drive = None
         self.motor.axis.refresh()
 
     def set_torque_limit(self, percent: int) -> None:
