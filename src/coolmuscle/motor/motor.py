@@ -21,8 +21,8 @@ from ..sim.kernel import Kernel
 from ..sim.memo import Key, Memo
 from .context import Context
 from .core import MotorBus
-from .motion.axis import Axis
-from .motion.dynamics import Drive, MotionMemos
+from .motion.axis import Axis, Servo
+from .motion.dynamics import Drive, Motion, MotionMemos
 from .motion.planner import ESTOP_DECEL, Limits, limits_from_data
 from .motion.plant import DEFAULT_KP, STEPPER_KP, Plant
 from .motion.profile import Profile
@@ -66,7 +66,7 @@ _IN_POSITION: Final = int(Ux.IN_POSITION)
 _K20_KBPS = {0: "38.4", 1: "9.6", 2: "19.2", 3: "57.6", 4: "115.2", 5: "230.4"}
 
 
-class Motor:
+class Motor(Servo):
     """A virtual COOL MUSCLE: the only place motor behaviour lives."""
 
     def __init__(self, motor_id: int, kernel: Kernel, firmware: Firmware, bus: MotorBus,
@@ -99,10 +99,7 @@ class Motor:
         self.supervision = sup = Supervisor(self)
         self.thermal, self.faults, self.travel = sup.thermal, sup.faults, sup.travel
         self.push, self.origin, self.geometry = sup.push, sup.origin, sup.geometry
-        self.axis = Axis(kernel, drive=sup.drive,
-                         in_position_window=lambda: self.params.get(55),
-                         on_in_position=self._arrived,
-                         on_passing_point=self._passing_point, memos=memos)
+        self.axis = Axis(kernel, self, memos=memos)
         self.axis.half_range = units.counter_half_range(self._resolution.pulses_per_rev)
         sup.attach()
         self.estopped = False
@@ -543,7 +540,16 @@ class Motor:
         """Raw position of the Z phase / encoder phase 0 (machine file, default 0)."""
         return self.geometry.z_raw(self.resolution.pulses_per_rev)
 
-    def _arrived(self) -> None:
+    def in_position_window(self) -> int:
+        """K55 (ch. 3), pulses: what the axis asks at every motion."""
+        return self.params.get(55)
+
+    def motion_ends(self, motion: Motion, now: int) -> None:
+        """The axis replaces ``motion`` at ``now``: the heat it made until then."""
+        self.thermal.advance(motion, now)
+
+    def in_position(self) -> None:
+        """The axis came within K55 of its target (Ux=8): the leg's end."""
         if self._go_speed:            # a "^" reached P0 (not halted by S0 = 0): done
             self._go_target = None
         self.supervision.arrival()
@@ -554,7 +560,7 @@ class Motor:
         """A motion ended: let waiting bank lines look again (no polling)."""
         self.bus.poke(self.id)
 
-    def _passing_point(self, index: int) -> None:
+    def passing_point(self, index: int) -> None:
         """K34=6: the output is on for K73 ms from each passing point; a point within
         the pulse of the previous one lengthens it (ch. 3 K73)."""
         del index

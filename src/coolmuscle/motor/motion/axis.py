@@ -53,25 +53,43 @@ class Watcher:
         del axis
 
 
-def _default_drive() -> Drive:
-    return Drive(kp=300.0, a_limit=1e12, a_friction=0.0, a_load=0.0, v_max=1e12)
+# compiled (coolmuscle/_accel.py): a base class, so that the axis calls the motor's
+# answers directly at every motion; subclassable by interpreted code (tests)
+@mypyc_attr(allow_interpreted_subclasses=True)
+class Servo:
+    """What an axis asks of the motor it turns (:class:`coolmuscle.motor.motor.Motor`
+    subclasses it); this base is a bare shaft: a stiff loop, a K55 of 5 pulses."""
+
+    def drive(self) -> Drive:
+        """The dynamics parameters now (plant, torque limit, machine, faults)."""
+        return Drive(kp=300.0, a_limit=1e12, a_friction=0.0, a_load=0.0, v_max=1e12)
+
+    def in_position_window(self) -> int:
+        """K55 (ch. 3), pulses."""
+        return 5
+
+    def motion_ends(self, motion: Motion, now: int) -> None:
+        """``motion`` is replaced at ``now`` (before each re-solve: the thermal model
+        brings its state to ``now`` along it)."""
+        del motion, now
+
+    def in_position(self) -> None:
+        """The shaft came within K55 of the target (Ux=8)."""
+
+    def passing_point(self, index: int) -> None:
+        """A merge passing point ``index`` was passed (K34=6, K73)."""
+        del index
 
 
 class Axis:
     """One motor shaft under position control."""
 
-    def __init__(self, kernel: Kernel, *, drive: Callable[[], Drive] = _default_drive,
-                 in_position_window: Callable[[], int] = lambda: 5,
-                 on_in_position: Callable[[], None] = lambda: None,
-                 on_passing_point: Callable[[int], None] = lambda index: None,
+    def __init__(self, kernel: Kernel, servo: Servo | None = None, *,
                  memos: MotionMemos | None = None) -> None:
         self.kernel = kernel
         #: Plans and solved motions, shared with the other axes of the chain.
         self.memos = MotionMemos() if memos is None else memos
-        self._drive = drive
-        self._window = in_position_window
-        self._on_in_position = on_in_position
-        self._on_passing_point = on_passing_point
+        self.servo = Servo() if servo is None else servo
         self.zero = 0.0
         self.sign = 1
         #: Half the span of the position counter (user pulses): user positions wrap
@@ -83,7 +101,8 @@ class Axis:
         #: from rest that the shaft follows from its origin on, while ``profile`` is
         #: still the one planned then.
         self._rest: tuple[Profile, Profile] | None = None
-        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, drive(), self.memos)
+        self.motion = Motion(self.profile, kernel.now, 0.0, 0.0, self.servo.drive(),
+                             self.memos)
         self.target_raw = 0.0
         #: The command of a stream (:meth:`follow`) and when its next target is due:
         #: while it is followed, the motion is solved that far only (dynamics.Motion).
@@ -94,8 +113,6 @@ class Axis:
         self.moving = False
         self.generation = 0
         self._watchers: list[Watcher] = []
-        #: Called with (the motion ending, now) before each re-solve (thermal model).
-        self.before_resolve: list[Callable[[Motion, int], None]] = []
         self._timers: list[Timer] = []
         #: A reversal after an early in-position is solved from the command's end
         #: (:meth:`move`; False: from the decelerating command now, the exact oracle).
@@ -358,7 +375,7 @@ class Axis:
         self._cancel()
         self.zero = float(raw)
         self.profile = hold(raw, self.kernel.now)
-        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self._drive(),
+        self.motion = Motion(self.profile, self.kernel.now, raw, 0.0, self.servo.drive(),
                              self.memos)
         self.target_raw = float(raw)
         self.moving = False
@@ -449,8 +466,7 @@ class Axis:
         """Re-solve the shaft motion from the actual state now (or take ``motion``,
         solved from it) and re-arm everything."""
         now = self.kernel.now
-        for hook in self.before_resolve:
-            hook(self.motion, now)
+        self.servo.motion_ends(self.motion, now)
         self._cancel()
         self.generation += 1
         if motion is None:
@@ -498,7 +514,7 @@ class Axis:
         self._arm_all(self.kernel.now)
 
     def _current_drive(self) -> Drive:
-        drive = self._drive()
+        drive = self.servo.drive()
         if drive.enabled != self._enabled:
             from dataclasses import replace
             drive = replace(drive, enabled=self._enabled)
@@ -514,7 +530,7 @@ class Axis:
         for t_ns, index in self.profile.passing_times_ns():
             if t_ns >= now:
                 self._timers.append(self.kernel.schedule_at(
-                    t_ns, partial(self._on_passing_point, index),
+                    t_ns, partial(self.servo.passing_point, index),
                     priority=PRIO_MOTION, name="passing-point"))
         done = self.in_position_time(now)
         if done is not None:
@@ -532,7 +548,7 @@ class Axis:
         position": the command may still be on its last pulses.  Only the command's
         final approach counts (from where it stays within K55 of the target), so a
         path that passes the target earlier is not in position there."""
-        window = float(self._window())
+        window = float(self.servo.in_position_window())
         approach = self.profile.settles_ns(self.target_raw, window)
         if approach is None:
             return None
@@ -540,7 +556,7 @@ class Axis:
 
     def _arrived(self) -> None:
         self.moving = False
-        self._on_in_position()
+        self.servo.in_position()
 
 
 def wrap_user(user: float, half: float) -> float:

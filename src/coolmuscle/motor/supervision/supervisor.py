@@ -71,9 +71,8 @@ class Supervisor:
         self._limit = self._scale = self._extra = self._lo = self._hi = 0.0
 
     def attach(self) -> None:
-        """Watch the axis: alarms, push, origin search; heat before each re-solve."""
+        """Watch the axis: alarms, push, origin search (the heat: Motor.motion_ends)."""
         axis = self.motor.axis
-        axis.before_resolve.append(self.thermal.advance)
         self.motor.plant.on_change = self._plant_changed
         for watcher in (*alarm_watchers(self.motor), self.push, self.origin):
             axis.add_watcher(watcher)
