@@ -89,6 +89,11 @@ class Chain:
         self.motors = self.bus.motors
         self.host_line = self.bus.host_line
         self.links = self.bus.links
+        # A fieldbus reads every axis every cycle (an EtherCAT segment: 32 axes each
+        # millisecond): these reads go straight to the compiled bus, without a frame of
+        # this class's own (the methods below say the same, for the reader and the types).
+        self.cyclic_state = self.bus.cyclic_state  # type: ignore[method-assign]
+        self.get_param = self.bus.get_param  # type: ignore[method-assign]
         self._observers: list[Callable[[], None]] = []
         #: Lines parsed lately (the syntax tree is frozen, so a tree can serve again): a
         #: host or PLC sends the same few lines over and over.  Errors are not kept.

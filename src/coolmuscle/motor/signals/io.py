@@ -187,10 +187,23 @@ class DigitalIO:
 
     def output_word(self) -> int:
         """?50: bit 0 = output 1 (K33 and K34 read once: a fieldbus reads the word every
-        cycle)."""
+        cycle, so :meth:`output_signal` and :meth:`port_of` are written out here, with
+        the same decisions)."""
         k33, k34 = self._param(33), self._param(34)
+        if k33 != self._k33 or k34 != self._k34:
+            self._decode(self._k26, k33, k34)
+        functions, inverted, general = self._output_functions, self._outputs_inverted, \
+            self.general
         word = 0
         for n in range(1, self.output_count + 1):
-            if self.port_of(n, self.output_signal(n, k34), k33):
+            fn = functions[n]
+            follows = _follows(fn, n)
+            if follows is not None:
+                signal = general[follows]
+            elif fn == OUT_NONE or fn == OUT_ANALOG:
+                signal = False
+            else:
+                signal = self._function_signal(fn, n)
+            if signal != inverted[n]:
                 word |= 1 << (n - 1)
         return word

@@ -99,7 +99,7 @@ class Supervisor:
             limit = self.torque_limit * plant.peak_torque / 100.0
         ppr = m.resolution.pulses_per_rev
         extra = faults.extra_load_percent / 100.0 * plant.rated_torque
-        scale, speed_limit = faults.speed_scale(), m.k(40)
+        scale, speed_limit = faults.speed_scale(), m.params.get(40)
         lo, hi = self.geometry.walls(ppr)
         last = self._last_drive
         if last is not None and ppr == self._ppr and limit == self._limit \
