@@ -216,7 +216,8 @@ class ChainBus:
                 self.host_line.send_line(text)
         if not self._listeners:              # nobody subscribed: no event to hand out
             return
-        event = Event(self.kernel.now, motor, kind, text, value, origin)  # type: ignore[arg-type]
+        # tuple.__new__: the named tuple built without its Python-level __new__ (compiled)
+        event = tuple.__new__(Event, (self.kernel.now, motor, kind, text, value, origin))
         for listener in list(self._listeners):
             try:
                 listener(event)

@@ -90,6 +90,12 @@ class AxisDrive:
         self.inputs = 0
         self._prev_cw = 0
         self._target = 0                          # 607Ah of the cycle's output image
+        # the places of the entries read and written every cycle (Dictionary.key)
+        self._controlword = od.key(self.idx(0x6040))
+        self._target_position = od.key(self.idx(0x607A))
+        self._statusword = od.key(self.idx(0x6041))
+        self._position_actual = od.key(self.idx(0x6064))
+        self._mode_display = od.key(self.idx(0x6061))
 
     # -- helpers ------------------------------------------------------------------
     def idx(self, index: int) -> int:
@@ -117,8 +123,8 @@ class AxisDrive:
         self._switch_mode(now)
         # 6040h and 607Ah of one output image: read together, before any call into the
         # motor (the frame thread writes the next image between two cycles).
-        cw = int(self.od.get(self.idx(0x6040)))
-        self._target = int(self.od.get(self.idx(0x607A)))
+        cw = int(self.od.value_at(self._controlword))
+        self._target = int(self.od.value_at(self._target_position))
         if modes.is_cia402(self.mode):
             self._cia402(cw, now)
         elif self.mode == modes.CMD:
@@ -141,11 +147,11 @@ class AxisDrive:
 
     def _publish(self, snap: CyclicState) -> None:
         od = self.od
-        od.set(self.idx(0x6041), 0, self.statusword())
+        od.set_at(self._statusword, self.statusword())
         position = int(snap.position)
-        od.set(self.idx(0x6064), 0, INT32_MIN if position < INT32_MIN
-               else INT32_MAX if position > INT32_MAX else position)
-        od.set(self.idx(0x6061), 0, self.mode)
+        od.set_at(self._position_actual, INT32_MIN if position < INT32_MIN
+                  else INT32_MAX if position > INT32_MAX else position)
+        od.set_at(self._mode_display, self.mode)
 
     # -- modes (6.2.2) ------------------------------------------------------------------
     def request_mode(self, value: int) -> None:

@@ -54,6 +54,10 @@ NO_DICTIONARY = 0x08000023
 #: PDO assignment objects (6.3.3): their entries change only while subindex 0 is 0.
 _ASSIGNMENTS = frozenset({0x1C12, 0x1C13})
 
+#: An entry's place, (index, subindex), as one object (:meth:`Dictionary.key`): compiled,
+#: a tuple typed by its size would be unboxed and made again at every use.
+Key = tuple[object, ...]
+
 ReadHook = Callable[[int], "int | str"]
 WriteHook = Callable[[int, "int | str"], "int | str | None"]
 
@@ -72,7 +76,7 @@ class Dictionary:
     def __init__(self, table: Table) -> None:
         self.table = table
         self._objects: dict[int, Obj] = {o.index: o for o in table.objects if o.available}
-        self._values: dict[tuple[int, int], int | str] = {
+        self._values: dict[Key, int | str] = {
             (o.index, e.sub): e.default for o in self._objects.values()
             for e in o.entries if e.available}
         self._read_hooks: dict[int, ReadHook] = {}
@@ -81,6 +85,11 @@ class Dictionary:
         self._tx = [(o.index, e) for p in table.tx_pdos() for o, e in table.pdo_entries(p)]
         self._rx_fmt = "<" + "".join(e.dtype.fmt for _i, e in self._rx)
         self._tx_fmt = "<" + "".join(e.dtype.fmt for _i, e in self._tx)
+        # the images' layouts made once: every bridge cycle packs and unpacks them
+        self._rx_struct = struct.Struct(self._rx_fmt)
+        self._tx_struct = struct.Struct(self._tx_fmt)
+        self._rx_keys: list[Key] = [(i, e.sub) for i, e in self._rx]
+        self._tx_keys: list[Key] = [(i, e.sub) for i, e in self._tx]
 
     # -- application side -------------------------------------------------------
     def on_read(self, index: int, hook: ReadHook) -> None:
@@ -100,6 +109,20 @@ class Dictionary:
         """Store a value from the application (no access check)."""
         self._values[(index, sub)] = value
 
+    @staticmethod
+    def key(index: int, sub: int = 0) -> Key:
+        """The place of entry ``index``.``sub``, for :meth:`value_at` and :meth:`set_at`:
+        made once by an application that reads or writes the entry every cycle."""
+        return (index, sub)
+
+    def value_at(self, key: Key) -> int | str:
+        """:meth:`get` by a :meth:`key`."""
+        return self._values[key]
+
+    def set_at(self, key: Key, value: int | str) -> None:
+        """:meth:`set` by a :meth:`key`."""
+        self._values[key] = value
+
     def objects(self) -> list[Obj]:
         """The available objects in index order (SDO information's object list)."""
         return [self._objects[i] for i in sorted(self._objects)]
@@ -107,23 +130,25 @@ class Dictionary:
     # -- process images (6.3.1) ----------------------------------------------------
     @property
     def output_size(self) -> int:
-        return struct.calcsize(self._rx_fmt)
+        return self._rx_struct.size
 
     @property
     def input_size(self) -> int:
-        return struct.calcsize(self._tx_fmt)
+        return self._tx_struct.size
 
     def unpack_outputs(self, image: bytes) -> None:
         """Store a received RxPDO image (SM2) into its mapped objects."""
-        if len(image) < self.output_size:
+        layout = self._rx_struct
+        if len(image) < layout.size:
             return
-        values = struct.unpack_from(self._rx_fmt, image)
-        for (index, entry), value in zip(self._rx, values):
-            self._values[(index, entry.sub)] = value
+        stored = self._values
+        for key, value in zip(self._rx_keys, layout.unpack_from(image)):
+            stored[key] = value
 
     def pack_inputs(self) -> bytes:
         """The TxPDO image (SM3) from the mapped objects' values."""
-        return struct.pack(self._tx_fmt, *(self._values[(i, e.sub)] for i, e in self._tx))
+        stored = self._values
+        return self._tx_struct.pack(*[stored[key] for key in self._tx_keys])
 
     # -- master side (SDO) -----------------------------------------------------------
     def lookup(self, index: int, sub: int) -> tuple[Obj, Entry]:
