@@ -201,7 +201,7 @@ class ChainBus:
                 callback()
 
     # -- events -------------------------------------------------------------
-    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+    def emit(self, motor: int, kind: str, text: str, value: int | None = None,
              origin: str = "motor") -> None:
         """Report a line: on the host line (per origin) and to every subscriber."""
         cut = self.cut_from

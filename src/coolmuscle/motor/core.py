@@ -32,7 +32,7 @@ from .supervision.thermal import Thermal
 class MotorBus(Protocol):
     """What a motor needs from its chain."""
 
-    def emit(self, motor: int, kind: str, text: str, *, value: int | None = None,
+    def emit(self, motor: int, kind: str, text: str, value: int | None = None,
              origin: str = "motor") -> None:
         """Report a line (host line + event stream)."""
 

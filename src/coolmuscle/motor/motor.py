@@ -225,7 +225,8 @@ class Motor(Servo):
         if self.reports(Report.IN_POSITION_AND_ALARM):
             ux = self.status
             kind = "alarm" if self.alarm else "status"
-            self.bus.emit(self.id, kind, status_line(self.id, ux), value=ux)
+            # positional: a call through the bus protocol with keywords is parsed slowly
+            self.bus.emit(self.id, kind, status_line(self.id, ux), ux)
 
     def report_outputs(self) -> None:
         """``OUT.n=..`` event when K23 includes 4 (general outputs only)."""

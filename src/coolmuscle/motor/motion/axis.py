@@ -335,7 +335,8 @@ class Axis:
             if start != raw:
                 span = period_ns / 1e9
                 ramp = Segment(0.0, span, start, (raw - start) / span, 0.0, 0.0)
-                profile = Profile(now, (ramp,), final_position=raw)
+                # one segment from 0 of the period's length: nothing to check
+                profile = Profile(now, (ramp,), final_position=raw, checked=True)
                 self._stream = (profile, now + period_ns)
                 self._start(profile)
                 return
@@ -527,16 +528,20 @@ class Axis:
 
     def _schedule_milestones(self) -> None:
         now = self.kernel.now
-        for t_ns, index in self.profile.passing_times_ns():
-            if t_ns >= now:
-                self._timers.append(self.kernel.schedule_at(
-                    t_ns, partial(self.servo.passing_point, index),
-                    priority=PRIO_MOTION, name="passing-point"))
+        if self.profile.passing_times:
+            self._schedule_passing_points(now)
         done = self.in_position_time(now)
         if done is not None:
             self._timers.append(self.kernel.schedule_at(done, self._arrived,
                                                         priority=PRIO_MOTION,
                                                         name="in-position"))
+
+    def _schedule_passing_points(self, now: int) -> None:
+        for t_ns, index in self.profile.passing_times_ns():
+            if t_ns >= now:
+                self._timers.append(self.kernel.schedule_at(
+                    t_ns, partial(self.servo.passing_point, index),
+                    priority=PRIO_MOTION, name="passing-point"))
 
     def in_position_time(self, after_ns: int) -> int | None:
         """When the actual position comes within K55 of the target (``None``: not in
