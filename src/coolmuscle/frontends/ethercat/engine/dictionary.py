@@ -85,7 +85,7 @@ class Dictionary:
         self._tx = [(o.index, e) for p in table.tx_pdos() for o, e in table.pdo_entries(p)]
         self._rx_fmt = "<" + "".join(e.dtype.fmt for _i, e in self._rx)
         self._tx_fmt = "<" + "".join(e.dtype.fmt for _i, e in self._tx)
-        # the images' layouts made once: every bridge cycle packs and unpacks them
+        # the images' layouts made once: every cycle packs and unpacks them
         self._rx_struct = struct.Struct(self._rx_fmt)
         self._tx_struct = struct.Struct(self._tx_fmt)
         self._rx_keys: list[Key] = [(i, e.sub) for i, e in self._rx]
