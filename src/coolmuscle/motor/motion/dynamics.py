@@ -236,9 +236,44 @@ def _sign(x: float) -> int:
     return (x > 0.0) - (x < 0.0)
 
 
+class CommandPiece:
+    """One piece of a motion's command: from ``start`` to ``end`` (s from the motion's
+    origin; the last is endless) the cubic ``poly`` (an :data:`.expoly.F` without its
+    exponential term).  Immutable by convention; equal and hashed by its values (a
+    solved motion is looked up by its command, :func:`_solved`).  An object, not a
+    tuple: every target of a stream builds its command, and compiled code keeps a
+    plain class's numbers unboxed where a tuple in a list is a float object each."""
+
+    __slots__ = ("start", "end", "poly", "_hash", "_hashed")
+
+    def __init__(self, start: float, end: float, poly: F) -> None:
+        self.start = start
+        self.end = end
+        self.poly = poly
+        self._hash = 0
+        self._hashed = False            # the hash is made at the first lookup, and kept
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, CommandPiece):
+            return NotImplemented
+        a, b = self.poly, other.poly                  # compared number by number
+        return self.start == other.start and self.end == other.end and a[0] == b[0] \
+            and a[1] == b[1] and a[2] == b[2] and a[3] == b[3] and a[4] == b[4]
+
+    def __hash__(self) -> int:
+        if not self._hashed:
+            self._hash = hash((self.start, self.end, self.poly))
+            self._hashed = True
+        return self._hash
+
+    def __repr__(self) -> str:
+        return f"CommandPiece({self.start!r}, {self.end!r}, {self.poly!r})"
+
+
 def command_pieces(profile: Profile, origin_ns: int,
-                   memos: MotionMemos | None = None) -> list[tuple[float, float, F]]:
-    """The command as (start, end, cubic) from ``origin_ns`` on; the last is endless.
+                   memos: MotionMemos | None = None) -> list[CommandPiece]:
+    """The command as pieces (start, end, cubic) from ``origin_ns`` on; the last is
+    endless.
 
     Remembered in ``memos`` for a reused plan (the same segment tuple: planner.plan_moves)
     seen from the same offset: a repeated move builds its command once.  A hold (no
@@ -257,22 +292,22 @@ def command_pieces(profile: Profile, origin_ns: int,
     return out
 
 
-def _command_pieces(profile: Profile, origin_ns: int) -> list[tuple[float, float, F]]:
+def _command_pieces(profile: Profile, origin_ns: int) -> list[CommandPiece]:
     off = (origin_ns - profile.origin_ns) / NS_PER_S
-    out: list[tuple[float, float, F]] = []
+    out: list[CommandPiece] = []
     if profile.end_ns is not None and origin_ns >= profile.end_ns:
-        return [(0.0, math.inf, xp.const(profile.final_position))]
+        return [CommandPiece(0.0, math.inf, xp.const(profile.final_position))]
     if off < 0.0:
-        out.append((0.0, -off, xp.const(profile.start_state[0])))
+        out.append(CommandPiece(0.0, -off, xp.const(profile.start_state[0])))
     for seg in profile.segments:
         s0, s1 = seg.start - off, seg.end - off
         if s1 <= 0.0:
             continue
         p, v, a = seg.state(max(0.0, -s0))
-        out.append((max(s0, 0.0), s1, (p, v, a / 2.0, seg.j / 6.0, 0.0)))
+        out.append(CommandPiece(max(s0, 0.0), s1, (p, v, a / 2.0, seg.j / 6.0, 0.0)))
     if profile.end_ns is not None:
-        last = out[-1][1] if out else 0.0
-        out.append((last, math.inf, xp.const(profile.final_position)))
+        last = out[-1].end if out else 0.0
+        out.append(CommandPiece(last, math.inf, xp.const(profile.final_position)))
     return out
 
 
@@ -339,7 +374,7 @@ class MotionMemos:
     def __init__(self, size: int = 1024) -> None:
         self.plans: Memo[Key, tuple[tuple[Segment, ...], tuple[tuple[float, int], ...]]] = \
             Memo(size)
-        self.commands: Memo[Key, tuple[object, tuple[tuple[float, float, F], ...]]] = \
+        self.commands: Memo[Key, tuple[object, tuple[CommandPiece, ...]]] = \
             Memo(size)
         #: By what a solution depends on: the drive, the shaft's position and speed, the
         #: command (relative to its start for ``solved``).
@@ -685,7 +720,7 @@ class Motion:
 
 
 def _solved(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...],
+            cmd: tuple[CommandPiece, ...],
             memos: MotionMemos | None) -> tuple[Piece, ...]:
     """The pieces of a motion relative to the command's position at its origin.  The
     solution depends on nothing else, so a machine that repeats a cycle solves each of its
@@ -704,7 +739,7 @@ def _solved(drive: Drive, position: float, velocity: float,
 
 
 def _placed(drive: Drive, position: float, velocity: float,
-            cmd: tuple[tuple[float, float, F], ...], memos: MotionMemos | None,
+            cmd: tuple[CommandPiece, ...], memos: MotionMemos | None,
             until: float = math.inf) -> Solution:
     """The pieces of a motion where it is: :func:`_solved` moved to the command's
     position at the motion's origin (kept in ``memos`` too: a cycle repeats its moves in
@@ -719,7 +754,8 @@ def _placed(drive: Drive, position: float, velocity: float,
             return found
     placement = _Placement(drive, cmd)
     ref = placement.ref
-    rel_cmd = tuple((a, b, (c[0] - ref, c[1], c[2], c[3], c[4])) for a, b, c in cmd)
+    rel_cmd = tuple([CommandPiece(c.start, c.end, (c.poly[0] - ref, c.poly[1], c.poly[2],
+                                                   c.poly[3], c.poly[4])) for c in cmd])
     if lazy:
         solver = _Solver(placement.rel_drive, list(rel_cmd))
         solver._build(position - ref, velocity, until)
@@ -738,10 +774,10 @@ class _Placement:
 
     __slots__ = ("drive", "cmd", "ref", "rel_drive", "_ci")
 
-    def __init__(self, drive: Drive, cmd: tuple[tuple[float, float, F], ...]) -> None:
+    def __init__(self, drive: Drive, cmd: tuple[CommandPiece, ...]) -> None:
         self.drive = drive
         self.cmd = cmd
-        self.ref = ref = cmd[0][2][0]
+        self.ref = ref = cmd[0].poly[0]
         self.rel_drive = drive
         if drive.wall_lo != -math.inf or drive.wall_hi != math.inf:
             self.rel_drive = replace(drive, wall_lo=drive.wall_lo - ref,
@@ -753,10 +789,11 @@ class _Placement:
         cmd, drive, rel_drive = self.cmd, self.drive, self.rel_drive
         t = piece.start
         ci = self._ci
-        while ci < len(cmd) - 1 and cmd[ci][1] <= t:     # the command piece it began in
+        while ci < len(cmd) - 1 and cmd[ci].end <= t:    # the command piece it began in
             ci += 1
         self._ci = ci
-        c_start, _, c_poly = cmd[ci]
+        began = cmd[ci]
+        c_start, c_poly = began.start, began.poly
         p0 = piece.pos[0]
         if p0 == rel_drive.wall_hi:                      # at a stopper: exactly there
             p0 = drive.wall_hi
@@ -765,7 +802,7 @@ class _Placement:
         else:
             p0 += self.ref
         if piece.exit == "" and piece.mode == STALL:     # the safety net's hold
-            shown = cmd[-1][2]
+            shown = cmd[-1].poly
         else:
             shown = xp.shift(c_poly, 0.0, t - c_start)
         if piece.mode == FREE and not drive.enabled:     # servo off: the command follows
@@ -820,7 +857,7 @@ class _Solver:
     """Builds the pieces of one motion, in coordinates relative to the command's
     position at the motion's origin (so a repeated move is solved once: :func:`_solved`)."""
 
-    def __init__(self, drive: Drive, cmd: list[tuple[float, float, F]]) -> None:
+    def __init__(self, drive: Drive, cmd: list[CommandPiece]) -> None:
         self.drive = drive
         self.pieces: list[Piece] = []
         self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
@@ -852,7 +889,7 @@ class _Solver:
         while not self.done:
             if self.next is None:
                 if len(self.pieces) >= MAX_PIECES:
-                    self._append(_rest_piece(self._t, self._p, self._cmd[-1][2], self.drive))
+                    self._append(_rest_piece(self._t, self._p, self._cmd[-1].poly, self.drive))
                     self.done = True
                     return
                 self._open()
@@ -865,10 +902,11 @@ class _Solver:
         ended (:attr:`next`)."""
         t, p, v = self._t, self._p, self._v
         ci = self._ci
-        while self._cmd[ci][1] <= t:
+        while self._cmd[ci].end <= t:
             ci += 1
         self._ci = ci
-        c_start, c_end, c_poly = self._cmd[ci]
+        now_cmd = self._cmd[ci]
+        c_start, c_end, c_poly = now_cmd.start, now_cmd.end, now_cmd.poly
         cmd = xp.shift(c_poly, 0.0, t - c_start)
         end, kind = c_end - t, "command"
         if self._tiny >= CHATTER and self.drive.enabled and not self.drive.stepper:
