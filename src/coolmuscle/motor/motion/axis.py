@@ -106,7 +106,9 @@ class Axis:
         self.target_raw = 0.0
         #: The command of a stream (:meth:`follow`) and when its next target is due:
         #: while it is followed, the motion is solved that far only (dynamics.Motion).
-        self._stream: tuple[Profile, int] | None = None
+        #: Two attributes, not a tuple: compiled, the instant stays unboxed.
+        self._stream: Profile | None = None
+        self._stream_due = 0
         #: Solve every motion to its end at once, a stream's too (the same numbers and
         #: instants, only slower: tests compare the two).
         self.solve_in_full = False
@@ -337,7 +339,7 @@ class Axis:
                 ramp = Segment(0.0, span, start, (raw - start) / span, 0.0, 0.0)
                 # one segment from 0 of the period's length: nothing to check
                 profile = Profile(now, (ramp,), final_position=raw, checked=True)
-                self._stream = (profile, now + period_ns)
+                self._stream, self._stream_due = profile, now + period_ns
                 self._start(profile)
                 return
         self._start(hold(raw, now))
@@ -471,10 +473,10 @@ class Axis:
         self._cancel()
         self.generation += 1
         if motion is None:
-            stream, horizon = self._stream, None
-            if stream is not None and stream[0] is self.profile and stream[1] > now \
+            horizon: int | None = None
+            if self._stream is self.profile and self._stream_due > now \
                     and not self.solve_in_full:
-                horizon = stream[1]
+                horizon = self._stream_due
             motion = Motion(self.profile, now, self.raw_actual(), self.raw_velocity(),
                             self._current_drive(), self.memos, horizon_ns=horizon)
         self.motion = motion

@@ -133,7 +133,8 @@ class Piece:
     tuple would be boxed) and flags say whether they are computed yet."""
 
     __slots__ = ("start", "end", "mode", "pos", "cmd", "torque", "k", "s", "exit",
-                 "on_cmd", "_vel", "_err", "_has_vel", "_has_err", "_bounds")
+                 "on_cmd", "_vel", "_err", "_has_vel", "_has_err", "_bounded", "_reach_err",
+                 "_reach_vel", "_reach_torque")
 
     def __init__(self, start: float, end: float, mode: str, pos: F, cmd: F, torque: F,
                  k: float, s: int = 0, exit: str = "", on_cmd: bool = False) -> None:
@@ -151,7 +152,10 @@ class Piece:
         self._err: F = (0.0, 0.0, 0.0, 0.0, 0.0)
         self._has_vel = False
         self._has_err = False
-        self._bounds: tuple[float, float, float] | None = None
+        # the bounds of |err|, |vel|, |torque| (:meth:`reach`), three numbers, not an
+        # optional tuple: compiled, they stay unboxed in the object
+        self._bounded = False
+        self._reach_err = self._reach_vel = self._reach_torque = 0.0
 
     def set_vel(self, vel: F) -> None:
         """Give the speed, computed already (the same numbers as :meth:`vel`)."""
@@ -191,7 +195,9 @@ class Piece:
         out._vel, out._has_vel = self._vel, self._has_vel
         out._err, out._has_err = self._err, self._has_err
         if last <= end:
-            out._bounds = self._bounds          # the same stretch: the same bounds
+            # the same stretch: the same bounds
+            out._bounded, out._reach_err = self._bounded, self._reach_err
+            out._reach_vel, out._reach_torque = self._reach_vel, self._reach_torque
         return out
 
     def vel(self) -> F:
@@ -208,13 +214,19 @@ class Piece:
 
     def reach(self, what: str) -> float:
         """A bound of |err|, |vel| or |torque| (``what``) over the piece."""
-        bounds = self._bounds
-        if bounds is None:
+        self._bound()
+        index = _reach_index(what)
+        return self._reach_err if index == 0 else self._reach_vel if index == 1 \
+            else self._reach_torque
+
+    def _bound(self) -> None:
+        """The three bounds of :meth:`reach`, computed at the first ask."""
+        if not self._bounded:
             dur = self.end - self.start
-            bounds = self._bounds = (xp.abs_bound(self.err(), dur),
-                                     xp.abs_bound(self.vel(), dur),
-                                     xp.abs_bound(self.torque, dur))
-        return bounds[_reach_index(what)]
+            self._reach_err = xp.abs_bound(self.err(), dur)
+            self._reach_vel = xp.abs_bound(self.vel(), dur)
+            self._reach_torque = xp.abs_bound(self.torque, dur)
+            self._bounded = True
 
 
 _REACH: Final = {"err": 0, "vel": 1, "torque": 2}
@@ -597,7 +609,8 @@ class Motion:
 
         A watcher whose threshold is at or above it skips every piece, so it can
         answer "never" without walking them."""
-        return self._solution.peaks[_reach_index(what)]
+        index, peaks = _reach_index(what), self._solution.peaks
+        return peaks[0] if index == 0 else peaks[1] if index == 1 else peaks[2]
 
     def settled(self, window: float, after_ns: int) -> int | None:
         """The first instant >= ``after_ns`` where |Pe| <= ``window`` (``None``: never in
@@ -832,18 +845,19 @@ class _Unsolved:
         new = tuple([placement.place(piece) for piece in solver.pieces[self.placed:]])
         self.placed = len(solver.pieces)
         chosen = solver.next
-        self.next = None if chosen is None else placement.place(chosen[0])
+        self.next = None if chosen is None else placement.place(chosen)
         return new
 
 
-def _peaks(pieces: Sequence[Piece]) -> tuple[float, ...]:
+def _peaks(pieces: Sequence[Piece]) -> tuple[float, float, float]:
     """:meth:`Motion.peak` of each kind (in :data:`_REACH`'s order), as max() over the
     pieces, in one pass."""
-    pieces[0].reach("err")
-    top_err, top_vel, top_torque = pieces[0]._bounds  # type: ignore[misc]
+    first = pieces[0]
+    first._bound()
+    top_err, top_vel, top_torque = first._reach_err, first._reach_vel, first._reach_torque
     for piece in pieces:
-        piece.reach("err")                            # computes the piece's three bounds
-        b_err, b_vel, b_torque = piece._bounds         # type: ignore[misc]
+        piece._bound()
+        b_err, b_vel, b_torque = piece._reach_err, piece._reach_vel, piece._reach_torque
         if b_err > top_err:
             top_err = b_err
         if b_vel > top_vel:
@@ -868,9 +882,13 @@ class _Solver:
         #: one ended, and how many tiny pieces came in a row (no chattering).
         self._t, self._p, self._v, self._ci = 0.0, 0.0, 0.0, 0
         self._kind_prev, self._mode_prev, self._s_prev, self._tiny = "", "", 0, 0
-        #: The next piece chosen, not yet ended: (piece, its exits, the longest it may
-        #: last, why it would end then).
-        self.next: tuple[Piece, Exits, float, str] | None = None
+        #: The next piece chosen, not yet ended (``None``: none chosen), its exits, the
+        #: longest it may last and why it would end then (attributes of their own, not a
+        #: tuple: compiled, the numbers stay unboxed).
+        self.next: Piece | None = None
+        self._next_exits: Exits = []
+        self._next_end = 0.0
+        self._next_kind = ""
         #: Solved to the end (the last piece is endless, or the safety net's).
         self.done = False
 
@@ -922,12 +940,13 @@ class _Solver:
         else:
             piece, exits = self._choose(t, p, v, cmd, c_end - t)
         piece.exit = OPEN
-        self.next = (piece, exits, end, kind)
+        self.next, self._next_exits, self._next_end, self._next_kind = piece, exits, end, kind
 
     def _close(self) -> None:
         """Find where the chosen piece ends (the first of its exits) and take it."""
-        assert self.next is not None
-        piece, exits, end, kind = self.next
+        piece = self.next
+        assert piece is not None
+        exits, end, kind = self._next_exits, self._next_end, self._next_kind
         self.next = None
         for name, conds in exits:
             if isinstance(conds, float):
