@@ -458,9 +458,7 @@ def first_true(conds: Sequence[AnyF], k: float, a: float, b: float) -> float | N
 
     The interval is cut at every sign change of every condition; the first stretch
     whose midpoint satisfies all of them starts at the answer.  Conditions whose
-    cheap upper bound is <= 0 make the answer ``None`` at once; conditions that all
-    hold at ``a`` make it ``a`` at once (the first stretch starts there: no roots are
-    sought for the answer the cuts would give).
+    cheap upper bound is <= 0 make the answer ``None`` at once.
     """
     if b <= a:
         return None
@@ -471,11 +469,6 @@ def first_true(conds: Sequence[AnyF], k: float, a: float, b: float) -> float | N
     for cond in conds:
         if upper_bound(cond, k, a, b) <= 0.0:
             return None
-    for cond in conds:
-        if not value_any(cond, k, a) > 0.0:
-            break
-    else:
-        return a
     found = _all_roots(conds, k, a, b)
     cuts = sorted({a, *found}) if found else [a]
     last = len(cuts) - 1
@@ -494,8 +487,6 @@ def _first_true5(f: F, k: float, a: float, b: float) -> float | None:
     """:func:`first_true` of one piece-sized condition (most are): taken apart once."""
     if _upper_bound5(f, k, a, b) <= 0.0:
         return None
-    if value(f, k, a) > 0.0:                  # it holds from a on
-        return a
     found = roots5(f, k, a, b)
     cuts = sorted({a, *found}) if found else [a]
     last = len(cuts) - 1
