@@ -161,7 +161,10 @@ class DigitalIO:
 
     def output_signal(self, number: int, k34: int | None = None) -> bool:
         """The signal of output ``number`` by K34 (now, or the value ``k34``)."""
-        fn = self.output_function(number, k34)
+        return self._signal_of(self.output_function(number, k34), number)
+
+    def _signal_of(self, fn: int, number: int) -> bool:
+        """The signal of output ``number`` whose function is ``fn``."""
         follows = _follows(fn, number)
         if follows is not None:
             return self.general[follows]
@@ -186,24 +189,14 @@ class DigitalIO:
         return signal != self._outputs_inverted[number]
 
     def output_word(self) -> int:
-        """?50: bit 0 = output 1 (K33 and K34 read once: a fieldbus reads the word every
-        cycle, so :meth:`output_signal` and :meth:`port_of` are written out here, with
-        the same decisions)."""
+        """?50: bit 0 = output 1 (K33 and K34 read and decoded once: a fieldbus reads
+        the word every cycle; each port is :meth:`port_of` of its signal)."""
         k33, k34 = self._param(33), self._param(34)
         if k33 != self._k33 or k34 != self._k34:
             self._decode(self._k26, k33, k34)
-        functions, inverted, general = self._output_functions, self._outputs_inverted, \
-            self.general
+        functions, inverted = self._output_functions, self._outputs_inverted
         word = 0
         for n in range(1, self.output_count + 1):
-            fn = functions[n]
-            follows = _follows(fn, n)
-            if follows is not None:
-                signal = general[follows]
-            elif fn == OUT_NONE or fn == OUT_ANALOG:
-                signal = False
-            else:
-                signal = self._function_signal(fn, n)
-            if signal != inverted[n]:
+            if self._signal_of(functions[n], n) != inverted[n]:
                 word |= 1 << (n - 1)
         return word
