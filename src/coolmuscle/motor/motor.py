@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Final
 
 from ..cml import ast
 from ..errors import MotorError, OutOfRangeError
-from ..sim.kernel import Kernel
+from ..sim.kernel import Kernel, nearest
 from ..sim.memo import Key, Memo
 from .context import Context
 from .core import MotorBus
@@ -176,7 +176,7 @@ class Motor(Servo):
 
     def position(self) -> int:
         """Px (?96), whole pulses."""
-        return round(self.axis.position())
+        return nearest(self.axis.position())
 
     def cyclic_values(self, now: int) -> tuple[int, int, int, float, int, int, int, bool,
                                                 bool, bool]:
@@ -189,11 +189,11 @@ class Motor(Servo):
 
     def speed_units(self) -> int:
         """Sx (?97): actual speed in K37 speed units, to the nearest unit."""
-        return round(self.axis.velocity() / self.resolution.speed_unit_pps)
+        return nearest(self.axis.velocity() / self.resolution.speed_unit_pps)
 
     def torque(self) -> int:
         """Ix (?98): % of rated torque."""
-        return round(self.torque_exact())
+        return nearest(self.torque_exact())
 
     def torque_exact(self) -> float:
         """Ix before it is rounded to a whole %: what ``?98`` reads (the twin's fit
@@ -531,7 +531,7 @@ class Motor(Servo):
     @property
     def temperature(self) -> int:
         """?71 Temp (°C)."""
-        return round(self.thermal.temperature_at(self.axis.motion, self.kernel.now))
+        return nearest(self.thermal.temperature_at(self.axis.motion, self.kernel.now))
 
     def set_temperature(self, celsius: float) -> None:
         """The case is at ``celsius`` now (fault injection, machine file)."""

@@ -8,6 +8,7 @@ lists "1 position error overflow" etc. without adding 16) — docs/fidelity.md.
 from __future__ import annotations
 
 from enum import IntFlag
+from typing import Final
 
 
 class Ux(IntFlag):
@@ -27,8 +28,8 @@ class Ux(IntFlag):
 
 
 #: Alarm bits: each makes the motor free and raises the K34 alarm output (ch. 3 K56, K57).
-ALARM_BITS = (Ux.POSITION_ERROR_OVERFLOW | Ux.OVER_SPEED | Ux.OVERLOAD
-              | Ux.OVER_CURRENT | Ux.TEMPERATURE)
+ALARM_BITS: Final = (Ux.POSITION_ERROR_OVERFLOW | Ux.OVER_SPEED | Ux.OVERLOAD
+                     | Ux.OVER_CURRENT | Ux.TEMPERATURE)
 
 
 class Report(IntFlag):

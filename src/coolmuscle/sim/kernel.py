@@ -16,6 +16,7 @@ Real-time pacing is a thin layer on top (:mod:`coolmuscle.sim.realtime`).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from heapq import heappop, heappush
@@ -39,14 +40,24 @@ PRIO_REPORT: Final = 30   # output delivery
 Callback = Callable[[], None]
 
 
+def nearest(x: float) -> int:
+    """``round(x)``: the nearest integer, a tie to the even one.  Written out: compiled,
+    ``round`` is a generic call (the builtin looked up by name, the float boxed)."""
+    below = math.floor(x)
+    rest = x - below                      # exact: below is within 1 of x
+    if rest > 0.5 or (rest == 0.5 and below % 2 == 1):
+        return below + 1
+    return below
+
+
 def seconds(s: float) -> int:
     """Convert seconds (float) to kernel nanoseconds, rounding to nearest."""
-    return int(round(s * NS_PER_S))
+    return nearest(s * NS_PER_S)
 
 
 def ms(value: float) -> int:
     """Convert milliseconds to kernel nanoseconds."""
-    return int(round(value * NS_PER_MS))
+    return nearest(value * NS_PER_MS)
 
 
 def to_seconds(ns: int) -> float:

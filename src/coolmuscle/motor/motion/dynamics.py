@@ -41,7 +41,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
-from ...sim.kernel import NS_PER_S
+from ...sim.kernel import NS_PER_S, seconds
 from ...sim.memo import Key, Memo
 from . import expoly as xp
 from .expoly import AnyF, F
@@ -465,7 +465,7 @@ class Motion:
         """The instant the solved part ends (``None``: solved to the end)."""
         if self._solution.unsolved is None:
             return None
-        return self.origin_ns + round(self._frontier * NS_PER_S)
+        return self.origin_ns + seconds(self._frontier)
 
     def complete(self) -> None:
         """Solve the rest of the motion now."""
@@ -598,7 +598,7 @@ class Motion:
 
     # -- solved instants --------------------------------------------------------
     def to_ns(self, piece: Piece, tau: float) -> int:
-        return self.origin_ns + round((piece.start + tau) * NS_PER_S)
+        return self.origin_ns + seconds(piece.start + tau)
 
     def reach(self, piece: Piece, what: str) -> float:
         """A bound of |err|, |vel| or |torque| (``what``) over a piece (cached)."""
@@ -874,7 +874,8 @@ class _Solver:
     def __init__(self, drive: Drive, cmd: list[CommandPiece]) -> None:
         self.drive = drive
         self.pieces: list[Piece] = []
-        self._walled = math.isfinite(drive.wall_lo) or math.isfinite(drive.wall_hi)
+        # math.isfinite written as comparisons: compiled, it is a generic call
+        self._walled = -math.inf < drive.wall_lo < math.inf or -math.inf < drive.wall_hi < math.inf
         self._is_stepper = drive.stepper
         self._exp_tau_min = math.exp(-drive.kp * TAU_MIN)     # e^{-kτ} at TAU_MIN (tracking)
         self._cmd = cmd
@@ -996,7 +997,8 @@ class _Solver:
             return self._stepper(t, p, v, cmd, dur)
         e0 = cmd[0] - p
         vref = max(-d.v_max, min(d.v_max, d.kp * e0))
-        if abs(v - vref) <= max(1e-6 * abs(v), SNAP_TIME * d.a_limit, 1e-9):
+        # two max() of two: compiled, max() of three is a generic call (the same value)
+        if abs(v - vref) <= max(max(1e-6 * abs(v), SNAP_TIME * d.a_limit), 1e-9):
             track = self._track(t, p, cmd, dur)
             piece = track[0]
             # err() and the values at TAU_MIN written out (xp.sub, xp.value: same arithmetic)

@@ -25,12 +25,13 @@ import math
 from bisect import bisect_right
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Final
 
-from ...sim.kernel import NS_PER_S
+from ...sim.kernel import NS_PER_S, seconds
 
 State = tuple[float, float, float]
 
-_ITERATIONS = 200
+_ITERATIONS: Final = 200
 
 
 @dataclass(init=False, unsafe_hash=True, slots=True)
@@ -111,7 +112,7 @@ class Profile:
             self.end_ns: int | None = None
             self.final_position: float = math.copysign(math.inf, last.v)
         else:
-            self.end_ns = self.origin_ns + round(self.duration * NS_PER_S)
+            self.end_ns = self.origin_ns + seconds(self.duration)
             if final_position is None:
                 final_position = last.end_state()[0] if last else start_state[0]
             self.final_position = float(final_position)
@@ -176,7 +177,7 @@ class Profile:
 
     def passing_times_ns(self) -> list[tuple[int, int]]:
         """(kernel time, waypoint index) of each merge passing point (K34=6, K73)."""
-        return [(self.origin_ns + round(t * NS_PER_S), i) for t, i in self._passing]
+        return [(self.origin_ns + seconds(t), i) for t, i in self._passing]
 
     def max_speed(self) -> float:
         """The largest |velocity| anywhere in the profile (pulses/s)."""
@@ -194,7 +195,7 @@ class Profile:
 
     # -- solved instants ---------------------------------------------------
     def _to_ns(self, rel: float, after_ns: int) -> int:
-        return max(after_ns, self.origin_ns + round(rel * NS_PER_S))
+        return max(after_ns, self.origin_ns + seconds(rel))
 
     def _segments_from(self, after_ns: int) -> Iterable[tuple[Segment, float]]:
         rel = (after_ns - self.origin_ns) / NS_PER_S
@@ -240,7 +241,7 @@ class Profile:
                     continue
                 edge = center + math.copysign(window, off)
                 tau = _solve_monotone(seg, edge, lo, hi, seg.position(lo) - edge)
-                return self.origin_ns + round((seg.start + tau) * NS_PER_S)
+                return self.origin_ns + seconds(seg.start + tau)
         return self.origin_ns
 
     def time_speed_below(self, speed: float, after_ns: int) -> int | None:

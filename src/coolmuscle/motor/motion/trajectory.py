@@ -18,7 +18,7 @@ import math
 from bisect import bisect_right
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from ...sim.kernel import NS_PER_MS, NS_PER_S
 from .profile import Profile
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from .axis import Axis
 
 #: Largest number of edges solved for one export (a trace of a long fast run).
-MAX_EDGES = 200_000
+MAX_EDGES: Final = 200_000
 
 
 @dataclass(init=False, unsafe_hash=True, slots=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ...errors import MotorError
 from ...sim.kernel import PRIO_MOTION, Timer
@@ -33,21 +33,33 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-SAMPLE_NS = 200_000          # filter sample period: 5000 samples/s (K39 unit)
-TICK_NS = 1_000_000          # command update period
-SAMPLES_PER_TICK = TICK_NS // SAMPLE_NS
-SETTLED = 0.01               # counts: the filter has reached a steady input
+SAMPLE_NS: Final = 200_000          # filter sample period: 5000 samples/s (K39 unit)
+TICK_NS: Final = 1_000_000          # command update period
+SAMPLES_PER_TICK: Final = TICK_NS // SAMPLE_NS
+SETTLED: Final = 0.01               # counts: the filter has reached a steady input
 
-LO, HI = volts_to_counts(0.2), volts_to_counts(4.8)          # K38 dead zones
-MID_LO, MID_HI = volts_to_counts(2.4), volts_to_counts(2.6)  # CW/CCW zero band
+# K38 dead zones, and the CW/CCW zero band
+LO: Final = volts_to_counts(0.2)
+HI: Final = volts_to_counts(4.8)
+MID_LO: Final = volts_to_counts(2.4)
+MID_HI: Final = volts_to_counts(2.6)
 
-NONE, POSITION, SPEED_CW, SPEED_CCW, SPEED_BOTH = 0, 1, 2, 3, 4
-P_DATA, S_PLUS, S_MINUS, S_BOTH, TORQUE, TORQUE_FEEDBACK = 5, 6, 7, 8, 9, 10
-SPEED_MODES = (SPEED_CW, SPEED_CCW, SPEED_BOTH)
+NONE: Final = 0
+POSITION: Final = 1
+SPEED_CW: Final = 2
+SPEED_CCW: Final = 3
+SPEED_BOTH: Final = 4
+P_DATA: Final = 5
+S_PLUS: Final = 6
+S_MINUS: Final = 7
+S_BOTH: Final = 8
+TORQUE: Final = 9
+TORQUE_FEEDBACK: Final = 10
+SPEED_MODES: Final = (SPEED_CW, SPEED_CCW, SPEED_BOTH)
 
 #: CM1 (cm1-ethernetip-interface-manual.txt Appendix A): K64 selects the analog
 #: function; 9 = "Analog control only (K38)" with K38 0 speed / 1 position.
-_CM1_K64 = {1: S_PLUS, 2: P_DATA}
+_CM1_K64: Final = {1: S_PLUS, 2: P_DATA}
 
 
 def unipolar(y: float) -> float:

@@ -19,7 +19,7 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ...errors import CcwLimitError, CwLimitError, MotorError
 from ..motion import planner
@@ -28,8 +28,8 @@ from ..signals.io import digit
 if TYPE_CHECKING:
     from ..core import MotorCore
 
-_UNIT = {0: 100, 1: 10, 2: 1}
-AT_REST_PPS = 1.0   # below 1 pulse/s the shaft counts as standing (no pulse in a second)
+_UNIT: Final = {0: 100, 1: 10, 2: 1}
+AT_REST_PPS: Final = 1.0   # below 1 pulse/s the shaft counts as standing (no pulse in a second)
 
 
 class TravelLimits:

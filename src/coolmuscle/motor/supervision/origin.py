@@ -25,7 +25,7 @@ CW is the raw (machine) positive direction.  Choices: docs/fidelity.md "Origin s
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ..motion import expoly as xp
 from ..motion.axis import Watcher
@@ -36,15 +36,18 @@ if TYPE_CHECKING:
     from ..core import MotorCore
     from ..motion.axis import Axis
 
-STOPPER, SENSOR, ZPHASE, SENSOR_Z = "stopper", "sensor", "z", "sensor+z"
+STOPPER: Final = "stopper"
+SENSOR: Final = "sensor"
+ZPHASE: Final = "z"
+SENSOR_Z: Final = "sensor+z"
 
 #: Encoder phase cycles per turn (5.3.1 "0 to 999 per 1/50 rotation").
-PHASE_CYCLES = 50
+PHASE_CYCLES: Final = 50
 
-_LENGTH_UNIT = {0: 100, 1: 10, 2: 1}
+_LENGTH_UNIT: Final = {0: 100, 1: 10, 2: 1}
 
 #: An edge counts as crossed this far past it (pulses): no chatter from float noise.
-EDGE_MARGIN = 1e-6
+EDGE_MARGIN: Final = 1e-6
 
 
 def source_of(k46: int) -> str:

@@ -34,11 +34,11 @@ COMPLETE: Final = "complete"
 ERROR: Final = "error"
 
 #: Ux per push state (plain ints: read at every status report).
-_STATUS_BITS = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
-                ERROR: int(Ux.PUSH_ERROR)}
+_STATUS_BITS: Final = {PUSHING: int(Ux.PUSH), COMPLETE: int(Ux.PUSH | Ux.IN_POSITION),
+                       ERROR: int(Ux.PUSH_ERROR)}
 
 #: The torque counts as "at the push level" within this relative margin.
-_AT_LEVEL = 1.0 - 1e-6
+_AT_LEVEL: Final = 1.0 - 1e-6
 
 
 class Push(Watcher):

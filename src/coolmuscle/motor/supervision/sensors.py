@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from ..motion import expoly as xp
 from ..motion.axis import Watcher
 
 #: An edge counts as crossed this far past it (pulses): no chatter from float noise.
-EDGE_MARGIN = 1e-6
+EDGE_MARGIN: Final = 1e-6
 
 if TYPE_CHECKING:
     from ..core import MotorCore

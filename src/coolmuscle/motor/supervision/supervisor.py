@@ -42,7 +42,7 @@ MotionListener = Callable[[str], None]
 _RESOLVE_ON: Final = frozenset({37, 40, 47, 55, 56, 57, 60, 61})
 
 #: CM2 driver temperature alarm (°C); CM1 uses K71 (Appendix A "Temperature limit").
-CM2_TEMPERATURE_ALARM = 85.0
+CM2_TEMPERATURE_ALARM: Final = 85.0
 
 
 class Supervisor:

@@ -17,15 +17,15 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Final
 
-from ...sim.kernel import NS_PER_S
+from ...sim.kernel import NS_PER_S, seconds
 from ..motion import expoly as xp
 from ..motion.dynamics import Motion, Piece
 
 # (not Final: a Final tuple here is left unset by the compiled module's start-up)
-_NODES = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
-          0.9061798459386640)
-_WEIGHTS = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
-            0.4786286704993665, 0.2369268850561891)
+_NODES: Final = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
+                 0.9061798459386640)
+_WEIGHTS: Final = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
+                   0.4786286704993665, 0.2369268850561891)
 
 #: A motion that cannot heat the case by more than this (°C) only lets it cool.
 NEGLIGIBLE: Final = 0.1
@@ -88,7 +88,7 @@ class Thermal:
             if math.isinf(dt):
                 return None
             temp = self._after(temp, q, dt)
-            t += round(dt * NS_PER_S)
+            t += seconds(dt)
         return None
 
     def _may_exceed(self, motion: Motion, after_ns: int, temp: float, limit: float) -> bool:

@@ -45,11 +45,12 @@ INT32_MAX: Final = (1 << 31) - 1
 _ALARM_MASK: Final = int(ALARM_BITS)
 _STILL_MASK: Final = int(Ux.IN_POSITION) | int(ALARM_BITS)
 #: CMD mode: controlword bits 8-11 -> (CML, acknowledgement high byte), 7.1.2 / 7.1.3.
-CMD_WORDS = {0x1: (")", 0xF1), 0x2: ("(", 0xF2), 0x3: ("|", 0xF3), 0x4: ("|2", 0xF4),
-             0x6: ("]1", 0xF6)}
-ORIGIN_DONE_ACK, ORIGIN_TIMEOUT_ACK = 0xF8, 0xF9
+CMD_WORDS: Final = {0x1: (")", 0xF1), 0x2: ("(", 0xF2), 0x3: ("|", 0xF3), 0x4: ("|2", 0xF4),
+                    0x6: ("]1", 0xF6)}
+ORIGIN_DONE_ACK: Final = 0xF8
+ORIGIN_TIMEOUT_ACK: Final = 0xF9
 #: (from, to) -> PDS transition number of the 6.1.1 diagram (for logs and tests).
-TRANSITIONS = {
+TRANSITIONS: Final = {
     (State.NOT_READY, State.SWITCH_ON_DISABLED): 1,
     (State.SWITCH_ON_DISABLED, State.READY): 2, (State.READY, State.SWITCHED_ON): 3,
     (State.READY, State.OPERATION_ENABLED): 34, (State.SWITCHED_ON, State.OPERATION_ENABLED): 4,

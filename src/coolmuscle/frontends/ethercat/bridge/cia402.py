@@ -29,13 +29,13 @@ class State(enum.Enum):
 
 #: 6.1.3 table A, bits 0-6 (quick stop bit 5 reads 1 = "not active": it never happens).
 _BITS: Final = {State.NOT_READY: 0x0000, State.SWITCH_ON_DISABLED: 0x0040, State.READY: 0x0021,
-         State.SWITCHED_ON: 0x0023, State.OPERATION_ENABLED: 0x0027,
-         State.FAULT_REACTION: 0x000F, State.FAULT: 0x0008}
+                State.SWITCHED_ON: 0x0023, State.OPERATION_ENABLED: 0x0027,
+                State.FAULT_REACTION: 0x000F, State.FAULT: 0x0008}
 
 #: 6.1.1 "Reference (Cool Muscle State)".
-_MOTOR = {State.NOT_READY: "A", State.SWITCH_ON_DISABLED: "A", State.READY: "A",
-          State.SWITCHED_ON: "B", State.OPERATION_ENABLED: "C", State.FAULT_REACTION: "C",
-          State.FAULT: "A"}
+_MOTOR: Final = {State.NOT_READY: "A", State.SWITCH_ON_DISABLED: "A", State.READY: "A",
+                 State.SWITCHED_ON: "B", State.OPERATION_ENABLED: "C", State.FAULT_REACTION: "C",
+                 State.FAULT: "A"}
 
 REMOTE: Final = 0x0200            # bit 9: fixed 1
 FOLLOWING: Final = 0x1000         # bit 12 in csp: follows the target position

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from functools import partial
+from typing import Final
 
 from ....device import Device, Event
 from ....sim.kernel import PRIO_IO
@@ -27,12 +28,12 @@ from .link import CmLink
 
 log = logging.getLogger(__name__)
 
-NULL = "Null\r\n"
-MAX_STRING = 64                         # 7.2.2 "Max String Size 64bytes"
+NULL: Final = "Null\r\n"
+MAX_STRING: Final = 64                         # 7.2.2 "Max String Size 64bytes"
 #: Lines the motor prints on its port (origin ``fieldbus`` is the bridge's own).
-PORT_ORIGINS = frozenset({"fieldbus", "motor", "bank", "ladder"})
+PORT_ORIGINS: Final = frozenset({"fieldbus", "motor", "bank", "ladder"})
 #: Lines kept for a master that does not poll (older ones are dropped and counted).
-QUEUE_LIMIT = 4096
+QUEUE_LIMIT: Final = 4096
 
 
 class CmlMailbox:

@@ -10,8 +10,10 @@ and reports INPUT2-4 (its OUT1 and INPUT1 carry the serial line, 2.5.2).
 
 from __future__ import annotations
 
-TAG = 0xC000
-SERIAL_ERROR = 0xF
+from typing import Final
+
+TAG: Final = 0xC000
+SERIAL_ERROR: Final = 0xF
 
 
 def is_cpio_word(controlword: int) -> bool:

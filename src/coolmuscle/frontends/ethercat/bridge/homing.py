@@ -12,21 +12,29 @@ error (an alarm, the search stopped without its origin, or :data:`TIMEOUT_NS`).
 
 from __future__ import annotations
 
+from typing import Final
+
 from ....device import CyclicState, Device
 from ....motor.status import ALARM_BITS
 
-STOPPER_CW, STOPPER_CCW, SWITCH_CW, SWITCH_CCW = 1, 2, 3, 4
-METHODS = (STOPPER_CW, STOPPER_CCW, SWITCH_CW, SWITCH_CCW)
+STOPPER_CW: Final = 1
+STOPPER_CCW: Final = 2
+SWITCH_CW: Final = 3
+SWITCH_CCW: Final = 4
+METHODS: Final = (STOPPER_CW, STOPPER_CCW, SWITCH_CW, SWITCH_CCW)
 
 #: No time limit in the manual for "Origin Search Time Out" (7.1.3 F9xxh): chosen.
-TIMEOUT_NS = 60_000_000_000
+TIMEOUT_NS: Final = 60_000_000_000
 
-IDLE, RUNNING, ATTAINED, ERROR, INTERRUPTED = "idle", "running", "attained", "error", \
-    "interrupted"
+IDLE: Final = "idle"
+RUNNING: Final = "running"
+ATTAINED: Final = "attained"
+ERROR: Final = "error"
+INTERRUPTED: Final = "interrupted"
 
 #: 6.4.2 / CiA402 statusword bits 10 (target reached), 12 (attained), 13 (error).
-STATUS_BITS = {IDLE: 0x0400, RUNNING: 0x0000, ATTAINED: 0x1400, ERROR: 0x2400,
-               INTERRUPTED: 0x0400}
+STATUS_BITS: Final = {IDLE: 0x0400, RUNNING: 0x0000, ATTAINED: 0x1400, ERROR: 0x2400,
+                      INTERRUPTED: 0x0400}
 
 
 def homing_params(method: int, k45: int, k46: int, switch_speed: int,

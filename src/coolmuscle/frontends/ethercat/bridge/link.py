@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 from typing import Final
 
 #: 7.3 F511h.2 "6: 176,800bps" and F511h.3 "1: 1 msec" (the codes the objects read).
-BAUD = 176_800
-BAUD_CODE = 6
-CYCLE_CODE = 1
-CYCLE_NS = 1_000_000
-BITS_PER_BYTE = 10                    # start, 8 data, stop
+BAUD: Final = 176_800
+BAUD_CODE: Final = 6
+CYCLE_CODE: Final = 1
+CYCLE_NS: Final = 1_000_000
+BITS_PER_BYTE: Final = 10                    # start, 8 data, stop
 BYTE_NS: Final = BITS_PER_BYTE * 1_000_000_000 // BAUD      # 56,561 ns
 
 

@@ -12,18 +12,25 @@ to csp and CPIO to csp: csp is reached from hm and CML only, hm from csp only
 
 from __future__ import annotations
 
-HM, CSP, CML, CMD, CPIO = 6, 8, 101, 120, 121
-NAMES = {HM: "hm", CSP: "csp", CML: "CML", CMD: "CMD", CPIO: "CPIO"}
-POWER_UP = CSP                  # chapter 6 note 1: "always starts with csp mode (8)"
+from typing import Final
+
+# Final: compiled code reads a constant in place, not from the module's dictionary.
+HM: Final = 6
+CSP: Final = 8
+CML: Final = 101
+CMD: Final = 120
+CPIO: Final = 121
+NAMES: Final = {HM: "hm", CSP: "csp", CML: "CML", CMD: "CMD", CPIO: "CPIO"}
+POWER_UP: Final = CSP           # chapter 6 note 1: "always starts with csp mode (8)"
 
 #: 6502h supported drive modes (6.2.1): bit 5 hm, bit 7 csp.
-SUPPORTED_DRIVE_MODES = (1 << 5) | (1 << 7)
+SUPPORTED_DRIVE_MODES: Final = (1 << 5) | (1 << 7)
 
 #: 6.2.2 note 2: at least 5 ms between two switches.
-SWITCH_INTERVAL_NS = 5_000_000
+SWITCH_INTERVAL_NS: Final = 5_000_000
 
 #: target mode -> the modes it can be reached from (chapter 6 diagram).
-_REACHED_FROM: dict[int, frozenset[int]] = {
+_REACHED_FROM: Final[dict[int, frozenset[int]]] = {
     CSP: frozenset({HM, CML}),
     HM: frozenset({CSP}),
     CML: frozenset({CSP, CMD, CPIO}),
