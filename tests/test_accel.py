@@ -353,3 +353,34 @@ def test_a_bad_compile_setting_is_one_line(build_env: pytest.MonkeyPatch,
     assert accel_tool.main(["build", "--force"]) == 1
     assert capsys.readouterr().err == ("compiling the hot modules failed: "
                                        "COOLMUSCLE_COMPILE must be 0, 1 or auto, not 'yes'\n")
+
+
+def test_no_hot_module_declares_a_final_tuple_of_floats() -> None:
+    """mypyc 1.19 checks a ``Final`` tuple of floats for "unset" with the test inverted
+    where a function reads it in some expressions: the read raises ``NameError`` (or,
+    caught, changes the answer).  The hot modules keep such tuples plain."""
+    import ast
+    offenders = []
+    for module in accel.MODULES:
+        path = Path(accel.PACKAGE_DIR) / accel.source_relpath(module)
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.AnnAssign) and "Final" in ast.unparse(node.annotation) \
+                    and isinstance(node.value, ast.Tuple) \
+                    and any(isinstance(e, ast.Constant) and isinstance(e.value, float)
+                            for e in ast.walk(node.value)):
+                offenders.append(f"{module}: {ast.unparse(node.target)}")
+    assert offenders == []
+
+
+def test_the_safety_nets_rest_piece_of_a_free_motor_makes_no_torque() -> None:
+    """dynamics._rest_piece (MAX_PIECES reached) of a servo that is off reads the zero
+    function; compiled, this raised NameError while expoly.ZERO was a Final tuple."""
+    from dataclasses import replace
+
+    from coolmuscle.motor.motion import dynamics
+    from coolmuscle.motor.motion.plant import Plant
+    drive = Plant().drive(1000, limit_percent_of_rated=100.0, enabled=True)
+    piece = dynamics._rest_piece(0.5, 12.0, (3.0, 0.0, 0.0, 0.0, 0.0),
+                                 replace(drive, enabled=False))
+    assert piece.torque == (0.0, 0.0, 0.0, 0.0, 0.0)
+    assert piece.pos[0] == 12.0 and piece.start == 0.5

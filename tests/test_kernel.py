@@ -3,9 +3,13 @@ fieldbus cycle waiting for the same instant cost one event (docs/performance.md)
 
 from __future__ import annotations
 
-import pytest
+import math
 
-from coolmuscle.sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from coolmuscle.sim.kernel import PRIO_HORIZON, PRIO_MOTION, Kernel, ms, nearest, seconds
 
 
 def test_callbacks_shared_by_an_instant_run_in_one_event_in_the_order_given() -> None:
@@ -70,3 +74,27 @@ def test_a_callback_that_fails_leaves_the_others_of_its_instant_to_run() -> None
     assert ran == ["before"] and kernel.now == 100
     kernel.run(until=200)
     assert ran == ["before", "after 1", "after 2"] and kernel.now == 200
+
+
+@given(st.floats(allow_nan=False, allow_infinity=False)
+       | st.integers(-10**15, 10**15).map(lambda n: n + 0.5)
+       | st.floats(-4.0, 4.0))
+def test_nearest_is_round_to_the_bit_ties_to_even(x: float) -> None:
+    """Kernel times are rounded with ``nearest`` (compiled code's own arithmetic): the
+    same integer as ``round``, a tie to the even one, huge values included."""
+    assert nearest(x) == round(x)
+    assert seconds(x / 1e9) == round(x / 1e9 * 1e9)
+
+
+def test_nearest_refuses_what_round_refuses() -> None:
+    for bad, error in ((math.inf, OverflowError), (-math.inf, OverflowError),
+                       (math.nan, ValueError)):
+        with pytest.raises(error):
+            round(bad)
+        with pytest.raises(error):
+            nearest(bad)
+
+
+def test_seconds_and_ms_round_ties_to_even() -> None:
+    assert seconds(2.5e-9) == 2 and seconds(3.5e-9) == 4 and seconds(-2.5e-9) == -2
+    assert ms(0.0000025) == 2 and ms(1.5) == 1_500_000

@@ -28,7 +28,9 @@ F = tuple[float, float, float, float, float]
 #: squares a speed: :func:`mul`).  A 5-tuple takes the :data:`F` paths, the same numbers.
 AnyF = tuple[float, ...]
 
-ZERO: Final[F] = (0.0, 0.0, 0.0, 0.0, 0.0)
+#: (not Final: compiled, a Final tuple of floats read in a conditional expression checks
+#: as unset and raises NameError, a mypyc 1.19 fault)
+ZERO: F = (0.0, 0.0, 0.0, 0.0, 0.0)
 INF: Final = math.inf
 _ITERATIONS: Final = 100
 

@@ -46,8 +46,9 @@ NOMINAL_VSEN: Final = 240
 #: Bounds of the injected values: ten times the rated torque either way (a jam, a load
 #: driving the shaft); a driver case between a freezer and far past its alarm.  Beyond
 #: them a value means nothing physical and would overflow the load model's numbers.
-TORQUE_PERCENT: Final = (-1000.0, 1000.0)
-TEMPERATURE_C: Final = (-40.0, 200.0)
+# (not Final: compiled, a Final tuple of floats reads as unset, a mypyc 1.19 fault)
+TORQUE_PERCENT = (-1000.0, 1000.0)
+TEMPERATURE_C = (-40.0, 200.0)
 
 
 class Faults:

@@ -21,11 +21,11 @@ from ...sim.kernel import NS_PER_S, seconds
 from ..motion import expoly as xp
 from ..motion.dynamics import Motion, Piece
 
-# (not Final: a Final tuple here is left unset by the compiled module's start-up)
-_NODES: Final = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
-                 0.9061798459386640)
-_WEIGHTS: Final = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
-                   0.4786286704993665, 0.2369268850561891)
+# (not Final: compiled, a Final tuple of floats reads as unset, a mypyc 1.19 fault)
+_NODES = (-0.9061798459386640, -0.5384693101056831, 0.0, 0.5384693101056831,
+          0.9061798459386640)
+_WEIGHTS = (0.2369268850561891, 0.4786286704993665, 0.5688888888888889,
+            0.4786286704993665, 0.2369268850561891)
 
 #: A motion that cannot heat the case by more than this (°C) only lets it cool.
 NEGLIGIBLE: Final = 0.1
