@@ -54,15 +54,9 @@ NO_DICTIONARY = 0x08000023
 #: PDO assignment objects (6.3.3): their entries change only while subindex 0 is 0.
 _ASSIGNMENTS = frozenset({0x1C12, 0x1C13})
 
-#: An entry's place, index and subindex as one int (:func:`place`, :meth:`Dictionary.key`):
-#: every cycle reads and writes the mapped entries by it, and an int hashes at once where
-#: a tuple hashes its items at every lookup.
-Key = int
-
-
-def place(index: int, sub: int) -> Key:
-    """The :data:`Key` of entry ``index``.``sub`` (a subindex is one byte, CiA 301)."""
-    return index << 8 | sub
+#: An entry's place, (index, subindex), as one object (:meth:`Dictionary.key`): compiled,
+#: a tuple typed by its size would be unboxed and made again at every use.
+Key = tuple[object, ...]
 
 ReadHook = Callable[[int], "int | str"]
 WriteHook = Callable[[int, "int | str"], "int | str | None"]
@@ -83,7 +77,7 @@ class Dictionary:
         self.table = table
         self._objects: dict[int, Obj] = {o.index: o for o in table.objects if o.available}
         self._values: dict[Key, int | str] = {
-            place(o.index, e.sub): e.default for o in self._objects.values()
+            (o.index, e.sub): e.default for o in self._objects.values()
             for e in o.entries if e.available}
         self._read_hooks: dict[int, ReadHook] = {}
         self._write_hooks: dict[int, WriteHook] = {}
@@ -94,8 +88,8 @@ class Dictionary:
         # the images' layouts made once: every cycle packs and unpacks them
         self._rx_struct = struct.Struct(self._rx_fmt)
         self._tx_struct = struct.Struct(self._tx_fmt)
-        self._rx_keys: list[Key] = [place(i, e.sub) for i, e in self._rx]
-        self._tx_keys: list[Key] = [place(i, e.sub) for i, e in self._tx]
+        self._rx_keys: list[Key] = [(i, e.sub) for i, e in self._rx]
+        self._tx_keys: list[Key] = [(i, e.sub) for i, e in self._tx]
 
     # -- application side -------------------------------------------------------
     def on_read(self, index: int, hook: ReadHook) -> None:
@@ -109,17 +103,17 @@ class Dictionary:
 
     def get(self, index: int, sub: int = 0) -> int | str:
         """The stored value (no access check, no hook)."""
-        return self._values[place(index, sub)]
+        return self._values[(index, sub)]
 
     def set(self, index: int, sub: int, value: int | str) -> None:
         """Store a value from the application (no access check)."""
-        self._values[place(index, sub)] = value
+        self._values[(index, sub)] = value
 
     @staticmethod
     def key(index: int, sub: int = 0) -> Key:
         """The place of entry ``index``.``sub``, for :meth:`value_at` and :meth:`set_at`:
         made once by an application that reads or writes the entry every cycle."""
-        return place(index, sub)
+        return (index, sub)
 
     def value_at(self, key: Key) -> int | str:
         """:meth:`get` by a :meth:`key`."""
@@ -177,7 +171,7 @@ class Dictionary:
         hook = self._read_hooks.get(obj.index)
         if hook is not None:
             return hook(entry.sub)
-        return self._values[place(obj.index, entry.sub)]
+        return self._values[(obj.index, entry.sub)]
 
     def write(self, index: int, sub: int, data: bytes, *, sized: bool = True) -> None:
         """SDO download of one entry.  ``sized``: the length is exact (else truncate)."""
@@ -186,7 +180,7 @@ class Dictionary:
             raise SdoAbort(READ_ONLY, f"{index:04X}h.{sub}")
         value = self._decode(entry, data, sized)
         if obj.code in (ARRAY, RECORD) and sub > 0 and obj.entries[0].access == "ro" \
-                and entry.pdo == "" and index in _ASSIGNMENTS and self._values[place(index, 0)]:
+                and entry.pdo == "" and index in _ASSIGNMENTS and self._values[(index, 0)]:
             raise SdoAbort(SUB0_NOT_ZERO)   # CiA 301: entries change only while sub 0 is 0
         if isinstance(value, int):
             if entry.low is not None and value < entry.low:
@@ -198,7 +192,7 @@ class Dictionary:
             stored = hook(sub, value)
             if stored is not None:
                 value = stored
-        self._values[place(index, sub)] = value
+        self._values[(index, sub)] = value
 
     @staticmethod
     def _decode(entry: Entry, data: bytes, sized: bool) -> int | str:
