@@ -274,12 +274,11 @@ def _refine(f: F, k: float, lo: float, hi: float, flo: float) -> float:
     # value(f) and value(f') written out (the same expressions, no calls): hot path
     c0, c1, c2, c3, d = f
     s1, s2, s3, sd = c1, 2.0 * c2, 3.0 * c3, -k * d      # deriv(f, k)
-    exp = math.exp
     t = 0.5 * (lo + hi)
     for _ in range(_ITERATIONS):
         ft = c0 + t * (c1 + t * (c2 + t * c3))
         if d:
-            ft = ft + d * exp(-k * t)
+            ft = ft + d * math.exp(-k * t)
         if ft == 0.0:
             return t
         if (ft < 0.0) == (flo < 0.0):
@@ -290,7 +289,7 @@ def _refine(f: F, k: float, lo: float, hi: float, flo: float) -> float:
             break
         slope = s1 + t * (s2 + t * (s3 + t * 0.0))
         if sd:
-            slope = slope + sd * exp(-k * t)
+            slope = slope + sd * math.exp(-k * t)
         step = t - ft / slope if slope != 0.0 else lo - 1.0
         t = step if lo < step < hi else 0.5 * (lo + hi)
     return 0.5 * (lo + hi)
@@ -418,12 +417,11 @@ def _roots5(c0: float, c1: float, c2: float, c3: float, d: float, k: float,
         critical = _roots5(s0, s1, s2, 0.0, sd, k, a, b)
     if not critical and not math.isinf(b):
         # one monotonic stretch (the usual case): f at both ends
-        exp = math.exp
         flo = c0 + a * (c1 + a * (c2 + a * c3))
         fhi = c0 + b * (c1 + b * (c2 + b * c3))
         if d:
-            flo = flo + d * exp(-k * a)
-            fhi = fhi + d * exp(-k * b)
+            flo = flo + d * math.exp(-k * a)
+            fhi = fhi + d * math.exp(-k * b)
         if flo == 0.0 or fhi == 0.0 or (flo < 0.0) == (fhi < 0.0):
             return []
         return [_refine((c0, c1, c2, c3, d), k, a, b, flo)]
