@@ -276,6 +276,8 @@ def test_a_megabyte_each_way_at_once_loses_no_byte(side: str, procs: list[Progra
     port = serial.serial_for_url(where, timeout=0.5)
     try:
         assert peer.connected.wait(10) and peer.conn is not None
+        if side == "listen":      # the motor's bytes reach a host program once taken
+            cap.wait_for(r"host program connected from ", timeout=30)
         writer = threading.Thread(target=port.write, args=(up,), daemon=True)
         writer.start()
         assert peer.conn is not None

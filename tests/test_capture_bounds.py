@@ -156,6 +156,10 @@ def test_a_64_mib_line_from_the_motor_is_recorded_in_pieces(tmp_path: Path,
     try:
         with serial.serial_for_url(where, timeout=1) as port:
             assert motor.connected.wait(10)
+            # what the motor sends while no host program is attached is recorded, not
+            # relayed (a serial port with nobody listening): the connect returns when
+            # the kernel accepted it, the capture takes it a moment later
+            cap.wait_for(r"host program connected from ", timeout=30)
             motor.send_in_background(NO_LINE_END, 64)
             got, deadline = 0, time.monotonic() + 120
             while got < 64 * MIB and time.monotonic() < deadline:
