@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 
 from coolmuscle.chain import Chain
 from coolmuscle.device.api import Event
-from coolmuscle.motor.motion.dynamics import SAT, Drive, Motion
+from coolmuscle.motor.motion import expoly as xp
+from coolmuscle.motor.motion.dynamics import SAT, Drive, Motion, Piece
 from coolmuscle.motor.motion.profile import Profile, Segment
 from fixtures import collect_events
 
@@ -152,3 +153,41 @@ def test_a_motion_solved_in_part_is_the_motion_solved_in_full(
     assert [repr(p) for p in part.pieces] == [repr(p) for p in full.pieces]
     assert part.peak("torque") == full.peak("torque")
     assert part.within(target, 1.0, origin) == full.within(target, 1.0, origin)
+
+
+def _within_by_both_sides(motion: Motion, center: float, window: float,
+                          after_ns: int) -> int | None:
+    """The K55 search written as its definition: the first instant at which the
+    position is below ``center + window`` and above ``center - window`` together."""
+    def inside(piece: Piece) -> list[xp.F]:
+        off = xp.sub(piece.pos, xp.const(center))
+        return [xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))]
+    return motion.first_of(after_ns, (inside,))
+
+
+@settings(max_examples=120, deadline=None)
+@given(kp=st.floats(50.0, 3000.0), a_limit=st.floats(1e4, 1e7),
+       friction=st.floats(0.0, 5e3), position=st.floats(-300.0, 300.0),
+       velocity=st.floats(-2e4, 2e4), target=st.floats(-300.0, 300.0),
+       center=st.floats(-300.0, 300.0), window=st.integers(-1, 50).map(float),
+       period_us=st.integers(100, 4000), after_us=st.integers(0, 20_000))
+def test_k55_in_position_is_the_first_instant_within_the_window_on_both_sides(
+        kp: float, a_limit: float, friction: float, position: float, velocity: float,
+        target: float, center: float, window: float, period_us: int,
+        after_us: int) -> None:
+    """Ch. 3 K55: in position is the first instant the shaft is within the window of the
+    target.  The search (one side's root only, or at once when already inside) gives
+    the instant the two-sided definition gives, and the shaft is inside there.  K55 is
+    a whole number of pulses (-1: a window that holds nothing, as 0 does)."""
+    drive = Drive(kp=kp, a_limit=a_limit, a_friction=friction, a_load=0.0, v_max=3e5)
+    origin, period = 7 * MS, period_us * 1000
+    span = period / 1e9
+    profile = Profile(origin, (Segment(0.0, span, position, (target - position) / span,
+                                       0.0, 0.0),), final_position=target)
+    motion = Motion(profile, origin, position, velocity, drive)
+    after = origin + after_us * 1000
+    found = motion.within(center, window, after)
+    assert found == _within_by_both_sides(motion, center, window, after)
+    if found is not None:
+        assert found >= after
+        assert abs(motion.position_at(found) - center) <= window + 1e-3   # (a ns later)

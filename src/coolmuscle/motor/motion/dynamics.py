@@ -642,7 +642,14 @@ class Motion:
         """:meth:`first_of` for :meth:`within`, written out (every target of a stream
         asks it): a piece whose position stays ``window`` or more from ``center`` by its
         bound (:func:`xp.spread`) is passed without seeking roots, where none would be
-        found; the others are searched with the same conditions."""
+        found; the others are searched with the same conditions.
+
+        The two conditions (below ``center + window``, above ``center - window``) add
+        up to ``2 * window``: where one fails the other holds.  So a position inside at
+        the start of the search is the answer there, and one outside waits for the
+        condition it fails alone (one root search, not two)."""
+        if not window > 0.0:                        # both never hold together
+            return None
         rel = max(0.0, self._rel(after_ns))
         i = max(0, bisect_right(self._starts, rel) - 1)
         for piece in self.pieces[i:]:
@@ -651,8 +658,16 @@ class Motion:
             if abs(pos[0] - center) - xp.spread(pos, duration) >= window:
                 continue
             off = xp.sub(pos, xp.const(center))
-            tau = xp.first_true([xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))],
-                                piece.k, max(0.0, rel - piece.start), duration)
+            below, above = xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))
+            start = max(0.0, rel - piece.start)
+            if start >= duration:
+                continue
+            if not xp.value(below, piece.k, start) > 0.0:
+                tau = xp.first_true([below], piece.k, start, duration)
+            elif not xp.value(above, piece.k, start) > 0.0:
+                tau = xp.first_true([above], piece.k, start, duration)
+            else:
+                tau = start                         # inside already
             if tau is not None:
                 at = self.origin_ns + math.ceil((piece.start + tau) * NS_PER_S)
                 return max(after_ns, at)
