@@ -100,3 +100,34 @@ def test_a_braking_curve_of_degree_two_is_the_same_on_the_5_tuple_path(
         xp.first_true([cond, padded], 300.0, 1e-9, end)
     assert (xp.upper_bound(short, 300.0, 1e-9, end) <= 0.0) == \
         (xp.upper_bound(padded, 300.0, 1e-9, end) <= 0.0)
+
+
+
+def _series(out: float, coefs: dict[int, float], b: float) -> float:
+    """``out`` + c_i·b**i, term by term in rising order (∞ when b is): a bound's
+    series written with ``**``."""
+    if coefs and math.isinf(b):
+        return math.inf
+    for i, c in coefs.items():
+        out += c * b ** i
+    return out
+
+
+@settings(max_examples=300, deadline=None)
+@given(f=st.tuples(coef, coef, coef, coef, coef), k=st.floats(0.1, 50.0),
+       a=st.one_of(st.just(0.0), st.floats(0.0, 2.0)),
+       w=st.one_of(st.floats(0.0, 1e3), st.just(math.inf)))
+def test_the_bounds_are_their_power_series_to_the_last_bit(
+        f: xp.F, k: float, a: float, w: float) -> None:
+    """spread, abs_bound and the 5-tuple upper_bound give the numbers of their series
+    written with ``**`` exactly (they take ``math.pow``: compiled, ``**`` on floats is a
+    generic call; the same C ``pow`` either way)."""
+    terms = {i: abs(f[i]) for i in (1, 2, 3) if f[i]}
+    assert xp.spread(f, w) == _series(abs(f[4]), terms, w)
+    assert xp.abs_bound(f, w) == _series(abs(f[0]) + abs(f[4]), terms, w)
+    g = xp.shift(f, k, a) if a else f
+    rising = {i: g[i] for i in (1, 2, 3) if g[i] > 0.0}
+    expected = _series(g[0], rising, (a + w) - a)
+    if g[4] > 0.0 and not math.isinf(expected):
+        expected += g[4]
+    assert xp.upper_bound(f, k, a, a + w) == expected

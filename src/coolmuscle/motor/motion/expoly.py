@@ -115,17 +115,17 @@ def spread(f: F, b: float) -> float:
     if c:
         if math.isinf(b):
             return INF
-        out += abs(c) * b ** 1
+        out += abs(c) * b
     c = f[2]
     if c:
         if math.isinf(b):
             return INF
-        out += abs(c) * b ** 2
+        out += abs(c) * math.pow(b, 2.0)
     c = f[3]
     if c:
         if math.isinf(b):
             return INF
-        out += abs(c) * b ** 3
+        out += abs(c) * math.pow(b, 3.0)
     return out
 
 
@@ -138,11 +138,11 @@ def abs_bound(f: F, b: float) -> float:
         if math.isinf(b):
             return INF
         if c1:
-            out += abs(c1) * b ** 1
+            out += abs(c1) * b
         if c2:
-            out += abs(c2) * b ** 2
+            out += abs(c2) * math.pow(b, 2.0)
         if c3:
-            out += abs(c3) * b ** 3
+            out += abs(c3) * math.pow(b, 3.0)
     return out
 
 
@@ -247,11 +247,11 @@ def _upper_bound5(f: F, k: float, a: float, b: float) -> float:
         if math.isinf(w):
             return INF
         if g1 > 0.0:
-            out += g1 * w ** 1
+            out += g1 * w
         if g2 > 0.0:
-            out += g2 * w ** 2
+            out += g2 * math.pow(w, 2.0)
         if g3 > 0.0:
-            out += g3 * w ** 3
+            out += g3 * math.pow(w, 3.0)
     if gd > 0.0:
         out += gd
     return out

@@ -102,7 +102,7 @@ class Thermal:
         for piece in motion.pieces:
             if piece.end <= rel:
                 continue
-            q = (piece.reach("torque") * scale) ** 2
+            q = math.pow(piece.reach("torque") * scale, 2.0)
             if self.idle + self.rise_at_rated * q > temp:
                 temp = self._after(temp, q, piece.end - max(rel, piece.start))
                 if temp > limit:
@@ -125,7 +125,7 @@ def _heating_scale(motion: Motion) -> float:
 
 def _peak_square(motion: Motion) -> float:
     """A bound of (torque / rated)² over the whole motion."""
-    return (motion.peak("torque") * _heating_scale(motion)) ** 2
+    return math.pow(motion.peak("torque") * _heating_scale(motion), 2.0)
 
 
 def _stretches(motion: Motion, t0: int, t1: int | None) -> Iterator[tuple[float, float]]:
@@ -148,9 +148,9 @@ def _stretches(motion: Motion, t0: int, t1: int | None) -> Iterator[tuple[float,
 def _mean_square(piece: Piece, a: float, b: float) -> float:
     """Mean of torque² over [a, b] (at ``a`` when the stretch is endless)."""
     if math.isinf(b):
-        return xp.value(piece.torque, piece.k, a) ** 2
+        return math.pow(xp.value(piece.torque, piece.k, a), 2.0)
     half, mid = (b - a) / 2.0, (a + b) / 2.0
     total = 0.0
     for node, weight in zip(_NODES, _WEIGHTS):
-        total += weight * xp.value(piece.torque, piece.k, mid + half * node) ** 2
+        total += weight * math.pow(xp.value(piece.torque, piece.k, mid + half * node), 2.0)
     return total / 2.0
