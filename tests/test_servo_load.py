@@ -316,3 +316,51 @@ def test_the_fuzzed_sequence_stays_far_below_the_piece_limit(
     axis_speed = max(abs(chain.motors[1].axis.motion.velocity_at(chain.kernel.now - ms(t)))
                      for t in range(0, 100, 10))
     assert axis_speed == 0.0                           # standing (the K56 alarm or arrived)
+
+
+def test_2_1_1_a_peak_torque_changed_while_pushing_a_stopper_applies_at_once(
+        make_chain: ChainFactory) -> None:
+    """M=100 is the maximum motor torque (2.1.1 "M"): against a stopper Ix shows the
+    plant's peak torque, and a new peak torque at once (the plant is the motor's)."""
+    chain = make_chain()
+    motor = chain.motors[1]
+    motor.geometry.stopper_cw = 3000.0
+    motor.axis.refresh()
+    chain.execute("K56.1=100, S.1=50, A.1=100, P.1=20000")
+    chain.execute("^.1")
+    chain.kernel.run(until=seconds(1.0))
+    assert chain.execute("?98.1") == ["Ix.1=300"]
+    motor.plant.peak_torque = 200.0
+    chain.kernel.run(until=seconds(1.1))
+    assert chain.execute("?98.1") == ["Ix.1=200"]
+
+
+def test_6_6_ix_of_an_extra_load_stays_its_share_of_a_changed_rated_torque(
+        make_chain: ChainFactory) -> None:
+    """An extra load of 50 % of rated (fault injection) holds Ix at 50 (6.6 ?98, % of
+    rated); with a doubled rated torque the load is 50 % of the new rating."""
+    chain = make_chain()
+    motor = chain.motors[1]
+    motor.faults.inject("overload", torque=50.0)
+    chain.kernel.run(until=seconds(0.5))
+    assert chain.execute("?98.1") in (["Ix.1=50"], ["Ix.1=-50"])
+    motor.plant.rated_torque = 0.64
+    chain.kernel.run(until=seconds(1.0))
+    assert chain.execute("?98.1") in (["Ix.1=50"], ["Ix.1=-50"])
+    assert motor.axis.motion.drive.a_load * motor.plant.nm_per_accel(
+        motor.resolution.pulses_per_rev) == pytest.approx(0.32)
+
+
+def test_ch3_k37_a_new_resolution_scales_the_servos_acceleration_units(
+        make_chain: ChainFactory) -> None:
+    """K37 (ch. 3, its table: pulses per revolution) sets the unit the servo model
+    counts in: the torque limit as an acceleration doubles, in pulses/s², with twice
+    the pulses per revolution, from the next motion on."""
+    chain = make_chain()
+    motor = chain.motors[1]
+    assert motor.resolution.pulses_per_rev == 1000                 # K37=3, the default
+    before = motor.axis.motion.drive.a_limit
+    chain.execute("K37.1=4")                                       # 2000 pulses/rev
+    chain.execute("S.1=10, A.1=10, P.1=1000")
+    chain.execute("^.1")
+    assert motor.axis.motion.drive.a_limit == pytest.approx(2.0 * before)

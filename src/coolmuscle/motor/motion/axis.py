@@ -125,6 +125,9 @@ class Axis:
         #: Where the part of the motion solved ends, while the axis waits there
         #: (:meth:`_arm_all`; ``None``: solved to its end, or a new motion came).
         self._frontier_at: int | None = None
+        #: :meth:`_frontier_due` as the kernel calls it (made once: a bound method made
+        #: at every stream target is an allocation and a lookup)
+        self._on_frontier = self._frontier_due
         #: (time_ns, profile, motion, zero, sign) kept while a trace records.
         self.history: list[tuple[int, Profile, Motion, float, int]] | None = None
         #: Called after every trajectory change (rotation pulses, external encoder:
@@ -498,7 +501,7 @@ class Axis:
         if frontier is not None:
             # one event for every axis whose stream is due then (a fieldbus cycle)
             self._frontier_at = due = max(frontier, now)
-            self.kernel.schedule_shared(due, self._frontier_due, priority=PRIO_HORIZON,
+            self.kernel.schedule_shared(due, self._on_frontier, priority=PRIO_HORIZON,
                                         name="motion-frontier")
         # every watcher's event was cancelled (_cancel): asked again, each in its place
         timers = self._watch_timers

@@ -208,13 +208,17 @@ class TemperatureWatch(_AlarmWatch):
     bit: ClassVar[Ux] = Ux.TEMPERATURE
     mask: ClassVar[int] = int(Ux.TEMPERATURE)
 
+    def __init__(self, motor: MotorCore) -> None:
+        super().__init__(motor)
+        self._thermal = motor.thermal       # (read at every motion)
+
     def active(self, axis: Axis) -> bool:
         return not self.motor.alarm & self._mask
 
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
             return None
-        thermal = self.motor.thermal
+        thermal = self._thermal
         return thermal.first_above(axis.motion, after_ns, thermal.alarm)
 
 

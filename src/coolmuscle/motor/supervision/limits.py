@@ -40,12 +40,13 @@ class TravelLimits:
         self.on = {1: False, -1: False}
         self._range: tuple[float, float] = (-math.inf, math.inf)
         self._range_version = -1            # K45, K58, K59 as of this params version
+        self._params = motor.params         # (its version is read at every target)
 
     # -- software limits ----------------------------------------------------------
     def soft_range(self) -> tuple[float, float]:
         """(lowest, highest) user position allowed; ±inf where K58/K59 are 0."""
         m = self.motor
-        version = m.params.version
+        version = self._params.version
         if version != self._range_version:
             unit = 100 if m.firmware.name == "cm1" else _UNIT.get(digit(m.k(45), 3), 100)
             k58, k59 = m.k(58), m.k(59)

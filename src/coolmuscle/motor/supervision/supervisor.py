@@ -69,6 +69,14 @@ class Supervisor:
         self._last_drive: Drive | None = None
         self._ppr, self._speed_limit = 0, 0
         self._limit = self._scale = self._extra = self._lo = self._hi = 0.0
+        # What :meth:`drive` reads at every target of a stream, held here in their own
+        # types (compiled, a read through the motor's protocol is a generic lookup): the
+        # K table, the plant's torques (read again when the plant says it changed) and
+        # K37's pulses per revolution (read again when a K value changed).
+        self._params = motor.params
+        self._peak_torque = motor.plant.peak_torque
+        self._rated_torque = motor.plant.rated_torque
+        self._ppr_now, self._ppr_version = 0, -1
 
     def attach(self) -> None:
         """Watch the axis: alarms, push, origin search (the heat: Motor.motion_ends)."""
@@ -89,17 +97,16 @@ class Supervisor:
         The same values give the same (immutable) Drive object until a field of the
         plant changes: a move asks for it once, and the solved motions are looked up
         by it."""
-        m, faults = self.motor, self.faults
-        plant = m.plant
+        faults = self.faults
         if faults.power_cable_broken:
             limit = 0.0
         elif self.push.active:
             limit = self.push.level_percent()
         else:
-            limit = self.torque_limit * plant.peak_torque / 100.0
-        ppr = m.resolution.pulses_per_rev
-        extra = faults.extra_load_percent / 100.0 * plant.rated_torque
-        scale, speed_limit = faults.speed_scale(), m.params.get(40)
+            limit = self.torque_limit * self._peak_torque / 100.0
+        ppr = self._pulses_per_rev()
+        extra = faults.extra_load_percent / 100.0 * self._rated_torque
+        scale, speed_limit = faults.speed_scale(), self._params.get(40)
         lo, hi = self.geometry.walls(ppr)
         last = self._last_drive
         if last is not None and ppr == self._ppr and limit == self._limit \
@@ -109,7 +116,7 @@ class Supervisor:
         key: Key = (ppr, limit, scale, extra, (lo, hi), speed_limit)
         found = self._drives.get(key)
         if found is None:
-            found = self._drives.put(key, plant.drive(
+            found = self._drives.put(key, self.motor.plant.drive(
                 ppr, limit_percent_of_rated=limit, enabled=True, speed_scale=scale,
                 extra_load_nm=extra, walls=(lo, hi), speed_limit=speed_limit))
         self._last_drive = found
@@ -117,8 +124,18 @@ class Supervisor:
         self._lo, self._hi, self._speed_limit = lo, hi, speed_limit
         return found
 
+    def _pulses_per_rev(self) -> int:
+        """K37's pulses per revolution (ch. 3 K37 table), read again after a K change."""
+        version = self._params.version
+        if version != self._ppr_version:
+            self._ppr_now = self.motor.resolution.pulses_per_rev
+            self._ppr_version = version
+        return self._ppr_now
+
     def _plant_changed(self) -> None:
         """A field of the plant changed: new drives, and the motion re-solved at once."""
+        plant = self.motor.plant
+        self._peak_torque, self._rated_torque = plant.peak_torque, plant.rated_torque
         self._drives.clear()
         self._last_drive = None
         self.motor.axis.refresh()

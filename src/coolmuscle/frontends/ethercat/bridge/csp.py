@@ -9,15 +9,20 @@ that maximum; the motor's own software limits (K58/K59) apply inside the model.
 
 from __future__ import annotations
 
+from typing import Final
+
 from ....device import Device, TargetStream
 from ....motor.state.units import RESOLUTIONS
 from .identity import CYCLE_NS
 
+#: Appendix 5's maximum position by K37 (read at every cycle: a table of ints, not the
+#: resolutions' objects).
+_MAX_POSITION: Final = {k37: res.max_position for k37, res in RESOLUTIONS.items()}
+
 
 def max_position(k37: int) -> int:
     """Appendix 5: the largest position the motor takes at resolution ``k37``."""
-    res = RESOLUTIONS.get(k37)
-    return res.max_position if res is not None else 999_999_999
+    return _MAX_POSITION.get(k37, 999_999_999)
 
 
 def clamp(target: int, k37: int) -> int:
