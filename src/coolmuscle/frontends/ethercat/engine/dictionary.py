@@ -54,8 +54,8 @@ NO_DICTIONARY = 0x08000023
 #: PDO assignment objects (6.3.3): their entries change only while subindex 0 is 0.
 _ASSIGNMENTS = frozenset({0x1C12, 0x1C13})
 
-#: An entry's place, (index, subindex), as one object (:meth:`Dictionary.key`): compiled,
-#: a tuple typed by its size would be unboxed and made again at every use.
+#: An entry's name, (index, subindex), as one object: compiled, a tuple typed by its
+#: size would be unboxed and made again at every use.
 Key = tuple[object, ...]
 
 ReadHook = Callable[[int], "int | str"]
@@ -76,9 +76,16 @@ class Dictionary:
     def __init__(self, table: Table) -> None:
         self.table = table
         self._objects: dict[int, Obj] = {o.index: o for o in table.objects if o.available}
-        self._values: dict[Key, int | str] = {
-            (o.index, e.sub): e.default for o in self._objects.values()
-            for e in o.entries if e.available}
+        # Every entry's value in a list, at its place (slot); the place by (index, sub).
+        # An application reading an entry every cycle keeps its place (:meth:`key`): a
+        # list read, where a tuple key is hashed and compared at every lookup.
+        self._place: dict[Key, int] = {}
+        self._slots: list[int | str] = []
+        for o in self._objects.values():
+            for e in o.entries:
+                if e.available:
+                    self._place[(o.index, e.sub)] = len(self._slots)
+                    self._slots.append(e.default)
         self._read_hooks: dict[int, ReadHook] = {}
         self._write_hooks: dict[int, WriteHook] = {}
         self._rx = [(o.index, e) for p in table.rx_pdos() for o, e in table.pdo_entries(p)]
@@ -88,8 +95,8 @@ class Dictionary:
         # the images' layouts made once: every cycle packs and unpacks them
         self._rx_struct = struct.Struct(self._rx_fmt)
         self._tx_struct = struct.Struct(self._tx_fmt)
-        self._rx_keys: list[Key] = [(i, e.sub) for i, e in self._rx]
-        self._tx_keys: list[Key] = [(i, e.sub) for i, e in self._tx]
+        self._rx_places: list[int] = [self._place[(i, e.sub)] for i, e in self._rx]
+        self._tx_places: list[int] = [self._place[(i, e.sub)] for i, e in self._tx]
 
     # -- application side -------------------------------------------------------
     def on_read(self, index: int, hook: ReadHook) -> None:
@@ -102,26 +109,33 @@ class Dictionary:
         self._write_hooks[index] = hook
 
     def get(self, index: int, sub: int = 0) -> int | str:
-        """The stored value (no access check, no hook)."""
-        return self._values[(index, sub)]
+        """The stored value (no access check, no hook); ``KeyError`` for an entry the
+        slave does not have."""
+        return self._slots[self._place[(index, sub)]]
 
     def set(self, index: int, sub: int, value: int | str) -> None:
-        """Store a value from the application (no access check)."""
-        self._values[(index, sub)] = value
+        """Store a value from the application (no access check); an entry the table
+        does not have is kept as well (an application's own)."""
+        place = self._place.get((index, sub))
+        if place is None:
+            self._place[(index, sub)] = len(self._slots)
+            self._slots.append(value)
+        else:
+            self._slots[place] = value
 
-    @staticmethod
-    def key(index: int, sub: int = 0) -> Key:
+    def key(self, index: int, sub: int = 0) -> int:
         """The place of entry ``index``.``sub``, for :meth:`value_at` and :meth:`set_at`:
-        made once by an application that reads or writes the entry every cycle."""
-        return (index, sub)
+        taken once by an application that reads or writes the entry every cycle
+        (``KeyError`` for an entry the slave does not have)."""
+        return self._place[(index, sub)]
 
-    def value_at(self, key: Key) -> int | str:
+    def value_at(self, place: int) -> int | str:
         """:meth:`get` by a :meth:`key`."""
-        return self._values[key]
+        return self._slots[place]
 
-    def set_at(self, key: Key, value: int | str) -> None:
+    def set_at(self, place: int, value: int | str) -> None:
         """:meth:`set` by a :meth:`key`."""
-        self._values[key] = value
+        self._slots[place] = value
 
     def objects(self) -> list[Obj]:
         """The available objects in index order (SDO information's object list)."""
@@ -141,14 +155,14 @@ class Dictionary:
         layout = self._rx_struct
         if len(image) < layout.size:
             return
-        stored = self._values
-        for key, value in zip(self._rx_keys, layout.unpack_from(image)):
-            stored[key] = value
+        slots = self._slots
+        for place, value in zip(self._rx_places, layout.unpack_from(image)):
+            slots[place] = value
 
     def pack_inputs(self) -> bytes:
         """The TxPDO image (SM3) from the mapped objects' values."""
-        stored = self._values
-        return self._tx_struct.pack(*[stored[key] for key in self._tx_keys])
+        slots = self._slots
+        return self._tx_struct.pack(*[slots[place] for place in self._tx_places])
 
     # -- master side (SDO) -----------------------------------------------------------
     def lookup(self, index: int, sub: int) -> tuple[Obj, Entry]:
@@ -171,7 +185,7 @@ class Dictionary:
         hook = self._read_hooks.get(obj.index)
         if hook is not None:
             return hook(entry.sub)
-        return self._values[(obj.index, entry.sub)]
+        return self._slots[self._place[(obj.index, entry.sub)]]
 
     def write(self, index: int, sub: int, data: bytes, *, sized: bool = True) -> None:
         """SDO download of one entry.  ``sized``: the length is exact (else truncate)."""
@@ -180,7 +194,7 @@ class Dictionary:
             raise SdoAbort(READ_ONLY, f"{index:04X}h.{sub}")
         value = self._decode(entry, data, sized)
         if obj.code in (ARRAY, RECORD) and sub > 0 and obj.entries[0].access == "ro" \
-                and entry.pdo == "" and index in _ASSIGNMENTS and self._values[(index, 0)]:
+                and entry.pdo == "" and index in _ASSIGNMENTS and self.get(index, 0):
             raise SdoAbort(SUB0_NOT_ZERO)   # CiA 301: entries change only while sub 0 is 0
         if isinstance(value, int):
             if entry.low is not None and value < entry.low:
@@ -192,7 +206,7 @@ class Dictionary:
             stored = hook(sub, value)
             if stored is not None:
                 value = stored
-        self._values[(index, sub)] = value
+        self.set(index, sub, value)
 
     @staticmethod
     def _decode(entry: Entry, data: bytes, sized: bool) -> int | str:
