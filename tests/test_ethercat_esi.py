@@ -121,3 +121,23 @@ def test_an_eb12_chain_has_one_firmware_per_motor_1_4_3():
         assert [m.firmware.name for m in chain.motors.values()] == ["cm1", "cm1", "cm2", "cm2"]
     finally:
         chain.close()
+
+
+def test_an_entrys_place_reads_and_writes_what_sdo_and_the_process_images_see_6_3_1():
+    """An application keeps an entry's place (Dictionary.key) and reads and writes the
+    value there every cycle: the same value SDO reads and the TxPDO image carries, and
+    what an RxPDO image brings; an entry the slave lacks has no place."""
+    od = Dictionary(build_table("EB02"))
+    statusword, controlword = od.key(0x6041), od.key(0x6040)
+    od.set_at(statusword, 0x1237)
+    assert od.get(0x6041) == 0x1237 == od.value_at(statusword)
+    assert struct.unpack("<H", od.read(0x6041, 0))[0] == 0x1237
+    od.write(0x6040, 0, struct.pack("<H", 0x000F))             # SDO download
+    assert od.value_at(controlword) == 0x000F
+    od.unpack_outputs(b"\x06\x00" + bytes(od.output_size - 2))  # 6040h first (RxPDO)
+    assert od.value_at(controlword) == 6
+    assert od.pack_inputs()[:2] == struct.pack("<H", 0x1237)   # 6041h first (TxPDO)
+    with pytest.raises(KeyError):
+        od.key(0x60FB, 9)
+    od.set(0x5FFF, 3, 42)                                       # an application's own entry
+    assert od.get(0x5FFF, 3) == 42 == od.value_at(od.key(0x5FFF, 3))
