@@ -235,7 +235,8 @@ class Profile:
             return self.end_ns
         for seg in reversed(self.segments):
             cuts = [0.0, *_velocity_roots(seg, 0.0, seg.duration), seg.duration]
-            for lo, hi in zip(reversed(cuts[:-1]), reversed(cuts[1:])):
+            for i in range(len(cuts) - 2, -1, -1):        # its monotonic parts, last first
+                lo, hi = cuts[i], cuts[i + 1]
                 off = seg.position(lo) - center
                 if abs(off) <= window:
                     continue
