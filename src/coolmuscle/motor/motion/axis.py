@@ -60,6 +60,10 @@ class Servo:
     """What an axis asks of the motor it turns (:class:`coolmuscle.motor.motor.Motor`
     subclasses it); this base is a bare shaft: a stiff loop, a K55 of 5 pulses."""
 
+    #: The motor's latched alarms (Ux bits, 6.6 ?99; 0: none): the alarm watchers of
+    #: its axis read them at every motion.
+    alarm: int = 0
+
     def drive(self) -> Drive:
         """The dynamics parameters now (plant, torque limit, machine, faults)."""
         return Drive(kp=300.0, a_limit=1e12, a_friction=0.0, a_load=0.0, v_max=1e12)

@@ -82,7 +82,9 @@ class _AlarmWatch(Watcher):
         return self._limit
 
     def active(self, axis: Axis) -> bool:
-        return axis.enabled and not self.motor.alarm & self._mask   # int & int: no enum
+        # the motor's alarms as its axis's servo (the motor itself): read through the
+        # compiled base class, not the motor's protocol (a lookup by name)
+        return axis.enabled and not axis.servo.alarm & self._mask   # int & int: no enum
 
     def fire(self, axis: Axis) -> None:
         del axis
@@ -213,7 +215,7 @@ class TemperatureWatch(_AlarmWatch):
         self._thermal = motor.thermal       # (read at every motion)
 
     def active(self, axis: Axis) -> bool:
-        return not self.motor.alarm & self._mask
+        return not axis.servo.alarm & self._mask
 
     def next_time(self, axis: Axis, after_ns: int) -> int | None:
         if not self.active(axis):
