@@ -124,8 +124,8 @@ class AxisDrive:
         self._switch_mode(now)
         # 6040h and 607Ah of one output image: read together, before any call into the
         # motor (the frame thread writes the next image between two cycles).
-        cw = int(self.od.value_at(self._controlword))
-        self._target = int(self.od.value_at(self._target_position))
+        cw = self.od.value_at(self._controlword)
+        self._target = self.od.value_at(self._target_position)
         if modes.is_cia402(self.mode):
             self._cia402(cw, now)
         elif self.mode == modes.CMD:

@@ -129,9 +129,11 @@ class Dictionary:
         (``KeyError`` for an entry the slave does not have)."""
         return self._place[(index, sub)]
 
-    def value_at(self, place: int) -> int | str:
-        """:meth:`get` by a :meth:`key`."""
-        return self._slots[place]
+    def value_at(self, place: int) -> int:
+        """:meth:`get` of a numeric entry by a :meth:`key` (what a cycle reads: typed
+        as an int, compiled code uses it as one without converting it generically)."""
+        value = self._slots[place]
+        return value if isinstance(value, int) else int(value)
 
     def set_at(self, place: int, value: int | str) -> None:
         """:meth:`set` by a :meth:`key`."""
