@@ -657,11 +657,11 @@ class Motion:
             duration = piece.duration
             if abs(pos[0] - center) - xp.spread(pos, duration) >= window:
                 continue
-            off = xp.sub(pos, xp.const(center))
-            below, above = xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))
             start = max(0.0, rel - piece.start)
             if start >= duration:
                 continue
+            off = xp.sub(pos, xp.const(center))
+            below, above = xp.sub(xp.const(window), off), xp.sub(off, xp.const(-window))
             if not xp.value(below, piece.k, start) > 0.0:
                 tau = xp.first_true([below], piece.k, start, duration)
             elif not xp.value(above, piece.k, start) > 0.0:
