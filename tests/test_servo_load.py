@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from coolmuscle.chain.daisy import Chain
 from coolmuscle.motor.motion import expoly as xp
 from coolmuscle.motor.motion.dynamics import CONTACT, LOST, SNAP_TIME, TRACK, Motion
+from coolmuscle.motor.motor import Motor
 from coolmuscle.sim.kernel import NS_PER_S, ms, seconds
 from fixtures import ChainFactory, new_chain
 
@@ -125,14 +126,20 @@ def test_m0_written_while_moving_applies_at_once(make_chain: ChainFactory) -> No
     assert abs(motor.torque()) <= 15
 
 
-def test_stopper_contact_stops_the_shaft_pe_grows_torque_at_the_limit(
-        make_chain: ChainFactory) -> None:
+def _toward_a_stopper(make_chain: ChainFactory) -> tuple[Chain, Motor]:
+    """A CM2 moving toward a stopper at 3000 pulses, far beyond it (K56 = 100)."""
     chain = make_chain()
     motor = chain.motors[1]
     motor.geometry.stopper_cw = 3000.0
     motor.axis.refresh()
     chain.execute("K56.1=100, S.1=50, A.1=100, P.1=20000")
     chain.execute("^.1")
+    return chain, motor
+
+
+def test_stopper_contact_stops_the_shaft_pe_grows_torque_at_the_limit(
+        make_chain: ChainFactory) -> None:
+    chain, motor = _toward_a_stopper(make_chain)
     motion, start = motor.axis.motion, chain.kernel.now
     assert max(motion.position_at(t) for t in _samples(motion, start, start + seconds(2))) \
         <= 3000.0 + 1e-6
@@ -322,12 +329,7 @@ def test_2_1_1_a_peak_torque_changed_while_pushing_a_stopper_applies_at_once(
         make_chain: ChainFactory) -> None:
     """M=100 is the maximum motor torque (2.1.1 "M"): against a stopper Ix shows the
     plant's peak torque, and a new peak torque at once (the plant is the motor's)."""
-    chain = make_chain()
-    motor = chain.motors[1]
-    motor.geometry.stopper_cw = 3000.0
-    motor.axis.refresh()
-    chain.execute("K56.1=100, S.1=50, A.1=100, P.1=20000")
-    chain.execute("^.1")
+    chain, motor = _toward_a_stopper(make_chain)
     chain.kernel.run(until=seconds(1.0))
     assert chain.execute("?98.1") == ["Ix.1=300"]
     motor.plant.peak_torque = 200.0
