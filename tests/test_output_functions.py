@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from bank_support import Rig, rig
 from coolmuscle.motor.signals.io import DigitalIO, digit
+from coolmuscle.motor.state.firmware import CM2
 from coolmuscle.motor.state.output_functions import (
     CML_OUTPUT_FUNCTIONS,
     OUT_ANALOG,
@@ -21,6 +22,7 @@ from coolmuscle.motor.state.output_functions import (
     OUT_GENERAL,
     OUT_NONE,
 )
+from coolmuscle.motor.state.param_table import ParamTable
 from coolmuscle.sim.kernel import NS_PER_MS, seconds
 from coolmuscle.tools.trace.recorder import record
 from fixtures import ChainFactory, collect_events
@@ -239,23 +241,32 @@ def test_ch3_k55_in_position_is_detected_before_reaching_the_target(
     assert chain2.execute("?51.1") == ["OUT1.1=1"] and chain2.execute("?99.1") == ["Ux.1=8"]
 
 
+def _digits(low: int, high: int, count: int) -> st.SearchStrategy[int]:
+    """A digit-wise K value (ch. 3): ``count`` digits, each ``low..high``."""
+    return st.lists(st.integers(low, high), min_size=count, max_size=count).map(
+        lambda ds: sum(d * 10 ** i for i, d in enumerate(ds)))
+
+
+_K26, _K33, _K34 = _digits(0, 3, 6), _digits(0, 1, 4), _digits(0, 9, 4)
+
+
 @settings(max_examples=200, deadline=None)
-@given(k26=st.integers(0, 999_999), k33=st.integers(0, 9999), k34=st.integers(0, 9999),
-       later=st.tuples(st.integers(0, 999_999), st.integers(0, 9999), st.integers(0, 9999)),
+@given(k26=_K26, k33=_K33, k34=_K34, later=st.tuples(_K26, _K33, _K34),
        levels=st.lists(st.booleans(), min_size=6, max_size=6),
        general=st.lists(st.booleans(), min_size=4, max_size=4))
 def test_ch3_k26_k33_k34_words_are_the_digits_read_afresh(
         k26: int, k33: int, k34: int, later: tuple[int, int, int], levels: list[bool],
         general: list[bool]) -> None:
-    """?70 and ?50 read K26/K33/K34 digit by digit (ch. 3), whatever values came before
-    (DigitalIO keeps the digits of the values it decoded last)."""
-    params = {26: k26, 33: k33, 34: k34}
-    io = DigitalIO(6, 4, params.__getitem__, lambda fn, n: (fn + n) % 2 == 0,
-                   CML_OUTPUT_FUNCTIONS)
+    """?70 and ?50 read K26/K33/K34 digit by digit (ch. 3) from the motor's K table,
+    whatever values came before (DigitalIO keeps the digits of the values it decoded
+    last)."""
+    params = ParamTable(CM2)
+    io = DigitalIO(6, 4, params, lambda fn, n: (fn + n) % 2 == 0, CML_OUTPUT_FUNCTIONS)
     io.levels[1:] = levels
     io.general[1:] = general
     for values in ((k26, k33, k34), later, (k26, k33, k34)):
-        params[26], params[33], params[34] = values
+        for number, value in zip((26, 33, 34), values):
+            params.set(number, value)
         inputs = sum(1 << (n - 1) for n in range(1, 7)
                      if levels[n - 1] != (digit(values[0], n) % 2 == 1))
         outputs = 0

@@ -82,12 +82,9 @@ class Motor(Servo):
         self._limits_memo: Memo[Key, Limits] = Memo(256)
         self._resolution = units.resolution(self.params.get(37))
         self._resolution_version = self.params.version
-        #: ``k(number)``: the current value of K parameter ``number``; the table's own
-        #: lookup (K lookups are many a move: no extra frame)
-        self.k: Callable[[int], int] = self.params.get
         self.memory = Memory(firmware, k37=self.k(37))
         self.params.on_change(self._param_changed)
-        self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params.get,
+        self.io = DigitalIO(firmware.inputs, firmware.outputs, self.params,
                             self._output_function_signal, firmware.output_functions,
                             one_logic=firmware.one_logic,
                             inverting_logic=firmware.inverting_logic)
@@ -154,6 +151,11 @@ class Motor(Servo):
             self.memory.set_k37(new)
             self.axis.half_range = units.counter_half_range(self.resolution.pulses_per_rev)
         self.supervision.param_changed(k)
+
+    def k(self, number: object) -> int:
+        """The current value of K parameter ``number`` (ch. 3); looked up as the table
+        looks it up (:meth:`ParamTable.get`: 37.0 finds K37 there too)."""
+        return self.params.get(number)
 
     def reports(self, flag: Report) -> bool:
         """Whether K23 includes ``flag``."""

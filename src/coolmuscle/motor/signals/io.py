@@ -27,6 +27,7 @@ from ..state.output_functions import (
     OUT_GENERAL,
     OUT_NONE,
 )
+from ..state.param_table import ParamTable
 
 #: 10 ** n for the digits a K parameter has (compiled, ``**`` is a generic power call;
 #: Final: a compiled module holds it in a static, not a module dictionary lookup a digit).
@@ -55,7 +56,7 @@ def _follows(fn: int, number: int) -> int | None:
 class DigitalIO:
     """Input levels, general output states, and the words reported by ?70 / ?50."""
 
-    def __init__(self, inputs: int, outputs: int, param: Callable[[int], int],
+    def __init__(self, inputs: int, outputs: int, params: ParamTable,
                  function_signal: Callable[[int, int], bool] = lambda fn, n: False,
                  functions: Sequence[int] = CML_OUTPUT_FUNCTIONS, one_logic: bool = False,
                  inverting_logic: int = 0) -> None:
@@ -66,7 +67,9 @@ class DigitalIO:
         (CM2 0, "Low Active"; CM1 1, "Normally closed")."""
         self.input_count = inputs
         self.output_count = outputs
-        self._param = param
+        #: the motor's K table, read at each word (compiled, a call of the table's own
+        #: method: no generic call of a stored callable a fieldbus cycle)
+        self._params = params
         self._function_signal = function_signal
         self._functions = tuple(functions)
         self._one_logic = one_logic
@@ -111,14 +114,14 @@ class DigitalIO:
         K26 now or the value ``k26``."""
         if not 1 <= number <= self.input_count:
             return False
-        value = self._param(26) if k26 is None else k26
+        value = self._params.get(26) if k26 is None else k26
         if value != self._k26:
             self._decode(value, self._k33, self._k34)
         return self.levels[number] != self._inputs_inverted[number]
 
     def input_word(self) -> int:
         """?70: bit 0 = input 1 (K26 read once: a fieldbus reads the word every cycle)."""
-        k26 = self._param(26)
+        k26 = self._params.get(26)
         if k26 != self._k26:
             self._decode(k26, self._k33, self._k34)
         levels, inverted = self.levels, self._inputs_inverted
@@ -132,7 +135,7 @@ class DigitalIO:
     def output_function(self, number: int, k34: int | None = None) -> int:
         """The function (``OUT_*``) of output ``number`` by K34 now, or by the K34
         value ``k34`` (a trace's past instant)."""
-        value = self._param(34) if k34 is None else k34
+        value = self._params.get(34) if k34 is None else k34
         if not 1 <= number <= self.output_count:
             return self._functions[digit(value, number)]
         if value != self._k34:
@@ -180,7 +183,7 @@ class DigitalIO:
         """The port for ``signal`` by K33 now, or by the K33 value ``k33``: CM2 digit 1
         high active, 0 low active (ch. 3 K33); CM1 0 normally open, 1 normally closed
         (Appendix A K33)."""
-        value = self._param(33) if k33 is None else k33
+        value = self._params.get(33) if k33 is None else k33
         if not 1 <= number <= self.output_count:
             return signal != (digit(value, 1 if self._one_logic else number)
                               == self._inverting_logic)
@@ -191,7 +194,7 @@ class DigitalIO:
     def output_word(self) -> int:
         """?50: bit 0 = output 1 (K33 and K34 read and decoded once: a fieldbus reads
         the word every cycle; each port is :meth:`port_of` of its signal)."""
-        k33, k34 = self._param(33), self._param(34)
+        k33, k34 = self._params.get(33), self._params.get(34)
         if k33 != self._k33 or k34 != self._k34:
             self._decode(self._k26, k33, k34)
         functions, inverted = self._output_functions, self._outputs_inverted
