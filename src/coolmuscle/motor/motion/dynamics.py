@@ -782,14 +782,14 @@ def _placed(drive: Drive, position: float, velocity: float,
             return found
     placement = _Placement(drive, cmd)
     ref = placement.ref
-    rel_cmd = tuple([CommandPiece(c.start, c.end, (c.poly[0] - ref, c.poly[1], c.poly[2],
-                                                   c.poly[3], c.poly[4])) for c in cmd])
+    rel_cmd = [CommandPiece(c.start, c.end, (c.poly[0] - ref, c.poly[1], c.poly[2],
+                                             c.poly[3], c.poly[4])) for c in cmd]
     if lazy:
-        solver = _Solver(placement.rel_drive, list(rel_cmd))
+        solver = _Solver(placement.rel_drive, rel_cmd)
         solver._build(position - ref, velocity, until)
         rest = _Unsolved(solver, placement)
         return Solution(rest.place_new(), rest)
-    solved = _solved(placement.rel_drive, position - ref, velocity, rel_cmd, memos)
+    solved = _solved(placement.rel_drive, position - ref, velocity, tuple(rel_cmd), memos)
     solution = Solution(tuple([placement.place(piece) for piece in solved]))
     if memos is not None:
         memos.placed.put(key, solution)
@@ -1071,13 +1071,13 @@ class _Solver:
         if ed:
             ep = ep + ed * math.exp(-k * probe)
         sgn = (ep > 0.0) - (ep < 0.0)
-        still: Exits = []
+        still = False
         if sgn and q1 == q2 == q3 == 0.0:
             # settling on a standing command: once creeping, static friction holds
             if abs(k * ed) <= V_STILL:
                 sgn, turn = 0, None
             else:
-                still = [("still", [xp.plus(xp.scale(e, -sgn * k), V_STILL)])]
+                still = True
         vel: F = (pos[1], 2.0 * pos[2], 3.0 * pos[3], 0.0, -k * pos[4])   # pos'
         load = sgn * d.a_friction + d.a_load
         torque: F = (vel[1] + load, 2.0 * vel[2], 3.0 * vel[3], 0.0, -k * vel[4])  # pos'' + load
@@ -1088,7 +1088,7 @@ class _Solver:
         if xp.abs_bound(kev, dur) > d.v_max:                    # _beyond("vmax", ...)
             exits += _beyond("vmax", kev, dur, d.v_max)
         if still:
-            exits += still
+            exits.append(("still", [xp.plus(xp.scale(e, -sgn * k), V_STILL)]))
         if turn is not None:
             exits.append(("vzero", turn))
         piece = Piece(t, math.inf, TRACK, pos, cmd, torque, k)

@@ -233,12 +233,16 @@ class Profile:
             return None
         if abs(self.final_position - center) > window:
             return self.end_ns
-        for seg in reversed(self.segments):
-            cuts = [0.0, *_velocity_roots(seg, 0.0, seg.duration), seg.duration]
-            for i in range(len(cuts) - 2, -1, -1):        # its monotonic parts, last first
-                lo, hi = cuts[i], cuts[i + 1]
+        segments = self.segments
+        for s in range(len(segments) - 1, -1, -1):        # by index: no iterator object
+            seg = segments[s]
+            turns = _velocity_roots(seg, 0.0, seg.duration)
+            hi = seg.duration
+            for i in range(len(turns), -1, -1):           # its monotonic parts, last first
+                lo = turns[i - 1] if i > 0 else 0.0
                 off = seg.position(lo) - center
                 if abs(off) <= window:
+                    hi = lo
                     continue
                 edge = center + math.copysign(window, off)
                 tau = _solve_monotone(seg, edge, lo, hi, seg.position(lo) - edge)
@@ -321,9 +325,11 @@ def _quadratic_roots(c2: float, c1: float, c0: float) -> list[float]:
     return sorted(roots)
 
 
-def _velocity_roots(seg: Segment, lo: float, hi: float) -> list[float]:
-    """Instants in (lo, hi) where the segment's velocity is zero."""
-    return [r for r in _quadratic_roots(seg.j / 2.0, seg.a, seg.v) if lo < r < hi]
+def _velocity_roots(seg: Segment, lo: float, hi: float) -> tuple[float, ...]:
+    """Instants in (lo, hi) where the segment's velocity is zero, ascending."""
+    if seg.j == 0.0 and seg.a == 0.0:       # constant speed: none (_quadratic_roots too)
+        return ()
+    return tuple([r for r in _quadratic_roots(seg.j / 2.0, seg.a, seg.v) if lo < r < hi])
 
 
 def _segment_crossing(seg: Segment, x: float, tau0: float, tol: float) -> float | None:

@@ -375,8 +375,9 @@ class Timeline:
             for track in list(self.tracks):
                 track.switch(old, new, now)
         self.piece = new
-        for listener in list(self.listeners):
-            listener(old, new)
+        if self.listeners:                   # a copy only when someone listens
+            for listener in list(self.listeners):
+                listener(old, new)
 
     def position(self) -> float:
         return self.piece.position(self.now())
