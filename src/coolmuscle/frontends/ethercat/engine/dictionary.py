@@ -187,7 +187,7 @@ class Dictionary:
         hook = self._read_hooks.get(obj.index)
         if hook is not None:
             return hook(entry.sub)
-        return self._slots[self._place[(obj.index, entry.sub)]]
+        return self.get(obj.index, entry.sub)
 
     def write(self, index: int, sub: int, data: bytes, *, sized: bool = True) -> None:
         """SDO download of one entry.  ``sized``: the length is exact (else truncate)."""
