@@ -1,7 +1,8 @@
 """What each lever of the compile costs and gives (docs/performance.md "Compiled hot
 modules": the table of levers).
 
-Run: ``PYTHONPATH=src python bench/bench_compile.py [--plans NAME,...] [--no-speed]``
+Run: ``PYTHONPATH=src python bench/bench_compile.py [--plans NAME,...] [--no-speed]
+[--time ROUNDS]``
 (mypy 1.19 and a C compiler needed: the ``accel`` extra).  For each plan of
 :data:`PLANS` it compiles the hot modules as the package build does
 (coolmuscle/tools/accel/compiler.py, into a temporary folder) and records:
@@ -10,6 +11,10 @@ Run: ``PYTHONPATH=src python bench/bench_compile.py [--plans NAME,...] [--no-spe
   process: the steady figure on a shared machine; on an idle machine with two CPUs the
   wall time of a parallel compile is about the mypyc step plus half the C compile's CPU)
   and how long the mypyc step took;
+* with ``--time ROUNDS``, the CPU time of a cycle of the bridge in csp on each plan's
+  code, the plans run in turn (``A B C A B C ...``), with each one's ratio to the first
+  round by round (link-time optimisation saves more time than instructions: the calls
+  between the modules become direct, without the indirection of exported symbols);
 * the speed of the code it made: the instructions (callgrind, which a loaded machine
   does not disturb) of three workloads run on a copy of the package with those compiled
   modules, less those of the same process doing none of the work (start and imports):
@@ -28,6 +33,7 @@ import os
 import re
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -47,21 +53,26 @@ MODEL = ("",)
 
 #: The plans measured: name -> (what it is, plan, modules left out).
 PLANS: dict[str, tuple[str, compiler.Plan, tuple[str, ...]]] = {
-    "one-O3": ("one library, one C file, -O3 (before)", compiler.Plan(jobs=1), ()),
-    "multi-O3": ("one library, a C file a module, -O3, 2 jobs",
-                 compiler.Plan(multi_file=True, jobs=2), ()),
-    "multi-O2": ("the same at -O2", compiler.Plan(multi_file=True, jobs=2, opt_level="2"), ()),
-    "multi-O1": ("the same at -O1", compiler.Plan(multi_file=True, jobs=2, opt_level="1"), ()),
+    "one-O3": ("one library, one C file, -O3 (the first build)",
+               compiler.Plan(jobs=1, link_time=False), ()),
+    "multi-O3": ("one library, a C file a module, -O3, 2 jobs, each file optimised alone",
+                 compiler.Plan(multi_file=True, jobs=2, link_time=False), ()),
+    "multi-O3-lto": ("the same, optimised as a whole when linked, its symbols hidden "
+                     "(the build's plan)", compiler.Plan(multi_file=True, jobs=2), ()),
+    "multi-O2": ("a C file a module at -O2",
+                 compiler.Plan(multi_file=True, jobs=2, opt_level="2", link_time=False), ()),
+    "multi-O1": ("a C file a module at -O1",
+                 compiler.Plan(multi_file=True, jobs=2, opt_level="1", link_time=False), ()),
     "one-O1": ("one library, one C file, -O1",
-               compiler.Plan(jobs=2, opt_level="1"), ()),
+               compiler.Plan(jobs=2, opt_level="1", link_time=False), ()),
     "separate-O3": ("a library a module (separate), -O3, 2 jobs",
-                    compiler.Plan(separate=True, jobs=2), ()),
+                    compiler.Plan(separate=True, jobs=2, link_time=False), ()),
     "groups-O3": ("two libraries (model, bridge), a C file a module, -O3, 2 jobs",
-                  compiler.Plan(multi_file=True, jobs=2,
+                  compiler.Plan(multi_file=True, jobs=2, link_time=False,
                                 groups=(("coolmuscle._hot_bridge", BRIDGE),
                                         ("coolmuscle._hot", MODEL))), ()),
     "nobridge-O3": ("without the bridge's 8 modules, a C file a module, -O3, 2 jobs",
-                    compiler.Plan(multi_file=True, jobs=2), BRIDGE),
+                    compiler.Plan(multi_file=True, jobs=2, link_time=False), BRIDGE),
 }
 
 #: One workload, run in a fresh interpreter on a package copy: ``size`` units of work.
@@ -86,7 +97,8 @@ elif name == "stream4":
             half = 2000.0 + 50.0 * n
             stream.push(round(half - half * math.cos(2.0 * math.pi * i / 4000.0)))
         chain.kernel.advance(1_000_000)
-elif name == "bridge":
+elif name in ("bridge", "bridge-time"):
+    import time
     from coolmuscle.frontends.ethercat.bridge.app import BridgeApp
     chain = Chain(motors=4)
     app = BridgeApp(chain, "EB02")
@@ -99,12 +111,17 @@ elif name == "bridge":
     for cw in (0x06, 0x07, 0x0F):
         for _ in range(5):
             ms(cw, 0)
+    start = time.process_time()
     for i in range(size):
         ms(0x0F, 3 * (i % 1000))
+    if name == "bridge-time":
+        print("us-per-cycle", (time.process_time() - start) / size * 1e6)
 """
 
 #: Workload -> (units measured, what a unit is).
 WORKLOADS = {"chain15": (2000, "ms"), "stream4": (300, "cycles"), "bridge": (300, "cycles")}
+#: Cycles of the bridge a timed run (``--time``) takes.
+TIMED_CYCLES = 20_000
 
 
 def compile_plan(plan: compiler.Plan, leave_out: tuple[str, ...], out: Path
@@ -175,14 +192,44 @@ def speed(src: Path, pure: bool = False) -> dict[str, float]:
             for name, (size, _unit) in WORKLOADS.items()}
 
 
+def cpu_per_cycle(src: Path) -> float:
+    """CPU microseconds a cycle of the bridge in csp (4 axes moving) takes, in one run."""
+    env = dict(os.environ, PYTHONPATH=str(src), COOLMUSCLE_PURE="0")
+    done = subprocess.run([sys.executable, "-c", WORKLOAD, "bridge-time", str(TIMED_CYCLES)],
+                          env=env, capture_output=True, text=True, check=True)
+    return float(done.stdout.split("us-per-cycle")[1])
+
+
+def timed(copies: dict[str, Path], rounds: int) -> None:
+    """Each plan's code timed in turn, ``rounds`` times (A B C A B C ...: a machine
+    whose speed drifts slows them alike); medians, and each plan's ratio to the first
+    taken round by round."""
+    names = list(copies)
+    runs: dict[str, list[float]] = {name: [] for name in names}
+    for _ in range(rounds):
+        for name in names:
+            runs[name].append(cpu_per_cycle(copies[name]))
+    first = runs[names[0]]
+    print(f"\nCPU time a cycle of the bridge in csp ({TIMED_CYCLES} cycles a run, "
+          f"{rounds} runs each, taken in turn):")
+    print(f"{'plan':<13} {'median us':>9} {'to ' + names[0]:>16}  (ratios: min-max)")
+    for name in names:
+        ratios = sorted(a / b for a, b in zip(runs[name], first, strict=True))
+        print(f"{name:<13} {statistics.median(runs[name]):>9.1f} "
+              f"{statistics.median(ratios):>16.3f}  ({ratios[0]:.3f}-{ratios[-1]:.3f})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--plans", default=",".join(PLANS))
     parser.add_argument("--no-speed", action="store_true")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--time", type=int, default=0, metavar="ROUNDS",
+                        help="also time the bridge's cycle on each plan's code, in turn")
     args = parser.parse_args()
     chosen = args.plans.split(",")
     rows: dict[str, dict[str, float]] = {}
+    copies: dict[str, Path] = {}
     with tempfile.TemporaryDirectory(prefix="bench-compile-") as tmp:
         if not args.no_speed:
             rows["sources"] = speed(package_copy(None, Path(tmp) / "pure"), pure=True)
@@ -191,10 +238,14 @@ def main() -> None:
             _what, plan, leave_out = PLANS[name]
             out = Path(tmp) / name / "built"
             row = compile_plan(plan, leave_out, out)
+            if not args.no_speed or args.time:
+                copies[name] = package_copy(out, Path(tmp) / name, leave_out)
             if not args.no_speed:
-                row |= speed(package_copy(out, Path(tmp) / name, leave_out))
+                row |= speed(copies[name])
             rows[name] = row
             print(f"{name}:", json.dumps(row), flush=True)
+        if args.time:
+            timed(copies, args.time)
     print(f"\nload average after: {os.getloadavg()}")
     head = f"{'plan':<13} {'wall s':>7} {'CPU s':>6} {'mypyc s':>7}"
     units = "  ".join(f"{n} M/{size} {unit}" for n, (size, unit) in WORKLOADS.items())

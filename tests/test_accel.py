@@ -341,9 +341,37 @@ def test_a_failed_compile_keeps_the_sources_with_its_last_line(
     outcome = compiler.build(accel, out, in_place=False, log=logged.append)
     why = "mypyc or the C compiler failed: error: command gcc failed with exit code 1"
     assert outcome == compiler.Outcome(False, why)
-    assert logged[0] == "warming up\nerror: command gcc failed with exit code 1"
+    assert logged[0].startswith("C compiler flags for the whole library: ")
+    assert logged[1] == "warming up\nerror: command gcc failed with exit code 1"
     assert accel.refusal(accel.read_stamp(str(out)), str(out)) == \
         f"not compiled at install time: {why}"
+
+
+def refusing_cc(where: Path, refused: str) -> str:
+    """A C compiler (gcc behind a shell script) that fails when given a flag matching
+    the shell pattern ``refused``."""
+    script = where / "refusing-cc"
+    script.write_text(f'#!/bin/sh\nfor a in "$@"; do case "$a" in {refused}) exit 1;; esac; done\n'
+                      'exec gcc "$@"\n')
+    script.chmod(0o755)
+    return str(script)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="GCC's and Clang's flags (MSVC: none)")
+def test_link_time_flags_are_the_first_set_the_c_compiler_takes(
+        tmp_path: Path, build_env: pytest.MonkeyPatch) -> None:
+    """The library is optimised as a whole with its symbols hidden where the compiler
+    takes it (GCC: ``-flto=auto``); a compiler that refuses link-time optimisation
+    still gets hidden symbols, one that refuses those too gets none, a missing one none:
+    the build then goes on (or says why) as before."""
+    build_env.setenv("CC", "gcc -pthread")
+    assert compiler.link_time_flags(tmp_path) == ("-fvisibility=hidden", "-flto=auto")
+    build_env.setenv("CC", refusing_cc(tmp_path, "-flto=*"))
+    assert compiler.link_time_flags(tmp_path) == ("-fvisibility=hidden",)
+    build_env.setenv("CC", refusing_cc(tmp_path, "-fvisibility=*"))
+    assert compiler.link_time_flags(tmp_path) == ()
+    build_env.setenv("CC", "/no/such/cc")
+    assert compiler.link_time_flags(tmp_path) == ()
 
 
 def test_a_bad_compile_setting_is_one_line(build_env: pytest.MonkeyPatch,

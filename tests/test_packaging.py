@@ -8,7 +8,8 @@ the dependencies come from this environment's site-packages through a ``.pth`` f
 which adds the path but not the editable install's own ``.pth``).  There:
 
 * with a C compiler, ``coolmuscle --version`` says compiled, every hot module is a
-  ``.so`` from the wheel beside its source, and a reference run (a guide example, three golden
+  ``.so`` from the wheel beside its source, their shared library exports only its init
+  function (optimised as a whole when linked), and a reference run (a guide example, three golden
   transcripts with 1 ms traces, a csp stream, a 15-motor bank: tests/accel_worker.py
   ``--sample``) gives the same bytes compiled, with ``COOLMUSCLE_PURE=1``, and as this
   checkout's sources;
@@ -27,6 +28,7 @@ Slow (the compile is 30-120 s on a busy 2-CPU machine); both tests share one wor
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import shutil
@@ -158,6 +160,12 @@ def test_a_wheel_built_with_a_compiler_installs_and_runs_the_compiled_modules(
         source = site / accel.source_relpath(name)
         assert path.startswith(str(source)[:-3] + ".cpython-") and path.endswith(".so") \
             and source.is_file(), (name, path)
+    # optimised as a whole when linked (compiler.LINK_TIME): the library exports its
+    # init function only, every compiled function is hidden inside it
+    library = ctypes.CDLL(str(next(site.glob("_hot__mypyc.*.so"))))
+    assert hasattr(library, "PyInit__hot__mypyc")
+    assert not hasattr(library, "CPyDef_sim___kernel___Kernel___run")
+    assert not hasattr(library, "CPyDef_motor___motion___dynamics____placed")
 
     head, lines = sample(python)
     assert head == {"compiled": True, "reason": "built with the package by mypyc 1.19.0"}

@@ -106,6 +106,10 @@ slots = threading.BoundedSemaphore(jobs)
 
 class BuildExt(build_ext):
     def build_extensions(self):
+        flags = plan["flags"]              # compiled and linked with (link_time_flags)
+        for ext in self.extensions:
+            ext.extra_compile_args = list(ext.extra_compile_args or []) + flags
+            ext.extra_link_args = list(ext.extra_link_args or []) + flags
         whole = self.compiler.compile
 
         def one(source, kwargs):
@@ -115,7 +119,8 @@ class BuildExt(build_ext):
                 done[0] += 1
                 count = done[0]
             say("C compiler: %d/%d %s" % (count, total, os.path.basename(source)),
-                "compiling C files (%d/%d done)" % (count, total))
+                "compiling C files (%d/%d done)" % (count, total) if count < total
+                else "linking")
             return objects
 
         def compile(sources, **kwargs):
@@ -146,10 +151,12 @@ class Plan:
     else ``(library, module prefixes)`` pairs; a module goes to the first whose prefix
     it starts with (the last group should take ``""``).  ``separate``: every module its
     own library.  ``jobs``: C files compiled at a time (0: the CPUs this process may
-    use)."""
+    use).  ``link_time``: optimise each library as a whole when it is linked, its own
+    symbols hidden, where the C compiler takes it (:func:`link_time_flags`)."""
 
     opt_level: str = "3"
     multi_file: bool = False
+    link_time: bool = True
     groups: tuple[tuple[str, tuple[str, ...]], ...] | None = None
     separate: bool = False
     jobs: int = 0
@@ -161,6 +168,37 @@ class Plan:
             return max(1, len(os.sched_getaffinity(0)))
         except AttributeError:                 # not Linux
             return max(1, os.cpu_count() or 1)
+
+
+#: Link-time optimisation with a library's own symbols hidden (only its module init
+#: functions exported): calls between the modules are then direct, and the linker may
+#: inline across them.  The first set the C compiler takes: GCC's spelling (``auto``:
+#: the link's optimisation runs on every CPU), Clang's; else hidden symbols alone.
+LINK_TIME: tuple[tuple[str, ...], ...] = (
+    ("-fvisibility=hidden", "-flto=auto"),
+    ("-fvisibility=hidden", "-flto=thin"),
+    ("-fvisibility=hidden",),
+)
+
+
+def link_time_flags(work: Path) -> tuple[str, ...]:
+    """The first set of :data:`LINK_TIME` with which the C compiler (:func:`compiler_command`)
+    compiles and links a small shared library in the folder ``work``; ``()`` when it
+    takes none, or on Windows (MSVC spells them otherwise)."""
+    if sys.platform == "win32":
+        return ()
+    source = work / "link_time_probe.c"
+    source.write_text("int probe(int x) { return x + 1; }\n", encoding="utf-8")
+    for flags in LINK_TIME:
+        command = [*shlex.split(compiler_command()), *flags, "-fPIC", "-shared",
+                   str(source), "-o", str(work / "link_time_probe.so")]
+        try:
+            done = subprocess.run(command, capture_output=True, timeout=120)
+        except (OSError, subprocess.SubprocessError):
+            return ()
+        if done.returncode == 0:
+            return flags
+    return ()
 
 
 #: The plan of the package build: a C file a module, compiled side by side on every CPU,
@@ -351,8 +389,10 @@ def _keep_sources(accel: Sources, dest: Path, reason: str) -> Outcome:
     return Outcome(False, reason)
 
 
-def _plan_json(accel: Sources, plan: Plan, paths: dict[str, str]) -> str:
-    """The child's settings: ``plan`` with its groups as lists of paths."""
+def _plan_json(accel: Sources, plan: Plan, paths: dict[str, str],
+               flags: tuple[str, ...] = ()) -> str:
+    """The child's settings: ``plan`` with its groups as lists of paths, and the flags
+    every C file is compiled and linked with."""
     groups: list[dict[str, object]] | None = None
     if plan.groups is not None:
         members: dict[str, list[str]] = {name: [] for name, _ in plan.groups}
@@ -365,6 +405,7 @@ def _plan_json(accel: Sources, plan: Plan, paths: dict[str, str]) -> str:
             members[name].append(path)
         groups = [{"name": name, "paths": found} for name, found in members.items() if found]
     return json.dumps({"opt_level": plan.opt_level, "multi_file": plan.multi_file,
+                       "flags": list(flags),
                        "separate": plan.separate, "groups": groups, "group": accel.GROUP,
                        "jobs": plan.job_count(), "prefix": PROGRESS, "heartbeat": HEARTBEAT})
 
@@ -407,8 +448,11 @@ def _compile(accel: Sources, dest: Path, in_place: bool, log: Callable[[str], No
         out, tmp = Path(work) / "out", Path(work) / "tmp"
         setup_py = Path(work) / "setup_accel.py"
         setup_py.write_text(_SETUP, encoding="utf-8")
+        flags = link_time_flags(Path(work)) if plan.link_time else ()
+        log("C compiler flags for the whole library: "
+            + (" ".join(flags) or "none (the compiler takes no link-time optimisation)"))
         _run_child([sys.executable, str(setup_py), ",".join(paths.values()), str(out),
-                    str(tmp), _plan_json(accel, plan, paths)], src, log)
+                    str(tmp), _plan_json(accel, plan, paths, flags)], src, log)
         built = out / package.name
         files = sorted(p.relative_to(built).as_posix() for p in _extensions(built))
         modules = {_module_name(f) for f in files}
