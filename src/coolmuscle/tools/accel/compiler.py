@@ -448,9 +448,11 @@ def _compile(accel: Sources, dest: Path, in_place: bool, log: Callable[[str], No
         out, tmp = Path(work) / "out", Path(work) / "tmp"
         setup_py = Path(work) / "setup_accel.py"
         setup_py.write_text(_SETUP, encoding="utf-8")
-        flags = link_time_flags(Path(work)) if plan.link_time else ()
-        log("C compiler flags for the whole library: "
-            + (" ".join(flags) or "none (the compiler takes no link-time optimisation)"))
+        flags: tuple[str, ...] = ()
+        if plan.link_time:
+            flags = link_time_flags(Path(work))
+            log("C compiler flags for the whole library: "
+                + (" ".join(flags) or "none (the compiler takes none of them)"))
         _run_child([sys.executable, str(setup_py), ",".join(paths.values()), str(out),
                     str(tmp), _plan_json(accel, plan, paths, flags)], src, log)
         built = out / package.name
