@@ -120,7 +120,8 @@ class BuildExt(build_ext):
                 count = done[0]
             say("C compiler: %d/%d %s" % (count, total, os.path.basename(source)),
                 "compiling C files (%d/%d done)" % (count, total) if count < total
-                else "linking")
+                else "linking" + (" (optimising the library as a whole)" if any(
+                    f.startswith("-flto") for f in flags) else ""))
             return objects
 
         def compile(sources, **kwargs):
